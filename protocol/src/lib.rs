@@ -1,0 +1,164 @@
+//! The calibrated-model blob: what the trainer writes and the runtime loads.
+//!
+//! Frame (all integers little-endian):
+//!
+//! ```text
+//! magic "CBDM" (4) | format version u16 (2) | payload length u32 (4) | payload | CRC-32 (4)
+//! ```
+//!
+//! The payload is a postcard encoding of [`Model`]. The CRC-32 (ISO-HDLC) covers everything
+//! before it. The large arrays (measurement configurations, momenta) are stored as raw
+//! little-endian `f64` bytes that the runtime reads in place, so a blob in flash is never copied.
+#![no_std]
+
+#[cfg(feature = "std")]
+extern crate std;
+
+mod model;
+mod validate;
+
+pub use model::*;
+pub use validate::ModelError;
+
+/// Four bytes that open every blob.
+pub const MAGIC: [u8; 4] = *b"CBDM";
+/// Version of the payload layout; bumped on any incompatible change.
+pub const FORMAT_VERSION: u16 = 1;
+/// Bytes before the payload: magic, version, payload length.
+pub const HEADER_LEN: usize = 10;
+/// Bytes after the payload: the checksum.
+pub const TRAILER_LEN: usize = 4;
+
+const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Why a blob was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DecodeError {
+    /// Shorter than header plus trailer, or shorter than the declared payload length.
+    Truncated { needed: usize, got: usize },
+    /// Longer than header + declared payload + trailer.
+    TrailingBytes { expected: usize, got: usize },
+    BadMagic,
+    UnsupportedVersion { found: u16, supported: u16 },
+    ChecksumMismatch { stored: u32, computed: u32 },
+    /// The payload does not decode as a [`Model`] (postcard error).
+    Payload,
+    /// The payload decoded but is inconsistent (dimensions, non-finite or out-of-range values).
+    Invalid(ModelError),
+}
+
+/// Why a model could not be encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EncodeError {
+    BufferTooSmall,
+    Invalid(ModelError),
+}
+
+impl core::fmt::Display for DecodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            DecodeError::Truncated { needed, got } => {
+                write!(f, "blob truncated: needs {needed} bytes, has {got}")
+            }
+            DecodeError::TrailingBytes { expected, got } => {
+                write!(f, "blob has trailing bytes: expected {expected} bytes, has {got}")
+            }
+            DecodeError::BadMagic => write!(f, "not a CbD model blob (bad magic)"),
+            DecodeError::UnsupportedVersion { found, supported } => {
+                write!(f, "blob format version {found} is not supported (this build reads {supported})")
+            }
+            DecodeError::ChecksumMismatch { stored, computed } => {
+                write!(f, "blob checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")
+            }
+            DecodeError::Payload => write!(f, "blob payload does not decode"),
+            DecodeError::Invalid(e) => write!(f, "blob holds an invalid model: {e}"),
+        }
+    }
+}
+
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            EncodeError::BufferTooSmall => write!(f, "output buffer too small for the blob"),
+            EncodeError::Invalid(e) => write!(f, "refusing to encode an invalid model: {e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for DecodeError {}
+#[cfg(feature = "std")]
+impl std::error::Error for EncodeError {}
+
+/// Encodes `model` into `out`, returning the number of bytes written.
+/// The model is validated first: an invalid model is never written.
+pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
+    model.validate().map_err(EncodeError::Invalid)?;
+    if out.len() < HEADER_LEN + TRAILER_LEN {
+        return Err(EncodeError::BufferTooSmall);
+    }
+    let payload_end = {
+        let (_, rest) = out.split_at_mut(HEADER_LEN);
+        let room = rest.len() - TRAILER_LEN;
+        let written = postcard::to_slice(model, &mut rest[..room])
+            .map_err(|_| EncodeError::BufferTooSmall)?;
+        HEADER_LEN + written.len()
+    };
+    let payload_len = (payload_end - HEADER_LEN) as u32;
+    out[0..4].copy_from_slice(&MAGIC);
+    out[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out[6..10].copy_from_slice(&payload_len.to_le_bytes());
+    let crc = CRC32.checksum(&out[..payload_end]);
+    out[payload_end..payload_end + TRAILER_LEN].copy_from_slice(&crc.to_le_bytes());
+    Ok(payload_end + TRAILER_LEN)
+}
+
+/// Encodes `model` into a new vector (std only).
+#[cfg(feature = "std")]
+pub fn encode_to_vec(model: &Model<'_>) -> Result<std::vec::Vec<u8>, EncodeError> {
+    let mut buf = std::vec![0u8; 4096 + model.points.byte_len() + model.momenta.byte_len()];
+    let len = encode(model, &mut buf)?;
+    buf.truncate(len);
+    Ok(buf)
+}
+
+/// Checks the frame (magic, version, length, checksum), decodes the payload and validates it.
+/// The returned model borrows its arrays from `blob`.
+pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
+    let min = HEADER_LEN + TRAILER_LEN;
+    if blob.len() < min {
+        return Err(DecodeError::Truncated { needed: min, got: blob.len() });
+    }
+    if blob[0..4] != MAGIC {
+        return Err(DecodeError::BadMagic);
+    }
+    let version = u16::from_le_bytes([blob[4], blob[5]]);
+    if version != FORMAT_VERSION {
+        return Err(DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION });
+    }
+    let payload_len = u32::from_le_bytes([blob[6], blob[7], blob[8], blob[9]]) as usize;
+    let total = HEADER_LEN.saturating_add(payload_len).saturating_add(TRAILER_LEN);
+    if blob.len() < total {
+        return Err(DecodeError::Truncated { needed: total, got: blob.len() });
+    }
+    if blob.len() > total {
+        return Err(DecodeError::TrailingBytes { expected: total, got: blob.len() });
+    }
+    let payload_end = HEADER_LEN + payload_len;
+    let t = &blob[payload_end..];
+    let stored = u32::from_le_bytes([t[0], t[1], t[2], t[3]]);
+    let computed = CRC32.checksum(&blob[..payload_end]);
+    if stored != computed {
+        return Err(DecodeError::ChecksumMismatch { stored, computed });
+    }
+    let (model, rest): (Model<'_>, &[u8]) =
+        postcard::take_from_bytes(&blob[HEADER_LEN..payload_end]).map_err(|_| DecodeError::Payload)?;
+    if !rest.is_empty() {
+        return Err(DecodeError::Payload);
+    }
+    model.validate().map_err(DecodeError::Invalid)?;
+    Ok(model)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,246 @@
+//! The types a blob carries.
+
+use heapless::Vec as HVec;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+/// Most joints a model may have.
+pub const MAX_JOINTS: usize = 7;
+/// Largest task-space dimension (3-D position).
+pub const MAX_TASK_DIM: usize = 3;
+/// Most integration steps a model may ask for.
+pub const MAX_STEPS: u16 = 64;
+
+/// A calibrated model: nominal kinematics, kernels, integrator, control points and momenta.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Model<'a> {
+    pub nominal: NominalModel,
+    pub normalisation: Normalisation,
+    pub joint_kernel: JointKernel,
+    pub task_kernel: TaskKernel,
+    pub integrator: Integrator,
+    pub momentum_law: MomentumLaw,
+    /// Noise level σ of energy (16), internal units (kept for provenance; not used to evaluate).
+    pub sigma: f64,
+    pub n_points: u32,
+    /// Measurement configurations, `n_points × n_joints`, row-major, joint units of the nominal model.
+    #[serde(borrow)]
+    pub points: F64Slice<'a>,
+    /// Optimal initial momenta P0, `n_points × task_dim`, row-major, internal units.
+    #[serde(borrow)]
+    pub momenta: F64Slice<'a>,
+}
+
+impl Model<'_> {
+    pub fn n_joints(&self) -> usize {
+        self.nominal.n_joints()
+    }
+    pub fn task_dim(&self) -> usize {
+        self.nominal.task_dim()
+    }
+}
+
+/// The controller's own kinematics k0.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum NominalModel {
+    /// Planar serial arm of revolute joints: y = Σ_k l_k (cos, sin)(x_1 + … + x_k).
+    PlanarChain { lengths: HVec<f64, MAX_JOINTS> },
+    /// Spatial serial chain from a Denavit–Hartenberg table; task space is the tool position.
+    DhChain(DhChain),
+}
+
+impl NominalModel {
+    pub fn n_joints(&self) -> usize {
+        match self {
+            NominalModel::PlanarChain { lengths } => lengths.len(),
+            NominalModel::DhChain(c) => c.joints.len(),
+        }
+    }
+    pub fn task_dim(&self) -> usize {
+        match self {
+            NominalModel::PlanarChain { .. } => 2,
+            NominalModel::DhChain(_) => 3,
+        }
+    }
+    /// Whether joint `d` is an angle (periodic).
+    pub fn is_revolute(&self, d: usize) -> bool {
+        match self {
+            NominalModel::PlanarChain { .. } => true,
+            NominalModel::DhChain(c) => c.joints.get(d).map(|j| j.kind == JointKind::Revolute).unwrap_or(true),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum DhConvention {
+    /// T_i = Rz(θ) Tz(d) Tx(a) Rx(α)
+    Standard,
+    /// Craig's modified convention: T_i = Rx(α) Tx(a) Rz(θ) Tz(d)
+    Modified,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum JointKind {
+    Revolute,
+    Prismatic,
+}
+
+/// One row of a DH table. Lengths in the model's length unit, angles in radians.
+/// For a revolute joint θ = q + theta_offset; for a prismatic joint d = q + d.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DhJoint {
+    pub kind: JointKind,
+    pub a: f64,
+    pub alpha: f64,
+    pub d: f64,
+    pub theta_offset: f64,
+}
+
+/// A rigid transform: rotation (row-major 3×3) and translation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    pub rotation: [f64; 9],
+    pub translation: [f64; 3],
+}
+
+impl Transform {
+    pub const IDENTITY: Transform = Transform {
+        rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        translation: [0.0; 3],
+    };
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DhChain {
+    pub convention: DhConvention,
+    pub joints: HVec<DhJoint, MAX_JOINTS>,
+    pub base: Transform,
+    pub tool: Transform,
+}
+
+/// Task-space normalisation: internal = (user − offset) / scale.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Normalisation {
+    pub task_offset: [f64; MAX_TASK_DIM],
+    pub task_scale: f64,
+}
+
+impl Normalisation {
+    pub const IDENTITY: Normalisation = Normalisation { task_offset: [0.0; MAX_TASK_DIM], task_scale: 1.0 };
+}
+
+/// K_V(x, x') = γ · exp(Σ_d f_d(x_d − x'_d)); f_d = b_d (cos Δ − 1) (periodic) or −Δ²/(2 ℓ_d²).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JointKernel {
+    pub gamma: f64,
+    pub axes: HVec<JointKernelAxis, MAX_JOINTS>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum JointKernelAxis {
+    /// b (cos Δ − 1): for revolute joints, periodic in 2π.
+    Periodic { b: f64 },
+    /// −Δ² / (2 ℓ²): for prismatic joints.
+    Gaussian { width: f64 },
+}
+
+/// K_W(y, y') = exp(−|y − y'|² / (2 a²)), internal units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TaskKernel {
+    pub width: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum IntegratorMethod {
+    /// Forward Euler: one stage per step.
+    Euler,
+    /// Heun's method (explicit trapezoid): two stages per step.
+    Heun,
+    /// Classical Runge–Kutta: four stages per step.
+    Rk4,
+}
+
+impl IntegratorMethod {
+    pub const fn stages(self) -> usize {
+        match self {
+            IntegratorMethod::Euler => 1,
+            IntegratorMethod::Heun => 2,
+            IntegratorMethod::Rk4 => 4,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Integrator {
+    pub method: IntegratorMethod,
+    pub steps: u16,
+}
+
+impl Integrator {
+    /// Right-hand-side evaluations per integration, i.e. stored trajectory samples.
+    pub const fn stage_count(&self) -> usize {
+        self.method.stages() * self.steps as usize
+    }
+}
+
+/// How the momenta evolve (DESIGN.md §2): with or without the −(div v) P term.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MomentumLaw {
+    WithDivergence,
+    WithoutDivergence,
+}
+
+/// A borrowed array of little-endian `f64`, read in place (no alignment needed, no copy).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct F64Slice<'a>(&'a [u8]);
+
+impl<'a> F64Slice<'a> {
+    /// Wraps little-endian bytes; the length must be a multiple of 8 (checked on validation).
+    pub const fn from_le_bytes(bytes: &'a [u8]) -> Self {
+        F64Slice(bytes)
+    }
+    pub fn len(&self) -> usize {
+        self.0.len() / 8
+    }
+    pub fn is_empty(&self) -> bool {
+        self.0.len() < 8
+    }
+    pub fn byte_len(&self) -> usize {
+        self.0.len()
+    }
+    pub fn bytes(&self) -> &'a [u8] {
+        self.0
+    }
+    /// The `i`-th value, or `None` past the end.
+    #[inline]
+    pub fn get(&self, i: usize) -> Option<f64> {
+        let b = self.0.get(i * 8..i * 8 + 8)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Some(f64::from_le_bytes(a))
+    }
+    pub fn iter(&self) -> impl Iterator<Item = f64> + 'a {
+        self.0.chunks_exact(8).map(|c| {
+            let mut a = [0u8; 8];
+            a.copy_from_slice(c);
+            f64::from_le_bytes(a)
+        })
+    }
+}
+
+impl Serialize for F64Slice<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_bytes(self.0)
+    }
+}
+
+impl<'de: 'a, 'a> Deserialize<'de> for F64Slice<'a> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        <&'de [u8]>::deserialize(d).map(F64Slice)
+    }
+}
+
+/// Little-endian bytes of `values` (std only), for building a [`F64Slice`].
+#[cfg(feature = "std")]
+pub fn f64_le_bytes(values: &[f64]) -> std::vec::Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}

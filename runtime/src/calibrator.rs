@@ -1,0 +1,219 @@
+//! Loading a blob into caller-provided storage and evaluating the calibrated model (eq. 20).
+
+use crate::flow::{control_point_rates, joint_field, position_rates, task_field, write_samples, Dims, FlowParams};
+use crate::integrate::{integrate, scratch_len};
+use crate::kernel::joint_kernel;
+use crate::nominal::{forward_kinematics, Kinematics};
+use crate::Error;
+use cbd_protocol::{decode, Integrator, Model, MAX_JOINTS, MAX_TASK_DIM};
+use nalgebra::{Dyn, MatrixView, SMatrix, U1};
+
+/// `f64` values of storage a model with these sizes needs: the configurations (`N × n`), the
+/// control points' trajectory (`stages × N × (2m + n)`), and working space for loading and queries.
+pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, integrator: Integrator) -> usize {
+    let dims = Dims { n: n_joints, m: task_dim };
+    let trajectory = integrator.stage_count() * n_points * dims.sample_len();
+    let load = (1 + scratch_len(1)) * n_points * dims.state_len();
+    let query = n_points * (n_joints + 1);
+    n_points * n_joints + trajectory + if load > query { load } else { query }
+}
+
+/// Sets the initial control-point state: k_i = k0(x_i), J_i = Dk0(x_i), P_i = P0_i (internal units).
+pub fn initial_state(model: &Model<'_>, state: &mut [f64]) -> Result<(), Error> {
+    let dims = Dims { n: model.n_joints(), m: model.task_dim() };
+    let (m, n) = (dims.m, dims.n);
+    let mut x = [0.0; MAX_JOINTS];
+    for (i, s) in state.chunks_exact_mut(dims.state_len()).enumerate() {
+        for (d, xd) in x.iter_mut().enumerate().take(n) {
+            *xd = model.points.get(i * n + d).ok_or(Error::Internal)?;
+        }
+        let k0 = forward_kinematics(&model.nominal, &x[..n]).normalised(&model.normalisation);
+        s[..m].copy_from_slice(&k0.position[..m]);
+        for a in 0..m {
+            s[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);
+            s[m + m * n + a] = model.momenta.get(i * m + a).ok_or(Error::Internal)?;
+        }
+    }
+    Ok(())
+}
+
+/// Integrates the control points (eq. 17, 19) with the model's scheme, storing the sample of
+/// every stage in `trajectory` and calling `on_stage(stage, state)` with each stage's input state.
+/// `state` holds the initial state on entry and the final state on return.
+#[allow(clippy::too_many_arguments)]
+pub fn integrate_control_points(
+    params: &FlowParams<'_>,
+    integrator: Integrator,
+    points: &[f64],
+    state: &mut [f64],
+    scratch: &mut [f64],
+    trajectory: &mut [f64],
+    mut on_stage: impl FnMut(usize, &[f64]),
+) -> Result<(), Error> {
+    let dims = params.dims;
+    let n_points = points.len() / dims.n;
+    let block = n_points * dims.sample_len();
+    integrate(integrator.method, integrator.steps, state, scratch, |stage, y, out| {
+        let samples = trajectory.get_mut(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
+        write_samples(dims, y, samples);
+        on_stage(stage, y);
+        control_point_rates(params, points, y, samples, 0..n_points, out);
+        if out.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::Diverged)
+        }
+    })?;
+    if state.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::Diverged)
+    }
+}
+
+/// The calibrated position and Jacobian at one configuration, in the user's units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Evaluation {
+    position: SMatrix<f64, MAX_TASK_DIM, 1>,
+    jacobian: SMatrix<f64, MAX_TASK_DIM, MAX_JOINTS>,
+    task_dim: usize,
+    n_joints: usize,
+    support: f64,
+}
+
+impl Evaluation {
+    /// k1(ξ): the calibrated position (length `task_dim`).
+    pub fn position(&self) -> MatrixView<'_, f64, Dyn, U1, U1, nalgebra::Const<MAX_TASK_DIM>> {
+        self.position.generic_view((0, 0), (Dyn(self.task_dim), U1))
+    }
+    /// Dk1(ξ): the calibrated Jacobian (`task_dim × n_joints`).
+    pub fn jacobian(&self) -> MatrixView<'_, f64, Dyn, Dyn, U1, nalgebra::Const<MAX_TASK_DIM>> {
+        self.jacobian.generic_view((0, 0), (Dyn(self.task_dim), Dyn(self.n_joints)))
+    }
+    /// Largest K_V(ξ, x_j)/γ over the measured configurations, in (0, 1]: 1 on a measured
+    /// configuration, near 0 far from every one (extrapolation).
+    pub fn support(&self) -> f64 {
+        self.support
+    }
+    /// Whether the query is far from every measured configuration (`support` below `threshold`).
+    pub fn is_extrapolating(&self, threshold: f64) -> bool {
+        self.support < threshold
+    }
+}
+
+/// A loaded model: the blob's arrays (borrowed, read in place) and the control points'
+/// trajectories, integrated once at load time.
+pub struct Calibrator<'a> {
+    model: Model<'a>,
+    dims: Dims,
+    points: &'a [f64],
+    trajectory: &'a mut [f64],
+    work: &'a mut [f64],
+}
+
+impl<'a> Calibrator<'a> {
+    /// Decodes and validates `blob`, then integrates the control points' trajectories into `storage`,
+    /// which must hold at least [`storage_len`] values for the model.
+    pub fn load(blob: &'a [u8], storage: &'a mut [f64]) -> Result<Self, Error> {
+        let model = decode(blob).map_err(Error::Blob)?;
+        Self::from_model(model, storage)
+    }
+
+    /// As [`Calibrator::load`], for a model already decoded.
+    pub fn from_model(model: Model<'a>, storage: &'a mut [f64]) -> Result<Self, Error> {
+        model.validate().map_err(|e| Error::Blob(cbd_protocol::DecodeError::Invalid(e)))?;
+        let dims = Dims { n: model.n_joints(), m: model.task_dim() };
+        let n_points = model.n_points as usize;
+        let needed = storage_len(n_points, dims.n, dims.m, model.integrator);
+        if storage.len() < needed {
+            return Err(Error::StorageTooSmall { needed, got: storage.len() });
+        }
+        let traj_len = model.integrator.stage_count() * n_points * dims.sample_len();
+        let (points, rest) = storage[..needed].split_at_mut(n_points * dims.n);
+        let (trajectory, work) = rest.split_at_mut(traj_len);
+        // The blob stores configurations as unaligned bytes; the flow slices them as f64.
+        for (p, v) in points.iter_mut().zip(model.points.iter()) {
+            *p = v;
+        }
+        let state_len = n_points * dims.state_len();
+        let (state, rest) = work.split_at_mut(state_len);
+        initial_state(&model, state)?;
+        let params = FlowParams { dims, joint_kernel: &model.joint_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
+        integrate_control_points(&params, model.integrator, points, state, &mut rest[..scratch_len(state_len)], trajectory, |_, _| {})?;
+        let points: &'a [f64] = points;
+        Ok(Calibrator { model, dims, points, trajectory, work })
+    }
+
+    /// The model this calibrator evaluates.
+    pub fn model(&self) -> &Model<'a> {
+        &self.model
+    }
+
+    /// eq. (20): the calibrated position k1(ξ) and Jacobian Dk1(ξ) at joint configuration `q`.
+    pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
+        let dims = self.dims;
+        let (m, n) = (dims.m, dims.n);
+        if q.len() != n {
+            return Err(Error::QueryDimension { expected: n, found: q.len() });
+        }
+        if let Some(index) = q.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFiniteQuery { index });
+        }
+        let n_points = self.model.n_points as usize;
+        // K_V(ξ, x_j) and its gradient do not change along the flow: computed once per query.
+        let row_len = n + 1;
+        let row = self.work.get_mut(..n_points * row_len).ok_or(Error::Internal)?;
+        let mut grad = [0.0; MAX_JOINTS];
+        let mut support: f64 = 0.0;
+        for (j, r) in row.chunks_exact_mut(row_len).enumerate() {
+            let xj = self.points.get(j * n..(j + 1) * n).ok_or(Error::Internal)?;
+            let k = joint_kernel(&self.model.joint_kernel, q, xj, &mut grad);
+            r[0] = k;
+            r[1..].copy_from_slice(&grad[..n]);
+            support = support.max(k);
+        }
+        let row: &[f64] = row;
+        let k0: Kinematics = forward_kinematics(&self.model.nominal, q).normalised(&self.model.normalisation);
+        let mut y = [0.0; MAX_TASK_DIM * (1 + MAX_JOINTS)];
+        let y = &mut y[..dims.query_len()];
+        y[..m].copy_from_slice(&k0.position[..m]);
+        for a in 0..m {
+            y[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);
+        }
+        let mut scratch = [0.0; scratch_len(MAX_TASK_DIM * (1 + MAX_JOINTS))];
+        let block = n_points * dims.sample_len();
+        let trajectory: &[f64] = self.trajectory;
+        let task_kernel = self.model.task_kernel;
+        integrate(self.model.integrator.method, self.model.integrator.steps, y, &mut scratch, |stage, s, out| {
+            let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
+            let tf = task_field(dims, &task_kernel, &s[..m], samples);
+            let jf = joint_field(dims, samples, |j, g| {
+                let r = &row[j * row_len..(j + 1) * row_len];
+                g[..n].copy_from_slice(&r[1..]);
+                r[0]
+            });
+            let (dk, djac) = out.split_at_mut(m);
+            position_rates(dims, &s[m..], &tf, &jf, dk, djac);
+            Ok(())
+        })?;
+        let norm = &self.model.normalisation;
+        let mut out = Evaluation {
+            position: SMatrix::zeros(),
+            jacobian: SMatrix::zeros(),
+            task_dim: m,
+            n_joints: n,
+            support: support / self.model.joint_kernel.gamma,
+        };
+        for a in 0..m {
+            out.position[a] = norm.task_offset[a] + norm.task_scale * y[a];
+            for d in 0..n {
+                out.jacobian[(a, d)] = norm.task_scale * y[m + a * n + d];
+            }
+        }
+        if out.position.iter().chain(out.jacobian.iter()).all(|v| v.is_finite()) {
+            Ok(out)
+        } else {
+            Err(Error::NonFiniteResult)
+        }
+    }
+}

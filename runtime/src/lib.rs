@@ -1,0 +1,52 @@
+//! Evaluates a calibrated model k1 = ψ ∘ k0 ∘ φ⁻¹ (Calibration by Diffeomorphisms) on a
+//! controller: `#![no_std]`, no heap, fixed-step integration of eq. (20), position and Jacobian.
+//!
+//! ```ignore
+//! let mut storage = [0.0f64; 200_000]; // ≥ storage_len(N, n, m, integrator)
+//! let mut cal = Calibrator::load(BLOB, &mut storage)?;
+//! let e = cal.evaluate(&[0.3, -1.2])?;
+//! let (y, dy) = (e.position(), e.jacobian());
+//! ```
+#![no_std]
+
+pub mod calibrator;
+pub mod flow;
+pub mod integrate;
+pub mod kernel;
+pub mod nominal;
+
+pub use calibrator::{integrate_control_points, initial_state, storage_len, Calibrator, Evaluation};
+pub use cbd_protocol as protocol;
+
+/// Why loading or evaluation failed. The runtime returns these; it never panics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Error {
+    /// The blob was rejected (frame, checksum, version or contents).
+    Blob(cbd_protocol::DecodeError),
+    /// The caller's storage is smaller than [`storage_len`] for this model.
+    StorageTooSmall { needed: usize, got: usize },
+    /// The query has the wrong number of joints.
+    QueryDimension { expected: usize, found: usize },
+    /// A query coordinate is NaN or infinite.
+    NonFiniteQuery { index: usize },
+    /// The control points' flow produced a non-finite value.
+    Diverged,
+    /// The query's flow produced a non-finite value.
+    NonFiniteResult,
+    /// An internal size invariant failed (a bug, reported instead of panicking).
+    Internal,
+}
+
+impl core::fmt::Display for Error {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Error::Blob(e) => write!(f, "{e}"),
+            Error::StorageTooSmall { needed, got } => write!(f, "storage too small: model needs {needed} f64 values, got {got}"),
+            Error::QueryDimension { expected, found } => write!(f, "query has {found} joints, model has {expected}"),
+            Error::NonFiniteQuery { index } => write!(f, "query joint {index} is not finite"),
+            Error::Diverged => write!(f, "the control points' flow diverged (non-finite state)"),
+            Error::NonFiniteResult => write!(f, "evaluation produced a non-finite value"),
+            Error::Internal => write!(f, "internal size invariant failed"),
+        }
+    }
+}

@@ -1,0 +1,200 @@
+//! The nominal forward kinematics k0 and its Jacobian Dk0, in the model's own units.
+
+use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel, Normalisation, Transform, MAX_JOINTS, MAX_TASK_DIM};
+
+/// Position (first `task_dim` entries) and Jacobian (row-major, `task_dim × n_joints`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Kinematics {
+    pub position: [f64; MAX_TASK_DIM],
+    pub jacobian: [[f64; MAX_JOINTS]; MAX_TASK_DIM],
+}
+
+impl Kinematics {
+    const ZERO: Kinematics = Kinematics { position: [0.0; MAX_TASK_DIM], jacobian: [[0.0; MAX_JOINTS]; MAX_TASK_DIM] };
+
+    /// Maps user units to internal ones: (y − offset)/scale, J/scale.
+    pub fn normalised(mut self, norm: &Normalisation) -> Kinematics {
+        let inv = 1.0 / norm.task_scale;
+        for c in 0..MAX_TASK_DIM {
+            self.position[c] = (self.position[c] - norm.task_offset[c]) * inv;
+            for d in 0..MAX_JOINTS {
+                self.jacobian[c][d] *= inv;
+            }
+        }
+        self
+    }
+}
+
+/// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
+pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
+    match model {
+        NominalModel::PlanarChain { lengths } => planar_chain(lengths, x),
+        NominalModel::DhChain(chain) => dh_chain(chain, x),
+    }
+}
+
+// y = Σ_k l_k (cos θ_k, sin θ_k), θ_k = x_1 + … + x_k.
+fn planar_chain(lengths: &[f64], x: &[f64]) -> Kinematics {
+    let mut out = Kinematics::ZERO;
+    let mut theta = 0.0;
+    let n = lengths.len().min(x.len());
+    for k in 0..n {
+        theta += x[k];
+        let (s, c) = (libm::sin(theta), libm::cos(theta));
+        out.position[0] += lengths[k] * c;
+        out.position[1] += lengths[k] * s;
+        // Link k moves with every joint d ≤ k.
+        for d in 0..=k {
+            out.jacobian[0][d] -= lengths[k] * s;
+            out.jacobian[1][d] += lengths[k] * c;
+        }
+    }
+    out
+}
+
+/// A rigid transform as a 3×4 row-major matrix [R | t].
+type Frame = [[f64; 4]; 3];
+
+fn frame_of(t: &Transform) -> Frame {
+    let r = &t.rotation;
+    [
+        [r[0], r[1], r[2], t.translation[0]],
+        [r[3], r[4], r[5], t.translation[1]],
+        [r[6], r[7], r[8], t.translation[2]],
+    ]
+}
+
+fn compose(a: &Frame, b: &Frame) -> Frame {
+    let mut out = [[0.0; 4]; 3];
+    for i in 0..3 {
+        for j in 0..4 {
+            let mut s = if j == 3 { a[i][3] } else { 0.0 };
+            for k in 0..3 {
+                s += a[i][k] * b[k][j];
+            }
+            out[i][j] = s;
+        }
+    }
+    out
+}
+
+fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
+    let (s, c) = (libm::sin(theta), libm::cos(theta));
+    [[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, d]]
+}
+
+fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
+    let (s, c) = (libm::sin(alpha), libm::cos(alpha));
+    [[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]]
+}
+
+fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
+    let n = chain.joints.len().min(x.len());
+    let mut frame = frame_of(&chain.base);
+    // Joint axes (z) and points on them, in the base frame.
+    let mut axes = [[0.0; 3]; MAX_JOINTS];
+    let mut origins = [[0.0; 3]; MAX_JOINTS];
+    for (i, joint) in chain.joints.iter().take(n).enumerate() {
+        let (theta, d) = match joint.kind {
+            JointKind::Revolute => (x[i] + joint.theta_offset, joint.d),
+            JointKind::Prismatic => (joint.theta_offset, x[i] + joint.d),
+        };
+        match chain.convention {
+            // T_i = Rz(θ) Tz(d) Tx(a) Rx(α): joint i moves about z of frame i−1.
+            DhConvention::Standard => {
+                axes[i] = [frame[0][2], frame[1][2], frame[2][2]];
+                origins[i] = [frame[0][3], frame[1][3], frame[2][3]];
+                frame = compose(&frame, &rot_z_trans_z(theta, d));
+                frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
+            }
+            // T_i = Rx(α) Tx(a) Rz(θ) Tz(d): joint i moves about z of frame i.
+            DhConvention::Modified => {
+                frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
+                axes[i] = [frame[0][2], frame[1][2], frame[2][2]];
+                origins[i] = [frame[0][3], frame[1][3], frame[2][3]];
+                frame = compose(&frame, &rot_z_trans_z(theta, d));
+            }
+        }
+    }
+    frame = compose(&frame, &frame_of(&chain.tool));
+    let p = [frame[0][3], frame[1][3], frame[2][3]];
+    let mut out = Kinematics::ZERO;
+    out.position = p;
+    for i in 0..n {
+        let z = axes[i];
+        let col = match chain.joints[i].kind {
+            JointKind::Revolute => {
+                let r = [p[0] - origins[i][0], p[1] - origins[i][1], p[2] - origins[i][2]];
+                [z[1] * r[2] - z[2] * r[1], z[2] * r[0] - z[0] * r[2], z[0] * r[1] - z[1] * r[0]]
+            }
+            JointKind::Prismatic => z,
+        };
+        for c in 0..3 {
+            out.jacobian[c][i] = col[c];
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cbd_protocol::DhJoint;
+    use heapless::Vec as HVec;
+
+    fn check_jacobian(model: &NominalModel, x: &[f64]) {
+        let k = forward_kinematics(model, x);
+        let h = 1e-6;
+        for d in 0..x.len() {
+            let mut xa = [0.0; MAX_JOINTS];
+            let mut xb = [0.0; MAX_JOINTS];
+            xa[..x.len()].copy_from_slice(x);
+            xb[..x.len()].copy_from_slice(x);
+            xa[d] += h;
+            xb[d] -= h;
+            let (ka, kb) = (forward_kinematics(model, &xa[..x.len()]), forward_kinematics(model, &xb[..x.len()]));
+            for c in 0..model.task_dim() {
+                let fd = (ka.position[c] - kb.position[c]) / (2.0 * h);
+                let scale = 1.0 + fd.abs();
+                assert!((fd - k.jacobian[c][d]).abs() < 1e-6 * scale, "row {c} joint {d}: fd {fd} vs {}", k.jacobian[c][d]);
+            }
+        }
+    }
+
+    #[test]
+    fn planar_rr_matches_closed_form_and_finite_differences() {
+        let model = NominalModel::PlanarChain { lengths: HVec::from_slice(&[1.0, 0.5]).unwrap() };
+        let x = [0.7, -1.9];
+        let k = forward_kinematics(&model, &x);
+        let y = [libm::cos(0.7) + 0.5 * libm::cos(0.7 - 1.9), libm::sin(0.7) + 0.5 * libm::sin(0.7 - 1.9)];
+        assert!((k.position[0] - y[0]).abs() < 1e-15 && (k.position[1] - y[1]).abs() < 1e-15);
+        check_jacobian(&model, &x);
+    }
+
+    fn six_joint(convention: DhConvention) -> NominalModel {
+        let j = |kind, a, alpha: f64, d| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
+        let mut tool = Transform::IDENTITY;
+        tool.translation = [0.01, 0.02, 0.031];
+        NominalModel::DhChain(DhChain {
+            convention,
+            joints: HVec::from_slice(&[
+                j(JointKind::Revolute, 0.0, 1.5707963267948966, 0.089),
+                j(JointKind::Revolute, -0.425, 0.0, 0.0),
+                j(JointKind::Prismatic, -0.392, 0.2, 0.0),
+                j(JointKind::Revolute, 0.0, 1.5707963267948966, 0.109),
+                j(JointKind::Revolute, 0.0, -1.5707963267948966, 0.094),
+                j(JointKind::Revolute, 0.0, 0.0, 0.082),
+            ])
+            .unwrap(),
+            base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [0.1, 0.0, 0.2] },
+            tool,
+        })
+    }
+
+    #[test]
+    fn dh_chains_jacobian_matches_finite_differences() {
+        for conv in [DhConvention::Standard, DhConvention::Modified] {
+            check_jacobian(&six_joint(conv), &[0.3, -0.8, 0.05, 1.2, -0.4, 2.0]);
+        }
+    }
+}
