@@ -1,0 +1,12 @@
+//! Offline trainer for Calibration by Diffeomorphisms, laid out by pipeline stage:
+//! data import → nominal models → kernels → flow (primal + tangent) → solver → baselines →
+//! diagnosis → reports → CLI.
+
+pub mod data;
+pub mod simulate;
+pub mod kernels;
+pub mod flow;
+pub mod solver;
+pub mod baselines;
+pub mod report;
+pub mod cli;

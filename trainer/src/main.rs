@@ -1,1 +1,9 @@
-fn main(){}
+use clap::Parser;
+
+fn main() {
+    let cli = cbd_trainer::cli::Cli::parse();
+    if let Err(message) = cbd_trainer::cli::run(cli) {
+        eprintln!("error: {message}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,3 @@
+//! The peers Calibration by Diffeomorphisms is compared with.
+
+pub mod krr;

@@ -1,0 +1,1 @@
+//! Kernels and hyperparameters: the linearised (Gaussian-process) model of DESIGN.md §3.

@@ -1,0 +1,3 @@
+//! Error statistics and tables.
+
+pub mod stats;

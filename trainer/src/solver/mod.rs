@@ -1,0 +1,1 @@
+//! Levenberg–Marquardt on energy (16) over the initial momenta.
