@@ -3,10 +3,12 @@
 //! diagnosis → reports → CLI.
 
 pub mod data;
+pub mod nominal;
 pub mod simulate;
 pub mod kernels;
 pub mod flow;
 pub mod solver;
+pub mod predict;
 pub mod baselines;
 pub mod report;
 pub mod cli;

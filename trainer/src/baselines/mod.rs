@@ -1,3 +1,4 @@
 //! The peers Calibration by Diffeomorphisms is compared with.
 
 pub mod krr;
+pub mod dh_calibration;

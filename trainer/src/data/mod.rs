@@ -41,3 +41,6 @@ impl Measurements {
         out
     }
 }
+
+pub mod csv_import;
+pub mod model_file;

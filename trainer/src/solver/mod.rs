@@ -1,1 +1,8 @@
-//! Levenberg–Marquardt on energy (16) over the initial momenta.
+//! Minimises energy (16) over the initial momenta for the discrete flow the runtime integrates:
+//! Levenberg–Marquardt on the stacked residual, exact Jacobian from the tangent flow,
+//! warm-started from the linearised (kernel) model.
+
+pub mod levenberg_marquardt;
+pub mod regulariser;
+
+pub use levenberg_marquardt::{fit_cbd, CbdFit, CbdOptions, FitError, FitReport, IterationLog};

@@ -1,0 +1,378 @@
+//! Parametric calibration: Levenberg–Marquardt over every Denavit–Hartenberg parameter
+//! (a, α, d, θ_offset of each joint), the base transform (3 translations + 3 small rotations,
+//! applied on the left of the nominal base) and the tool translation (the tool's rotation does
+//! not move a measured position, so it is not a parameter).
+//!
+//! Residual: k(p; x_i) − y_i for every measured coordinate. The Jacobian is by central differences
+//! (each length parameter enters the position affinely, so for them it is exact to rounding).
+//! Columns are scaled to unit norm; the damped normal equations are solved through the
+//! eigendecomposition of JᵀJ (faer), and directions whose eigenvalue is below
+//! `rank_tolerance × λ_max` are dropped: unidentifiable combinations (e.g. d₂ + d₃ + d₄ for
+//! parallel axes, base yaw vs θ₁ offset) stay at their nominal values (the minimum-norm change
+//! in scaled parameters) and are reported by name.
+
+use crate::data::Measurements;
+use crate::nominal::Pose;
+use cbd_protocol::{DhChain, NominalModel};
+use cbd_runtime::nominal::forward_kinematics;
+use faer::{Mat, Side};
+
+/// Settings of the fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DhCalibrationOptions {
+    pub max_iterations: usize,
+    /// Eigenvalues of the scaled JᵀJ below this fraction of the largest are unidentifiable.
+    pub rank_tolerance: f64,
+    /// Stop when an accepted step lowers the cost by less than this fraction.
+    pub cost_tolerance: f64,
+}
+
+impl Default for DhCalibrationOptions {
+    fn default() -> Self {
+        DhCalibrationOptions { max_iterations: 200, rank_tolerance: 1e-14, cost_tolerance: 1e-15 }
+    }
+}
+
+/// What the fit did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DhFitStats {
+    pub iterations: usize,
+    /// Root-mean-square position error (Euclidean, per measurement) before and after.
+    pub initial_rms: f64,
+    pub final_rms: f64,
+    pub n_parameters: usize,
+    /// Identifiable directions (numerical rank of the scaled Jacobian at the solution).
+    pub rank: usize,
+    /// For each unidentifiable direction, the parameters that dominate it (weight > 0.3).
+    pub unidentifiable: Vec<String>,
+    /// Change of every parameter from the nominal (names in `parameter_names`).
+    pub parameter_changes: Vec<f64>,
+    pub parameter_names: Vec<String>,
+    pub converged: bool,
+}
+
+#[derive(Debug, Clone)]
+pub struct DhCalibration {
+    pub model: NominalModel,
+    pub stats: DhFitStats,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum DhCalibrationError {
+    /// Only DH chains have DH parameters.
+    NotADhChain,
+    /// Fewer measured coordinates than parameters would be meaningless.
+    TooFewMeasurements { rows: usize },
+    /// The eigendecomposition failed (non-finite data?).
+    Numerical(String),
+}
+
+impl std::fmt::Display for DhCalibrationError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DhCalibrationError::NotADhChain => write!(f, "DH calibration needs a DH chain as nominal model"),
+            DhCalibrationError::TooFewMeasurements { rows } => write!(f, "DH calibration: {rows} measurements are too few"),
+            DhCalibrationError::Numerical(m) => write!(f, "DH calibration: {m}"),
+        }
+    }
+}
+
+impl std::error::Error for DhCalibrationError {}
+
+/// Number of parameters for `n` joints: 4 per joint, 6 base, 3 tool.
+pub fn parameter_count(n: usize) -> usize {
+    4 * n + 9
+}
+
+/// Parameter names, in the order of [`DhFitStats::parameter_changes`].
+pub fn parameter_names(n: usize) -> Vec<String> {
+    let mut names = Vec::with_capacity(parameter_count(n));
+    for i in 1..=n {
+        for p in ["a", "alpha", "d", "theta_offset"] {
+            names.push(format!("{p}{i}"));
+        }
+    }
+    for p in ["base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz", "tool_tx", "tool_ty", "tool_tz"] {
+        names.push(p.to_string());
+    }
+    names
+}
+
+/// The chain with parameter changes `p` applied to `nominal`.
+pub fn apply_parameters(nominal: &DhChain, p: &[f64]) -> DhChain {
+    let mut c = nominal.clone();
+    let n = c.joints.len();
+    for (i, j) in c.joints.iter_mut().enumerate() {
+        j.a += p[4 * i];
+        j.alpha += p[4 * i + 1];
+        j.d += p[4 * i + 2];
+        j.theta_offset += p[4 * i + 3];
+    }
+    let o = 4 * n;
+    let r = [p[o + 3], p[o + 4], p[o + 5]];
+    let angle = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+    let rot = if angle > 0.0 { Pose::axis_angle([r[0] / angle, r[1] / angle, r[2] / angle], angle) } else { Pose::IDENTITY };
+    let mut base = rot.compose(&Pose::from_transform(&nominal.base));
+    for k in 0..3 {
+        base.t[k] = nominal.base.translation[k] + p[o + k];
+        c.tool.translation[k] += p[o + 6 + k];
+    }
+    // Base rotation turns about the base origin: rot ∘ base, then restore/shift the translation.
+    c.base = base.to_transform();
+    c
+}
+
+fn residuals(chain: &DhChain, data: &Measurements, out: &mut [f64]) {
+    let model = NominalModel::DhChain(chain.clone());
+    for i in 0..data.len() {
+        let k = forward_kinematics(&model, data.joints(i));
+        for c in 0..3 {
+            out[3 * i + c] = k.position[c] - data.position(i)[c];
+        }
+    }
+}
+
+fn rms(r: &[f64]) -> f64 {
+    let n = r.len() / 3;
+    (r.iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64).sqrt()
+}
+
+/// Fits all DH parameters plus base and tool to `data` (positions in the model's length unit).
+pub fn calibrate_dh(nominal: &NominalModel, data: &Measurements, options: &DhCalibrationOptions) -> Result<DhCalibration, DhCalibrationError> {
+    let NominalModel::DhChain(chain0) = nominal else { return Err(DhCalibrationError::NotADhChain) };
+    let n = chain0.joints.len();
+    let np = parameter_count(n);
+    let rows = 3 * data.len();
+    if data.len() < 2 || data.task_dim != 3 {
+        return Err(DhCalibrationError::TooFewMeasurements { rows: data.len() });
+    }
+    // Length scale: the size of the workspace, for finite-difference steps.
+    let scale = {
+        let mut s = 0.0f64;
+        for i in 0..data.len() {
+            let p = data.position(i);
+            s = s.max((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt());
+        }
+        s.max(1e-9)
+    };
+    let names = parameter_names(n);
+    let is_angle: Vec<bool> = names.iter().map(|s| s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r")).collect();
+    let mut p = vec![0.0; np];
+    let mut r = vec![0.0; rows];
+    residuals(chain0, data, &mut r);
+    let initial_rms = rms(&r);
+    let mut cost = 0.5 * r.iter().map(|v| v * v).sum::<f64>();
+    let mut mu = -1.0;
+    let mut nu = 2.0;
+    let mut converged = false;
+    let mut iterations = 0;
+    let (mut rp, mut rm) = (vec![0.0; rows], vec![0.0; rows]);
+    let mut rank = np;
+    let mut null_dirs: Vec<Vec<f64>> = Vec::new();
+    let mut jac = Mat::<f64>::zeros(rows, np);
+    let mut recompute = true;
+    let mut colnorm = vec![1.0; np];
+    let mut eig: Option<(Vec<f64>, Mat<f64>)> = None;
+    let mut g = vec![0.0; np];
+    while iterations < options.max_iterations {
+        if recompute {
+            for k in 0..np {
+                let h = if is_angle[k] { 1e-6 } else { 1e-6 * scale };
+                let mut q = p.clone();
+                q[k] = p[k] + h;
+                residuals(&apply_parameters(chain0, &q), data, &mut rp);
+                q[k] = p[k] - h;
+                residuals(&apply_parameters(chain0, &q), data, &mut rm);
+                let mut s = 0.0;
+                for i in 0..rows {
+                    let v = (rp[i] - rm[i]) / (2.0 * h);
+                    jac[(i, k)] = v;
+                    s += v * v;
+                }
+                colnorm[k] = if s > 0.0 { s.sqrt() } else { 1.0 };
+            }
+            // Scaled normal equations A = Dᵀ JᵀJ D⁻¹, gradient g = D⁻¹ Jᵀ r.
+            let a = Mat::from_fn(np, np, |i, j| {
+                let mut s = 0.0;
+                for row in 0..rows {
+                    s += jac[(row, i)] * jac[(row, j)];
+                }
+                s / (colnorm[i] * colnorm[j])
+            });
+            for k in 0..np {
+                g[k] = (0..rows).map(|row| jac[(row, k)] * r[row]).sum::<f64>() / colnorm[k];
+            }
+            let evd = a.self_adjoint_eigen(Side::Lower).map_err(|e| DhCalibrationError::Numerical(format!("{e:?}")))?;
+            let values: Vec<f64> = (0..np).map(|k| evd.S()[k]).collect();
+            let vectors = evd.U().to_owned();
+            let lmax = values.iter().cloned().fold(0.0, f64::max);
+            let cut = options.rank_tolerance * lmax;
+            rank = values.iter().filter(|&&l| l > cut).count();
+            null_dirs = (0..np).filter(|&k| values[k] <= cut).map(|k| (0..np).map(|i| vectors[(i, k)]).collect()).collect();
+            if mu < 0.0 {
+                mu = 1e-3 * lmax;
+            }
+            eig = Some((values, vectors));
+            recompute = false;
+        }
+        let (values, vectors) = eig.as_ref().expect("computed");
+        let lmax = values.iter().cloned().fold(0.0, f64::max);
+        let cut = options.rank_tolerance * lmax;
+        // Step in scaled parameters: −Σ_k v_k (v_kᵀ g) / (λ_k + μ) over identifiable directions.
+        let mut step_s = vec![0.0; np];
+        let mut predicted = 0.0;
+        for k in 0..np {
+            if values[k] <= cut {
+                continue;
+            }
+            let vg: f64 = (0..np).map(|i| vectors[(i, k)] * g[i]).sum();
+            let c = -vg / (values[k] + mu);
+            // Predicted decrease of the linear model: −(c vg + ½ λ c²).
+            predicted -= c * vg + 0.5 * values[k] * c * c;
+            for i in 0..np {
+                step_s[i] += c * vectors[(i, k)];
+            }
+        }
+        iterations += 1;
+        let step_norm = step_s.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let p_norm = p.iter().zip(&colnorm).map(|(v, c)| (v * c).powi(2)).sum::<f64>().sqrt();
+        if step_norm <= 1e-14 * (p_norm + 1e-9) || predicted <= 0.0 {
+            converged = true;
+            break;
+        }
+        let trial: Vec<f64> = p.iter().zip(&step_s).zip(&colnorm).map(|((v, s), c)| v + s / c).collect();
+        let mut rt = vec![0.0; rows];
+        residuals(&apply_parameters(chain0, &trial), data, &mut rt);
+        let new_cost = 0.5 * rt.iter().map(|v| v * v).sum::<f64>();
+        let rho = (cost - new_cost) / predicted;
+        if new_cost.is_finite() && rho > 0.0 {
+            let decrease = cost - new_cost;
+            p = trial;
+            r = rt;
+            cost = new_cost;
+            mu *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
+            nu = 2.0;
+            recompute = true;
+            if decrease <= options.cost_tolerance * cost.max(f64::MIN_POSITIVE) || cost == 0.0 {
+                converged = true;
+                break;
+            }
+        } else {
+            mu *= nu;
+            nu *= 2.0;
+            if mu > 1e20 * lmax.max(1e-300) {
+                converged = true;
+                break;
+            }
+        }
+    }
+    let unidentifiable = null_dirs
+        .iter()
+        .map(|v| {
+            let mut parts: Vec<(f64, &str)> = v.iter().zip(&names).filter(|(w, _)| w.abs() > 0.3).map(|(w, s)| (*w, s.as_str())).collect();
+            parts.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+            parts.iter().map(|(w, s)| format!("{w:+.2}·{s}")).collect::<Vec<_>>().join(" ")
+        })
+        .collect();
+    let chain = apply_parameters(chain0, &p);
+    Ok(DhCalibration {
+        model: NominalModel::DhChain(chain),
+        stats: DhFitStats {
+            iterations,
+            initial_rms,
+            final_rms: rms(&r),
+            n_parameters: np,
+            rank,
+            unidentifiable,
+            parameter_changes: p,
+            parameter_names: names,
+            converged,
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cbd_protocol::{DhConvention, DhJoint, JointKind, Transform};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn ur5_like(convention: DhConvention) -> DhChain {
+        let deg = std::f64::consts::PI / 180.0;
+        let j = |a, alpha: f64, d| DhJoint { kind: JointKind::Revolute, a, alpha: alpha * deg, d, theta_offset: 0.0 };
+        let mut tool = Transform::IDENTITY;
+        tool.translation = [0.0, 0.0, 31.0];
+        DhChain {
+            convention,
+            joints: heapless::Vec::from_slice(&[
+                j(0.0, 90.0, 89.159),
+                j(-425.0, 0.0, 0.0),
+                j(-392.25, 0.0, 0.0),
+                j(0.0, 90.0, 109.15),
+                j(0.0, -90.0, 94.65),
+                j(0.0, 0.0, 82.3),
+            ])
+            .unwrap(),
+            base: Transform::IDENTITY,
+            tool,
+        }
+    }
+
+    fn sample(model: &NominalModel, count: usize, seed: u64) -> Measurements {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut m = Measurements::new(6, 3);
+        for _ in 0..count {
+            let q: Vec<f64> = (0..6).map(|_| rng.gen_range(-3.0..3.0)).collect();
+            m.push(&q, &forward_kinematics(model, &q).position);
+        }
+        m
+    }
+
+    #[test]
+    fn recovers_positions_of_a_perturbed_chain_without_noise() {
+        let nominal = ur5_like(DhConvention::Standard);
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let p_true: Vec<f64> = parameter_names(6)
+            .iter()
+            .map(|s| if s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r") { rng.gen_range(-0.01..0.01) } else { rng.gen_range(-2.0..2.0) })
+            .collect();
+        let truth = NominalModel::DhChain(apply_parameters(&nominal, &p_true));
+        let train = sample(&truth, 150, 1);
+        let test = sample(&truth, 300, 2);
+        let fit = calibrate_dh(&NominalModel::DhChain(nominal), &train, &DhCalibrationOptions::default()).unwrap();
+        assert!(fit.stats.initial_rms > 1.0, "{:?}", fit.stats);
+        assert!(fit.stats.rank < fit.stats.n_parameters && !fit.stats.unidentifiable.is_empty(), "{:?}", fit.stats);
+        let mut worst: f64 = 0.0;
+        for i in 0..test.len() {
+            let k = forward_kinematics(&fit.model, test.joints(i));
+            for c in 0..3 {
+                worst = worst.max((k.position[c] - test.position(i)[c]).abs());
+            }
+        }
+        assert!(worst < 1e-6, "worst test error {worst} mm; stats {:?}", fit.stats);
+    }
+
+    #[test]
+    fn modified_convention_also_recovers() {
+        let nominal = ur5_like(DhConvention::Modified);
+        let mut p_true = vec![0.0; parameter_count(6)];
+        p_true[0] = 0.8; // a1
+        p_true[5] = 0.004; // alpha2
+        p_true[10] = -1.5; // d3
+        p_true[24] = 3.0; // base_tx
+        p_true[28] = 0.01; // base_ry
+        p_true[32] = 2.0; // tool_tz
+        let truth = NominalModel::DhChain(apply_parameters(&nominal, &p_true));
+        let train = sample(&truth, 120, 3);
+        let fit = calibrate_dh(&NominalModel::DhChain(nominal), &train, &DhCalibrationOptions::default()).unwrap();
+        assert!(fit.stats.final_rms < 1e-7, "{:?}", fit.stats);
+    }
+
+    #[test]
+    fn planar_chain_is_rejected() {
+        let planar = NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0]).unwrap() };
+        let e = calibrate_dh(&planar, &Measurements::new(1, 2), &DhCalibrationOptions::default()).unwrap_err();
+        assert_eq!(e, DhCalibrationError::NotADhChain);
+    }
+}

@@ -1,0 +1,152 @@
+//! `cbd demo`: the paper's RR benchmark end to end — simulate, fit, write the blob, load it
+//! with the runtime, evaluate on random configurations, compare with kernel ridge regression.
+
+use crate::baselines::krr::KernelRidge;
+use crate::report::stats::ErrorStats;
+use crate::simulate::{configurations, rr, Sampling};
+use crate::solver::{fit_cbd, CbdOptions};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Debug, clap::Args)]
+pub struct DemoArgs {
+    /// Where to write the calibrated model.
+    #[arg(long, default_value = "rr-demo.blob")]
+    pub out: PathBuf,
+    /// Write the figures as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Random test configurations.
+    #[arg(long, default_value_t = 3000)]
+    pub test_points: usize,
+    /// Grid points per joint (the paper: 16, i.e. 256 measurements).
+    #[arg(long, default_value_t = 16)]
+    pub grid: usize,
+    /// Integration steps of the flow (training optimises this scheme).
+    #[arg(long, default_value_t = 5)]
+    pub steps: u16,
+    /// Integrator: euler, heun or rk4.
+    #[arg(long, default_value = "heun")]
+    pub integrator: String,
+    /// Noise level σ of energy (16).
+    #[arg(long, default_value_t = 1e-4)]
+    pub sigma: f64,
+    /// Levenberg–Marquardt iteration limit.
+    #[arg(long, default_value_t = 30)]
+    pub max_iterations: usize,
+    /// Drop the −(div v) P term from the momentum law.
+    #[arg(long)]
+    pub no_divergence: bool,
+    /// No per-iteration progress.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct DemoReport {
+    pub nominal: ErrorStats,
+    pub calibrated: ErrorStats,
+    pub krr: ErrorStats,
+    pub nominal_grid: ErrorStats,
+    pub calibrated_grid: ErrorStats,
+    pub krr_grid: ErrorStats,
+    pub fit_seconds: f64,
+    pub krr_fit_seconds: f64,
+    pub iterations: usize,
+    pub blob_bytes: usize,
+    pub max_runtime_trainer_diff: f64,
+    pub n_train: usize,
+    pub n_test: usize,
+    pub integrator: String,
+    pub steps: u16,
+    pub sigma: f64,
+    pub fit: crate::solver::FitReport,
+}
+
+pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod, String> {
+    match name.to_ascii_lowercase().as_str() {
+        "euler" => Ok(cbd_protocol::IntegratorMethod::Euler),
+        "heun" => Ok(cbd_protocol::IntegratorMethod::Heun),
+        "rk4" => Ok(cbd_protocol::IntegratorMethod::Rk4),
+        other => Err(format!("unknown integrator `{other}` (expected euler, heun or rk4)")),
+    }
+}
+
+pub fn run(args: DemoArgs) -> Result<(), String> {
+    let nominal = rr::nominal();
+    let real = rr::RealRr::default();
+    let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
+    let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
+
+    let mut opts = CbdOptions::paper_rr();
+    opts.sigma = args.sigma;
+    opts.integrator = cbd_protocol::Integrator { method: parse_integrator(&args.integrator)?, steps: args.steps };
+    opts.max_iterations = args.max_iterations;
+    opts.verbose = !args.quiet;
+    if args.no_divergence {
+        opts.law = cbd_protocol::MomentumLaw::WithoutDivergence;
+    }
+    let fit = fit_cbd(&nominal, &train, &opts).map_err(|e| e.to_string())?;
+    crate::cli::write_atomically(&args.out, &fit.blob)?;
+
+    // The controller's view: load the blob written to disk and evaluate it.
+    let blob = std::fs::read(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let calibrated_test = crate::predict::evaluate_blob(&blob, &test.joints)?;
+    let calibrated_grid = crate::predict::evaluate_blob(&blob, &train.joints)?;
+
+    let nominal_at = |joints: &[f64]| -> Vec<f64> {
+        joints.chunks_exact(2).flat_map(|q| cbd_runtime::nominal::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
+    };
+    let t0 = Instant::now();
+    let mut krr_kernel = opts.joint_kernel.clone();
+    krr_kernel.gamma = 1.0;
+    let krr = KernelRidge::fit(&nominal, &train, krr_kernel, 1e-12).map_err(|e| e.to_string())?;
+    let krr_fit_seconds = t0.elapsed().as_secs_f64();
+
+    let report = DemoReport {
+        nominal: ErrorStats::of_positions(&nominal_at(&test.joints), &test.positions, 2),
+        calibrated: ErrorStats::of_positions(&calibrated_test, &test.positions, 2),
+        krr: ErrorStats::of_positions(&krr.predict(&nominal, &test.joints), &test.positions, 2),
+        nominal_grid: ErrorStats::of_positions(&nominal_at(&train.joints), &train.positions, 2),
+        calibrated_grid: ErrorStats::of_positions(&calibrated_grid, &train.positions, 2),
+        krr_grid: ErrorStats::of_positions(&krr.predict(&nominal, &train.joints), &train.positions, 2),
+        fit_seconds: fit.report.seconds,
+        krr_fit_seconds,
+        iterations: fit.report.iterations,
+        blob_bytes: blob.len(),
+        max_runtime_trainer_diff: fit.report.max_runtime_trainer_diff,
+        n_train: train.len(),
+        n_test: test.len(),
+        integrator: args.integrator.clone(),
+        steps: args.steps,
+        sigma: args.sigma,
+        fit: fit.report.clone(),
+    };
+    print_report(&report);
+    println!("model written to {}", args.out.display());
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+fn print_report(r: &DemoReport) {
+    println!("Calibration by Diffeomorphisms — planar RR benchmark (paper §4)");
+    println!("train: {} grid configurations; test: {} uniform random configurations", r.n_train, r.n_test);
+    println!("flow: {} × {} steps, σ = {:.1e}; {} LM iterations ({})", r.integrator, r.steps, r.sigma, r.iterations, r.fit.stop_reason);
+    println!();
+    println!("{:<28} {:>11} {:>11} {:>11} {:>11}", "position error (length units)", "mean", "median", "p99", "max");
+    let row = |name: &str, s: &ErrorStats| println!("{:<28} {:>11.3e} {:>11.3e} {:>11.3e} {:>11.3e}", name, s.mean, s.median, s.p99, s.max);
+    row("random: nominal", &r.nominal);
+    row("random: CbD (runtime)", &r.calibrated);
+    row("random: kernel ridge", &r.krr);
+    row("grid: nominal", &r.nominal_grid);
+    row("grid: CbD (runtime)", &r.calibrated_grid);
+    row("grid: kernel ridge", &r.krr_grid);
+    println!();
+    println!("orders of magnitude (random, mean): CbD {:.2}, kernel ridge {:.2}", (r.nominal.mean / r.calibrated.mean).log10(), (r.nominal.mean / r.krr.mean).log10());
+    println!("fit time: CbD {:.2} s (flow {:.2} s, tangent {:.2} s, solves {:.2} s); kernel ridge {:.3} s", r.fit_seconds, r.fit.seconds_flow, r.fit.seconds_tangent, r.fit.seconds_solve, r.krr_fit_seconds);
+    println!("blob: {} bytes; largest runtime/trainer difference at the training points: {:.1e} (relative)", r.blob_bytes, r.max_runtime_trainer_diff);
+}

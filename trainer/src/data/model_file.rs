@@ -1,0 +1,458 @@
+//! The model file (TOML): a nominal serial chain and how its measurements are stored.
+//!
+//! ```toml
+//! name = "UR5"
+//! length_unit = "mm"          # "mm" | "m": unit of every length in this file and of the model
+//! angle_unit = "deg"          # "deg" | "rad": unit of every angle in this file
+//!
+//! [chain]                     # a DH table …
+//! convention = "standard"     # "standard": Rz(θ) Tz(d) Tx(a) Rx(α); "modified" (Craig): Rx(α) Tx(a) Rz(θ) Tz(d)
+//! joints = [                  # kind = "revolute" (default) | "prismatic"; theta_offset defaults to 0
+//!   { a = 0, alpha = 90, d = 89.159 },
+//!   { a = -425, alpha = 0, d = 0, theta_offset = 0, kind = "revolute" },
+//! ]
+//! base = { translation = [0, 0, 0], rpy = [0, 0, 0] }   # optional; rpy = URDF's Rz(y) Ry(p) Rx(r)
+//! tool = { translation = [0, 0, 31] }                    # or rotation = [[..], [..], [..]] (rows)
+//!
+//! # [urdf]                    # … or a URDF chain (exactly one of [chain], [urdf], [planar])
+//! # path = "robot.urdf"       # relative to this file; URDF lengths are metres, converted to length_unit
+//! # base_link = "base_link"
+//! # tip_link = "tool0"
+//!
+//! # [planar]                  # … or a planar arm of revolute joints (2-D task space)
+//! # lengths = [1.0, 0.5]
+//!
+//! [measurements]              # optional: the CSV columns
+//! joints = ["q1_deg", "q2_deg"]        # one per joint, in chain order
+//! positions = ["x_mm", "y_mm", "z_mm"] # one per task coordinate
+//! angle_unit = "deg"          # unit of revolute joint columns (default: angle_unit above)
+//! length_unit = "mm"          # unit of position and prismatic joint columns (default: length_unit above)
+//! min_rows = 10               # fewer data rows is an error (default 1)
+//! ```
+//!
+//! Inside the program the model works in the file's length unit and in radians.
+//! Unknown fields are errors that name the field.
+
+use super::csv_import::ColumnSpec;
+use crate::nominal::urdf::chain_from_urdf;
+use crate::nominal::Pose;
+use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
+use serde::Deserialize;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LengthUnit {
+    Mm,
+    M,
+}
+
+impl LengthUnit {
+    /// Metres per unit.
+    pub fn metres(self) -> f64 {
+        match self {
+            LengthUnit::Mm => 1e-3,
+            LengthUnit::M => 1.0,
+        }
+    }
+    /// Factor converting a value in `self` into `to`.
+    pub fn factor_to(self, to: LengthUnit) -> f64 {
+        match (self, to) {
+            (a, b) if a == b => 1.0,
+            (LengthUnit::M, LengthUnit::Mm) => 1000.0,
+            _ => 1e-3,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            LengthUnit::Mm => "mm",
+            LengthUnit::M => "m",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AngleUnit {
+    Deg,
+    Rad,
+}
+
+impl AngleUnit {
+    /// Radians per unit.
+    pub fn radians(self) -> f64 {
+        match self {
+            AngleUnit::Deg => std::f64::consts::PI / 180.0,
+            AngleUnit::Rad => 1.0,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            AngleUnit::Deg => "deg",
+            AngleUnit::Rad => "rad",
+        }
+    }
+}
+
+/// Any failure to read a model file or a measurement file. Display gives the file, and for CSV
+/// data the line and column.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ImportError {
+    /// The file could not be read.
+    Io { file: PathBuf, message: String },
+    /// The model file is not valid TOML for the schema (unknown field, wrong type, …); the
+    /// message comes from the TOML parser and names the field and position.
+    Toml { file: PathBuf, message: String },
+    /// The model file parses but describes no valid model.
+    Model { file: PathBuf, message: String },
+    /// A URDF file could not be read or converted.
+    Urdf { file: PathBuf, message: String },
+    /// A problem in a CSV file. `line` is 1-based (the header is line 1); `column` is the
+    /// column's name where one applies.
+    Csv { file: PathBuf, line: Option<u64>, column: Option<String>, message: String },
+}
+
+impl fmt::Display for ImportError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ImportError::Io { file, message } => write!(f, "{}: {message}", file.display()),
+            ImportError::Toml { file, message } => write!(f, "{}: {}", file.display(), message.trim_end()),
+            ImportError::Model { file, message } => write!(f, "{}: {message}", file.display()),
+            ImportError::Urdf { file, message } => write!(f, "{}: URDF: {message}", file.display()),
+            ImportError::Csv { file, line, column, message } => {
+                write!(f, "{}", file.display())?;
+                if let Some(l) = line {
+                    write!(f, ":{l}")?;
+                }
+                if let Some(c) = column {
+                    write!(f, ": column '{c}'")?;
+                }
+                write!(f, ": {message}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for ImportError {}
+
+/// A loaded model file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelFile {
+    /// Where it was read from (for messages and relative paths).
+    pub path: PathBuf,
+    pub name: Option<String>,
+    /// Lengths in `length_unit`, angles in radians.
+    pub nominal: NominalModel,
+    /// The model's length unit (= the file's).
+    pub length_unit: LengthUnit,
+    /// The unit angles were written in (the model itself uses radians).
+    pub angle_unit: AngleUnit,
+    /// Joint names: from the URDF, or `q1 … qn`.
+    pub joint_names: Vec<String>,
+    /// The `[measurements]` section, if any.
+    pub measurements: Option<MeasurementSection>,
+}
+
+/// The `[measurements]` section: CSV column names and units.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementSection {
+    pub joints: Vec<String>,
+    pub positions: Vec<String>,
+    pub angle_unit: Option<AngleUnit>,
+    pub length_unit: Option<LengthUnit>,
+    pub min_rows: Option<usize>,
+}
+
+impl ModelFile {
+    /// Column specification for [`crate::data::csv_import::read_measurements`]: from the
+    /// `[measurements]` section, or an error if the file has none.
+    pub fn column_spec(&self) -> Result<ColumnSpec, ImportError> {
+        let section = self.measurements.as_ref().ok_or_else(|| ImportError::Model {
+            file: self.path.clone(),
+            message: "no [measurements] section: name the CSV columns there or on the command line".into(),
+        })?;
+        let spec = self.column_spec_with(section.joints.clone(), section.positions.clone());
+        Ok(ColumnSpec {
+            angle_unit: section.angle_unit.unwrap_or(self.angle_unit),
+            length_unit: section.length_unit.unwrap_or(self.length_unit),
+            min_rows: section.min_rows.unwrap_or(1),
+            ..spec
+        })
+    }
+
+    /// Column specification with the given column names (e.g. from the command line), in the
+    /// model file's units.
+    pub fn column_spec_with(&self, joints: Vec<String>, positions: Vec<String>) -> ColumnSpec {
+        ColumnSpec {
+            joint_columns: joints,
+            position_columns: positions,
+            joint_kinds: (0..self.nominal.n_joints())
+                .map(|d| if self.nominal.is_revolute(d) { JointKind::Revolute } else { JointKind::Prismatic })
+                .collect(),
+            angle_unit: self.angle_unit,
+            length_unit: self.length_unit,
+            model_length_unit: self.length_unit,
+            min_rows: 1,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModelFile {
+    name: Option<String>,
+    description: Option<String>,
+    length_unit: LengthUnit,
+    angle_unit: AngleUnit,
+    chain: Option<RawChain>,
+    urdf: Option<RawUrdf>,
+    planar: Option<RawPlanar>,
+    measurements: Option<MeasurementSection>,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum RawConvention {
+    Standard,
+    Modified,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum RawKind {
+    Revolute,
+    Prismatic,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChain {
+    convention: RawConvention,
+    joints: Vec<RawJoint>,
+    base: Option<RawTransform>,
+    tool: Option<RawTransform>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawJoint {
+    kind: Option<RawKind>,
+    a: f64,
+    alpha: f64,
+    d: f64,
+    #[serde(default)]
+    theta_offset: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTransform {
+    translation: Option<[f64; 3]>,
+    rpy: Option<[f64; 3]>,
+    rotation: Option<[[f64; 3]; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawUrdf {
+    path: PathBuf,
+    base_link: String,
+    tip_link: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlanar {
+    lengths: Vec<f64>,
+}
+
+/// Reads and checks a model file (see the module documentation for the format).
+pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError> {
+    let path = path.as_ref();
+    let text = std::fs::read_to_string(path).map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
+    parse_model_file(&text, path)
+}
+
+/// Parses model-file text; `path` names it in errors and anchors a relative URDF path.
+pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportError> {
+    let file = path.to_path_buf();
+    let raw: RawModelFile = toml::from_str(text).map_err(|e| ImportError::Toml { file: file.clone(), message: e.to_string() })?;
+    let model_err = |message: String| ImportError::Model { file: file.clone(), message };
+    let _ = &raw.description;
+    let deg = raw.angle_unit.radians();
+    let sections = raw.chain.is_some() as u8 + raw.urdf.is_some() as u8 + raw.planar.is_some() as u8;
+    if sections != 1 {
+        return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({sections} found)")));
+    }
+    let (nominal, joint_names) = if let Some(chain) = raw.chain {
+        if chain.joints.is_empty() || chain.joints.len() > MAX_JOINTS {
+            return Err(model_err(format!("[chain] has {} joints; 1 to {MAX_JOINTS} are supported", chain.joints.len())));
+        }
+        let mut joints = heapless::Vec::<DhJoint, MAX_JOINTS>::new();
+        for (i, j) in chain.joints.iter().enumerate() {
+            for (name, v) in [("a", j.a), ("alpha", j.alpha), ("d", j.d), ("theta_offset", j.theta_offset)] {
+                if !v.is_finite() {
+                    return Err(model_err(format!("[chain] joint {}: {name} is not finite", i + 1)));
+                }
+            }
+            let kind = match j.kind.unwrap_or(RawKind::Revolute) {
+                RawKind::Revolute => JointKind::Revolute,
+                RawKind::Prismatic => JointKind::Prismatic,
+            };
+            let _ = joints.push(DhJoint { kind, a: j.a, alpha: j.alpha * deg, d: j.d, theta_offset: j.theta_offset * deg });
+        }
+        let base = transform(chain.base.as_ref(), deg).map_err(|m| model_err(format!("[chain.base]: {m}")))?;
+        let tool = transform(chain.tool.as_ref(), deg).map_err(|m| model_err(format!("[chain.tool]: {m}")))?;
+        let convention = match chain.convention {
+            RawConvention::Standard => DhConvention::Standard,
+            RawConvention::Modified => DhConvention::Modified,
+        };
+        let n = joints.len();
+        (NominalModel::DhChain(DhChain { convention, joints, base, tool }), (1..=n).map(|i| format!("q{i}")).collect())
+    } else if let Some(u) = raw.urdf {
+        let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
+        let robot = urdf_rs::read_file(&urdf_path).map_err(|e| ImportError::Urdf { file: urdf_path.clone(), message: e.to_string() })?;
+        let scale = LengthUnit::M.factor_to(raw.length_unit);
+        let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|message| ImportError::Urdf { file: urdf_path.clone(), message })?;
+        (NominalModel::DhChain(conv.chain), conv.joint_names)
+    } else {
+        let lengths = raw.planar.expect("one section").lengths;
+        if lengths.is_empty() || lengths.len() > MAX_JOINTS || lengths.iter().any(|l| !l.is_finite()) {
+            return Err(model_err(format!("[planar] needs 1 to {MAX_JOINTS} finite lengths")));
+        }
+        let n = lengths.len();
+        (NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&lengths).expect("checked") }, (1..=n).map(|i| format!("q{i}")).collect())
+    };
+    if let Some(m) = &raw.measurements {
+        if m.joints.len() != nominal.n_joints() {
+            return Err(model_err(format!("[measurements] names {} joint columns; the model has {} joints", m.joints.len(), nominal.n_joints())));
+        }
+        if m.positions.len() != nominal.task_dim() {
+            return Err(model_err(format!("[measurements] names {} position columns; the task space has {} coordinates", m.positions.len(), nominal.task_dim())));
+        }
+    }
+    Ok(ModelFile {
+        path: file,
+        name: raw.name,
+        nominal,
+        length_unit: raw.length_unit,
+        angle_unit: raw.angle_unit,
+        joint_names,
+        measurements: raw.measurements,
+    })
+}
+
+fn transform(raw: Option<&RawTransform>, deg: f64) -> Result<Transform, String> {
+    let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
+    let translation = raw.translation.unwrap_or([0.0; 3]);
+    let rotation = match (raw.rpy, raw.rotation) {
+        (Some(_), Some(_)) => return Err("give either rpy or rotation, not both".into()),
+        (Some([r, p, y]), None) => Pose::rpy(r * deg, p * deg, y * deg).r,
+        (None, Some(m)) => {
+            // Must be a rotation: orthonormal with determinant +1.
+            for i in 0..3 {
+                for j in 0..3 {
+                    let dot: f64 = (0..3).map(|k| m[i][k] * m[j][k]).sum();
+                    let want = if i == j { 1.0 } else { 0.0 };
+                    if (dot - want).abs() > 1e-6 {
+                        return Err(format!("rotation is not orthonormal (rows {} and {} have dot product {dot})", i + 1, j + 1));
+                    }
+                }
+            }
+            let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+            if det < 0.0 {
+                return Err("rotation has determinant −1 (a reflection)".into());
+            }
+            m
+        }
+        (None, None) => Pose::IDENTITY.r,
+    };
+    if translation.iter().chain(rotation.iter().flatten()).any(|v| !v.is_finite()) {
+        return Err("non-finite value".into());
+    }
+    Ok(Pose { r: rotation, t: translation }.to_transform())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cbd_runtime::nominal::forward_kinematics;
+
+    const SMALL: &str = r#"
+length_unit = "m"
+angle_unit = "rad"
+[chain]
+convention = "modified"
+joints = [ { a = 0, alpha = 0, d = 0.1 }, { a = 0.3, alpha = 1.5707963267948966, d = 0, kind = "prismatic" } ]
+base = { translation = [1, 2, 3], rotation = [[0, -1, 0], [1, 0, 0], [0, 0, 1]] }
+tool = { translation = [0, 0, 0.05], rpy = [0.1, 0.2, 0.3] }
+[measurements]
+joints = ["q1", "q2"]
+positions = ["x", "y", "z"]
+length_unit = "mm"
+"#;
+
+    #[test]
+    fn parses_a_modified_chain_with_units_and_columns() {
+        let m = parse_model_file(SMALL, Path::new("small.toml")).unwrap();
+        let NominalModel::DhChain(c) = &m.nominal else { panic!() };
+        assert_eq!(c.convention, DhConvention::Modified);
+        assert_eq!(c.joints[1].kind, JointKind::Prismatic);
+        assert_eq!(c.base.translation, [1.0, 2.0, 3.0]);
+        let spec = m.column_spec().unwrap();
+        assert_eq!(spec.length_unit, LengthUnit::Mm);
+        assert_eq!(spec.model_length_unit, LengthUnit::M);
+        assert_eq!(spec.angle_unit, AngleUnit::Rad);
+        // q = 0: p = base ∘ (Tz 0.1) ∘ (Tx 0.3 Rx 90°) ∘ tool.t — tool z (0.05) becomes −y, base turns x→y.
+        let k = forward_kinematics(&m.nominal, &[0.0, 0.0]);
+        let want = [1.0 + 0.05, 2.0 + 0.3, 3.0 + 0.1];
+        for c in 0..3 {
+            assert!((k.position[c] - want[c]).abs() < 1e-12, "{:?}", k.position);
+        }
+    }
+
+    #[test]
+    fn unknown_field_is_an_error_naming_it() {
+        let text = SMALL.replace("convention = \"modified\"", "convention = \"modified\"\nlink_lenght = 3");
+        let e = parse_model_file(&text, Path::new("small.toml")).unwrap_err();
+        let s = e.to_string();
+        assert!(s.contains("link_lenght") && s.contains("small.toml"), "{s}");
+        let e = parse_model_file(&SMALL.replace("\"mm\"", "\"inch\""), Path::new("small.toml")).unwrap_err();
+        assert!(e.to_string().contains("inch"), "{e}");
+    }
+
+    #[test]
+    fn inconsistent_files_are_rejected() {
+        let bad = SMALL.replace("joints = [\"q1\", \"q2\"]", "joints = [\"q1\"]");
+        assert!(parse_model_file(&bad, Path::new("x.toml")).unwrap_err().to_string().contains("joint columns"));
+        let bad = SMALL.replace("[[0, -1, 0]", "[[0, -1, 0.5]");
+        assert!(parse_model_file(&bad, Path::new("x.toml")).unwrap_err().to_string().contains("orthonormal"));
+        let both = format!("{SMALL}\n[planar]\nlengths = [1.0]\n");
+        assert!(parse_model_file(&both, Path::new("x.toml")).unwrap_err().to_string().contains("exactly one"));
+    }
+
+    #[test]
+    fn urdf_model_file_loads_relative_to_itself() {
+        let dir = std::env::temp_dir().join(format!("cbd-model-file-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("arm.urdf"), crate::nominal::urdf::tests_support::TEST_URDF).unwrap();
+        std::fs::write(
+            dir.join("arm.toml"),
+            "length_unit = \"mm\"\nangle_unit = \"deg\"\n[urdf]\npath = \"arm.urdf\"\nbase_link = \"world\"\ntip_link = \"tool0\"\n",
+        )
+        .unwrap();
+        let m = load_model_file(dir.join("arm.toml")).unwrap();
+        assert_eq!(m.joint_names.len(), 6);
+        let robot = urdf_rs::read_from_string(crate::nominal::urdf::tests_support::TEST_URDF).unwrap();
+        let q = [0.1, 0.2, -0.3, 0.0, 0.5, 0.6];
+        let reference = crate::nominal::urdf::urdf_tip_pose(&robot, "world", "tool0", &q, 1000.0).unwrap();
+        let k = forward_kinematics(&m.nominal, &q);
+        for c in 0..3 {
+            assert!((k.position[c] - reference.t[c]).abs() < 1e-9);
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -1,0 +1,348 @@
+//! The tangent of the discrete flow: ∂k_i(1)/∂P0 for all initial momenta at once.
+//!
+//! All m·N tangent directions are propagated together through the same fixed-step scheme
+//! as the primal (the runtime's `integrate`), so the result is the exact derivative of the
+//! discrete model. Each stage's linearised right-hand side is a handful of N×N kernel matrices
+//! times N×D blocks of tangents (GEMMs on faer), plus row scalings.
+//!
+//! Tangent layout: column-major, rows component-major (row = c·N + i for state component c of
+//! point i: c < m is k, then J row-major, then P), one column per direction.
+
+use super::primal::{ControlPoints, PrimalFlow};
+use cbd_protocol::{MomentumLaw, MAX_JOINTS};
+use cbd_runtime::flow::Dims;
+use cbd_runtime::kernel::joint_kernel;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+
+/// The kernel matrices and per-point quantities the linearised dynamics need at one stage.
+struct StageLinearisation {
+    kw: Mat<f64>,
+    /// G_b[i, j] = ∂K_W(k_i, k_j)/∂k_i[b].
+    g: Vec<Mat<f64>>,
+    /// H_bc[i, j] = ∂²K_W/∂k_i[b]∂k_i[c], index b·m + c.
+    h: Vec<Mat<f64>>,
+    /// Per point: P_a (m), J_ad (m·n), Dw_ab (m²), v_d (n), Dv_de (n²), div, T_abc (m³).
+    p: Vec<Vec<f64>>,
+    jac: Vec<Vec<f64>>,
+    dw: Vec<Vec<f64>>,
+    v: Vec<Vec<f64>>,
+    dv: Vec<Vec<f64>>,
+    div: Vec<f64>,
+    t: Vec<Vec<f64>>,
+}
+
+/// K_V and its gradients ∂_e K_V (with respect to the first argument); constant along the flow.
+struct JointKernelMatrices {
+    kv: Mat<f64>,
+    gv: Vec<Mat<f64>>,
+}
+
+fn joint_kernel_matrices(cp: &ControlPoints) -> JointKernelMatrices {
+    let (n, count) = (cp.dims.n, cp.len());
+    let mut kv = Mat::zeros(count, count);
+    let mut gv: Vec<Mat<f64>> = (0..n).map(|_| Mat::zeros(count, count)).collect();
+    let mut grad = [0.0; MAX_JOINTS];
+    for j in 0..count {
+        let xj = &cp.points[j * n..(j + 1) * n];
+        for i in 0..count {
+            let value = joint_kernel(&cp.joint_kernel, &cp.points[i * n..(i + 1) * n], xj, &mut grad);
+            kv[(i, j)] = value;
+            for e in 0..n {
+                gv[e][(i, j)] = grad[e];
+            }
+        }
+    }
+    JointKernelMatrices { kv, gv }
+}
+
+fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64]) -> StageLinearisation {
+    let Dims { m, n } = cp.dims;
+    let (len, count) = (cp.dims.state_len(), cp.len());
+    let inv_a2 = 1.0 / (cp.task_kernel.width * cp.task_kernel.width);
+    let at = |i: usize| &state[i * len..(i + 1) * len];
+    let per_point = |k: usize| -> Vec<Vec<f64>> { (0..k).map(|_| vec![0.0; count]).collect() };
+    let (mut p, mut jac, mut u) = (per_point(m), per_point(m * n), per_point(n));
+    for i in 0..count {
+        let s = at(i);
+        for a in 0..m {
+            p[a][i] = s[m + m * n + a];
+            for d in 0..n {
+                jac[a * n + d][i] = s[m + a * n + d];
+            }
+        }
+        for d in 0..n {
+            u[d][i] = (0..m).map(|a| s[m + a * n + d] * s[m + m * n + a]).sum();
+        }
+    }
+    let mut kw = Mat::zeros(count, count);
+    let mut g: Vec<Mat<f64>> = (0..m).map(|_| Mat::zeros(count, count)).collect();
+    let mut h: Vec<Mat<f64>> = (0..m * m).map(|_| Mat::zeros(count, count)).collect();
+    let (mut dw, mut t) = (per_point(m * m), per_point(m * m * m));
+    for j in 0..count {
+        let kj = &at(j)[..m];
+        for i in 0..count {
+            let ki = &at(i)[..m];
+            let mut e = [0.0; 3];
+            let mut r2 = 0.0;
+            for c in 0..m {
+                e[c] = ki[c] - kj[c];
+                r2 += e[c] * e[c];
+            }
+            let k = (-0.5 * r2 * inv_a2).exp();
+            kw[(i, j)] = k;
+            for b in 0..m {
+                let gb = -k * e[b] * inv_a2;
+                g[b][(i, j)] = gb;
+                for a in 0..m {
+                    dw[a * m + b][i] += p[a][j] * gb;
+                }
+                for c in 0..m {
+                    let hbc = k * (e[b] * e[c] * inv_a2 * inv_a2 - if b == c { inv_a2 } else { 0.0 });
+                    h[b * m + c][(i, j)] = hbc;
+                    for a in 0..m {
+                        t[(a * m + b) * m + c][i] += p[a][j] * hbc;
+                    }
+                }
+            }
+        }
+    }
+    let (mut v, mut dv) = (per_point(n), per_point(n * n));
+    let mut div = vec![0.0; count];
+    for i in 0..count {
+        for j in 0..count {
+            let kvij = jk.kv[(i, j)];
+            for d in 0..n {
+                v[d][i] += kvij * u[d][j];
+                for e in 0..n {
+                    dv[d * n + e][i] += u[d][j] * jk.gv[e][(i, j)];
+                }
+            }
+        }
+        div[i] = (0..n).map(|d| dv[d * n + d][i]).sum();
+    }
+    if cp.law == MomentumLaw::WithoutDivergence {
+        div.iter_mut().for_each(|x| *x = 0.0);
+    }
+    StageLinearisation { kw, g, h, p, jac, dw, v, dv, div, t }
+}
+
+/// out += sign · diag(scale) · input (row scaling), column by column.
+fn add_row_scaled(mut out: MatMut<'_, f64>, scale: &[f64], input: MatRef<'_, f64>, sign: f64) {
+    for col in 0..out.ncols() {
+        for (i, s) in scale.iter().enumerate() {
+            out[(i, col)] += sign * s * input[(i, col)];
+        }
+    }
+}
+
+fn gemm(out: MatMut<'_, f64>, accum: Accum, lhs: MatRef<'_, f64>, rhs: MatRef<'_, f64>, alpha: f64) {
+    matmul(out, accum, lhs, rhs, alpha, Par::Seq);
+}
+
+/// Linearised right-hand side of the control-point dynamics for one column chunk.
+fn tangent_rates(cp: &ControlPoints, jk: &JointKernelMatrices, lin: &StageLinearisation, tan: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
+    let Dims { m, n } = cp.dims;
+    let count = cp.len();
+    let cols = tan.ncols();
+    let blk = |c: usize| tan.subrows(c * count, count);
+    let k_of = |a: usize| a;
+    let j_of = |a: usize, d: usize| m + a * n + d;
+    let p_of = |a: usize| m + m * n + a;
+    let zeros = |k: usize| -> Vec<Mat<f64>> { (0..k).map(|_| Mat::zeros(count, cols)).collect() };
+
+    // δu_d = Σ_a (P_a δJ_ad + J_ad δP_a)
+    let mut du = zeros(n);
+    for d in 0..n {
+        for a in 0..m {
+            add_row_scaled(du[d].as_mut(), &lin.p[a], blk(j_of(a, d)), 1.0);
+            add_row_scaled(du[d].as_mut(), &lin.jac[a * n + d], blk(p_of(a)), 1.0);
+        }
+    }
+    // S_ac = diag(P_a) δk_c
+    let mut s = zeros(m * m);
+    for a in 0..m {
+        for c in 0..m {
+            add_row_scaled(s[a * m + c].as_mut(), &lin.p[a], blk(k_of(c)), 1.0);
+        }
+    }
+    // δw_a = K_W δP_a − Σ_b G_b S_ab + Σ_b diag(Dw_ab) δk_b
+    let mut dw = zeros(m);
+    for a in 0..m {
+        gemm(dw[a].as_mut(), Accum::Replace, lin.kw.as_ref(), blk(p_of(a)), 1.0);
+        for b in 0..m {
+            gemm(dw[a].as_mut(), Accum::Add, lin.g[b].as_ref(), s[a * m + b].as_ref(), -1.0);
+            add_row_scaled(dw[a].as_mut(), &lin.dw[a * m + b], blk(k_of(b)), 1.0);
+        }
+    }
+    // δDw_ab = G_b δP_a + Σ_c (diag(T_abc) δk_c − H_bc S_ac)
+    let mut ddw = zeros(m * m);
+    for a in 0..m {
+        for b in 0..m {
+            let o = &mut ddw[a * m + b];
+            gemm(o.as_mut(), Accum::Replace, lin.g[b].as_ref(), blk(p_of(a)), 1.0);
+            for c in 0..m {
+                add_row_scaled(o.as_mut(), &lin.t[(a * m + b) * m + c], blk(k_of(c)), 1.0);
+                gemm(o.as_mut(), Accum::Add, lin.h[b * m + c].as_ref(), s[a * m + c].as_ref(), -1.0);
+            }
+        }
+    }
+    // δv_d = K_V δu_d, δDv_de = ∂_e K_V δu_d
+    let mut dvv = zeros(n);
+    let mut ddv = zeros(n * n);
+    for d in 0..n {
+        gemm(dvv[d].as_mut(), Accum::Replace, jk.kv.as_ref(), du[d].as_ref(), 1.0);
+        for e in 0..n {
+            gemm(ddv[d * n + e].as_mut(), Accum::Replace, jk.gv[e].as_ref(), du[d].as_ref(), 1.0);
+        }
+    }
+    out.fill(0.0);
+    // δ(dk_a) = δw_a − Σ_d (diag(v_d) δJ_ad + diag(J_ad) δv_d)
+    for a in 0..m {
+        let mut o = out.as_mut().subrows_mut(k_of(a) * count, count);
+        o.copy_from(dw[a].as_ref());
+        for d in 0..n {
+            add_row_scaled(o.as_mut(), &lin.v[d], blk(j_of(a, d)), -1.0);
+            add_row_scaled(o.as_mut(), &lin.jac[a * n + d], dvv[d].as_ref(), -1.0);
+        }
+    }
+    // δ(dJ_ad) = Σ_c (J_cd δDw_ac + Dw_ac δJ_cd) − Σ_e (Dv_ed δJ_ae + J_ae δDv_ed)
+    for a in 0..m {
+        for d in 0..n {
+            let mut o = out.as_mut().subrows_mut(j_of(a, d) * count, count);
+            for c in 0..m {
+                add_row_scaled(o.as_mut(), &lin.jac[c * n + d], ddw[a * m + c].as_ref(), 1.0);
+                add_row_scaled(o.as_mut(), &lin.dw[a * m + c], blk(j_of(c, d)), 1.0);
+            }
+            for e in 0..n {
+                add_row_scaled(o.as_mut(), &lin.dv[e * n + d], blk(j_of(a, e)), -1.0);
+                add_row_scaled(o.as_mut(), &lin.jac[a * n + e], ddv[e * n + d].as_ref(), -1.0);
+            }
+        }
+    }
+    // δ(dP_a) = −Σ_c (P_c δDw_ca + Dw_ca δP_c) − (P_a δdiv + div δP_a)
+    let with_div = cp.law == MomentumLaw::WithDivergence;
+    for a in 0..m {
+        let mut o = out.as_mut().subrows_mut(p_of(a) * count, count);
+        for c in 0..m {
+            add_row_scaled(o.as_mut(), &lin.p[c], ddw[c * m + a].as_ref(), -1.0);
+            add_row_scaled(o.as_mut(), &lin.dw[c * m + a], blk(p_of(c)), -1.0);
+        }
+        if with_div {
+            for d in 0..n {
+                add_row_scaled(o.as_mut(), &lin.p[a], ddv[d * n + d].as_ref(), -1.0);
+            }
+            add_row_scaled(o.as_mut(), &lin.div, blk(p_of(a)), -1.0);
+        }
+    }
+}
+
+/// Number of column chunks: fixed, so the result does not depend on how many threads run them.
+const CHUNKS: usize = 2;
+
+/// ∂k1(x_i)/∂P0 of the discrete flow: an (N·m) × (N·m) matrix, rows i·m + a (output point and
+/// coordinate), columns j·m + b (momentum of point j, coordinate b). Internal units.
+pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) -> Mat<f64> {
+    let dims = cp.dims;
+    let (m, count, len) = (dims.m, cp.len(), dims.state_len());
+    let jk = joint_kernel_matrices(cp);
+    let stage_len = count * len;
+    let stages: Vec<StageLinearisation> =
+        flow.stage_states.chunks_exact(stage_len).map(|y| linearise_stage(cp, &jk, y)).collect();
+    let directions = count * m;
+    let rows = count * len;
+    let bounds: Vec<(usize, usize)> = (0..CHUNKS).map(|c| (c * directions / CHUNKS, (c + 1) * directions / CHUNKS)).collect();
+    let run_chunk = |(d0, d1): (usize, usize)| -> Vec<f64> {
+        let cols = d1 - d0;
+        let mut tan = vec![0.0; rows * cols];
+        // Initial tangent: δP_{j,b} = 1 for direction j·m + b.
+        for dir in d0..d1 {
+            let (j, b) = (dir / m, dir % m);
+            tan[(dir - d0) * rows + (m + m * dims.n + b) * count + j] = 1.0;
+        }
+        let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(tan.len())];
+        let result: Result<(), ()> = cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
+            let y = MatRef::from_column_major_slice(y, rows, cols);
+            let out = MatMut::from_column_major_slice_mut(out, rows, cols);
+            tangent_rates(cp, &jk, &stages[stage], y, out);
+            Ok(())
+        });
+        let _ = result;
+        tan
+    };
+    let chunks: Vec<Vec<f64>> = if threads > 1 {
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = bounds.iter().map(|&b| scope.spawn(move || run_chunk(b))).collect();
+            handles.into_iter().map(|h| h.join().expect("tangent worker panicked")).collect()
+        })
+    } else {
+        bounds.iter().map(|&b| run_chunk(b)).collect()
+    };
+    let mut jac = Mat::zeros(count * m, directions);
+    for (&(d0, d1), tan) in bounds.iter().zip(&chunks) {
+        for dir in d0..d1 {
+            let col = &tan[(dir - d0) * rows..(dir - d0 + 1) * rows];
+            for i in 0..count {
+                for a in 0..m {
+                    jac[(i * m + a, dir)] = col[a * count + i];
+                }
+            }
+        }
+    }
+    jac
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cbd_protocol::*;
+
+    fn small_problem(law: MomentumLaw, method: IntegratorMethod) -> (ControlPoints, Vec<f64>) {
+        let nominal = crate::simulate::rr::nominal();
+        let points: Vec<f64> = crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 7, seed: 3 }, 2);
+        let cp = ControlPoints::new(
+            &nominal,
+            &Normalisation::IDENTITY,
+            points,
+            JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
+            TaskKernel { width: 1.027 },
+            law,
+            Integrator { method, steps: 3 },
+        );
+        let p0: Vec<f64> = (0..14).map(|k| 0.02 * ((k * 37 % 11) as f64 - 5.0)).collect();
+        (cp, p0)
+    }
+
+    #[test]
+    fn tangent_matches_central_finite_differences() {
+        for law in [MomentumLaw::WithDivergence, MomentumLaw::WithoutDivergence] {
+            for method in [IntegratorMethod::Heun, IntegratorMethod::Rk4] {
+                let (cp, p0) = small_problem(law, method);
+                let flow = cp.integrate(&p0).unwrap();
+                let jac = position_jacobian(&cp, &flow, 2);
+                let h = 1e-6;
+                let mut worst: f64 = 0.0;
+                for dir in 0..p0.len() {
+                    let (mut pa, mut pb) = (p0.clone(), p0.clone());
+                    pa[dir] += h;
+                    pb[dir] -= h;
+                    let ya = cp.integrate(&pa).unwrap().positions(cp.dims);
+                    let yb = cp.integrate(&pb).unwrap().positions(cp.dims);
+                    for r in 0..ya.len() {
+                        let fd = (ya[r] - yb[r]) / (2.0 * h);
+                        worst = worst.max((fd - jac[(r, dir)]).abs() / (1.0 + fd.abs()));
+                    }
+                }
+                assert!(worst < 1e-7, "{law:?} {method:?}: worst relative difference {worst:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn jacobian_does_not_depend_on_thread_count() {
+        let (cp, p0) = small_problem(MomentumLaw::WithDivergence, IntegratorMethod::Heun);
+        let flow = cp.integrate(&p0).unwrap();
+        let (a, b) = (position_jacobian(&cp, &flow, 1), position_jacobian(&cp, &flow, 2));
+        assert!(a == b);
+    }
+}
