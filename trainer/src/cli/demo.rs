@@ -5,6 +5,7 @@ use crate::baselines::krr::KernelRidge;
 use crate::report::stats::ErrorStats;
 use crate::simulate::{configurations, rr, Sampling};
 use crate::solver::{fit_cbd, CbdOptions};
+
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -23,24 +24,8 @@ pub struct DemoArgs {
     /// Grid points per joint (the paper: 16, i.e. 256 measurements).
     #[arg(long, default_value_t = 16)]
     pub grid: usize,
-    /// Integration steps of the flow (training optimises this scheme).
-    #[arg(long, default_value_t = 5)]
-    pub steps: u16,
-    /// Integrator: euler, heun or rk4.
-    #[arg(long, default_value = "heun")]
-    pub integrator: String,
-    /// Noise level σ of energy (16).
-    #[arg(long, default_value_t = 1e-4)]
-    pub sigma: f64,
-    /// Levenberg–Marquardt iteration limit.
-    #[arg(long, default_value_t = 30)]
-    pub max_iterations: usize,
-    /// Drop the −(div v) P term from the momentum law.
-    #[arg(long)]
-    pub no_divergence: bool,
-    /// No per-iteration progress.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub solver: crate::cli::fit::SolverArgs,
 }
 
 #[derive(Debug, Serialize)]
@@ -79,14 +64,7 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
 
-    let mut opts = CbdOptions::paper_rr();
-    opts.sigma = args.sigma;
-    opts.integrator = cbd_protocol::Integrator { method: parse_integrator(&args.integrator)?, steps: args.steps };
-    opts.max_iterations = args.max_iterations;
-    opts.verbose = !args.quiet;
-    if args.no_divergence {
-        opts.law = cbd_protocol::MomentumLaw::WithoutDivergence;
-    }
+    let opts: CbdOptions = args.solver.options(&nominal, &train)?;
     let fit = fit_cbd(&nominal, &train, &opts).map_err(|e| e.to_string())?;
     crate::cli::write_atomically(&args.out, &fit.blob)?;
 
@@ -118,9 +96,9 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
         max_runtime_trainer_diff: fit.report.max_runtime_trainer_diff,
         n_train: train.len(),
         n_test: test.len(),
-        integrator: args.integrator.clone(),
-        steps: args.steps,
-        sigma: args.sigma,
+        integrator: args.solver.integrator.clone(),
+        steps: args.solver.steps,
+        sigma: opts.sigma,
         fit: fit.report.clone(),
     };
     print_report(&report);

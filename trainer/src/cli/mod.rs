@@ -1,6 +1,9 @@
 //! The `cbd` command line: one file per command.
 
 pub mod demo;
+pub mod eval;
+pub mod fit;
+pub mod simulate;
 
 use clap::{Parser, Subcommand};
 use std::path::Path;
@@ -16,12 +19,54 @@ pub struct Cli {
 pub enum Command {
     /// The paper's RR benchmark end to end, on built-in defaults.
     Demo(demo::DemoArgs),
+    /// Simulate measurements of a robot with known errors, as CSV.
+    Simulate(simulate::SimulateArgs),
+    /// Train a calibrated model blob from measurements.
+    Fit(fit::FitArgs),
+    /// Evaluate a blob on measurements: mean, median, p99 and max position error.
+    Eval(eval::EvalArgs),
+}
+
+/// The nominal model: a model file, or the built-in planar RR arm.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ModelArgs {
+    /// Model file (TOML: DH table or URDF, units, CSV columns). Without it: the paper's RR arm,
+    /// CSV columns q1, q2 (radians), x, y.
+    #[arg(long)]
+    pub model: Option<std::path::PathBuf>,
+}
+
+/// The nominal model and how to read its measurement CSV files.
+pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, crate::data::csv_import::ColumnSpec), String> {
+    use crate::data::model_file::{AngleUnit, LengthUnit};
+    match &args.model {
+        Some(path) => {
+            let file = crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?;
+            let spec = file.column_spec().map_err(|e| e.to_string())?;
+            Ok((file.nominal, spec))
+        }
+        None => Ok((
+            crate::simulate::rr::nominal(),
+            crate::data::csv_import::ColumnSpec {
+                joint_columns: vec!["q1".into(), "q2".into()],
+                position_columns: vec!["x".into(), "y".into()],
+                joint_kinds: vec![cbd_protocol::JointKind::Revolute; 2],
+                angle_unit: AngleUnit::Rad,
+                length_unit: LengthUnit::M,
+                model_length_unit: LengthUnit::M,
+                min_rows: 2,
+            },
+        )),
+    }
 }
 
 /// Runs a parsed command; errors are printed by `main` with exit code 1.
 pub fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
         Command::Demo(args) => demo::run(args),
+        Command::Simulate(args) => simulate::run(args),
+        Command::Fit(args) => fit::run(args),
+        Command::Eval(args) => eval::run(args),
     }
 }
 

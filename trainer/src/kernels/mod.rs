@@ -1,1 +1,31 @@
-//! Kernels and hyperparameters: the linearised (Gaussian-process) model of DESIGN.md §3.
+//! Kernels and hyperparameters: defaults, task-space normalisation, and the linearised
+//! (Gaussian-process) model of DESIGN.md §3.
+
+use crate::data::Measurements;
+use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
+
+/// Task-space normalisation from data: offset = mean position, scale = RMS distance to it.
+pub fn normalisation_of(data: &Measurements) -> Normalisation {
+    let m = data.task_dim;
+    let count = data.len().max(1) as f64;
+    let mut offset = [0.0; 3];
+    for y in data.positions.chunks_exact(m) {
+        for c in 0..m {
+            offset[c] += y[c] / count;
+        }
+    }
+    let r2: f64 = data.positions.chunks_exact(m).map(|y| (0..m).map(|c| (y[c] - offset[c]).powi(2)).sum::<f64>()).sum::<f64>() / count;
+    let scale = if r2 > 0.0 && r2.is_finite() { r2.sqrt() } else { 1.0 };
+    Normalisation { task_offset: offset, task_scale: scale }
+}
+
+/// One axis per joint: periodic (b = 1) for revolute joints, Gaussian (width 1) for prismatic ones.
+pub fn default_joint_kernel(nominal: &NominalModel) -> JointKernel {
+    let mut axes = heapless::Vec::new();
+    for d in 0..nominal.n_joints() {
+        let axis = if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 1.0 } };
+        let _ = axes.push(axis);
+    }
+    JointKernel { gamma: 1.0, axes }
+}
+pub mod hyperparameters;

@@ -1,0 +1,58 @@
+//! `cbd eval`: evaluate a blob on measured data and report the position error.
+
+use crate::cli::{load_nominal, ModelArgs};
+use crate::report::stats::ErrorStats;
+use std::path::PathBuf;
+
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    pub model: ModelArgs,
+    /// The calibrated model.
+    #[arg(long)]
+    pub blob: PathBuf,
+    /// Measurements to evaluate on (CSV).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Warn about configurations whose kernel support (max K_V(q, x_j)/γ) is below this.
+    #[arg(long, default_value_t = 0.05)]
+    pub extrapolation_threshold: f64,
+}
+
+pub fn run(args: EvalArgs) -> Result<(), String> {
+    let (nominal, spec) = load_nominal(&args.model)?;
+    let data = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?.measurements;
+    let blob = std::fs::read(&args.blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    if model.nominal != nominal {
+        eprintln!("warning: {} was trained on a different nominal model than the one given", args.blob.display());
+    }
+    let m = model.task_dim();
+    let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, model.n_joints(), m, model.integrator)];
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let mut predicted = Vec::with_capacity(data.positions.len());
+    let mut nominal_pred = Vec::with_capacity(data.positions.len());
+    let mut far = 0;
+    for i in 0..data.len() {
+        let e = cal.evaluate(data.joints(i)).map_err(|e| format!("{} row {}: {e}", args.data.display(), i + 1))?;
+        if e.is_extrapolating(args.extrapolation_threshold) {
+            far += 1;
+        }
+        predicted.extend(e.position().iter());
+        nominal_pred.extend_from_slice(&cbd_runtime::nominal::forward_kinematics(&nominal, data.joints(i)).position[..m]);
+    }
+    let before = ErrorStats::of_positions(&nominal_pred, &data.positions, m);
+    let after = ErrorStats::of_positions(&predicted, &data.positions, m);
+    println!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
+    for (name, s) in [("nominal", before), ("calibrated", after)] {
+        println!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
+    }
+    if far > 0 {
+        eprintln!(
+            "warning: {far} of {} configurations are far from every measured configuration (kernel support < {}): extrapolation",
+            data.len(),
+            args.extrapolation_threshold
+        );
+    }
+    Ok(())
+}
