@@ -34,9 +34,10 @@ pub struct SolverArgs {
     #[arg(long)]
     pub gamma: Option<f64>,
     /// euler, heun or rk4.
-    #[arg(long, default_value = "heun")]
+    #[arg(long, default_value = "euler")]
     pub integrator: String,
-    #[arg(long, default_value_t = 5)]
+    /// Integration steps (training optimises exactly this discrete flow).
+    #[arg(long, default_value_t = 2)]
     pub steps: u16,
     #[arg(long, default_value_t = 30)]
     pub max_iterations: usize,

@@ -6,8 +6,28 @@ use crate::flow::tangent::position_jacobian;
 use crate::flow::ControlPoints;
 use cbd_protocol::{f64_le_bytes, F64Slice, Integrator, JointKernel, Model, MomentumLaw, NominalModel, Normalisation, TaskKernel};
 use faer::linalg::matmul::matmul;
-use faer::linalg::solvers::Solve;
+use faer::linalg::solvers::SolveLstsq;
 use faer::{Accum, Mat, Par, Side};
+
+/// Lᵀ with K = L Lᵀ. Kernel matrices of distinct points are positive definite but can be
+/// numerically singular; a jitter of 1e-13 · mean diagonal, grown tenfold until the factorisation
+/// succeeds, keeps the regulariser a norm.
+fn regulariser_factor(k: &Mat<f64>) -> Result<Mat<f64>, FitError> {
+    let dim = k.nrows();
+    let mean_diag = (0..dim).map(|i| k[(i, i)]).sum::<f64>() / dim as f64;
+    let mut jitter = 1e-13 * mean_diag;
+    for _ in 0..8 {
+        let mut kj = k.clone();
+        for i in 0..dim {
+            kj[(i, i)] += jitter;
+        }
+        if let Ok(llt) = kj.llt(Side::Lower) {
+            return Ok(llt.L().transpose().to_owned());
+        }
+        jitter *= 10.0;
+    }
+    Err(FitError::Singular { iteration: 0, damping: jitter })
+}
 use std::time::Instant;
 
 /// Everything that defines a CbD fit besides the data.
@@ -30,7 +50,7 @@ pub struct CbdOptions {
 }
 
 impl CbdOptions {
-    /// The paper's RR kernels (DESIGN.md §2) with our default scheme and σ.
+    /// The paper's RR kernels (DESIGN.md §2) with our default scheme (Euler × 2) and σ = 1e-6.
     pub fn paper_rr() -> Self {
         CbdOptions {
             joint_kernel: JointKernel {
@@ -38,12 +58,14 @@ impl CbdOptions {
                 axes: heapless::Vec::from_slice(&[cbd_protocol::JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("2 axes"),
             },
             task_kernel: TaskKernel { width: 1.0270 },
-            sigma: 1e-4,
-            integrator: Integrator { method: cbd_protocol::IntegratorMethod::Heun, steps: 5 },
+            sigma: 1e-6,
+            // Two Euler steps: a genuine (transported) flow that generalises best on the RR
+            // benchmark; more stages add nonlinearity that the ill-conditioned momenta amplify.
+            integrator: Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 2 },
             law: MomentumLaw::WithDivergence,
             normalisation: Normalisation::IDENTITY,
             max_iterations: 30,
-            relative_tolerance: 1e-12,
+            relative_tolerance: 1e-5,
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
             verbose: false,
         }
@@ -161,6 +183,7 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
     let dim = cp.len() * m;
     let k_reg = regulariser_matrix(&cp);
+    let chol_t = regulariser_factor(&k_reg)?;
     let sigma = opts.sigma;
     let (mut t_flow, mut t_tangent, mut t_solve) = (0.0, 0.0, 0.0);
 
@@ -193,33 +216,51 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let mut small_steps = 0;
     for iteration in 1..=opts.max_iterations {
         iterations = iteration;
+        // Gauss–Newton step as a least-squares problem, never forming JᵀJ (which would square
+        // the condition number): minimise |J δ/σ + r|² + |Lᵀ (P + δ)|² + λ |D δ|², K = L Lᵀ,
+        // D² = diag(JᵀJ/σ² + K) (Marquardt scaling).
         let t0 = Instant::now();
-        // Gauss–Newton system: H = K + JᵀJ/σ², g = K P + Jᵀ r/σ.
-        let mut h = k_reg.clone();
-        matmul(h.as_mut(), Accum::Add, jac.transpose(), jac.as_ref(), 1.0 / (sigma * sigma), Par::Seq);
-        let r = Mat::from_fn(dim, 1, |i, _| current.residual[i]);
-        let pm = Mat::from_fn(dim, 1, |i, _| p[i]);
-        let mut g = Mat::zeros(dim, 1);
-        matmul(g.as_mut(), Accum::Replace, k_reg.as_ref(), pm.as_ref(), 1.0, Par::Seq);
-        matmul(g.as_mut(), Accum::Add, jac.transpose(), r.as_ref(), 1.0 / sigma, Par::Seq);
+        let lt_p = {
+            let pm = Mat::from_fn(dim, 1, |i, _| p[i]);
+            let mut out = Mat::zeros(dim, 1);
+            matmul(out.as_mut(), Accum::Replace, chol_t.as_ref(), pm.as_ref(), 1.0, Par::Seq);
+            out
+        };
+        let scaling: Vec<f64> = (0..dim)
+            .map(|c| ((0..dim).map(|r| (jac[(r, c)] / sigma).powi(2)).sum::<f64>() + k_reg[(c, c)]).sqrt().max(1e-300))
+            .collect();
         t_solve += t0.elapsed().as_secs_f64();
         let mut accepted = None;
         while damping < 1e12 {
             let t0 = Instant::now();
-            let mut a = h.clone();
-            for i in 0..dim {
-                a[(i, i)] += damping * h[(i, i)].max(1e-300);
-            }
-            let step = match a.llt(Side::Lower) {
-                Ok(llt) => llt.solve(&g),
-                Err(_) => {
-                    damping *= 10.0;
-                    t_solve += t0.elapsed().as_secs_f64();
-                    continue;
+            let sqrt_damping = damping.sqrt();
+            let a = Mat::from_fn(3 * dim, dim, |r, c| {
+                if r < dim {
+                    jac[(r, c)] / sigma
+                } else if r < 2 * dim {
+                    chol_t[(r - dim, c)]
+                } else if r - 2 * dim == c {
+                    sqrt_damping * scaling[c]
+                } else {
+                    0.0
                 }
-            };
+            });
+            let b = Mat::from_fn(3 * dim, 1, |r, _| {
+                if r < dim {
+                    -current.residual[r]
+                } else if r < 2 * dim {
+                    -lt_p[(r - dim, 0)]
+                } else {
+                    0.0
+                }
+            });
+            let solution = a.qr().solve_lstsq(&b);
             t_solve += t0.elapsed().as_secs_f64();
-            let trial: Vec<f64> = p.iter().enumerate().map(|(i, v)| v - step[(i, 0)]).collect();
+            if !(0..dim).all(|i| solution[(i, 0)].is_finite()) {
+                damping *= 10.0;
+                continue;
+            }
+            let trial: Vec<f64> = p.iter().enumerate().map(|(i, v)| v + solution[(i, 0)]).collect();
             match evaluate(&trial, &mut t_flow) {
                 Some(e) if e.energy < current.energy => {
                     accepted = Some((trial, e));
@@ -239,7 +280,7 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         let decrease = (current.energy - e.energy) / current.energy;
         p = trial;
         current = e;
-        damping = (damping / 5.0).max(1e-12);
+        damping = (damping / 10.0).max(1e-30);
         log.push(IterationLog { iteration, energy: current.energy, regulariser: current.regulariser, train_rms: rms(&current.residual), damping, seconds: start.elapsed().as_secs_f64() });
         if opts.verbose {
             eprintln!("iter {iteration:2}  energy {:.6e}  train rms {:.3e}  damping {damping:.1e}  {:.1} s", current.energy, rms(&current.residual), start.elapsed().as_secs_f64());
