@@ -1,5 +1,6 @@
 //! The `cbd` command line: one file per command.
 
+pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod fit;
@@ -25,6 +26,8 @@ pub enum Command {
     Fit(fit::FitArgs),
     /// Evaluate a blob on measurements: mean, median, p99 and max position error.
     Eval(eval::EvalArgs),
+    /// Fit time, memory and evaluation time against N (writes BENCHMARKS.md with --markdown).
+    Bench(bench::BenchArgs),
 }
 
 /// The nominal model: a model file, or the built-in planar RR arm.
@@ -67,6 +70,7 @@ pub fn run(cli: Cli) -> Result<(), String> {
         Command::Simulate(args) => simulate::run(args),
         Command::Fit(args) => fit::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Bench(args) => bench::run(args),
     }
 }
 

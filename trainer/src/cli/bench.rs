@@ -1,0 +1,229 @@
+//! `cbd bench`: fit time, iterations and peak memory against N, and the runtime's evaluation
+//! time against nominal forward kinematics and against the kernel-ridge peer, measured in one run.
+
+use crate::baselines::krr::KernelRidge;
+use crate::simulate::{configurations, rr, Sampling};
+use crate::solver::{fit_cbd, CbdOptions};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Measurement counts for the RR benchmark (perfect squares: a √N × √N grid).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![64usize, 256, 1024])]
+    pub sizes: Vec<usize>,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Replace the "## Trainer and runtime" section of this Markdown file with the results.
+    #[arg(long)]
+    pub markdown: Option<PathBuf>,
+    /// Internal: fit one size in this process and print its JSON line (used for per-size peak memory).
+    #[arg(long, hide = true)]
+    pub single: Option<usize>,
+    /// Internal: where the single-size run writes its blob.
+    #[arg(long, hide = true)]
+    pub blob_out: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FitBench {
+    pub n: usize,
+    pub seconds: f64,
+    pub iterations: usize,
+    pub seconds_flow: f64,
+    pub seconds_tangent: f64,
+    pub seconds_solve: f64,
+    pub peak_mib: f64,
+    pub test_mean_error: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EvalBench {
+    pub n: usize,
+    pub ns: f64,
+    pub nominal_ns: f64,
+    pub krr_ns: f64,
+    pub ratio_to_nominal: f64,
+    pub ratio_to_krr: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct BenchReport {
+    pub machine: String,
+    pub fit: Vec<FitBench>,
+    pub eval: Vec<EvalBench>,
+}
+
+fn peak_mib() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|kb| kb.parse::<f64>().ok())
+        .map(|kb| kb / 1024.0)
+        .unwrap_or(f64::NAN)
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| t.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    format!("{cpu}, {cores} cores")
+}
+
+fn per_axis(n: usize) -> Result<usize, String> {
+    let k = (n as f64).sqrt().round() as usize;
+    if k * k == n && k >= 2 {
+        Ok(k)
+    } else {
+        Err(format!("size {n} is not a perfect square ≥ 4"))
+    }
+}
+
+/// Fits the RR benchmark with `n` grid measurements in this process.
+fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
+    let real = rr::RealRr::default();
+    let train = real.measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
+    let test = real.measure(&configurations(Sampling::Uniform { count: 1000, seed: 2026 }, 2));
+    let opts = CbdOptions::paper_rr();
+    let fit = fit_cbd(&rr::nominal(), &train, &opts).map_err(|e| e.to_string())?;
+    std::fs::write(blob_out, &fit.blob).map_err(|e| format!("{}: {e}", blob_out.display()))?;
+    let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
+    let r = &fit.report;
+    Ok(FitBench {
+        n,
+        seconds: r.seconds,
+        iterations: r.iterations,
+        seconds_flow: r.seconds_flow,
+        seconds_tangent: r.seconds_tangent,
+        seconds_solve: r.seconds_solve,
+        peak_mib: peak_mib(),
+        test_mean_error: crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean,
+    })
+}
+
+/// Median of `rounds` timings of `f` over all `queries`, in ns per query.
+fn time_per_query(queries: &[f64], rounds: usize, mut f: impl FnMut(&[f64]) -> f64) -> f64 {
+    let mut times: Vec<f64> = (0..rounds)
+        .map(|_| {
+            let t0 = Instant::now();
+            let mut sink = 0.0;
+            for q in queries.chunks_exact(2) {
+                sink += f(q);
+            }
+            std::hint::black_box(sink);
+            t0.elapsed().as_secs_f64() * 1e9 / (queries.len() / 2) as f64
+        })
+        .collect();
+    times.sort_by(|a, b| a.total_cmp(b));
+    times[times.len() / 2]
+}
+
+fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench, String> {
+    let model = cbd_protocol::decode(blob).map_err(|e| e.to_string())?;
+    let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, 2, 2, model.integrator)];
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| e.to_string())?;
+    let nominal = rr::nominal();
+    let queries = configurations(Sampling::Uniform { count: 500, seed: 11 }, 2);
+    let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
+    let mut kernel = CbdOptions::paper_rr().joint_kernel;
+    kernel.gamma = 1.0;
+    let krr = KernelRidge::fit(&nominal, &train, kernel, 1e-12).map_err(|e| e.to_string())?;
+    let rounds = 7;
+    let ns = time_per_query(&queries, rounds, |q| cal.evaluate(q).map(|e| e.position()[0]).unwrap_or(f64::NAN));
+    let nominal_ns = time_per_query(&queries, rounds, |q| cbd_runtime::nominal::forward_kinematics(&nominal, q).position[0]);
+    let krr_ns = time_per_query(&queries, rounds, |q| krr.predict(&nominal, q)[0]);
+    Ok(EvalBench { n, ns, nominal_ns, krr_ns, ratio_to_nominal: ns / nominal_ns, ratio_to_krr: ns / krr_ns })
+}
+
+pub fn run(args: BenchArgs) -> Result<(), String> {
+    if let Some(n) = args.single {
+        let blob_out = args.blob_out.clone().ok_or("--single needs --blob-out")?;
+        let fit = fit_one(n, &blob_out)?;
+        println!("{}", serde_json::to_string(&fit).map_err(|e| e.to_string())?);
+        return Ok(());
+    }
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut report = BenchReport { machine: machine(), fit: Vec::new(), eval: Vec::new() };
+    for &n in &args.sizes {
+        per_axis(n)?;
+        eprintln!("fitting N = {n} …");
+        // One process per size, so each peak-memory figure is that size's own.
+        let blob_path = std::env::temp_dir().join(format!("cbd-bench-{}-{n}.blob", std::process::id()));
+        let out = std::process::Command::new(&exe)
+            .args(["bench", "--single", &n.to_string(), "--blob-out"])
+            .arg(&blob_path)
+            .output()
+            .map_err(|e| e.to_string())?;
+        if !out.status.success() {
+            return Err(format!("bench for N = {n} failed: {}", String::from_utf8_lossy(&out.stderr)));
+        }
+        let line = String::from_utf8_lossy(&out.stdout);
+        let fit: FitBench = serde_json::from_str(line.trim()).map_err(|e| format!("bench output for N = {n}: {e}"))?;
+        eprintln!("  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.2e}", fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error);
+        report.fit.push(fit);
+        let blob = std::fs::read(&blob_path).map_err(|e| format!("{}: {e}", blob_path.display()))?;
+        let _ = std::fs::remove_file(&blob_path);
+        let e = eval_one(n, &blob)?;
+        eprintln!("  evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.ns, e.ratio_to_nominal, e.ratio_to_krr);
+        report.eval.push(e);
+    }
+    if let Some(path) = &args.json {
+        crate::cli::write_atomically(path, serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?.as_bytes())?;
+    }
+    let table = markdown(&report);
+    println!("{table}");
+    if let Some(path) = &args.markdown {
+        replace_section(path, "## Trainer and runtime", &table)?;
+    }
+    Ok(())
+}
+
+/// Least-squares slope of log(y) against log(x).
+fn exponent(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    let (sx, sy) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + x.ln(), b + y.ln()));
+    let (mx, my) = (sx / n, sy / n);
+    let (num, den) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + (x.ln() - mx) * (y.ln() - my), b + (x.ln() - mx).powi(2)));
+    num / den
+}
+
+fn markdown(r: &BenchReport) -> String {
+    let mut s = String::from("## Trainer and runtime\n\n");
+    s += &format!("Machine: {}. Command: `cargo run --release -p cbd-trainer --bin cbd -- bench --markdown BENCHMARKS.md`.\n", r.machine);
+    s += "RR benchmark (DESIGN.md §4), default scheme (Euler × 2, σ = 1e-6), N grid measurements; test error on 1000 random configurations.\n\n";
+    s += "| N | fit s | iterations | flow s | tangent s | solves s | peak MiB | test mean error |\n|---|---|---|---|---|---|---|---|\n";
+    for f in &r.fit {
+        s += &format!("| {} | {:.2} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.2e} |\n", f.n, f.seconds, f.iterations, f.seconds_flow, f.seconds_tangent, f.seconds_solve, f.peak_mib, f.test_mean_error);
+    }
+    s += "\n| N | runtime eval ns | nominal FK ns | kernel ridge ns | ratio to nominal | ratio to kernel ridge |\n|---|---|---|---|---|---|\n";
+    for e in &r.eval {
+        s += &format!("| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} |\n", e.n, e.ns, e.nominal_ns, e.krr_ns, e.ratio_to_nominal, e.ratio_to_krr);
+    }
+    if r.fit.len() >= 2 {
+        let fit_exp = exponent(&r.fit.iter().map(|f| (f.n as f64, f.seconds)).collect::<Vec<_>>());
+        let mem_exp = exponent(&r.fit.iter().map(|f| (f.n as f64, f.peak_mib)).collect::<Vec<_>>());
+        let eval_exp = exponent(&r.eval.iter().map(|e| (e.n as f64, e.ns)).collect::<Vec<_>>());
+        s += &format!("\nMeasured growth (least-squares exponent of N): fit time N^{fit_exp:.2}, peak memory N^{mem_exp:.2}, evaluation time N^{eval_exp:.2}.\n");
+    }
+    s
+}
+
+/// Replaces `heading`'s section (up to the next `## `) in `path`, or appends it.
+fn replace_section(path: &std::path::Path, heading: &str, body: &str) -> Result<(), String> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|_| String::from("# Benchmarks\n\n"));
+    let new = match text.find(heading) {
+        Some(start) => {
+            let rest = &text[start + heading.len()..];
+            let end = rest.find("\n## ").map(|i| start + heading.len() + i + 1).unwrap_or(text.len());
+            format!("{}{}{}", &text[..start], body.trim_end().to_owned() + "\n\n", &text[end..])
+        }
+        None => format!("{}\n{}\n", text.trim_end(), body),
+    };
+    crate::cli::write_atomically(path, new.as_bytes())
+}
