@@ -14,7 +14,7 @@ pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, inte
     let dims = Dims { n: n_joints, m: task_dim };
     let trajectory = integrator.stage_count() * n_points * dims.sample_len();
     let load = (1 + scratch_len(1)) * n_points * dims.state_len();
-    let query = n_points * (n_joints + 1);
+    let query = n_points * crate::query_derivatives::kernel_row_len(n_joints);
     n_points * n_joints + trajectory + if load > query { load } else { query }
 }
 
@@ -23,18 +23,37 @@ pub fn initial_state(model: &Model<'_>, state: &mut [f64]) -> Result<(), Error> 
     let dims = Dims { n: model.n_joints(), m: model.task_dim() };
     let (m, n) = (dims.m, dims.n);
     let mut x = [0.0; MAX_JOINTS];
+    if dims.state_len() == 0 {
+        return Err(Error::Internal);
+    }
     for (i, s) in state.chunks_exact_mut(dims.state_len()).enumerate() {
         for (d, xd) in x.iter_mut().enumerate().take(n) {
             *xd = model.points.get(i * n + d).ok_or(Error::Internal)?;
         }
-        let k0 = forward_kinematics(&model.nominal, &x[..n]).normalised(&model.normalisation);
-        s[..m].copy_from_slice(&k0.position[..m]);
-        for a in 0..m {
-            s[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);
-            s[m + m * n + a] = model.momenta.get(i * m + a).ok_or(Error::Internal)?;
+        let k0 = forward_kinematics(&model.nominal, x.get(..n).ok_or(Error::Internal)?).normalised(&model.normalisation);
+        let (s_k, rest) = s.split_at_mut_checked(m).ok_or(Error::Internal)?;
+        let (s_jac, s_p) = rest.split_at_mut_checked(m * n).ok_or(Error::Internal)?;
+        copy_kinematics(&k0, s_k, s_jac, n);
+        for (a, p) in s_p.iter_mut().enumerate() {
+            *p = model.momenta.get(i * m + a).ok_or(Error::Internal)?;
         }
     }
     Ok(())
+}
+
+/// Copies k0 into a state's `k` (m values) and `J` (m × n, row-major) parts.
+fn copy_kinematics(k0: &Kinematics, k: &mut [f64], jac: &mut [f64], n: usize) {
+    if n == 0 {
+        return;
+    }
+    for (dst, src) in k.iter_mut().zip(k0.position.iter()) {
+        *dst = *src;
+    }
+    for (dst, src) in jac.chunks_exact_mut(n).zip(k0.jacobian.iter()) {
+        for (d, s) in dst.iter_mut().zip(src.iter()) {
+            *d = *s;
+        }
+    }
 }
 
 /// Integrates the control points (eq. 17, 19) with the model's scheme, storing the sample of
@@ -51,8 +70,14 @@ pub fn integrate_control_points(
     mut on_stage: impl FnMut(usize, &[f64]),
 ) -> Result<(), Error> {
     let dims = params.dims;
-    let n_points = points.len() / dims.n;
+    let n_points = points.len().checked_div(dims.n).ok_or(Error::Internal)?;
     let block = n_points * dims.sample_len();
+    // `integrate` needs this much scratch; checked here so that a short buffer is an error, not a panic.
+    // (3 × len computed with a checked multiplication, so the optimiser can drop the slice checks.)
+    match state.len().checked_mul(3) {
+        Some(needed) if needed == scratch_len(state.len()) && scratch.len() >= needed => {}
+        _ => return Err(Error::Internal),
+    }
     integrate(integrator.method, integrator.steps, state, scratch, |stage, y, out| {
         let samples = trajectory.get_mut(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
         write_samples(dims, y, samples);
@@ -74,21 +99,28 @@ pub fn integrate_control_points(
 /// The calibrated position and Jacobian at one configuration, in the user's units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Evaluation {
-    position: SMatrix<f64, MAX_TASK_DIM, 1>,
-    jacobian: SMatrix<f64, MAX_TASK_DIM, MAX_JOINTS>,
-    task_dim: usize,
-    n_joints: usize,
-    support: f64,
+    pub(crate) position: SMatrix<f64, MAX_TASK_DIM, 1>,
+    pub(crate) jacobian: SMatrix<f64, MAX_TASK_DIM, MAX_JOINTS>,
+    pub(crate) transported_jacobian: SMatrix<f64, MAX_TASK_DIM, MAX_JOINTS>,
+    pub(crate) task_dim: usize,
+    pub(crate) n_joints: usize,
+    pub(crate) support: f64,
 }
 
 impl Evaluation {
     /// k1(ξ): the calibrated position (length `task_dim`).
     pub fn position(&self) -> MatrixView<'_, f64, Dyn, U1, U1, nalgebra::Const<MAX_TASK_DIM>> {
-        self.position.generic_view((0, 0), (Dyn(self.task_dim), U1))
+        // task_dim ≤ MAX_TASK_DIM always; the `min` lets the compiler drop nalgebra's bounds assert.
+        self.position.generic_view((0, 0), (Dyn(self.task_dim.min(MAX_TASK_DIM)), U1))
     }
     /// Dk1(ξ): the calibrated Jacobian (`task_dim × n_joints`).
     pub fn jacobian(&self) -> MatrixView<'_, f64, Dyn, Dyn, U1, nalgebra::Const<MAX_TASK_DIM>> {
-        self.jacobian.generic_view((0, 0), (Dyn(self.task_dim), Dyn(self.n_joints)))
+        self.jacobian.generic_view((0, 0), (Dyn(self.task_dim.min(MAX_TASK_DIM)), Dyn(self.n_joints.min(MAX_JOINTS))))
+    }
+    /// J(1) of eq. (19)/(20), the Jacobian transported along the flow as in the paper. It omits
+    /// the D²k·v term, so it differs from [`Evaluation::jacobian`]; kept for comparison.
+    pub fn transported_jacobian(&self) -> MatrixView<'_, f64, Dyn, Dyn, U1, nalgebra::Const<MAX_TASK_DIM>> {
+        self.transported_jacobian.generic_view((0, 0), (Dyn(self.task_dim), Dyn(self.n_joints)))
     }
     /// Largest K_V(ξ, x_j)/γ over the measured configurations, in (0, 1]: 1 on a measured
     /// configuration, near 0 far from every one (extrapolation).
@@ -104,11 +136,11 @@ impl Evaluation {
 /// A loaded model: the blob's arrays (borrowed, read in place) and the control points'
 /// trajectories, integrated once at load time.
 pub struct Calibrator<'a> {
-    model: Model<'a>,
-    dims: Dims,
-    points: &'a [f64],
-    trajectory: &'a mut [f64],
-    work: &'a mut [f64],
+    pub(crate) model: Model<'a>,
+    pub(crate) dims: Dims,
+    pub(crate) points: &'a [f64],
+    pub(crate) trajectory: &'a mut [f64],
+    pub(crate) work: &'a mut [f64],
 }
 
 impl<'a> Calibrator<'a> {
@@ -129,17 +161,18 @@ impl<'a> Calibrator<'a> {
             return Err(Error::StorageTooSmall { needed, got: storage.len() });
         }
         let traj_len = model.integrator.stage_count() * n_points * dims.sample_len();
-        let (points, rest) = storage[..needed].split_at_mut(n_points * dims.n);
-        let (trajectory, work) = rest.split_at_mut(traj_len);
+        let (points, rest) = storage.get_mut(..needed).ok_or(Error::Internal)?.split_at_mut_checked(n_points * dims.n).ok_or(Error::Internal)?;
+        let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
         // The blob stores configurations as unaligned bytes; the flow slices them as f64.
         for (p, v) in points.iter_mut().zip(model.points.iter()) {
             *p = v;
         }
         let state_len = n_points * dims.state_len();
-        let (state, rest) = work.split_at_mut(state_len);
+        let (state, rest) = work.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
         initial_state(&model, state)?;
         let params = FlowParams { dims, joint_kernel: &model.joint_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
-        integrate_control_points(&params, model.integrator, points, state, &mut rest[..scratch_len(state_len)], trajectory, |_, _| {})?;
+        let scratch = rest.get_mut(..scratch_len(state_len)).ok_or(Error::Internal)?;
+        integrate_control_points(&params, model.integrator, points, state, scratch, trajectory, |_, _| {})?;
         let points: &'a [f64] = points;
         Ok(Calibrator { model, dims, points, trajectory, work })
     }
@@ -149,12 +182,24 @@ impl<'a> Calibrator<'a> {
         &self.model
     }
 
-    /// eq. (20): the calibrated position k1(ξ) and Jacobian Dk1(ξ) at joint configuration `q`.
+    /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint
+    /// configuration `q` (see [`crate::query_derivatives`]); also the paper's transported J(1).
     pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
+        self.evaluate_with_exact_jacobian(q)
+    }
+
+    /// eq. (20) without tangents, cheaper: the calibrated position k1(ξ) and the paper's
+    /// transported J(1) (eq. 19), which is *not* the exact derivative of k1; both
+    /// [`Evaluation::jacobian`] and [`Evaluation::transported_jacobian`] hold J(1).
+    /// The position is bit-identical to [`Calibrator::evaluate`]'s.
+    pub fn evaluate_transported(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
         let dims = self.dims;
         let (m, n) = (dims.m, dims.n);
         if q.len() != n {
             return Err(Error::QueryDimension { expected: n, found: q.len() });
+        }
+        if n == 0 {
+            return Err(Error::Internal);
         }
         if let Some(index) = q.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFiniteQuery { index });
@@ -168,17 +213,20 @@ impl<'a> Calibrator<'a> {
         for (j, r) in row.chunks_exact_mut(row_len).enumerate() {
             let xj = self.points.get(j * n..(j + 1) * n).ok_or(Error::Internal)?;
             let k = joint_kernel(&self.model.joint_kernel, q, xj, &mut grad);
-            r[0] = k;
-            r[1..].copy_from_slice(&grad[..n]);
+            let (r_k, r_grad) = r.split_first_mut().ok_or(Error::Internal)?;
+            *r_k = k;
+            for (dst, g) in r_grad.iter_mut().zip(grad.iter()) {
+                *dst = *g;
+            }
             support = support.max(k);
         }
         let row: &[f64] = row;
         let k0: Kinematics = forward_kinematics(&self.model.nominal, q).normalised(&self.model.normalisation);
         let mut y = [0.0; MAX_TASK_DIM * (1 + MAX_JOINTS)];
-        let y = &mut y[..dims.query_len()];
-        y[..m].copy_from_slice(&k0.position[..m]);
-        for a in 0..m {
-            y[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);
+        let y = y.get_mut(..dims.query_len()).ok_or(Error::Internal)?;
+        {
+            let (y_k, y_jac) = y.split_at_mut_checked(m).ok_or(Error::Internal)?;
+            copy_kinematics(&k0, y_k, y_jac, n);
         }
         let mut scratch = [0.0; scratch_len(MAX_TASK_DIM * (1 + MAX_JOINTS))];
         let block = n_points * dims.sample_len();
@@ -186,28 +234,45 @@ impl<'a> Calibrator<'a> {
         let task_kernel = self.model.task_kernel;
         integrate(self.model.integrator.method, self.model.integrator.steps, y, &mut scratch, |stage, s, out| {
             let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-            let tf = task_field(dims, &task_kernel, &s[..m], samples);
-            let jf = joint_field(dims, samples, |j, g| {
-                let r = &row[j * row_len..(j + 1) * row_len];
-                g[..n].copy_from_slice(&r[1..]);
-                r[0]
+            let (s_k, s_jac) = s.split_at_checked(m).ok_or(Error::Internal)?;
+            let tf = task_field(dims, &task_kernel, s_k, samples);
+            let jf = joint_field(dims, samples, |j, g| match row.get(j * row_len..(j + 1) * row_len).and_then(|r| r.split_first()) {
+                Some((k, r_grad)) => {
+                    for (dst, src) in g.iter_mut().zip(r_grad) {
+                        *dst = *src;
+                    }
+                    *k
+                }
+                None => {
+                    *g = [0.0; MAX_JOINTS];
+                    0.0
+                }
             });
-            let (dk, djac) = out.split_at_mut(m);
-            position_rates(dims, &s[m..], &tf, &jf, dk, djac);
+            let (dk, djac) = out.split_at_mut_checked(m).ok_or(Error::Internal)?;
+            position_rates(dims, s_jac, &tf, &jf, dk, djac);
             Ok(())
         })?;
         let norm = &self.model.normalisation;
         let mut out = Evaluation {
             position: SMatrix::zeros(),
             jacobian: SMatrix::zeros(),
+            transported_jacobian: SMatrix::zeros(),
             task_dim: m,
             n_joints: n,
             support: support / self.model.joint_kernel.gamma,
         };
-        for a in 0..m {
-            out.position[a] = norm.task_offset[a] + norm.task_scale * y[a];
-            for d in 0..n {
-                out.jacobian[(a, d)] = norm.task_scale * y[m + a * n + d];
+        let (y_k, y_jac) = y.split_at_checked(m).ok_or(Error::Internal)?;
+        for ((dst, offset), v) in out.position.iter_mut().zip(norm.task_offset.iter()).zip(y_k) {
+            *dst = offset + norm.task_scale * v;
+        }
+        for (a, y_row) in y_jac.chunks_exact(n).enumerate() {
+            for (d, v) in y_row.iter().enumerate() {
+                if let Some(dst) = out.jacobian.get_mut((a, d)) {
+                    *dst = norm.task_scale * v;
+                }
+                if let Some(dst) = out.transported_jacobian.get_mut((a, d)) {
+                    *dst = norm.task_scale * v;
+                }
             }
         }
         if out.position.iter().chain(out.jacobian.iter()).all(|v| v.is_finite()) {

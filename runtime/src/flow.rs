@@ -50,17 +50,24 @@ pub struct JointField {
 /// Writes the trajectory sample (k_j, P_j, u_j = J_jᵀ P_j) of every control point.
 pub fn write_samples(dims: Dims, state: &[f64], samples: &mut [f64]) {
     let (m, n) = (dims.m, dims.n);
-    for (s, out) in state.chunks_exact(dims.state_len()).zip(samples.chunks_exact_mut(dims.sample_len())) {
-        let (k, rest) = s.split_at(m);
-        let (jac, p) = rest.split_at(m * n);
-        out[..m].copy_from_slice(k);
-        out[m..2 * m].copy_from_slice(p);
-        for d in 0..n {
-            let mut u = 0.0;
-            for a in 0..m {
-                u += jac[a * n + d] * p[a];
+    let (state_len, sample_len) = (dims.state_len(), dims.sample_len());
+    if n == 0 || state_len == 0 || sample_len == 0 {
+        return;
+    }
+    for (s, out) in state.chunks_exact(state_len).zip(samples.chunks_exact_mut(sample_len)) {
+        let (Some((k, rest)), Some((out_k, out_rest))) = (s.split_at_checked(m), out.split_at_mut_checked(m)) else { return };
+        let (Some((jac, p)), Some((out_p, out_u))) = (rest.split_at_checked(m * n), out_rest.split_at_mut_checked(m)) else { return };
+        for (dst, src) in out_k.iter_mut().zip(k).chain(out_p.iter_mut().zip(p)) {
+            *dst = *src;
+        }
+        // u_d = Σ_a J_ad P_a, summed over a in order for every d.
+        for u in out_u.iter_mut() {
+            *u = 0.0;
+        }
+        for (jac_a, p_a) in jac.chunks_exact(n).zip(p) {
+            for (u, j) in out_u.iter_mut().zip(jac_a) {
+                *u += j * p_a;
             }
-            out[2 * m + d] = u;
         }
     }
 }
@@ -71,16 +78,21 @@ pub fn task_field(dims: Dims, kernel: &TaskKernel, k: &[f64], samples: &[f64]) -
     let mut f = TaskField { w: [0.0; MAX_TASK_DIM], dw: [[0.0; MAX_TASK_DIM]; MAX_TASK_DIM] };
     let mut diff = [0.0; MAX_TASK_DIM];
     let mut grad = [0.0; MAX_TASK_DIM];
-    for s in samples.chunks_exact(dims.sample_len()) {
-        for c in 0..m {
-            diff[c] = k[c] - s[c];
+    let sample_len = dims.sample_len();
+    if sample_len == 0 {
+        return f;
+    }
+    for s in samples.chunks_exact(sample_len) {
+        let Some((s_k, rest)) = s.split_at_checked(m) else { break };
+        let Some((p, _)) = rest.split_at_checked(m) else { break };
+        for ((e, k_c), s_c) in diff.iter_mut().zip(k).zip(s_k) {
+            *e = k_c - s_c;
         }
         let kw = task_kernel(kernel, &diff, m, &mut grad);
-        let p = &s[m..2 * m];
-        for a in 0..m {
-            f.w[a] += kw * p[a];
-            for b in 0..m {
-                f.dw[a][b] += p[a] * grad[b];
+        for ((w_a, dw_a), p_a) in f.w.iter_mut().zip(f.dw.iter_mut()).zip(p) {
+            *w_a += kw * p_a;
+            for (dw_ab, g_b) in dw_a.iter_mut().zip(grad.iter()).take(m) {
+                *dw_ab += p_a * g_b;
             }
         }
     }
@@ -93,13 +105,17 @@ pub fn joint_field(dims: Dims, samples: &[f64], mut kv: impl FnMut(usize, &mut [
     let (m, n) = (dims.m, dims.n);
     let mut f = JointField { v: [0.0; MAX_JOINTS], dv: [[0.0; MAX_JOINTS]; MAX_JOINTS] };
     let mut grad = [0.0; MAX_JOINTS];
-    for (j, s) in samples.chunks_exact(dims.sample_len()).enumerate() {
+    let sample_len = dims.sample_len();
+    if sample_len == 0 {
+        return f;
+    }
+    for (j, s) in samples.chunks_exact(sample_len).enumerate() {
         let k = kv(j, &mut grad);
-        let u = &s[2 * m..2 * m + n];
-        for a in 0..n {
-            f.v[a] += k * u[a];
-            for b in 0..n {
-                f.dv[a][b] += u[a] * grad[b];
+        let Some(u) = s.get(2 * m..) else { break };
+        for ((v_a, dv_a), u_a) in f.v.iter_mut().zip(f.dv.iter_mut()).zip(u) {
+            *v_a += k * u_a;
+            for (dv_ab, g_b) in dv_a.iter_mut().zip(grad.iter()).take(n) {
+                *dv_ab += u_a * g_b;
             }
         }
     }
@@ -109,22 +125,30 @@ pub fn joint_field(dims: Dims, samples: &[f64], mut kv: impl FnMut(usize, &mut [
 /// eq. (17), (19), (20): dk = w(k) − J v(x), dJ = Dw(k) J − J Dv(x).
 /// `jac` and `djac` are row-major m×n.
 pub fn position_rates(dims: Dims, jac: &[f64], tf: &TaskField, jf: &JointField, dk: &mut [f64], djac: &mut [f64]) {
-    let (m, n) = (dims.m, dims.n);
-    for a in 0..m {
-        let mut r = tf.w[a];
-        for d in 0..n {
-            r -= jac[a * n + d] * jf.v[d];
+    let n = dims.n;
+    if n == 0 {
+        return;
+    }
+    // Row a of dJ: for every d, first + Σ_c Dw_ac J_cd (c in order), then − Σ_e J_ae Dv_ed (e in order).
+    let rows = dk.iter_mut().zip(djac.chunks_exact_mut(n)).zip(jac.chunks_exact(n)).zip(tf.w.iter().zip(tf.dw.iter()));
+    for (((dk_a, djac_a), jac_a), (w_a, dw_a)) in rows {
+        let mut r = *w_a;
+        for (j, v) in jac_a.iter().zip(jf.v.iter()) {
+            r -= j * v;
         }
-        dk[a] = r;
-        for d in 0..n {
-            let mut r = 0.0;
-            for c in 0..m {
-                r += tf.dw[a][c] * jac[c * n + d];
+        *dk_a = r;
+        for r in djac_a.iter_mut() {
+            *r = 0.0;
+        }
+        for (dw_ac, jac_c) in dw_a.iter().zip(jac.chunks_exact(n)) {
+            for (r, j) in djac_a.iter_mut().zip(jac_c) {
+                *r += dw_ac * j;
             }
-            for e in 0..n {
-                r -= jac[a * n + e] * jf.dv[e][d];
+        }
+        for (jac_ae, dv_e) in jac_a.iter().zip(jf.dv.iter()) {
+            for (r, dv) in djac_a.iter_mut().zip(dv_e.iter()) {
+                *r -= jac_ae * dv;
             }
-            djac[a * n + d] = r;
         }
     }
 }
@@ -132,8 +156,10 @@ pub fn position_rates(dims: Dims, jac: &[f64], tf: &TaskField, jf: &JointField, 
 /// (div v)(x) = trace Dv(x).
 pub fn divergence(dims: Dims, jf: &JointField) -> f64 {
     let mut div = 0.0;
-    for d in 0..dims.n {
-        div += jf.dv[d][d];
+    for (d, dv_d) in jf.dv.iter().enumerate().take(dims.n) {
+        if let Some(v) = dv_d.get(d) {
+            div += v;
+        }
     }
     div
 }
@@ -145,12 +171,17 @@ pub fn momentum_rate(dims: Dims, law: MomentumLaw, p: &[f64], tf: &TaskField, jf
         MomentumLaw::WithDivergence => divergence(dims, jf),
         MomentumLaw::WithoutDivergence => 0.0,
     };
-    for a in 0..m {
-        let mut r = 0.0;
-        for c in 0..m {
-            r -= tf.dw[c][a] * p[c];
+    // For every a: − Σ_c Dw_ca P_c (c in order), then − div P_a.
+    for r in dp.iter_mut().take(m) {
+        *r = 0.0;
+    }
+    for (dw_c, p_c) in tf.dw.iter().zip(p).take(m) {
+        for (r, dw) in dp.iter_mut().take(m).zip(dw_c.iter()) {
+            *r -= dw * p_c;
         }
-        dp[a] = r - div * p[a];
+    }
+    for (r, p_a) in dp.iter_mut().take(m).zip(p) {
+        *r -= div * p_a;
     }
 }
 
@@ -175,14 +206,24 @@ pub fn control_point_rates(
 ) {
     let dims = params.dims;
     let (m, n, len) = (dims.m, dims.n, dims.state_len());
-    for (i, rate) in rows.zip(out.chunks_exact_mut(len)) {
-        let s = &state[i * len..(i + 1) * len];
-        let xi = &points[i * n..(i + 1) * n];
-        let tf = task_field(dims, params.task_kernel, &s[..m], samples);
-        let jf = joint_field(dims, samples, |j, g| joint_kernel(params.joint_kernel, xi, &points[j * n..(j + 1) * n], g));
-        let (dk, rest) = rate.split_at_mut(m);
-        let (djac, dp) = rest.split_at_mut(m * n);
-        position_rates(dims, &s[m..m + m * n], &tf, &jf, dk, djac);
-        momentum_rate(dims, params.law, &s[m + m * n..], &tf, &jf, dp);
+    if n == 0 || len == 0 {
+        return;
+    }
+    let own = state.chunks_exact(len).zip(points.chunks_exact(n)).skip(rows.start).take(rows.len());
+    for ((s, xi), rate) in own.zip(out.chunks_exact_mut(len)) {
+        let Some((k, rest)) = s.split_at_checked(m) else { return };
+        let Some((jac, p)) = rest.split_at_checked(m * n) else { return };
+        let tf = task_field(dims, params.task_kernel, k, samples);
+        let jf = joint_field(dims, samples, |j, g| match points.get(j * n..(j + 1) * n) {
+            Some(xj) => joint_kernel(params.joint_kernel, xi, xj, g),
+            None => {
+                *g = [0.0; MAX_JOINTS];
+                0.0
+            }
+        });
+        let Some((dk, rest)) = rate.split_at_mut_checked(m) else { return };
+        let Some((djac, dp)) = rest.split_at_mut_checked(m * n) else { return };
+        position_rates(dims, jac, &tf, &jf, dk, djac);
+        momentum_rate(dims, params.law, p, &tf, &jf, dp);
     }
 }

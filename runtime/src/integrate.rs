@@ -23,7 +23,7 @@ pub fn integrate<E>(
     let len = y.len();
     let (acc, rest) = scratch.split_at_mut(len);
     let (slope, rest) = rest.split_at_mut(len);
-    let stage_state = &mut rest[..len];
+    let (stage_state, _) = rest.split_at_mut(len);
     let h = 1.0 / steps as f64;
     let mut stage = 0;
     for _ in 0..steps {

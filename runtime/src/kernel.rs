@@ -7,7 +7,7 @@ use cbd_protocol::{JointKernel, JointKernelAxis, TaskKernel, MAX_JOINTS, MAX_TAS
 #[inline]
 pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [f64; MAX_JOINTS]) -> f64 {
     let mut exponent = 0.0;
-    for (d, (axis, (a, b))) in kernel.axes.iter().zip(x.iter().zip(xp.iter())).enumerate() {
+    for (g, (axis, (a, b))) in grad.iter_mut().zip(kernel.axes.iter().zip(x.iter().zip(xp.iter()))) {
         let delta = a - b;
         let (f, df) = match *axis {
             JointKernelAxis::Periodic { b } => (b * (libm::cos(delta) - 1.0), -b * libm::sin(delta)),
@@ -17,7 +17,7 @@ pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [f64
             }
         };
         exponent += f;
-        grad[d] = df;
+        *g = df;
     }
     let value = kernel.gamma * libm::exp(exponent);
     for g in grad.iter_mut().take(kernel.axes.len()) {
@@ -36,8 +36,8 @@ pub fn task_kernel(kernel: &TaskKernel, diff: &[f64; MAX_TASK_DIM], m: usize, gr
         r2 += e * e;
     }
     let value = libm::exp(-0.5 * r2 * inv_a2);
-    for c in 0..m {
-        grad[c] = -value * diff[c] * inv_a2;
+    for (g, e) in grad.iter_mut().zip(diff.iter()).take(m) {
+        *g = -value * *e * inv_a2;
     }
     value
 }

@@ -8,12 +8,14 @@
 //! let (y, dy) = (e.position(), e.jacobian());
 //! ```
 #![no_std]
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
 pub mod calibrator;
 pub mod flow;
 pub mod integrate;
 pub mod kernel;
 pub mod nominal;
+pub mod query_derivatives;
 
 pub use calibrator::{integrate_control_points, initial_state, storage_len, Calibrator, Evaluation};
 pub use cbd_protocol as protocol;

@@ -15,10 +15,10 @@ impl Kinematics {
     /// Maps user units to internal ones: (y − offset)/scale, J/scale.
     pub fn normalised(mut self, norm: &Normalisation) -> Kinematics {
         let inv = 1.0 / norm.task_scale;
-        for c in 0..MAX_TASK_DIM {
-            self.position[c] = (self.position[c] - norm.task_offset[c]) * inv;
-            for d in 0..MAX_JOINTS {
-                self.jacobian[c][d] *= inv;
+        for ((p, o), row) in self.position.iter_mut().zip(norm.task_offset.iter()).zip(self.jacobian.iter_mut()) {
+            *p = (*p - o) * inv;
+            for j in row.iter_mut() {
+                *j *= inv;
             }
         }
         self
@@ -37,16 +37,16 @@ pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
 fn planar_chain(lengths: &[f64], x: &[f64]) -> Kinematics {
     let mut out = Kinematics::ZERO;
     let mut theta = 0.0;
-    let n = lengths.len().min(x.len());
-    for k in 0..n {
-        theta += x[k];
+    let [jac_x, jac_y, _] = &mut out.jacobian;
+    for (k, (l, xk)) in lengths.iter().zip(x).enumerate() {
+        theta += xk;
         let (s, c) = (libm::sin(theta), libm::cos(theta));
-        out.position[0] += lengths[k] * c;
-        out.position[1] += lengths[k] * s;
+        out.position[0] += l * c;
+        out.position[1] += l * s;
         // Link k moves with every joint d ≤ k.
-        for d in 0..=k {
-            out.jacobian[0][d] -= lengths[k] * s;
-            out.jacobian[1][d] += lengths[k] * c;
+        for (jx, jy) in jac_x.iter_mut().zip(jac_y.iter_mut()).take(k + 1) {
+            *jx -= l * s;
+            *jy += l * c;
         }
     }
     out
@@ -66,13 +66,13 @@ fn frame_of(t: &Transform) -> Frame {
 
 fn compose(a: &Frame, b: &Frame) -> Frame {
     let mut out = [[0.0; 4]; 3];
-    for i in 0..3 {
-        for j in 0..4 {
-            let mut s = if j == 3 { a[i][3] } else { 0.0 };
-            for k in 0..3 {
-                s += a[i][k] * b[k][j];
+    // out_ij = [j = 3] a_i3 + Σ_k a_ik b_kj, summed over k in order for every j.
+    for (out_i, a_i) in out.iter_mut().zip(a.iter()) {
+        *out_i = [0.0, 0.0, 0.0, a_i[3]];
+        for (a_ik, b_k) in a_i.iter().take(3).zip(b.iter()) {
+            for (s, b_kj) in out_i.iter_mut().zip(b_k.iter()) {
+                *s += a_ik * b_kj;
             }
-            out[i][j] = s;
         }
     }
     out
@@ -89,29 +89,28 @@ fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
 }
 
 fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
-    let n = chain.joints.len().min(x.len());
     let mut frame = frame_of(&chain.base);
     // Joint axes (z) and points on them, in the base frame.
     let mut axes = [[0.0; 3]; MAX_JOINTS];
     let mut origins = [[0.0; 3]; MAX_JOINTS];
-    for (i, joint) in chain.joints.iter().take(n).enumerate() {
+    for (((joint, x_i), axis), origin) in chain.joints.iter().zip(x).zip(axes.iter_mut()).zip(origins.iter_mut()) {
         let (theta, d) = match joint.kind {
-            JointKind::Revolute => (x[i] + joint.theta_offset, joint.d),
-            JointKind::Prismatic => (joint.theta_offset, x[i] + joint.d),
+            JointKind::Revolute => (x_i + joint.theta_offset, joint.d),
+            JointKind::Prismatic => (joint.theta_offset, x_i + joint.d),
         };
         match chain.convention {
             // T_i = Rz(θ) Tz(d) Tx(a) Rx(α): joint i moves about z of frame i−1.
             DhConvention::Standard => {
-                axes[i] = [frame[0][2], frame[1][2], frame[2][2]];
-                origins[i] = [frame[0][3], frame[1][3], frame[2][3]];
+                *axis = [frame[0][2], frame[1][2], frame[2][2]];
+                *origin = [frame[0][3], frame[1][3], frame[2][3]];
                 frame = compose(&frame, &rot_z_trans_z(theta, d));
                 frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
             }
             // T_i = Rx(α) Tx(a) Rz(θ) Tz(d): joint i moves about z of frame i.
             DhConvention::Modified => {
                 frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
-                axes[i] = [frame[0][2], frame[1][2], frame[2][2]];
-                origins[i] = [frame[0][3], frame[1][3], frame[2][3]];
+                *axis = [frame[0][2], frame[1][2], frame[2][2]];
+                *origin = [frame[0][3], frame[1][3], frame[2][3]];
                 frame = compose(&frame, &rot_z_trans_z(theta, d));
             }
         }
@@ -120,17 +119,20 @@ fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
     let p = [frame[0][3], frame[1][3], frame[2][3]];
     let mut out = Kinematics::ZERO;
     out.position = p;
-    for i in 0..n {
-        let z = axes[i];
-        let col = match chain.joints[i].kind {
+    let n = chain.joints.len().min(x.len());
+    for (i, ((z, o), joint)) in axes.iter().zip(origins.iter()).zip(chain.joints.iter()).take(n).enumerate() {
+        let z = *z;
+        let col = match joint.kind {
             JointKind::Revolute => {
-                let r = [p[0] - origins[i][0], p[1] - origins[i][1], p[2] - origins[i][2]];
+                let r = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
                 [z[1] * r[2] - z[2] * r[1], z[2] * r[0] - z[0] * r[2], z[0] * r[1] - z[1] * r[0]]
             }
             JointKind::Prismatic => z,
         };
-        for c in 0..3 {
-            out.jacobian[c][i] = col[c];
+        for (row, v) in out.jacobian.iter_mut().zip(col) {
+            if let Some(slot) = row.get_mut(i) {
+                *slot = v;
+            }
         }
     }
     out
@@ -178,11 +180,11 @@ mod tests {
         NominalModel::DhChain(DhChain {
             convention,
             joints: HVec::from_slice(&[
-                j(JointKind::Revolute, 0.0, 1.5707963267948966, 0.089),
+                j(JointKind::Revolute, 0.0, core::f64::consts::FRAC_PI_2, 0.089),
                 j(JointKind::Revolute, -0.425, 0.0, 0.0),
                 j(JointKind::Prismatic, -0.392, 0.2, 0.0),
-                j(JointKind::Revolute, 0.0, 1.5707963267948966, 0.109),
-                j(JointKind::Revolute, 0.0, -1.5707963267948966, 0.094),
+                j(JointKind::Revolute, 0.0, core::f64::consts::FRAC_PI_2, 0.109),
+                j(JointKind::Revolute, 0.0, -core::f64::consts::FRAC_PI_2, 0.094),
                 j(JointKind::Revolute, 0.0, 0.0, 0.082),
             ])
             .unwrap(),

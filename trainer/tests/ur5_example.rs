@@ -65,3 +65,54 @@ fn ur5_dh_calibration_reaches_the_reference_accuracy() {
     eprintln!("UR5 DH calibration: {stats:?}, {secs:.3} s, {:?}", fit.stats);
     assert!(stats.mean < 0.13, "mean test error {} mm", stats.mean);
 }
+
+/// Every peer on the UR5 data (about half a minute): `cargo test -p cbd-trainer --test ur5_example -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn ur5_compare_peers() {
+    use cbd_trainer::baselines::compare::compare_files;
+    use cbd_trainer::kernels::hyperparameters::SearchOptions;
+    let d = ur5_dir();
+    let (c, warnings) = compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), &SearchOptions::default(), None).unwrap();
+    eprintln!("warnings: {warnings:?}");
+    eprintln!("{}", c.table("mm"));
+    for r in &c.rows {
+        eprintln!(
+            "{:8} test mean {:.4} median {:.4} p99 {:.4} max {:.4} | train mean {:.4} | fit {:.2} s | {}",
+            r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.train_stats.mean, r.fit_seconds, r.note
+        );
+    }
+    let dh = c.rows.iter().find(|r| r.name == "dh").unwrap();
+    assert!(dh.stats.mean < 0.13);
+}
+
+/// The CbD hook of `compare_peers`, wired with `fit_cbd` and data-scaled default options (not
+/// tuned): `cargo test -p cbd-trainer --test ur5_example -- --ignored --nocapture cbd_hook`.
+#[test]
+#[ignore]
+fn cbd_hook_on_the_simulated_six_joint_arm() {
+    use cbd_trainer::baselines::compare::{compare_peers, Predictor};
+    use cbd_trainer::data::Measurements;
+    use cbd_trainer::kernels::hyperparameters::SearchOptions;
+    use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
+    use cbd_trainer::solver::{fit_cbd, CbdOptions};
+    let robot = SixJointRobot::ur5_like(21);
+    let train = robot.measure(&random_configurations(150, 22), 23);
+    let test = robot.measure(&random_configurations(200, 24), 25);
+    let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> Result<Predictor, String> {
+        let mut opts = CbdOptions::paper_rr();
+        opts.normalisation = cbd_trainer::kernels::normalisation_of(data);
+        opts.joint_kernel = cbd_trainer::kernels::default_joint_kernel(nominal);
+        opts.task_kernel.width = 1.0;
+        opts.sigma = robot.noise_std / opts.normalisation.task_scale;
+        opts.max_iterations = 15;
+        let fit = fit_cbd(nominal, data, &opts).map_err(|e| e.to_string())?;
+        Ok(Box::new(move |joints: &[f64]| cbd_trainer::predict::evaluate_blob(&fit.blob, joints).expect("blob evaluates")))
+    };
+    let c = compare_peers(&robot.nominal, &train, &test, &SearchOptions::default(), Some(&hook));
+    eprintln!("{}", c.table("mm"));
+    for r in &c.rows {
+        eprintln!("{}: {}", r.name, r.note);
+    }
+}
+

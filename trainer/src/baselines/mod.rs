@@ -2,3 +2,4 @@
 
 pub mod krr;
 pub mod dh_calibration;
+pub mod compare;

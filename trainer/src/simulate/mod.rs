@@ -53,3 +53,5 @@ pub fn add_noise(values: &mut [f64], std: f64, seed: u64) {
         *v += std * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos();
     }
 }
+
+pub mod six_joint;

@@ -1,0 +1,109 @@
+//! The test blobs of the firmware check, built deterministically (shared with `examples/control_loop`
+//! through `#[path]`).
+
+use cbd_protocol::*;
+use serde_json::Value;
+use std::f64::consts::{FRAC_PI_2, PI};
+
+use crate::shared::Lcg;
+
+const RR_REFERENCE: &str = include_str!("../../../tests/data/rr_flow_reference.json");
+
+/// The paper's RR arm settings, exactly as `tests/tests/reference_flow.rs` builds them.
+fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32) -> Model<'a> {
+    Model {
+        nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).expect("2 joints") },
+        normalisation: Normalisation::IDENTITY,
+        joint_kernel: JointKernel {
+            gamma: 8.0,
+            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("2 axes"),
+        },
+        task_kernel: TaskKernel { width: 1.0270 },
+        integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
+        momentum_law: MomentumLaw::WithDivergence,
+        sigma: 1.0,
+        n_points,
+        points: F64Slice::from_le_bytes(points),
+        momenta: F64Slice::from_le_bytes(momenta),
+    }
+}
+
+fn flat(v: &Value, out: &mut Vec<f64>) {
+    match v {
+        Value::Array(a) => a.iter().for_each(|x| flat(x, out)),
+        Value::Number(n) => out.push(n.as_f64().expect("number")),
+        _ => panic!("unexpected JSON value in the RR reference"),
+    }
+}
+
+/// The RR benchmark: 16 × 16 grid and the reference momenta of `tests/data/rr_flow_reference.json`.
+pub fn rr_reference_blob() -> Vec<u8> {
+    let reference: Value = serde_json::from_str(RR_REFERENCE).expect("RR reference JSON");
+    let (mut x, mut p0) = (Vec::new(), Vec::new());
+    flat(&reference["X"], &mut x);
+    flat(&reference["P0"], &mut p0);
+    assert_eq!((x.len(), p0.len()), (512, 512));
+    let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
+    encode_to_vec(&rr_model(&pb, &mb, 256)).expect("encode RR blob")
+}
+
+/// RR arm on a side × side grid of the torus with small pseudo-random momenta (cost measurement).
+pub fn rr_grid_blob(side: usize, seed: u32) -> Vec<u8> {
+    let step = 2.0 * PI / side as f64;
+    let x: Vec<f64> = (0..side * side).flat_map(|k| [(k / side) as f64 * step, (k % side) as f64 * step]).collect();
+    let mut rng = Lcg(seed);
+    let p0: Vec<f64> = (0..2 * side * side).map(|_| 1e-3 * rng.symmetric()).collect();
+    let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
+    encode_to_vec(&rr_model(&pb, &mb, (side * side) as u32)).expect("encode RR grid blob")
+}
+
+/// A 6-joint model: UR5 standard DH table (mm, data/ur5/README.md), 64 random configurations,
+/// small pseudo-random momenta, Heun × 5.
+pub fn six_joint_blob() -> Vec<u8> {
+    let deg = PI / 180.0;
+    let joint = |a: f64, alpha_deg: f64, d: f64| DhJoint {
+        kind: JointKind::Revolute,
+        a,
+        alpha: if alpha_deg == 90.0 { FRAC_PI_2 } else if alpha_deg == -90.0 { -FRAC_PI_2 } else { alpha_deg * deg },
+        d,
+        theta_offset: 0.0,
+    };
+    let mut tool = Transform::IDENTITY;
+    tool.translation = [0.0, 0.0, 31.0];
+    let chain = DhChain {
+        convention: DhConvention::Standard,
+        joints: heapless::Vec::from_slice(&[
+            joint(0.0, 90.0, 89.159),
+            joint(-425.0, 0.0, 0.0),
+            joint(-392.25, 0.0, 0.0),
+            joint(0.0, 90.0, 109.15),
+            joint(0.0, -90.0, 94.65),
+            joint(0.0, 0.0, 82.3),
+        ])
+        .expect("6 joints"),
+        base: Transform::IDENTITY,
+        tool,
+    };
+    const N: usize = 64;
+    let mut rng = Lcg(0x0005_5e1f);
+    let x: Vec<f64> = (0..N * 6).map(|_| PI * rng.symmetric()).collect();
+    let p0: Vec<f64> = (0..N * 3).map(|_| 1e-3 * rng.symmetric()).collect();
+    let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
+    let model = Model {
+        nominal: NominalModel::DhChain(chain),
+        normalisation: Normalisation { task_offset: [0.0, 0.0, 400.0], task_scale: 500.0 },
+        joint_kernel: JointKernel {
+            gamma: 1.0,
+            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; 6]).expect("6 axes"),
+        },
+        task_kernel: TaskKernel { width: 1.0 },
+        integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
+        momentum_law: MomentumLaw::WithDivergence,
+        sigma: 1.0,
+        n_points: N as u32,
+        points: F64Slice::from_le_bytes(&pb),
+        momenta: F64Slice::from_le_bytes(&mb),
+    };
+    encode_to_vec(&model).expect("encode 6-joint blob")
+}
+

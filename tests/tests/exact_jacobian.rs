@@ -1,0 +1,123 @@
+//! The runtime's exact Jacobian against central finite differences of its own positions, for the
+//! planar RR arm and for 6-joint DH chains (standard and modified, with a prismatic joint).
+
+use cbd_protocol::*;
+use cbd_runtime::query_derivatives::nominal_hessian;
+use cbd_runtime::Calibrator;
+
+fn six_joint(convention: DhConvention) -> NominalModel {
+    let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
+    let mut tool = Transform::IDENTITY;
+    tool.translation = [10.0, 20.0, 31.0];
+    NominalModel::DhChain(DhChain {
+        convention,
+        joints: heapless::Vec::from_slice(&[
+            j(JointKind::Revolute, 0.0, 1.5707963267948966, 89.0),
+            j(JointKind::Revolute, -425.0, 0.0, 0.0),
+            j(JointKind::Prismatic, -392.0, 0.2, 0.0),
+            j(JointKind::Revolute, 0.0, 1.5707963267948966, 109.0),
+            j(JointKind::Revolute, 0.0, -1.5707963267948966, 94.0),
+            j(JointKind::Revolute, 0.0, 0.0, 82.0),
+        ])
+        .unwrap(),
+        base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
+        tool,
+    })
+}
+
+/// A deterministic pseudo-random sequence in [−1, 1).
+fn lcg(state: &mut u64) -> f64 {
+    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+}
+
+fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integrator: Integrator) -> Vec<u8> {
+    let n = nominal.n_joints();
+    let m = nominal.task_dim();
+    let mut s = 7u64;
+    let points: Vec<f64> = (0..n_points * n).map(|_| 3.0 * lcg(&mut s)).collect();
+    let momenta: Vec<f64> = (0..n_points * m).map(|_| momentum * lcg(&mut s)).collect();
+    let axes: heapless::Vec<JointKernelAxis, 7> = (0..n).map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 2.0 } }).collect();
+    let (pb, mb) = (f64_le_bytes(&points), f64_le_bytes(&momenta));
+    let normalisation = if m == 3 { Normalisation { task_offset: [0.0, 0.0, 300.0], task_scale: 500.0 } } else { Normalisation::IDENTITY };
+    let model = Model {
+        nominal,
+        normalisation,
+        joint_kernel: JointKernel { gamma: 2.0, axes },
+        task_kernel: TaskKernel { width: 0.8 },
+        integrator,
+        momentum_law: MomentumLaw::WithDivergence,
+        sigma: 1e-3,
+        n_points: n_points as u32,
+        points: F64Slice::from_le_bytes(&pb),
+        momenta: F64Slice::from_le_bytes(&mb),
+    };
+    encode_to_vec(&model).unwrap()
+}
+
+fn check(blob: &[u8], queries: &[Vec<f64>]) -> (f64, f64) {
+    let mut storage = vec![0.0; 200_000];
+    let mut cal = Calibrator::load(blob, &mut storage).unwrap();
+    let (mut worst_exact, mut worst_transported): (f64, f64) = (0.0, 0.0);
+    for q in queries {
+        let plain = cal.evaluate_transported(q).unwrap();
+        let e = cal.evaluate(q).unwrap();
+        // The position is the same computation, bit for bit.
+        assert_eq!(plain.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>(), e.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        let h = 1e-6;
+        let scale = e.jacobian().iter().fold(0.0f64, |s, v| s.max(v.abs()));
+        for d in 0..q.len() {
+            let (mut qa, mut qb) = (q.clone(), q.clone());
+            qa[d] += h;
+            qb[d] -= h;
+            let ya: Vec<f64> = cal.evaluate(&qa).unwrap().position().iter().copied().collect();
+            let yb: Vec<f64> = cal.evaluate(&qb).unwrap().position().iter().copied().collect();
+            for r in 0..ya.len() {
+                let fd = (ya[r] - yb[r]) / (2.0 * h);
+                worst_exact = worst_exact.max((fd - e.jacobian()[(r, d)]).abs() / scale);
+                worst_transported = worst_transported.max((fd - e.transported_jacobian()[(r, d)]).abs() / scale);
+            }
+        }
+    }
+    (worst_exact, worst_transported)
+}
+
+#[test]
+fn exact_jacobian_matches_finite_differences() {
+    let mut s = 3u64;
+    for (name, nominal, momentum) in [
+        ("rr", NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() }, 0.05),
+        ("dh-standard", six_joint(DhConvention::Standard), 0.02),
+        ("dh-modified", six_joint(DhConvention::Modified), 0.02),
+    ] {
+        for integrator in [Integrator { method: IntegratorMethod::Euler, steps: 2 }, Integrator { method: IntegratorMethod::Rk4, steps: 3 }] {
+            let n = nominal.n_joints();
+            let blob = model_blob(nominal.clone(), 40, momentum, integrator);
+            let queries: Vec<Vec<f64>> = (0..5).map(|_| (0..n).map(|_| 3.0 * lcg(&mut s)).collect()).collect();
+            let (exact, transported) = check(&blob, &queries);
+            eprintln!("{name} {integrator:?}: exact {exact:.1e}, transported J(1) {transported:.1e} (relative to max |Dk1|)");
+            assert!(exact < 1e-7, "{name}: exact Jacobian off by {exact:e}");
+        }
+    }
+}
+
+#[test]
+fn nominal_hessian_matches_finite_differences() {
+    for nominal in [six_joint(DhConvention::Standard), six_joint(DhConvention::Modified)] {
+        let x = [0.3, -0.8, 0.05, 1.2, -0.4, 2.0];
+        let h = nominal_hessian(&nominal, &x);
+        let step = 1e-6;
+        for d in 0..6 {
+            let (mut xa, mut xb) = (x, x);
+            xa[d] += step;
+            xb[d] -= step;
+            let (ja, jb) = (cbd_runtime::nominal::forward_kinematics(&nominal, &xa).jacobian, cbd_runtime::nominal::forward_kinematics(&nominal, &xb).jacobian);
+            for a in 0..3 {
+                for e in 0..6 {
+                    let fd = (ja[a][e] - jb[a][e]) / (2.0 * step);
+                    assert!((fd - h[a][e][d]).abs() < 1e-5 * (1.0 + fd.abs()), "a {a} e {e} d {d}: fd {fd} vs {}", h[a][e][d]);
+                }
+            }
+        }
+    }
+}

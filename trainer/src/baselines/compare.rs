@@ -1,0 +1,257 @@
+//! Every peer on the same data: nominal, parametric DH calibration, kernel ridge / GP regression
+//! of the residual (hyperparameters by marginal likelihood on the training rows only), the
+//! hybrid DH + KRR, and — through a hook — Calibration by Diffeomorphisms and DH + CbD.
+
+use super::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
+use super::krr::KernelRidge;
+use crate::data::Measurements;
+use crate::kernels::hyperparameters::{choose_hyperparameters, Hyperparameters, SearchOptions};
+use crate::report::stats::ErrorStats;
+use cbd_protocol::NominalModel;
+use cbd_runtime::nominal::forward_kinematics;
+use std::time::Instant;
+
+/// Predicted positions (row-major, `task_dim` per row) at joint rows (row-major).
+pub type Predictor = Box<dyn Fn(&[f64]) -> Vec<f64>>;
+
+/// Fits a nonparametric correction on top of a nominal model and returns its predictor.
+/// The hook through which CbD enters the comparison (see [`compare_peers`]).
+pub type CorrectionFitter<'a> = &'a dyn Fn(&NominalModel, &Measurements) -> Result<Predictor, String>;
+
+/// One method's row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeerResult {
+    /// `nominal`, `dh`, `krr`, `dh+krr`, `cbd`, `dh+cbd`.
+    pub name: String,
+    /// Test-row errors (model length unit).
+    pub stats: ErrorStats,
+    /// Training-row errors.
+    pub train_stats: ErrorStats,
+    pub fit_seconds: f64,
+    /// Chosen hyperparameters, DH fit summary, or why the method failed.
+    pub note: String,
+}
+
+/// Everything [`compare_peers`] found, besides the table.
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    pub rows: Vec<PeerResult>,
+    pub dh: Option<DhFitStats>,
+    pub krr_hyperparameters: Option<Hyperparameters>,
+    pub dh_krr_hyperparameters: Option<Hyperparameters>,
+}
+
+impl Comparison {
+    /// The `cbd compare --json` shape: `{"methods": {name: {mean, median, p99, max, fit_seconds,
+    /// train_mean, note}}, "dh": {...}, "hyperparameters": {"krr": ..., "dh+krr": ...}}`.
+    pub fn to_json(&self) -> serde_json::Value {
+        use serde_json::json;
+        let mut methods = serde_json::Map::new();
+        for r in &self.rows {
+            methods.insert(
+                r.name.clone(),
+                json!({
+                    "mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max,
+                    "fit_seconds": r.fit_seconds, "train_mean": r.train_stats.mean, "note": r.note,
+                }),
+            );
+        }
+        let hyper = |h: &Option<Hyperparameters>| {
+            h.as_ref().map(|h| {
+                let widths: Vec<serde_json::Value> = h
+                    .kernel
+                    .axes
+                    .iter()
+                    .map(|a| match a {
+                        cbd_protocol::JointKernelAxis::Periodic { b } => json!({ "periodic_b": b }),
+                        cbd_protocol::JointKernelAxis::Gaussian { width } => json!({ "gaussian_width": width }),
+                    })
+                    .collect();
+                json!({
+                    "joint_axes": widths, "gamma": h.kernel.gamma, "noise_sigma": h.noise_sigma,
+                    "noise_sigma_data_units": h.noise_sigma_data_units(), "task_scale": h.task_scale,
+                    "log_marginal_likelihood": h.log_marginal_likelihood, "evaluations": h.evaluations, "rows_used": h.rows_used,
+                })
+            })
+        };
+        json!({
+            "methods": methods,
+            "dh": self.dh.as_ref().map(|d| json!({
+                "iterations": d.iterations, "initial_rms": d.initial_rms, "final_rms": d.final_rms,
+                "n_parameters": d.n_parameters, "rank": d.rank, "unidentifiable": d.unidentifiable,
+                "redundant_at_nominal": d.redundant_at_nominal, "converged": d.converged,
+            })),
+            "hyperparameters": { "krr": hyper(&self.krr_hyperparameters), "dh+krr": hyper(&self.dh_krr_hyperparameters) },
+        })
+    }
+
+    /// A plain-text table, one line per method.
+    pub fn table(&self, unit: &str) -> String {
+        let mut out = format!("{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}  ({unit})\n", "method", "mean", "median", "p99", "max", "fit [s]");
+        for r in &self.rows {
+            out += &format!("{:<8} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.2}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds);
+        }
+        out
+    }
+}
+
+/// [`compare_peers`] from files: the model file, and training and test CSVs read with the model
+/// file's `[measurements]` columns. Returns the comparison and the import warnings.
+pub fn compare_files(
+    model_file: impl AsRef<std::path::Path>,
+    train_csv: impl AsRef<std::path::Path>,
+    test_csv: impl AsRef<std::path::Path>,
+    search: &SearchOptions,
+    cbd: Option<CorrectionFitter>,
+) -> Result<(Comparison, Vec<String>), crate::data::model_file::ImportError> {
+    use crate::data::csv_import::read_measurements;
+    let model = crate::data::model_file::load_model_file(model_file)?;
+    let spec = model.column_spec()?;
+    let train = read_measurements(train_csv.as_ref(), &spec)?;
+    let test = read_measurements(test_csv.as_ref(), &spec)?;
+    let mut warnings = train.warnings(train_csv.as_ref());
+    warnings.extend(test.warnings(test_csv.as_ref()));
+    Ok((compare_peers(&model.nominal, &train.measurements, &test.measurements, search, cbd), warnings))
+}
+
+fn nominal_predictor(model: NominalModel) -> Predictor {
+    let m = model.task_dim();
+    Box::new(move |joints: &[f64]| {
+        joints.chunks_exact(model.n_joints()).flat_map(|q| forward_kinematics(&model, q).position.into_iter().take(m)).collect()
+    })
+}
+
+fn krr_on(model: &NominalModel, train: &Measurements, search: &SearchOptions) -> Result<(Predictor, Hyperparameters), String> {
+    let h = choose_hyperparameters(model, train, search).map_err(|e| e.to_string())?;
+    let krr = KernelRidge::fit(model, train, h.kernel.clone(), h.ridge()).map_err(|e| e.to_string())?;
+    let model = model.clone();
+    Ok((Box::new(move |joints: &[f64]| krr.predict(&model, joints)), h))
+}
+
+fn describe(h: &Hyperparameters) -> String {
+    let widths: Vec<String> = h
+        .kernel
+        .axes
+        .iter()
+        .map(|a| match a {
+            cbd_protocol::JointKernelAxis::Periodic { b } => format!("b={b:.3}"),
+            cbd_protocol::JointKernelAxis::Gaussian { width } => format!("l={width:.3}"),
+        })
+        .collect();
+    format!(
+        "{} gamma={:.3e} sigma={:.3e} (normalised, scale {:.4}; sigma {:.4} in data units) lml={:.2} after {} evaluations on {} rows",
+        widths.join(" "),
+        h.kernel.gamma,
+        h.noise_sigma,
+        h.task_scale,
+        h.noise_sigma_data_units(),
+        h.log_marginal_likelihood,
+        h.evaluations,
+        h.rows_used
+    )
+}
+
+/// Runs every peer: fits on `train` only, reports errors on `test`. `cbd` is the hook for
+/// Calibration by Diffeomorphisms: when given, it is fitted on the nominal model (`cbd`) and on
+/// the DH-calibrated model (`dh+cbd`); when `None`, those rows are absent.
+pub fn compare_peers(
+    nominal: &NominalModel,
+    train: &Measurements,
+    test: &Measurements,
+    search: &SearchOptions,
+    cbd: Option<CorrectionFitter>,
+) -> Comparison {
+    let m = nominal.task_dim();
+    let mut rows = Vec::new();
+    let mut push = |name: &str, fitted: Result<(Predictor, String), String>, seconds: f64| {
+        let (stats, train_stats, note) = match fitted {
+            Ok((p, note)) => (
+                ErrorStats::of_positions(&p(&test.joints), &test.positions, m),
+                ErrorStats::of_positions(&p(&train.joints), &train.positions, m),
+                note,
+            ),
+            Err(e) => {
+                let nan = ErrorStats::of_errors(&[]);
+                (nan, nan, format!("failed: {e}"))
+            }
+        };
+        rows.push(PeerResult { name: name.to_string(), stats, train_stats, fit_seconds: seconds, note });
+    };
+    push("nominal", Ok((nominal_predictor(nominal.clone()), String::new())), 0.0);
+
+    let t = Instant::now();
+    let dh = calibrate_dh(nominal, train, &DhCalibrationOptions::default());
+    let dh_seconds = t.elapsed().as_secs_f64();
+    let dh_model = dh.as_ref().ok().map(|f| f.model.clone());
+    push(
+        "dh",
+        dh.as_ref().map(|f| {
+            let s = &f.stats;
+            (nominal_predictor(f.model.clone()), format!("{} iterations, rank {}/{}, train rms {:.4}", s.iterations, s.rank, s.n_parameters, s.final_rms))
+        }).map_err(|e| e.to_string()),
+        dh_seconds,
+    );
+
+    let t = Instant::now();
+    let krr = krr_on(nominal, train, search);
+    let krr_seconds = t.elapsed().as_secs_f64();
+    let krr_h = krr.as_ref().ok().map(|(_, h)| h.clone());
+    push("krr", krr.map(|(p, h)| (p, describe(&h))), krr_seconds);
+
+    let mut dh_krr_h = None;
+    if let Some(dh_model) = &dh_model {
+        let t = Instant::now();
+        let fitted = krr_on(dh_model, train, search);
+        let seconds = dh_seconds + t.elapsed().as_secs_f64();
+        dh_krr_h = fitted.as_ref().ok().map(|(_, h)| h.clone());
+        push("dh+krr", fitted.map(|(p, h)| (p, describe(&h))), seconds);
+    }
+
+    // ---- Hook: Calibration by Diffeomorphisms (filled by the caller, e.g. with
+    // `cbd_trainer::solver::fit_cbd` and `crate::predict::evaluate_blob`). ----
+    if let Some(fit) = cbd {
+        let t = Instant::now();
+        let fitted = fit(nominal, train);
+        push("cbd", fitted.map(|p| (p, String::new())), t.elapsed().as_secs_f64());
+        if let Some(dh_model) = &dh_model {
+            let t = Instant::now();
+            let fitted = fit(dh_model, train);
+            push("dh+cbd", fitted.map(|p| (p, String::new())), dh_seconds + t.elapsed().as_secs_f64());
+        }
+    }
+
+    Comparison { rows, dh: dh.ok().map(|f| f.stats), krr_hyperparameters: krr_h, dh_krr_hyperparameters: dh_krr_h }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::six_joint::{random_configurations, SixJointRobot};
+
+    #[test]
+    fn peers_on_the_simulated_six_joint_arm() {
+        let robot = SixJointRobot::ur5_like(21);
+        let train = robot.measure(&random_configurations(250, 22), 23);
+        let test = robot.measure(&random_configurations(100, 24), 25);
+        let search = SearchOptions { max_evaluations: 100, ..SearchOptions::default() };
+        // A stand-in correction for the hook: KRR again, to check the plumbing.
+        let hook = |model: &NominalModel, data: &Measurements| krr_on(model, data, &search).map(|(p, _)| p);
+        let c = compare_peers(&robot.nominal, &train, &test, &search, Some(&hook));
+        let names: Vec<&str> = c.rows.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"]);
+        let get = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap().stats.mean;
+        assert!(get("dh") < 0.2 * get("nominal"), "{:?}", c.rows);
+        assert!(get("dh+krr") <= get("dh") * 1.05, "{:?}", c.rows);
+        assert_eq!(get("dh+krr"), get("dh+cbd"));
+        for r in &c.rows {
+            eprintln!("{:8} mean {:.4} median {:.4} p99 {:.4} max {:.4} fit {:.2}s  {}", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds, r.note);
+        }
+        let json = c.to_json();
+        for name in ["nominal", "dh", "krr", "cbd", "dh+krr", "dh+cbd"] {
+            for key in ["mean", "median", "p99", "max", "fit_seconds"] {
+                assert!(json["methods"][name][key].is_number(), "{name}.{key}");
+            }
+        }
+        assert!(c.table("mm").lines().count() == 7);
+    }
+}

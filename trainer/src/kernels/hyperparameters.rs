@@ -1,0 +1,371 @@
+//! Kernel widths and noise chosen objectively: maximise the log marginal likelihood of the
+//! Gaussian-process model of the residual r(x) = (y − k0(x)) / scale (DESIGN.md §3).
+//!
+//! Model: each task coordinate of r is an independent GP with the same covariance
+//! γ K_V(x, x') + σ² δ, K_V the joint kernel with γ = 1 (periodic axes b (cos Δ − 1), Gaussian
+//! axes −Δ²/(2ℓ²)). The signal variance γ is profiled out in closed form; the search runs over
+//! log b_d (or log ℓ_d) — shared by all axes or per axis — and log(σ²/γ), by a deterministic
+//! coordinate (pattern) search with shrinking steps. Only the rows given are used: pass
+//! training rows, never test rows.
+//!
+//! For [`crate::baselines::krr::KernelRidge::fit`], predictions depend only on ridge / γ, so
+//! `KernelRidge::fit(nominal, data, h.kernel.clone(), h.ridge())` is the GP posterior mean
+//! whatever the units of `data`.
+
+use crate::data::Measurements;
+#[cfg(test)]
+use crate::baselines::krr::kernel_matrix;
+use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
+use cbd_runtime::nominal::forward_kinematics;
+use faer::{linalg::solvers::Solve, Mat, Side};
+
+/// Search settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SearchOptions {
+    /// Positions are divided by this before the GP sees them; `None`: the scale of
+    /// [`super::normalisation_of`] (RMS distance of the measured positions from their mean),
+    /// the same normalisation the CbD model uses.
+    pub task_scale: Option<f64>,
+    /// After the shared-width search, refine each joint's width separately.
+    pub per_axis: bool,
+    /// Starting periodic b (and Gaussian width ℓ); `None`: from the data, so that the kernel
+    /// between two typical training configurations is about ½.
+    pub initial_b: Option<f64>,
+    pub initial_width: Option<f64>,
+    /// Coarse grid before the pattern search: factors 4^k (|k| ≤ this) on the shared widths,
+    /// times noise ratios σ²/γ = 10^-10, 10^-8, …, 10^2.
+    pub grid_half_width: i32,
+    /// Bounds on log-parameters keep the search in a sane box.
+    pub b_range: (f64, f64),
+    pub noise_ratio_range: (f64, f64),
+    /// The pattern search stops after this many likelihood evaluations in all (each one N×N
+    /// Cholesky factorisation); the coarse grid always runs ((2·grid_half_width + 1) × 7).
+    pub max_evaluations: usize,
+    /// Use at most this many rows (evenly spaced) for the search.
+    pub max_points: usize,
+}
+
+impl Default for SearchOptions {
+    fn default() -> Self {
+        SearchOptions {
+            task_scale: None,
+            per_axis: true,
+            initial_b: None,
+            initial_width: None,
+            grid_half_width: 3,
+            b_range: (1e-3, 1e3),
+            noise_ratio_range: (1e-12, 1e2),
+            max_evaluations: 150,
+            max_points: 1500,
+        }
+    }
+}
+
+/// The chosen hyperparameters, in normalised units (positions / `task_scale`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hyperparameters {
+    /// Joint kernel; `gamma` is the fitted signal variance γ.
+    pub kernel: JointKernel,
+    /// Noise standard deviation σ (normalised units; σ · task_scale in the data's unit).
+    pub noise_sigma: f64,
+    pub task_scale: f64,
+    /// Log marginal likelihood at the choice (all coordinates, rows used).
+    pub log_marginal_likelihood: f64,
+    pub evaluations: usize,
+    pub rows_used: usize,
+}
+
+impl Hyperparameters {
+    /// Ridge for [`crate::baselines::krr::KernelRidge::fit`] with `self.kernel`: σ².
+    pub fn ridge(&self) -> f64 {
+        self.noise_sigma * self.noise_sigma
+    }
+    /// Noise standard deviation in the data's length unit.
+    pub fn noise_sigma_data_units(&self) -> f64 {
+        self.noise_sigma * self.task_scale
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum HyperparameterError {
+    TooFewRows(usize),
+    /// No setting in the search box gave a positive-definite covariance.
+    NoValidSetting,
+}
+
+impl std::fmt::Display for HyperparameterError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            HyperparameterError::TooFewRows(n) => write!(f, "hyperparameter search: {n} rows are too few"),
+            HyperparameterError::NoValidSetting => write!(f, "hyperparameter search: no setting gave a positive-definite covariance"),
+        }
+    }
+}
+
+impl std::error::Error for HyperparameterError {}
+
+/// Log marginal likelihood of independent GP coordinates `residual` (N × m) with covariance
+/// `k` (N × N, noise included): −½ Σ_c r_cᵀ K⁻¹ r_c − (m/2) log|K| − (N m/2) log 2π.
+/// `None` if `k` is not positive definite.
+pub fn log_marginal_likelihood(k: &Mat<f64>, residual: &Mat<f64>) -> Option<f64> {
+    let (n, m) = (residual.nrows(), residual.ncols());
+    let llt = k.llt(Side::Lower).ok()?;
+    let l = llt.L();
+    let logdet: f64 = (0..n).map(|i| l[(i, i)].ln()).sum::<f64>() * 2.0;
+    let alpha = llt.solve(residual);
+    let quad: f64 = (0..n).flat_map(|i| (0..m).map(move |c| (i, c))).map(|(i, c)| residual[(i, c)] * alpha[(i, c)]).sum();
+    Some(-0.5 * quad - 0.5 * m as f64 * logdet - 0.5 * (n * m) as f64 * (2.0 * std::f64::consts::PI).ln())
+}
+
+/// Profiled log marginal likelihood for unit-γ kernel matrix `c` and noise ratio λ = σ²/γ:
+/// returns (value, γ̂).
+fn profiled_lml(c: &Mat<f64>, residual: &Mat<f64>, lambda: f64) -> Option<(f64, f64)> {
+    let (n, m) = (residual.nrows(), residual.ncols());
+    let mut k = c.clone();
+    for i in 0..n {
+        k[(i, i)] += lambda;
+    }
+    let llt = k.llt(Side::Lower).ok()?;
+    let l = llt.L();
+    let logdet: f64 = (0..n).map(|i| l[(i, i)].ln()).sum::<f64>() * 2.0;
+    let alpha = llt.solve(residual);
+    let quad: f64 = (0..n).flat_map(|i| (0..m).map(move |c| (i, c))).map(|(i, c)| residual[(i, c)] * alpha[(i, c)]).sum();
+    let nm = (n * m) as f64;
+    let gamma = quad / nm;
+    if !(gamma > 0.0) || !logdet.is_finite() {
+        return None;
+    }
+    let value = -0.5 * nm * gamma.ln() - 0.5 * m as f64 * logdet - 0.5 * nm - 0.5 * nm * (2.0 * std::f64::consts::PI).ln();
+    Some((value, gamma))
+}
+
+/// The kernel for log-parameters `theta` (one per axis) and unit γ.
+fn kernel_of(template: &[bool], theta: &[f64], gamma: f64) -> JointKernel {
+    let axes = template
+        .iter()
+        .zip(theta)
+        .map(|(&periodic, &t)| if periodic { JointKernelAxis::Periodic { b: t.exp() } } else { JointKernelAxis::Gaussian { width: t.exp() } })
+        .collect::<Vec<_>>();
+    JointKernel { gamma, axes: heapless::Vec::from_slice(&axes).expect("at most MAX_JOINTS axes") }
+}
+
+/// Chooses the joint-kernel widths, γ and σ for the residual of `nominal` on `data`.
+pub fn choose_hyperparameters(nominal: &NominalModel, data: &Measurements, options: &SearchOptions) -> Result<Hyperparameters, HyperparameterError> {
+    let count = data.len();
+    if count < 3 {
+        return Err(HyperparameterError::TooFewRows(count));
+    }
+    let (n, m) = (data.n_joints, data.task_dim);
+    let rows: Vec<usize> = if count > options.max_points {
+        (0..options.max_points).map(|k| k * count / options.max_points).collect()
+    } else {
+        (0..count).collect()
+    };
+    let used = data.subset(&rows);
+    let nominal_pos: Vec<[f64; 3]> = (0..used.len()).map(|i| forward_kinematics(nominal, used.joints(i)).position).collect();
+    let task_scale = options.task_scale.unwrap_or_else(|| super::normalisation_of(data).task_scale);
+    let residual = Mat::from_fn(used.len(), m, |i, c| (used.position(i)[c] - nominal_pos[i][c]) / task_scale);
+    let template: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
+    // Data-driven start: mean over pairs of (1 − cos Δ_d) (periodic) or Δ_d² / 2 (Gaussian).
+    let mut spread = vec![0.0; n];
+    let pairs = used.len().min(200);
+    for i in 0..pairs {
+        let (a, b) = (used.joints(i), used.joints((i * 7919 + 1) % used.len()));
+        for d in 0..n {
+            let delta = a[d] - b[d];
+            spread[d] += if template[d] { 1.0 - delta.cos() } else { 0.5 * delta * delta } / pairs as f64;
+        }
+    }
+    let total: f64 = spread.iter().sum::<f64>().max(1e-12);
+    // b Σ_d spread_d = ln 2 (periodic); Σ_d spread_d / ℓ² = ln 2 (Gaussian): same shared factor.
+    let b0 = options.initial_b.unwrap_or(2f64.ln() / total);
+    let w0 = options.initial_width.unwrap_or((total / 2f64.ln()).sqrt());
+    let init: Vec<f64> = template.iter().map(|&p| if p { b0.ln() } else { w0.ln() }).collect();
+    let (lo_b, hi_b) = (options.b_range.0.ln(), options.b_range.1.ln());
+    let (lo_l, hi_l) = (options.noise_ratio_range.0.ln(), options.noise_ratio_range.1.ln());
+
+    // The kernel's exponent is Σ_d w_d f_d(Δ_d) with w_d = b_d or 1/ℓ_d²: tabulate f_d once
+    // (lower triangle, row-major) so each evaluation costs one exp per pair.
+    let count_used = used.len();
+    let tri = count_used * (count_used + 1) / 2;
+    let mut table = vec![0.0; n * tri];
+    {
+        let mut at = 0;
+        for i in 0..count_used {
+            let xi = used.joints(i);
+            for j in 0..=i {
+                let xj = used.joints(j);
+                for d in 0..n {
+                    let delta = xi[d] - xj[d];
+                    table[at * n + d] = if template[d] { delta.cos() - 1.0 } else { -0.5 * delta * delta };
+                }
+                at += 1;
+            }
+        }
+    }
+    let evaluations = std::cell::Cell::new(0usize);
+    let eval = |theta: &[f64], log_lambda: f64| -> Option<(f64, f64)> {
+        evaluations.set(evaluations.get() + 1);
+        let w: Vec<f64> = theta.iter().zip(&template).map(|(t, &p)| if p { t.exp() } else { (-2.0 * t).exp() }).collect();
+        let mut c = Mat::<f64>::zeros(count_used, count_used);
+        let mut at = 0;
+        for i in 0..count_used {
+            for j in 0..=i {
+                let f = &table[at * n..at * n + n];
+                let v = f.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>().exp();
+                c[(i, j)] = v;
+                c[(j, i)] = v;
+                at += 1;
+            }
+        }
+        profiled_lml(&c, &residual, log_lambda.exp())
+    };
+    // Coarse grid on (shared width factor, noise ratio). A wider periodic kernel has smaller b,
+    // a wider Gaussian one larger ℓ: the factor multiplies b and divides ℓ² alike.
+    let mut best: Option<(f64, f64)> = None;
+    let mut theta = init.clone();
+    let mut log_lambda = 1e-2f64.ln();
+    let shift = |k: f64| -> Vec<f64> {
+        init.iter().zip(&template).map(|(t, &p)| if p { (t + k).clamp(lo_b, hi_b) } else { (t - 0.5 * k).clamp(lo_b, hi_b) }).collect()
+    };
+    for k in -options.grid_half_width..=options.grid_half_width {
+        let th = shift(k as f64 * 4f64.ln());
+        for e in (-10..=2).step_by(2) {
+            let ll = (10f64.powi(e)).ln().clamp(lo_l, hi_l);
+            if let Some(v) = eval(&th, ll) {
+                if best.map_or(true, |b| v.0 > b.0) {
+                    best = Some(v);
+                    theta = th.clone();
+                    log_lambda = ll;
+                }
+            }
+        }
+    }
+    let Some(mut best) = best else { return Err(HyperparameterError::NoValidSetting) };
+    let budget = options.max_evaluations.max(4);
+    // Coordinates: 0 = λ, 1 = shared width (all axes), 2.. = single axes (second phase).
+    let phases: Vec<Vec<usize>> = if options.per_axis && n > 1 { vec![vec![0, 1], (0..=n + 1).filter(|&k| k != 1).collect()] } else { vec![vec![0, 1]] };
+    for coords in phases {
+        let mut step = 2f64.ln(); // factor 2, then halving
+        while step > 1.05f64.ln() && evaluations.get() < budget {
+            let mut improved = false;
+            for &k in &coords {
+                for dir in [1.0, -1.0] {
+                    if evaluations.get() >= budget {
+                        break;
+                    }
+                    let (mut th, mut ll) = (theta.clone(), log_lambda);
+                    match k {
+                        0 => ll = (ll + dir * step).clamp(lo_l, hi_l),
+                        1 => th.iter_mut().zip(&template).for_each(|(t, &p)| *t = (*t + if p { dir * step } else { -0.5 * dir * step }).clamp(lo_b, hi_b)),
+                        a => th[a - 2] = (th[a - 2] + dir * step).clamp(lo_b, hi_b),
+                    }
+                    if th == theta && ll == log_lambda {
+                        continue;
+                    }
+                    if let Some(v) = eval(&th, ll) {
+                        if v.0 > best.0 + 1e-9 * best.0.abs() {
+                            best = v;
+                            theta = th;
+                            log_lambda = ll;
+                            improved = true;
+                            break; // keep moving along improving directions
+                        }
+                    }
+                }
+            }
+            if !improved {
+                step *= 0.5;
+            }
+        }
+    }
+    let gamma = best.1;
+    Ok(Hyperparameters {
+        kernel: kernel_of(&template, &theta, gamma),
+        noise_sigma: (log_lambda.exp() * gamma).sqrt(),
+        task_scale,
+        log_marginal_likelihood: best.0,
+        evaluations: evaluations.get(),
+        rows_used: used.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::baselines::krr::KernelRidge;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn normal(rng: &mut ChaCha8Rng) -> f64 {
+        let u1: f64 = rng.gen_range(f64::EPSILON..1.0);
+        let u2: f64 = rng.gen();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+
+    /// Residuals drawn from the GP itself (b = 2, γ = 0.01, σ = 0.02) on a planar 2R arm.
+    fn gp_sample(count: usize, seed: u64) -> (NominalModel, Measurements, Measurements) {
+        let nominal = NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let total = count + 200;
+        let joints: Vec<f64> = (0..total * 2).map(|_| rng.gen_range(0.0..std::f64::consts::TAU)).collect();
+        let truth = JointKernel { gamma: 0.01, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 2.0 }; 2]).unwrap() };
+        let mut k = kernel_matrix(&truth, &joints, &joints, 2);
+        for i in 0..total {
+            k[(i, i)] += 1e-10;
+        }
+        let l = k.llt(Side::Lower).unwrap().L().to_owned();
+        let z = Mat::from_fn(total, 2, |_, _| normal(&mut rng));
+        let f = &l * &z;
+        let (mut train, mut test) = (Measurements::new(2, 2), Measurements::new(2, 2));
+        for i in 0..total {
+            let q = &joints[2 * i..2 * i + 2];
+            let p = forward_kinematics(&nominal, q).position;
+            if i < count {
+                train.push(q, &[p[0] + f[(i, 0)] + 0.02 * normal(&mut rng), p[1] + f[(i, 1)] + 0.02 * normal(&mut rng)]);
+            } else {
+                test.push(q, &[p[0] + f[(i, 0)], p[1] + f[(i, 1)]]);
+            }
+        }
+        (nominal, train, test)
+    }
+
+    #[test]
+    fn recovers_the_generating_hyperparameters() {
+        let (nominal, train, test) = gp_sample(300, 11);
+        let opts = SearchOptions { task_scale: Some(1.0), ..SearchOptions::default() };
+        let h = choose_hyperparameters(&nominal, &train, &opts).unwrap();
+        let bs: Vec<f64> = h.kernel.axes.iter().map(|a| match a { JointKernelAxis::Periodic { b } => *b, _ => panic!() }).collect();
+        assert!(bs.iter().all(|&b| (1.0..4.0).contains(&b)), "b {bs:?} (true 2)");
+        assert!((h.noise_sigma - 0.02).abs() < 0.005, "σ {} (true 0.02)", h.noise_sigma);
+        assert!(h.kernel.gamma > 0.003 && h.kernel.gamma < 0.03, "γ {} (true 0.01)", h.kernel.gamma);
+        // The optimum is at least as likely as the generating values.
+        let residual = Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
+        let truth = JointKernel { gamma: 0.01, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 2.0 }; 2]).unwrap() };
+        let mut k = kernel_matrix(&truth, &train.joints, &train.joints, 2);
+        for i in 0..train.len() {
+            k[(i, i)] += 0.02 * 0.02;
+        }
+        let at_truth = log_marginal_likelihood(&k, &residual).unwrap();
+        assert!(h.log_marginal_likelihood >= at_truth - 1e-6, "{} < {at_truth}", h.log_marginal_likelihood);
+        // And the regression with them predicts the noise-free test values better than noise level.
+        let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge()).unwrap();
+        let pred = krr.predict(&nominal, &test.joints);
+        let rms = (pred.iter().zip(&test.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / test.len() as f64).sqrt();
+        assert!(rms < 0.02, "test rms {rms}");
+    }
+
+    #[test]
+    fn profiled_value_matches_the_full_likelihood() {
+        let (nominal, train, _) = gp_sample(60, 5);
+        let h = choose_hyperparameters(&nominal, &train, &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() }).unwrap();
+        let residual = Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
+        let mut k = kernel_matrix(&h.kernel, &train.joints, &train.joints, 2);
+        for i in 0..train.len() {
+            k[(i, i)] += h.ridge();
+        }
+        let full = log_marginal_likelihood(&k, &residual).unwrap();
+        assert!((full - h.log_marginal_likelihood).abs() < 1e-8 * full.abs().max(1.0), "{full} vs {}", h.log_marginal_likelihood);
+        assert!(h.evaluations <= 7 * 7 + 1, "{}", h.evaluations);
+    }
+}
