@@ -24,6 +24,9 @@ pub struct DemoArgs {
     /// Grid points per joint (the paper: 16, i.e. 256 measurements).
     #[arg(long, default_value_t = 16)]
     pub grid: usize,
+    /// Write figures (PNG and SVG) into this directory.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
     #[command(flatten)]
     pub solver: crate::cli::fit::SolverArgs,
 }
@@ -102,6 +105,29 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
         fit: fit.report.clone(),
     };
     print_report(&report);
+    if let Some(dir) = &args.plots {
+        use crate::report::plots::{demo_figures, position_errors, DemoPlotInputs};
+        let nominal_map = |q: &[f64]| -> Result<Vec<f64>, String> { Ok(nominal_at(q)) };
+        let real_map = |q: &[f64]| -> Result<Vec<f64>, String> { Ok(q.chunks_exact(2).flat_map(|x| real.position(x)).collect()) };
+        let calibrated_map = |q: &[f64]| crate::predict::evaluate_blob(&blob, q);
+        let test_before = position_errors(&nominal_at(&test.joints), &test.positions, 2);
+        let test_after = position_errors(&calibrated_test, &test.positions, 2);
+        let log: Vec<(usize, f64, f64)> = fit.report.log.iter().map(|r| (r.iteration, r.energy, r.train_rms)).collect();
+        let inputs = DemoPlotInputs {
+            nominal: &nominal_map,
+            real: &real_map,
+            calibrated: &calibrated_map,
+            joint_labels: ["q1 (rad)", "q2 (rad)"],
+            test_before: &test_before,
+            test_after: &test_after,
+            fit_log: &log,
+            unit: "length units",
+            heatmap_per_axis: 64,
+            workspace_per_axis: 16,
+        };
+        let files = demo_figures(dir, &inputs)?;
+        println!("figures written to {} ({} files)", dir.display(), files.len());
+    }
     println!("model written to {}", args.out.display());
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;

@@ -17,6 +17,9 @@ pub struct EvalArgs {
     /// Warn about configurations whose kernel support (max K_V(q, x_j)/γ) is below this.
     #[arg(long, default_value_t = 0.05)]
     pub extrapolation_threshold: f64,
+    /// Write figures (error histograms; heatmaps for two-joint arms) into this directory.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
 }
 
 pub fn run(args: EvalArgs) -> Result<(), String> {
@@ -46,6 +49,17 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     println!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
     for (name, s) in [("nominal", before), ("calibrated", after)] {
         println!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
+    }
+    if let Some(dir) = &args.plots {
+        use crate::report::plots::{error_heatmaps, error_histograms, position_errors};
+        let (before, after) = (position_errors(&nominal_pred, &data.positions, m), position_errors(&predicted, &data.positions, m));
+        let unit = "data length unit";
+        let mut files = error_histograms(dir, &before, &after, unit)?;
+        if data.n_joints == 2 {
+            let pairs: Vec<(f64, f64)> = data.joints.chunks_exact(2).map(|q| (q[0], q[1])).collect();
+            files.extend(error_heatmaps(dir, "q1 (rad)", "q2 (rad)", &pairs, &before, &after, 24, unit)?);
+        }
+        println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if far > 0 {
         eprintln!(

@@ -1,9 +1,11 @@
 //! The `cbd` command line: one file per command.
 
 pub mod bench;
+pub mod compare;
 pub mod demo;
 pub mod eval;
 pub mod fit;
+pub mod report;
 pub mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -26,6 +28,10 @@ pub enum Command {
     Fit(fit::FitArgs),
     /// Evaluate a blob on measurements: mean, median, p99 and max position error.
     Eval(eval::EvalArgs),
+    /// One self-contained HTML page for a run: inputs, hyperparameters, convergence, error tables, figures.
+    Report(report::ReportArgs),
+    /// All peers side by side on the same data: nominal, DH, kernel ridge, CbD and hybrids.
+    Compare(compare::CompareArgs),
     /// Fit time, memory and evaluation time against N (writes BENCHMARKS.md with --markdown).
     Bench(bench::BenchArgs),
 }
@@ -71,6 +77,8 @@ pub fn run(cli: Cli) -> Result<(), String> {
         Command::Fit(args) => fit::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Compare(args) => compare::run(args),
+        Command::Report(args) => report::run(args),
     }
 }
 

@@ -207,7 +207,11 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let mut log = Vec::new();
     let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / (r.len() / m) as f64).sqrt() * sigma * norm.task_scale;
     log.push(IterationLog { iteration: 0, energy: current.energy, regulariser: current.regulariser, train_rms: rms(&current.residual), damping, seconds: start.elapsed().as_secs_f64() });
-    if opts.verbose {
+    // A bar on a terminal; plain lines when verbose output goes to a pipe or file.
+    let progress = crate::report::progress::FitProgress::new(opts.max_iterations, !opts.verbose, "");
+    progress.update(0, current.energy, rms(&current.residual));
+    let print_lines = opts.verbose && !progress.is_visible();
+    if print_lines {
         eprintln!("iter  0  energy {:.6e}  train rms {:.3e}", current.energy, rms(&current.residual));
     }
     let mut converged = false;
@@ -282,7 +286,8 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         current = e;
         damping = (damping / 10.0).max(1e-30);
         log.push(IterationLog { iteration, energy: current.energy, regulariser: current.regulariser, train_rms: rms(&current.residual), damping, seconds: start.elapsed().as_secs_f64() });
-        if opts.verbose {
+        progress.update(iteration, current.energy, rms(&current.residual));
+        if print_lines {
             eprintln!("iter {iteration:2}  energy {:.6e}  train rms {:.3e}  damping {damping:.1e}  {:.1} s", current.energy, rms(&current.residual), start.elapsed().as_secs_f64());
         }
         if decrease < opts.relative_tolerance {
@@ -295,13 +300,17 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         } else {
             small_steps = 0;
         }
-        if iteration < opts.max_iterations {
+        // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
+        // Jacobian stays exact and no tangent is needed.
+        let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
+        if iteration < opts.max_iterations && !linear_scheme {
             let t0 = Instant::now();
             jac = position_jacobian(&cp, &current.flow, opts.threads);
             t_tangent += t0.elapsed().as_secs_f64();
         }
     }
 
+    progress.finish(&stop_reason);
     let k1 = current.flow.positions(cp.dims);
     let train_predictions: Vec<f64> = k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
     let (points, momenta) = (f64_le_bytes(&data.joints), f64_le_bytes(&p));
