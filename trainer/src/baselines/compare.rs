@@ -28,6 +28,8 @@ pub struct PeerResult {
     /// Training-row errors.
     pub train_stats: ErrorStats,
     pub fit_seconds: f64,
+    /// Position error of every test row (for plots).
+    pub test_errors: Vec<f64>,
     /// Chosen hyperparameters, DH fit summary, or why the method failed.
     pub note: String,
 }
@@ -164,18 +166,18 @@ pub fn compare_peers(
     let m = nominal.task_dim();
     let mut rows = Vec::new();
     let mut push = |name: &str, fitted: Result<(Predictor, String), String>, seconds: f64| {
-        let (stats, train_stats, note) = match fitted {
-            Ok((p, note)) => (
-                ErrorStats::of_positions(&p(&test.joints), &test.positions, m),
-                ErrorStats::of_positions(&p(&train.joints), &train.positions, m),
-                note,
-            ),
+        let (stats, train_stats, note, test_errors) = match fitted {
+            Ok((p, note)) => {
+                let predicted = p(&test.joints);
+                let test_errors = crate::report::plots::position_errors(&predicted, &test.positions, m);
+                (ErrorStats::of_errors(&test_errors), ErrorStats::of_positions(&p(&train.joints), &train.positions, m), note, test_errors)
+            }
             Err(e) => {
                 let nan = ErrorStats::of_errors(&[]);
-                (nan, nan, format!("failed: {e}"))
+                (nan, nan, format!("failed: {e}"), Vec::new())
             }
         };
-        rows.push(PeerResult { name: name.to_string(), stats, train_stats, fit_seconds: seconds, note });
+        rows.push(PeerResult { name: name.to_string(), stats, train_stats, fit_seconds: seconds, test_errors, note });
     };
     push("nominal", Ok((nominal_predictor(nominal.clone()), String::new())), 0.0);
 

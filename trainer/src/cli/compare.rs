@@ -21,6 +21,9 @@ pub struct CompareArgs {
     /// Write the results as JSON here (one object per method under "methods").
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Write a chart of every method's test-error distribution (PNG and SVG) into this directory.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
     /// Integration steps of the CbD flow (Euler). One step is the linearised model, whose
     /// Jacobian is exact in closed form (fast for N ≈ 1000); more steps need the tangent flow.
     #[arg(long, default_value_t = 1)]
@@ -54,6 +57,11 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
         if !r.note.is_empty() {
             println!("{}: {}", r.name, r.note);
         }
+    }
+    if let Some(dir) = &args.plots {
+        let methods: Vec<(String, Vec<f64>)> = comparison.rows.iter().filter(|r| !r.test_errors.is_empty()).map(|r| (r.name.clone(), r.test_errors.clone())).collect();
+        let files = crate::report::plots::method_comparison(dir, &methods, unit)?;
+        println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&comparison.to_json()).map_err(|e| e.to_string())?;

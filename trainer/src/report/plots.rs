@@ -184,12 +184,12 @@ fn fmt_sci(v: f64) -> String {
     format!("{v:.2e}")
 }
 
-/// A 10^k tick label for a log10 axis value.
+/// The tick label of a log10 axis value: 1e-2 at whole exponents, 3e-3 between them.
 fn pow10_label(v: &f64) -> String {
     if (v - v.round()).abs() < 1e-9 {
         format!("1e{}", v.round() as i64)
     } else {
-        format!("{v:.1}")
+        format!("{:.0e}", 10f64.powf(*v))
     }
 }
 
@@ -981,14 +981,7 @@ pub fn demo_figures(dir: &Path, inputs: &DemoPlotInputs) -> Result<Vec<PathBuf>,
     Ok(written)
 }
 
-/// Per-configuration position errors between two row-major position arrays of `dim` per row.
-pub fn position_errors(predicted: &[f64], measured: &[f64], dim: usize) -> Vec<f64> {
-    predicted
-        .chunks_exact(dim)
-        .zip(measured.chunks_exact(dim))
-        .map(|(p, y)| p.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt())
-        .collect()
-}
+pub use crate::report::stats::position_errors;
 
 #[cfg(test)]
 mod tests {

@@ -2,6 +2,15 @@
 
 use serde::Serialize;
 
+/// Euclidean distance between each predicted and measured row of `dim` values.
+pub fn position_errors(predicted: &[f64], measured: &[f64], dim: usize) -> Vec<f64> {
+    predicted
+        .chunks_exact(dim)
+        .zip(measured.chunks_exact(dim))
+        .map(|(p, y)| p.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt())
+        .collect()
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ErrorStats {
     pub mean: f64,
@@ -13,12 +22,7 @@ pub struct ErrorStats {
 impl ErrorStats {
     /// Statistics of Euclidean errors between predicted and measured rows of `dim` values.
     pub fn of_positions(predicted: &[f64], measured: &[f64], dim: usize) -> ErrorStats {
-        let errors: Vec<f64> = predicted
-            .chunks_exact(dim)
-            .zip(measured.chunks_exact(dim))
-            .map(|(p, y)| p.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt())
-            .collect();
-        ErrorStats::of_errors(&errors)
+        ErrorStats::of_errors(&position_errors(predicted, measured, dim))
     }
 
     /// Statistics of a list of non-negative errors (NaN sorts last and poisons the mean).
