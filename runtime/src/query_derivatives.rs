@@ -134,7 +134,8 @@ fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; NJ], [[f64; 3]; NJ], [f6
     ];
     let mut axes = [[0.0; 3]; NJ];
     let mut origins = [[0.0; 3]; NJ];
-    let column = |f: &Frame, c: usize| [f[0][c], f[1][c], f[2][c]];
+    let axis_of = |f: &Frame| [f[0][2], f[1][2], f[2][2]];
+    let origin_of = |f: &Frame| [f[0][3], f[1][3], f[2][3]];
     for (((joint, q), axis), origin) in chain.joints.iter().zip(x).zip(axes.iter_mut()).zip(origins.iter_mut()) {
         let (theta, d) = match joint.kind {
             JointKind::Revolute => (q + joint.theta_offset, joint.d),
@@ -146,14 +147,14 @@ fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; NJ], [[f64; 3]; NJ], [f6
         let rx: Frame = [[1.0, 0.0, 0.0, joint.a], [0.0, ca, -sa, 0.0], [0.0, sa, ca, 0.0]];
         match chain.convention {
             DhConvention::Standard => {
-                *axis = column(&frame, 2);
-                *origin = column(&frame, 3);
+                *axis = axis_of(&frame);
+                *origin = origin_of(&frame);
                 frame = compose(&compose(&frame, &rz), &rx);
             }
             DhConvention::Modified => {
                 frame = compose(&frame, &rx);
-                *axis = column(&frame, 2);
-                *origin = column(&frame, 3);
+                *axis = axis_of(&frame);
+                *origin = origin_of(&frame);
                 frame = compose(&frame, &rz);
             }
         }
@@ -166,7 +167,7 @@ fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; NJ], [[f64; 3]; NJ], [f6
         [tr[6], tr[7], tr[8], tt.translation[2]],
     ];
     frame = compose(&frame, &tool);
-    (axes, origins, column(&frame, 3))
+    (axes, origins, origin_of(&frame))
 }
 
 // Column j of Dk0 is z_j × (p − o_j) (revolute) or z_j (prismatic). Its derivative with respect

@@ -3,6 +3,7 @@
 //! ```text
 //! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, rr64.blob, rr1024.blob
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
+//! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
 //! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len blob_bytes
 //! ```
 //!
@@ -50,7 +51,7 @@ fn info(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
-fn eval(path: &Path) -> Result<(), String> {
+fn eval(path: &Path, transported: bool) -> Result<(), String> {
     let blob = read_blob(path)?;
     let (model, len) = needed_storage(&blob)?;
     let n = model.n_joints();
@@ -61,7 +62,8 @@ fn eval(path: &Path) -> Result<(), String> {
     for i in 0..shared::COUNT {
         let q = &mut q[..n];
         shared::config(i, q);
-        let written = match cal.evaluate(q) {
+        let result = if transported { cal.evaluate_transported(q) } else { cal.evaluate(q) };
+        let written = match result {
             Ok(e) => {
                 let (pos, jac) = (e.position(), e.jacobian());
                 let (m, n) = jac.shape();
@@ -79,9 +81,10 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
     let result = match args.iter().map(String::as_str).collect::<Vec<_>>()[1..] {
         ["make-blobs", dir] => make_blobs(Path::new(dir)),
-        ["eval", blob] => eval(Path::new(blob)),
+        ["eval", blob] => eval(Path::new(blob), false),
+        ["eval", "--transported", blob] => eval(Path::new(blob), true),
         ["info", blob] => info(Path::new(blob)),
-        _ => Err("usage: cbd-fw-host make-blobs OUT_DIR | eval BLOB | info BLOB".into()),
+        _ => Err("usage: cbd-fw-host make-blobs OUT_DIR | eval [--transported] BLOB | info BLOB".into()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -99,8 +99,8 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
         max_runtime_trainer_diff: fit.report.max_runtime_trainer_diff,
         n_train: train.len(),
         n_test: test.len(),
-        integrator: args.solver.integrator.clone(),
-        steps: args.solver.steps,
+        integrator: format!("{:?}", opts.integrator.method).to_lowercase(),
+        steps: opts.integrator.steps,
         sigma: opts.sigma,
         fit: fit.report.clone(),
     };

@@ -28,7 +28,10 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     let blob = std::fs::read(&args.blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     if model.nominal != nominal {
-        eprintln!("warning: {} was trained on a different nominal model than the one given", args.blob.display());
+        eprintln!(
+            "note: {} carries its own nominal model (e.g. DH-calibrated); errors are reported against the model file's nominal",
+            args.blob.display()
+        );
     }
     let m = model.task_dim();
     let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, model.n_joints(), m, model.integrator)];

@@ -14,6 +14,10 @@ pub struct FitArgs {
     /// Output blob.
     #[arg(long)]
     pub out: PathBuf,
+    /// First calibrate the DH parameters (plus base and tool) by Levenberg–Marquardt, then fit
+    /// the diffeomorphic correction on top; the blob carries the calibrated chain.
+    #[arg(long)]
+    pub dh_first: bool,
     #[command(flatten)]
     pub solver: SolverArgs,
 }
@@ -33,12 +37,13 @@ pub struct SolverArgs {
     /// Joint kernel amplitude γ.
     #[arg(long)]
     pub gamma: Option<f64>,
-    /// euler, heun or rk4.
-    #[arg(long, default_value = "euler")]
-    pub integrator: String,
-    /// Integration steps (training optimises exactly this discrete flow).
-    #[arg(long, default_value_t = 2)]
-    pub steps: u16,
+    /// euler, heun or rk4 (default euler).
+    #[arg(long)]
+    pub integrator: Option<String>,
+    /// Integration steps; training optimises exactly this discrete flow (default: 2 for the
+    /// planar RR arm, 1 — the linearised model, fast for large N — for model files).
+    #[arg(long)]
+    pub steps: Option<u16>,
     #[arg(long, default_value_t = 30)]
     pub max_iterations: usize,
     /// Drop the −(div v) P term from the momentum law.
@@ -55,11 +60,21 @@ impl SolverArgs {
         let mut opts = CbdOptions::paper_rr();
         let n = nominal.n_joints();
         if !(matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. }) && n == 2) {
-            opts.normalisation = crate::kernels::normalisation_of(data);
-            opts.joint_kernel = crate::kernels::default_joint_kernel(nominal);
-            opts.joint_kernel.gamma = 1.0;
-            opts.task_kernel.width = 1.0;
-            opts.sigma = 1e-3;
+            // Kernel widths and σ by the marginal likelihood of the residual GP on the training
+            // rows (DESIGN.md §3), mapped onto the flow's linearisation.
+            let search = crate::kernels::hyperparameters::SearchOptions::default();
+            let h = crate::kernels::hyperparameters::choose_hyperparameters(nominal, data, &search).map_err(|e| e.to_string())?;
+            opts = crate::kernels::cbd_options_from_gp(&h, data);
+            opts.integrator.steps = 1;
+            if !self.quiet {
+                eprintln!(
+                    "hyperparameters (GP marginal likelihood {:.2} on {} rows): joint kernel {:?}, noise σ {:.4} (data units)",
+                    h.log_marginal_likelihood,
+                    h.rows_used,
+                    h.kernel.axes.iter().collect::<Vec<_>>(),
+                    h.noise_sigma_data_units()
+                );
+            }
         }
         let scale = opts.normalisation.task_scale;
         if let Some(s) = self.sigma {
@@ -78,7 +93,12 @@ impl SolverArgs {
                 }
             }
         }
-        opts.integrator = cbd_protocol::Integrator { method: crate::cli::demo::parse_integrator(&self.integrator)?, steps: self.steps };
+        if let Some(method) = &self.integrator {
+            opts.integrator.method = crate::cli::demo::parse_integrator(method)?;
+        }
+        if let Some(steps) = self.steps {
+            opts.integrator.steps = steps;
+        }
         opts.max_iterations = self.max_iterations;
         opts.verbose = !self.quiet;
         if self.no_divergence {
@@ -95,6 +115,14 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         eprintln!("warning: {w}");
     }
     let data = imported.measurements;
+    let nominal = if args.dh_first {
+        let options = crate::baselines::dh_calibration::DhCalibrationOptions::default();
+        let dh = crate::baselines::dh_calibration::calibrate_dh(&nominal, &data, &options).map_err(|e| e.to_string())?;
+        eprintln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.stats.iterations, dh.stats.rank, dh.stats.n_parameters, dh.stats.final_rms);
+        dh.model
+    } else {
+        nominal
+    };
     let opts = args.solver.options(&nominal, &data)?;
     let fit = fit_cbd(&nominal, &data, &opts).map_err(|e| format!("{}: {e}", args.data.display()))?;
     crate::cli::write_atomically(&args.out, &fit.blob)?;

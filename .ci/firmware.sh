@@ -1,0 +1,159 @@
+#!/usr/bin/env bash
+# Firmware check (issue 5): the runtime on a Cortex-M under QEMU, bit-identical to the host.
+#
+#   bash .ci/firmware.sh
+#
+# Installs what is missing (qemu-system-arm, the thumbv7em-none-eabihf target), checks that the
+# runtime builds for the thumb target (no_std proof), builds the host tool (examples/fw-host) and the
+# test blobs, builds the firmware (examples/firmware) once per blob, runs it on QEMU's Cortex-M4
+# (mps2-an386) and Cortex-M7 (mps2-an500), and compares every printed f64 with the host runtime's,
+# bit for bit. Also runs a Cortex-M7 build that uses the M7's double-precision FPU
+# (-C target-cpu=cortex-m7). Exits non-zero on any difference.
+#
+# Last, a "panic-never" build (examples/firmware, feature panic-never): its panic handler calls an
+# undefined symbol, so the firmware links only if the optimiser removed every panic path (runtime,
+# protocol decoding, printing). Its result is reported; it fails the check only with
+# CBD_FW_REQUIRE_PANIC_NEVER=1 (cbd-protocol needs examples/firmware/protocol-panic-free.patch first).
+#
+# Sourced with FIRMWARE_LIB_ONLY=1 (by .ci/firmware-cost.sh) it only defines the helpers.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+FW_DIR="$ROOT/examples/firmware"
+OUT="${CBD_FW_OUT:-$ROOT/target/firmware-check}"
+HOST="$ROOT/target/debug/cbd-fw-host"
+QEMU_TIMEOUT="${CBD_FW_QEMU_TIMEOUT:-900}"
+
+log() { printf '[firmware] %s\n' "$*" >&2; }
+
+fw_install() {
+    if ! command -v qemu-system-arm >/dev/null 2>&1; then
+        log "installing qemu-system-arm"
+        local sudo=""
+        [ "$(id -u)" -eq 0 ] || sudo="sudo"
+        $sudo apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq qemu-system-arm >/dev/null
+    fi
+    if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+        log "adding the thumbv7em-none-eabihf target"
+        rustup target add thumbv7em-none-eabihf
+    fi
+}
+
+# Host tool and blobs (deterministic bytes).
+fw_host_and_blobs() {
+    log "building cbd-fw-host"
+    (cd "$ROOT" && cargo build -q -p cbd-fw-host)
+    mkdir -p "$OUT"
+    "$HOST" make-blobs "$OUT/blobs" >&2
+}
+
+# fw_build BLOB_NAME VARIANT  ->  prints the path of a copy of the ELF.
+# VARIANT: "sp" (target default: single-precision FPU, f64 in software; runs on M4 and M7)
+#          "dp" (-C target-cpu=cortex-m7: the M7's double-precision FPU; M7 only)
+fw_build() {
+    local name="$1" variant="$2" blob storage flags target_dir
+    blob="$OUT/blobs/$name.blob"
+    storage="$("$HOST" info "$blob" | awk '{print $4}')"
+    target_dir="$FW_DIR/target/$variant"
+    case "$variant" in
+        sp) flags="-C link-arg=-Tlink.x" ;;
+        dp) flags="-C link-arg=-Tlink.x -C target-cpu=cortex-m7" ;;
+        *) log "unknown variant $variant"; return 1 ;;
+    esac
+    log "building firmware: blob $name, variant $variant, storage $storage f64"
+    (cd "$FW_DIR" && CARGO_TARGET_DIR="$target_dir" RUSTFLAGS="$flags" CBD_BLOB="$blob" CBD_STORAGE_LEN="$storage" \
+        cargo build -q --release)
+    mkdir -p "$OUT/elf"
+    cp "$target_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/$name-$variant.elf"
+    echo "$OUT/elf/$name-$variant.elf"
+}
+
+# fw_run ELF CPU(m4|m7) OUTFILE: runs under QEMU with -icount shift=0 (SysTick: 1 tick = 40 instructions).
+fw_run() {
+    local elf="$1" cpu="$2" outfile="$3" machine
+    case "$cpu" in
+        m4) machine="-machine mps2-an386 -cpu cortex-m4" ;;
+        m7) machine="-machine mps2-an500 -cpu cortex-m7" ;;
+    esac
+    # shellcheck disable=SC2086
+    if ! timeout "$QEMU_TIMEOUT" qemu-system-arm $machine -nographic -monitor none \
+        -semihosting-config enable=on,target=native -icount shift=0 -kernel "$elf" >"$outfile" 2>&1 </dev/null; then
+        log "QEMU failed ($cpu, $elf):"; tail -5 "$outfile" >&2; return 1
+    fi
+    grep -qx done "$outfile" || { log "firmware did not finish ($cpu, $elf)"; tail -5 "$outfile" >&2; return 1; }
+}
+
+if [ "${FIRMWARE_LIB_ONLY:-0}" = 1 ]; then
+    return 0 2>/dev/null || exit 0
+fi
+
+fw_install
+log "runtime builds for thumbv7em-none-eabihf (no_std, no heap)"
+(cd "$ROOT/runtime" && cargo build -q --target thumbv7em-none-eabihf --release)
+fw_host_and_blobs
+
+failures=0
+summary=()
+for name in rr six; do
+    "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
+    values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
+    errors=$(grep -c ' error$' "$OUT/host-$name.txt" || true)
+    if [ "$values" -eq 0 ]; then
+        summary+=("FAIL  $name blob: the host printed no values")
+        failures=$((failures + 1))
+    fi
+    for variant in sp dp; do
+        elf="$(fw_build "$name" "$variant")"
+        cpus="m4 m7"
+        [ "$variant" = dp ] && cpus="m7"
+        for cpu in $cpus; do
+            run="$OUT/fw-$name-$variant-$cpu.txt"
+            if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$OUT/host-$name.txt" >"$OUT/diff-$name-$variant-$cpu.txt"; then
+                summary+=("PASS  $name blob  ${variant} build on $cpu: $values f64 values bit-identical to the host ($errors evaluation errors)")
+            else
+                summary+=("FAIL  $name blob  ${variant} build on $cpu: see $OUT/diff-$name-$variant-$cpu.txt")
+                failures=$((failures + 1))
+            fi
+        done
+    done
+done
+
+# Panic-free at link level?
+log "building the panic-never firmware (rr blob)"
+pn_dir="$FW_DIR/target/panic-never"
+rr_storage="$("$HOST" info "$OUT/blobs/rr.blob" | awk '{print $4}')"
+if (cd "$FW_DIR" && CARGO_TARGET_DIR="$pn_dir" RUSTFLAGS="-C link-arg=-Tlink.x" CBD_BLOB="$OUT/blobs/rr.blob" \
+    CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features panic-never) >"$OUT/panic-never.log" 2>&1; then
+    cp "$pn_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/rr-panic-never.elf"
+    run="$OUT/fw-rr-panic-never-m7.txt"
+    if fw_run "$OUT/elf/rr-panic-never.elf" m7 "$run" && diff <(grep '^q' "$run") "$OUT/host-rr.txt" >/dev/null; then
+        summary+=("PASS  panic-never build links (no reachable panic in runtime, decoder or printing) and is bit-identical on m7")
+    else
+        summary+=("FAIL  panic-never build linked but its output differs (see $run)")
+        failures=$((failures + 1))
+    fi
+elif grep -q 'undefined symbol: cbd_firmware_panic_is_reachable' "$OUT/panic-never.log"; then
+    # Where are the panics? (same code and flags, with the ordinary panic handler)
+    if command -v llvm-objdump >/dev/null 2>&1 && command -v llvm-nm >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; then
+        python3 "$FW_DIR/find-panics.py" "$OUT/elf/rr-sp.elf" >"$OUT/panic-sites.txt" 2>&1 || true
+        log "panic sites: $OUT/panic-sites.txt"
+    fi
+    if [ "${CBD_FW_REQUIRE_PANIC_NEVER:-0}" = 1 ]; then
+        summary+=("FAIL  panic-never build: a panic is reachable (see $OUT/panic-never.log)")
+        failures=$((failures + 1))
+    else
+        summary+=("INFO  panic-never build: a panic is still reachable (see $OUT/panic-sites.txt; cbd-protocol: examples/firmware/protocol-panic-free.patch)")
+    fi
+else
+    summary+=("FAIL  panic-never build failed to compile (see $OUT/panic-never.log)")
+    failures=$((failures + 1))
+fi
+
+echo "== firmware check (host vs QEMU, f64 bits) =="
+printf '%s\n' "${summary[@]}"
+if [ "$failures" -ne 0 ]; then
+    echo "firmware check: $failures failed"
+    exit 1
+fi
+echo "firmware check: passed (M4 and M7, software and hardware f64, RR and 6-joint blobs)"

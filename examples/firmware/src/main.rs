@@ -1,0 +1,159 @@
+//! The calibrated-model runtime on a Cortex-M: loads an embedded blob into static storage,
+//! evaluates `shared::COUNT` fixed joint configurations and prints every value's bits through
+//! semihosting, in the format of `cbd-fw-host eval` (lines `q…`). Lines `t… TICKS` and
+//! `load TICKS` give SysTick ticks per evaluation and for loading; run under
+//! `qemu-system-arm -icount shift=0` a tick is 40 guest instructions (DESIGN.md §6).
+//!
+//! Build: `CBD_BLOB=path/to.blob CBD_STORAGE_LEN=… cargo build --release` in this directory;
+//! `cargo run --release` runs it on QEMU's Cortex-M7 board.
+#![no_std]
+#![no_main]
+
+use core::fmt::Write;
+use core::hint::black_box;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use cbd_runtime::protocol::MAX_JOINTS;
+use cbd_runtime::Calibrator;
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m_rt::{entry, exception};
+use cortex_m_semihosting::{debug, hio};
+
+#[cfg(not(feature = "panic-never"))]
+use panic_semihosting as _;
+
+#[path = "shared.rs"]
+mod shared;
+
+include!(concat!(env!("OUT_DIR"), "/storage_len.rs"));
+
+/// The model, in flash; the runtime reads its arrays in place.
+static BLOB: &[u8] = include_bytes!(env!("CBD_BLOB_PATH"));
+
+/// All the RAM the runtime uses: `storage_len(…)` f64 values (the control points' trajectories).
+static mut STORAGE: [f64; STORAGE_LEN] = [0.0; STORAGE_LEN];
+
+/// SysTick wrap-arounds (the counter has 24 bits).
+static WRAPS: AtomicU32 = AtomicU32::new(0);
+const RELOAD: u32 = 0x00FF_FFFF;
+
+#[exception]
+fn SysTick() {
+    WRAPS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// SysTick ticks since start (monotonic, wrap-arounds counted).
+fn ticks() -> u64 {
+    loop {
+        let w = WRAPS.load(Ordering::SeqCst);
+        let c = SYST::get_current();
+        if WRAPS.load(Ordering::SeqCst) == w {
+            return u64::from(w) * u64::from(RELOAD + 1) + u64::from(RELOAD - c);
+        }
+    }
+}
+
+/// A line buffer that never panics (overflow is reported as a fmt error).
+struct Line {
+    buf: [u8; 1024],
+    len: usize,
+}
+
+impl Write for Line {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let end = self.len.checked_add(s.len()).ok_or(core::fmt::Error)?;
+        self.buf.get_mut(self.len..end).ok_or(core::fmt::Error)?.copy_from_slice(s.as_bytes());
+        self.len = end;
+        Ok(())
+    }
+}
+
+impl Line {
+    const fn new() -> Self {
+        Line { buf: [0; 1024], len: 0 }
+    }
+    /// Sends the line to the host and empties it.
+    fn flush(&mut self, out: &mut hio::HostStream) -> Result<(), ()> {
+        let bytes = self.buf.get(..self.len).ok_or(())?;
+        self.len = 0;
+        out.write_all(bytes)
+    }
+}
+
+fn run(out: &mut hio::HostStream) -> Result<(), ()> {
+    let mut line = Line::new();
+    // SAFETY: the only reference to STORAGE, taken once before any other use.
+    let storage: &'static mut [f64; STORAGE_LEN] = unsafe { &mut *core::ptr::addr_of_mut!(STORAGE) };
+    let t0 = ticks();
+    let loaded = Calibrator::load(black_box(BLOB), storage);
+    let t1 = ticks();
+    let mut cal = match loaded {
+        Ok(cal) => cal,
+        Err(e) => {
+            writeln!(line, "load error: {e}").map_err(|_| ())?;
+            line.flush(out)?;
+            return Err(());
+        }
+    };
+    writeln!(line, "load {} ticks", t1 - t0).map_err(|_| ())?;
+    line.flush(out)?;
+    let n = cal.model().n_joints();
+    let mut q = [0.0; MAX_JOINTS];
+    let q = q.get_mut(..n).ok_or(())?;
+    let mut costs = [0u32; shared::COUNT];
+    for (i, cost) in costs.iter_mut().enumerate() {
+        shared::config(i, q);
+        let start = ticks();
+        #[cfg(not(feature = "transported"))]
+        let result = black_box(cal.evaluate(black_box(q)));
+        #[cfg(feature = "transported")]
+        let result = black_box(cal.evaluate_transported(black_box(q)));
+        let end = ticks();
+        *cost = (end - start) as u32;
+        match result {
+            Ok(e) => {
+                let (pos, jac) = (e.position(), e.jacobian());
+                let (m, n) = jac.shape();
+                shared::write_result(&mut line, i, pos.iter().copied(), (0..m).flat_map(|a| (0..n).filter_map(move |d| jac.get((a, d)).copied())))
+            }
+            Err(_) => shared::write_error(&mut line, i),
+        }
+        .map_err(|_| ())?;
+        line.flush(out)?;
+    }
+    for (i, cost) in costs.iter().enumerate() {
+        writeln!(line, "t{i:03} {cost}").map_err(|_| ())?;
+        line.flush(out)?;
+    }
+    writeln!(line, "done").map_err(|_| ())?;
+    line.flush(out)
+}
+
+#[entry]
+fn main() -> ! {
+    if let Some(mut cp) = cortex_m::Peripherals::take() {
+        cp.SYST.set_clock_source(SystClkSource::Core);
+        cp.SYST.set_reload(RELOAD);
+        cp.SYST.clear_current();
+        cp.SYST.enable_interrupt();
+        cp.SYST.enable_counter();
+    }
+    let ok = match hio::hstdout() {
+        Ok(mut out) => run(&mut out).is_ok(),
+        Err(()) => false,
+    };
+    debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+#[cfg(feature = "panic-never")]
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    extern "Rust" {
+        /// Deliberately undefined: linking fails if any panic is reachable.
+        fn cbd_firmware_panic_is_reachable() -> !;
+    }
+    // SAFETY: never called in a binary that links.
+    unsafe { cbd_firmware_panic_is_reachable() }
+}
