@@ -45,6 +45,9 @@ pub fn cbd_fitter(search: &SearchOptions, steps: u16) -> impl Fn(&NominalModel, 
 }
 
 pub fn run(args: CompareArgs) -> Result<(), String> {
+    if args.steps == 0 || args.steps > cbd_protocol::MAX_STEPS {
+        return Err(format!("--steps must be between 1 and {}, got {}", cbd_protocol::MAX_STEPS, args.steps));
+    }
     let search = SearchOptions::default();
     let fitter = cbd_fitter(&search, args.steps);
     let (comparison, warnings) = compare_files(&args.model, &args.train, &args.test, &search, Some(&fitter)).map_err(|e| e.to_string())?;

@@ -24,7 +24,8 @@ pub struct EvalArgs {
 
 pub fn run(args: EvalArgs) -> Result<(), String> {
     let (nominal, spec) = load_nominal(&args.model)?;
-    let data = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?.measurements;
+    let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
+    let (data, lines) = (imported.measurements, imported.lines);
     let blob = std::fs::read(&args.blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     if model.nominal != nominal {
@@ -33,6 +34,17 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
             args.blob.display()
         );
     }
+    if model.n_joints() != data.n_joints || model.task_dim() != data.task_dim {
+        return Err(format!(
+            "{}: the model has {} joints and {}-D positions, but {} has {} joints and {}-D positions",
+            args.blob.display(),
+            model.n_joints(),
+            model.task_dim(),
+            args.data.display(),
+            data.n_joints,
+            data.task_dim
+        ));
+    }
     let m = model.task_dim();
     let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, model.n_joints(), m, model.integrator)];
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| format!("{}: {e}", args.blob.display()))?;
@@ -40,7 +52,8 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     let mut nominal_pred = Vec::with_capacity(data.positions.len());
     let mut far = 0;
     for i in 0..data.len() {
-        let e = cal.evaluate(data.joints(i)).map_err(|e| format!("{} row {}: {e}", args.data.display(), i + 1))?;
+        let line = lines.get(i).copied().unwrap_or(0);
+        let e = cal.evaluate(data.joints(i)).map_err(|e| format!("{}:{line}: {e}", args.data.display()))?;
         if e.is_extrapolating(args.extrapolation_threshold) {
             far += 1;
         }

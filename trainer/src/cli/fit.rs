@@ -56,7 +56,31 @@ pub struct SolverArgs {
 impl SolverArgs {
     /// Options for `nominal` and `data`: the paper's RR values for a planar 2-joint arm, otherwise
     /// data-scaled defaults (task space normalised to unit RMS radius).
+    /// Rejects out-of-range values before any work, naming the flag.
+    pub fn validate(&self) -> Result<(), String> {
+        for (flag, value) in [("--sigma", self.sigma), ("--task-width", self.task_width), ("--joint-b", self.joint_b), ("--gamma", self.gamma)] {
+            if let Some(v) = value {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(format!("{flag} must be a finite number > 0, got {v}"));
+                }
+            }
+        }
+        if let Some(steps) = self.steps {
+            if steps == 0 || steps > cbd_protocol::MAX_STEPS {
+                return Err(format!("--steps must be between 1 and {}, got {steps}", cbd_protocol::MAX_STEPS));
+            }
+        }
+        if let Some(method) = &self.integrator {
+            crate::cli::demo::parse_integrator(method)?;
+        }
+        if self.max_iterations == 0 {
+            return Err("--max-iterations must be at least 1".into());
+        }
+        Ok(())
+    }
+
     pub fn options(&self, nominal: &cbd_protocol::NominalModel, data: &crate::data::Measurements) -> Result<CbdOptions, String> {
+        self.validate()?;
         let mut opts = CbdOptions::paper_rr();
         let n = nominal.n_joints();
         if !(matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. }) && n == 2) {
@@ -109,6 +133,8 @@ impl SolverArgs {
 }
 
 pub fn run(args: FitArgs) -> Result<(), String> {
+    args.solver.validate()?;
+    crate::cli::check_output_dir(&args.out)?;
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     for w in imported.warnings(&args.data) {

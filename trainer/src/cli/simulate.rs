@@ -34,6 +34,12 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
             return Err(format!("--noise must be a finite non-negative number, got {noise}"));
         }
     }
+    if args.sampling == "grid" && args.grid < 2 {
+        return Err(format!("--grid must be at least 2 points per joint, got {}", args.grid));
+    }
+    if args.sampling == "uniform" && args.count == 0 {
+        return Err("--count must be at least 1".into());
+    }
     match args.robot.as_str() {
         "rr" => {}
         "six" => return simulate_six(&args),
