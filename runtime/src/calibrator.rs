@@ -1,8 +1,7 @@
 //! Loading a blob into caller-provided storage and evaluating the calibrated model (eq. 20).
 
-use crate::flow::{control_point_rates, joint_field, position_rates, task_field, write_samples, Dims, FlowParams};
+use crate::flow::{control_point_rates, write_samples, Dims, FlowParams};
 use crate::integrate::{integrate, scratch_len};
-use crate::kernel::joint_kernel;
 use crate::nominal::{forward_kinematics, Kinematics};
 use crate::Error;
 use cbd_protocol::{decode, Integrator, Model, MAX_JOINTS, MAX_TASK_DIM};
@@ -185,7 +184,7 @@ impl<'a> Calibrator<'a> {
     /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint
     /// configuration `q` (see [`crate::query_derivatives`]); also the paper's transported J(1).
     pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_with_exact_jacobian(q)
+        self.evaluate_query(q, true)
     }
 
     /// eq. (20) without tangents, cheaper: the calibrated position k1(ξ) and the paper's
@@ -193,92 +192,6 @@ impl<'a> Calibrator<'a> {
     /// [`Evaluation::jacobian`] and [`Evaluation::transported_jacobian`] hold J(1).
     /// The position is bit-identical to [`Calibrator::evaluate`]'s.
     pub fn evaluate_transported(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        let dims = self.dims;
-        let (m, n) = (dims.m, dims.n);
-        if q.len() != n {
-            return Err(Error::QueryDimension { expected: n, found: q.len() });
-        }
-        if n == 0 {
-            return Err(Error::Internal);
-        }
-        if let Some(index) = q.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFiniteQuery { index });
-        }
-        let n_points = self.model.n_points as usize;
-        // K_V(ξ, x_j) and its gradient do not change along the flow: computed once per query.
-        let row_len = n + 1;
-        let row = self.work.get_mut(..n_points * row_len).ok_or(Error::Internal)?;
-        let mut grad = [0.0; MAX_JOINTS];
-        let mut support: f64 = 0.0;
-        for (j, r) in row.chunks_exact_mut(row_len).enumerate() {
-            let xj = self.points.get(j * n..(j + 1) * n).ok_or(Error::Internal)?;
-            let k = joint_kernel(&self.model.joint_kernel, q, xj, &mut grad);
-            let (r_k, r_grad) = r.split_first_mut().ok_or(Error::Internal)?;
-            *r_k = k;
-            for (dst, g) in r_grad.iter_mut().zip(grad.iter()) {
-                *dst = *g;
-            }
-            support = support.max(k);
-        }
-        let row: &[f64] = row;
-        let k0: Kinematics = forward_kinematics(&self.model.nominal, q).normalised(&self.model.normalisation);
-        let mut y = [0.0; MAX_TASK_DIM * (1 + MAX_JOINTS)];
-        let y = y.get_mut(..dims.query_len()).ok_or(Error::Internal)?;
-        {
-            let (y_k, y_jac) = y.split_at_mut_checked(m).ok_or(Error::Internal)?;
-            copy_kinematics(&k0, y_k, y_jac, n);
-        }
-        let mut scratch = [0.0; scratch_len(MAX_TASK_DIM * (1 + MAX_JOINTS))];
-        let block = n_points * dims.sample_len();
-        let trajectory: &[f64] = self.trajectory;
-        let task_kernel = self.model.task_kernel;
-        integrate(self.model.integrator.method, self.model.integrator.steps, y, &mut scratch, |stage, s, out| {
-            let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-            let (s_k, s_jac) = s.split_at_checked(m).ok_or(Error::Internal)?;
-            let tf = task_field(dims, &task_kernel, s_k, samples);
-            let jf = joint_field(dims, samples, |j, g| match row.get(j * row_len..(j + 1) * row_len).and_then(|r| r.split_first()) {
-                Some((k, r_grad)) => {
-                    for (dst, src) in g.iter_mut().zip(r_grad) {
-                        *dst = *src;
-                    }
-                    *k
-                }
-                None => {
-                    *g = [0.0; MAX_JOINTS];
-                    0.0
-                }
-            });
-            let (dk, djac) = out.split_at_mut_checked(m).ok_or(Error::Internal)?;
-            position_rates(dims, s_jac, &tf, &jf, dk, djac);
-            Ok(())
-        })?;
-        let norm = &self.model.normalisation;
-        let mut out = Evaluation {
-            position: SMatrix::zeros(),
-            jacobian: SMatrix::zeros(),
-            transported_jacobian: SMatrix::zeros(),
-            task_dim: m,
-            n_joints: n,
-            support: support / self.model.joint_kernel.gamma,
-        };
-        let (y_k, y_jac) = y.split_at_checked(m).ok_or(Error::Internal)?;
-        for ((dst, offset), v) in out.position.iter_mut().zip(norm.task_offset.iter()).zip(y_k) {
-            *dst = offset + norm.task_scale * v;
-        }
-        for (a, y_row) in y_jac.chunks_exact(n).enumerate() {
-            for (d, v) in y_row.iter().enumerate() {
-                if let Some(dst) = out.jacobian.get_mut((a, d)) {
-                    *dst = norm.task_scale * v;
-                }
-                if let Some(dst) = out.transported_jacobian.get_mut((a, d)) {
-                    *dst = norm.task_scale * v;
-                }
-            }
-        }
-        if out.position.iter().chain(out.jacobian.iter()).all(|v| v.is_finite()) {
-            Ok(out)
-        } else {
-            Err(Error::NonFiniteResult)
-        }
+        self.evaluate_query(q, false)
     }
 }

@@ -320,6 +320,9 @@ pub fn query_rates_with_tangents(
     });
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     crate::flow::position_rates(dims, s_jac, &tf, &jf, dk, djac);
+    if tangents.is_empty() {
+        return Some(());
+    }
     let joint = joint_field_hessian_from_rows(dims, samples, kernel_rows);
     let second = SecondOrder { task: task_field_hessian(dims, task_kernel, s_k, samples), joint };
     for (d, (t, o)) in tangents.chunks_exact(q).zip(out_tangents.chunks_exact_mut(q)).enumerate().take(n) {
@@ -334,9 +337,10 @@ pub fn query_rates_with_tangents(
 const MAX_QUERY_TANGENT: usize = (MT + MT * NJ) * (1 + NJ);
 
 impl crate::Calibrator<'_> {
-    /// eq. (20) with its exact derivative: the calibrated position k1(ξ), the exact Jacobian
-    /// Dk1(ξ) of the discrete flow, and the paper's transported J(1).
-    pub fn evaluate_with_exact_jacobian(&mut self, q: &[f64]) -> Result<crate::Evaluation, crate::Error> {
+    /// eq. (20): the calibrated position k1(ξ) and the paper's transported J(1); with
+    /// `exact_jacobian`, also the exact Jacobian Dk1(ξ) of the discrete flow (otherwise the
+    /// Jacobian reported is J(1)). The position's arithmetic is the same either way.
+    pub(crate) fn evaluate_query(&mut self, q: &[f64], exact_jacobian: bool) -> Result<crate::Evaluation, crate::Error> {
         use crate::Error;
         let dims = self.dims;
         let (m, n) = (dims.m, dims.n);
@@ -359,7 +363,9 @@ impl crate::Calibrator<'_> {
         for (j, r) in rows.chunks_exact_mut(row_len).enumerate() {
             let xj = self.points.get(j * n..(j + 1) * n).ok_or(Error::Internal)?;
             let k = crate::kernel::joint_kernel(&self.model.joint_kernel, q, xj, &mut grad);
-            joint_kernel_hessian(&self.model.joint_kernel, k, q, xj, &mut hess);
+            if exact_jacobian {
+                joint_kernel_hessian(&self.model.joint_kernel, k, q, xj, &mut hess);
+            }
             let (r_k, rest) = r.split_first_mut().ok_or(Error::Internal)?;
             let (r_grad, r_hess) = rest.split_at_mut_checked(n).ok_or(Error::Internal)?;
             *r_k = k;
@@ -376,10 +382,11 @@ impl crate::Calibrator<'_> {
         let rows: &[f64] = rows;
         let norm = &self.model.normalisation;
         let k0 = crate::nominal::forward_kinematics(&self.model.nominal, q).normalised(norm);
-        let h0 = nominal_hessian(&self.model.nominal, q);
+        let h0 = if exact_jacobian { nominal_hessian(&self.model.nominal, q) } else { [[[0.0; NJ]; NJ]; MT] };
         let ql = dims.query_len();
         let mut y = [0.0; MAX_QUERY_TANGENT];
-        let y = y.get_mut(..query_tangent_len(dims)).ok_or(Error::Internal)?;
+        let state_len = if exact_jacobian { query_tangent_len(dims) } else { ql };
+        let y = y.get_mut(..state_len).ok_or(Error::Internal)?;
         let inv_scale = 1.0 / norm.task_scale;
         {
             let (primal, tangents) = y.split_at_mut_checked(ql).ok_or(Error::Internal)?;
@@ -434,12 +441,16 @@ impl crate::Calibrator<'_> {
                 }
             }
         }
-        for (d, t) in tangents.chunks_exact(ql).enumerate() {
-            for (a, v) in t.iter().take(m).enumerate() {
-                if let Some(dst) = out.jacobian.get_mut((a, d)) {
-                    *dst = norm.task_scale * v;
+        if exact_jacobian {
+            for (d, t) in tangents.chunks_exact(ql).enumerate() {
+                for (a, v) in t.iter().take(m).enumerate() {
+                    if let Some(dst) = out.jacobian.get_mut((a, d)) {
+                        *dst = norm.task_scale * v;
+                    }
                 }
             }
+        } else {
+            out.jacobian = out.transported_jacobian;
         }
         let finite = out.position.iter().chain(out.jacobian.iter()).chain(out.transported_jacobian.iter()).all(|v| v.is_finite());
         if finite {
