@@ -35,12 +35,24 @@ const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DecodeError {
     /// Shorter than header plus trailer, or shorter than the declared payload length.
-    Truncated { needed: usize, got: usize },
+    Truncated {
+        needed: usize,
+        got: usize,
+    },
     /// Longer than header + declared payload + trailer.
-    TrailingBytes { expected: usize, got: usize },
+    TrailingBytes {
+        expected: usize,
+        got: usize,
+    },
     BadMagic,
-    UnsupportedVersion { found: u16, supported: u16 },
-    ChecksumMismatch { stored: u32, computed: u32 },
+    UnsupportedVersion {
+        found: u16,
+        supported: u16,
+    },
+    ChecksumMismatch {
+        stored: u32,
+        computed: u32,
+    },
     /// The payload does not decode as a [`Model`] (postcard error).
     Payload,
     /// The payload decoded but is inconsistent (dimensions, non-finite or out-of-range values).
@@ -100,8 +112,7 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     let payload_end = {
         let (_, rest) = out.split_at_mut(HEADER_LEN);
         let room = rest.len() - TRAILER_LEN;
-        let written = postcard::to_slice(model, &mut rest[..room])
-            .map_err(|_| EncodeError::BufferTooSmall)?;
+        let written = postcard::to_slice(model, &mut rest[..room]).map_err(|_| EncodeError::BufferTooSmall)?;
         HEADER_LEN + written.len()
     };
     let payload_len = (payload_end - HEADER_LEN) as u32;
@@ -151,8 +162,7 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     if stored != computed {
         return Err(DecodeError::ChecksumMismatch { stored, computed });
     }
-    let (model, rest): (Model<'_>, &[u8]) =
-        postcard::take_from_bytes(&blob[HEADER_LEN..payload_end]).map_err(|_| DecodeError::Payload)?;
+    let (model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(&blob[HEADER_LEN..payload_end]).map_err(|_| DecodeError::Payload)?;
     if !rest.is_empty() {
         return Err(DecodeError::Payload);
     }

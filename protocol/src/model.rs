@@ -103,10 +103,7 @@ pub struct Transform {
 }
 
 impl Transform {
-    pub const IDENTITY: Transform = Transform {
-        rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        translation: [0.0; 3],
-    };
+    pub const IDENTITY: Transform = Transform { rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], translation: [0.0; 3] };
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

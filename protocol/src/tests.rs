@@ -10,10 +10,7 @@ fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a> {
     Model {
         nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() },
         normalisation: Normalisation::IDENTITY,
-        joint_kernel: JointKernel {
-            gamma: 8.0,
-            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap(),
-        },
+        joint_kernel: JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
         task_kernel: TaskKernel { width: 1.027 },
         integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
         momentum_law: MomentumLaw::WithDivergence,
@@ -85,10 +82,7 @@ fn every_truncation_is_rejected() {
 fn wrong_version_is_named() {
     let mut blob = sample_blob();
     blob[4..6].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
-    assert_eq!(
-        decode(&blob),
-        Err(DecodeError::UnsupportedVersion { found: FORMAT_VERSION + 1, supported: FORMAT_VERSION })
-    );
+    assert_eq!(decode(&blob), Err(DecodeError::UnsupportedVersion { found: FORMAT_VERSION + 1, supported: FORMAT_VERSION }));
 }
 
 #[test]
@@ -96,10 +90,7 @@ fn invalid_models_are_not_encoded() {
     let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
     let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, f64::NAN]);
     let mut buf = [0u8; 1024];
-    assert_eq!(
-        encode(&sample_model(&p, &m), &mut buf),
-        Err(EncodeError::Invalid(ModelError::NonFinite { field: "momenta", index: 5 }))
-    );
+    assert_eq!(encode(&sample_model(&p, &m), &mut buf), Err(EncodeError::Invalid(ModelError::NonFinite { field: "momenta", index: 5 })));
     let short = le(&[0.0, 0.1, 1.0]);
     let m = le(&[0.0; 6]);
     assert!(matches!(

@@ -160,7 +160,8 @@ impl<'a> Calibrator<'a> {
             return Err(Error::StorageTooSmall { needed, got: storage.len() });
         }
         let traj_len = model.integrator.stage_count() * n_points * dims.sample_len();
-        let (points, rest) = storage.get_mut(..needed).ok_or(Error::Internal)?.split_at_mut_checked(n_points * dims.n).ok_or(Error::Internal)?;
+        let (points, rest) =
+            storage.get_mut(..needed).ok_or(Error::Internal)?.split_at_mut_checked(n_points * dims.n).ok_or(Error::Internal)?;
         let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
         // The blob stores configurations as unaligned bytes; the flow slices them as f64.
         for (p, v) in points.iter_mut().zip(model.points.iter()) {

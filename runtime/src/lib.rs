@@ -17,7 +17,7 @@ pub mod kernel;
 pub mod nominal;
 pub mod query_derivatives;
 
-pub use calibrator::{integrate_control_points, initial_state, storage_len, Calibrator, Evaluation};
+pub use calibrator::{initial_state, integrate_control_points, storage_len, Calibrator, Evaluation};
 pub use cbd_protocol as protocol;
 
 /// Why loading or evaluation failed. The runtime returns these; it never panics.

@@ -57,11 +57,7 @@ type Frame = [[f64; 4]; 3];
 
 fn frame_of(t: &Transform) -> Frame {
     let r = &t.rotation;
-    [
-        [r[0], r[1], r[2], t.translation[0]],
-        [r[3], r[4], r[5], t.translation[1]],
-        [r[6], r[7], r[8], t.translation[2]],
-    ]
+    [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]]
 }
 
 fn compose(a: &Frame, b: &Frame) -> Frame {

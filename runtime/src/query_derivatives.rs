@@ -15,7 +15,9 @@
 
 use crate::flow::{Dims, JointField, TaskField};
 use crate::kernel::task_kernel;
-use cbd_protocol::{DhChain, DhConvention, JointKernel, JointKernelAxis, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use cbd_protocol::{
+    DhChain, DhConvention, JointKernel, JointKernelAxis, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT,
+};
 
 /// Second derivatives of the nominal model: `h[a][e][d] = ∂²k0_a / ∂x_e ∂x_d`, model units.
 pub type NominalHessian = [[[f64; NJ]; NJ]; MT];
@@ -127,11 +129,8 @@ fn compose(a: &Frame, b: &Frame) -> Frame {
 fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; NJ], [[f64; 3]; NJ], [f64; 3]) {
     let t = &chain.base;
     let r = &t.rotation;
-    let mut frame: Frame = [
-        [r[0], r[1], r[2], t.translation[0]],
-        [r[3], r[4], r[5], t.translation[1]],
-        [r[6], r[7], r[8], t.translation[2]],
-    ];
+    let mut frame: Frame =
+        [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]];
     let mut axes = [[0.0; 3]; NJ];
     let mut origins = [[0.0; 3]; NJ];
     let axis_of = |f: &Frame| [f[0][2], f[1][2], f[2][2]];
@@ -161,11 +160,8 @@ fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; NJ], [[f64; 3]; NJ], [f6
     }
     let tt = &chain.tool;
     let tr = &tt.rotation;
-    let tool: Frame = [
-        [tr[0], tr[1], tr[2], tt.translation[0]],
-        [tr[3], tr[4], tr[5], tt.translation[1]],
-        [tr[6], tr[7], tr[8], tt.translation[2]],
-    ];
+    let tool: Frame =
+        [[tr[0], tr[1], tr[2], tt.translation[0]], [tr[3], tr[4], tr[5], tt.translation[1]], [tr[6], tr[7], tr[8], tt.translation[2]]];
     frame = compose(&frame, &tool);
     (axes, origins, origin_of(&frame))
 }
@@ -306,16 +302,18 @@ pub fn query_rates_with_tangents(
     let (out_primal, out_tangents) = out.split_at_mut_checked(q)?;
     let (s_k, s_jac) = primal.split_at_checked(m)?;
     let tf = crate::flow::task_field(dims, task_kernel, s_k, samples);
-    let jf = crate::flow::joint_field(dims, samples, |j, g| match kernel_rows.get(j * row_len..j * row_len + 1 + n).and_then(|r| r.split_first()) {
-        Some((k, r_grad)) => {
-            for (dst, src) in g.iter_mut().zip(r_grad) {
-                *dst = *src;
+    let jf = crate::flow::joint_field(dims, samples, |j, g| {
+        match kernel_rows.get(j * row_len..j * row_len + 1 + n).and_then(|r| r.split_first()) {
+            Some((k, r_grad)) => {
+                for (dst, src) in g.iter_mut().zip(r_grad) {
+                    *dst = *src;
+                }
+                *k
             }
-            *k
-        }
-        None => {
-            *g = [0.0; NJ];
-            0.0
+            None => {
+                *g = [0.0; NJ];
+                0.0
+            }
         }
     });
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;

@@ -175,7 +175,12 @@ fn every_truncation_and_extension_is_rejected(blob: &[u8]) {
     let mut longer = blob.to_vec();
     for extra in 1..=16 {
         longer.push(if extra % 2 == 0 { 0 } else { 0xff });
-        check_rejected(&longer, &mut storage, DecodeError::TrailingBytes { expected: total, got: total + extra }, &format!("{extra} bytes appended"));
+        check_rejected(
+            &longer,
+            &mut storage,
+            DecodeError::TrailingBytes { expected: total, got: total + extra },
+            &format!("{extra} bytes appended"),
+        );
     }
 }
 
@@ -217,7 +222,12 @@ fn wrong_version_or_magic_is_rejected_even_with_a_valid_checksum() {
         let mut b = blob.clone();
         b[4..6].copy_from_slice(&version.to_le_bytes());
         reseal(&mut b);
-        check_rejected(&b, &mut storage, DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION }, &format!("version {version}"));
+        check_rejected(
+            &b,
+            &mut storage,
+            DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION },
+            &format!("version {version}"),
+        );
     }
     for i in 0..4 {
         for v in 0..=255u8 {

@@ -37,7 +37,9 @@ fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integrator:
     let mut s = 7u64;
     let points: Vec<f64> = (0..n_points * n).map(|_| 3.0 * lcg(&mut s)).collect();
     let momenta: Vec<f64> = (0..n_points * m).map(|_| momentum * lcg(&mut s)).collect();
-    let axes: heapless::Vec<JointKernelAxis, 7> = (0..n).map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 2.0 } }).collect();
+    let axes: heapless::Vec<JointKernelAxis, 7> = (0..n)
+        .map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 2.0 } })
+        .collect();
     let (pb, mb) = (f64_le_bytes(&points), f64_le_bytes(&momenta));
     let normalisation = if m == 3 { Normalisation { task_offset: [0.0, 0.0, 300.0], task_scale: 500.0 } } else { Normalisation::IDENTITY };
     let model = Model {
@@ -63,7 +65,10 @@ fn check(blob: &[u8], queries: &[Vec<f64>]) -> (f64, f64) {
         let plain = cal.evaluate_transported(q).unwrap();
         let e = cal.evaluate(q).unwrap();
         // The position is the same computation, bit for bit.
-        assert_eq!(plain.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>(), e.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        assert_eq!(
+            plain.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            e.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
         let h = 1e-6;
         let scale = e.jacobian().iter().fold(0.0f64, |s, v| s.max(v.abs()));
         for d in 0..q.len() {
@@ -90,7 +95,8 @@ fn exact_jacobian_matches_finite_differences() {
         ("dh-standard", six_joint(DhConvention::Standard), 0.02),
         ("dh-modified", six_joint(DhConvention::Modified), 0.02),
     ] {
-        for integrator in [Integrator { method: IntegratorMethod::Euler, steps: 2 }, Integrator { method: IntegratorMethod::Rk4, steps: 3 }] {
+        for integrator in [Integrator { method: IntegratorMethod::Euler, steps: 2 }, Integrator { method: IntegratorMethod::Rk4, steps: 3 }]
+        {
             let n = nominal.n_joints();
             let blob = model_blob(nominal.clone(), 40, momentum, integrator);
             let queries: Vec<Vec<f64>> = (0..5).map(|_| (0..n).map(|_| 3.0 * lcg(&mut s)).collect()).collect();
@@ -111,7 +117,10 @@ fn nominal_hessian_matches_finite_differences() {
             let (mut xa, mut xb) = (x, x);
             xa[d] += step;
             xb[d] -= step;
-            let (ja, jb) = (cbd_runtime::nominal::forward_kinematics(&nominal, &xa).jacobian, cbd_runtime::nominal::forward_kinematics(&nominal, &xb).jacobian);
+            let (ja, jb) = (
+                cbd_runtime::nominal::forward_kinematics(&nominal, &xa).jacobian,
+                cbd_runtime::nominal::forward_kinematics(&nominal, &xb).jacobian,
+            );
             for a in 0..3 {
                 for e in 0..6 {
                     let fd = (ja[a][e] - jb[a][e]) / (2.0 * step);

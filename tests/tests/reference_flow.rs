@@ -61,7 +61,8 @@ fn runtime_matches_independent_reference() {
         let mut traj = vec![0.0; model.integrator.stage_count() * 256 * dims.sample_len()];
         let params = FlowParams { dims, joint_kernel: &model.joint_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
         integrate_control_points(&params, model.integrator, &x, &mut state, &mut scratch, &mut traj, |_, _| {}).unwrap();
-        let pick = |range: std::ops::Range<usize>| state.chunks(dims.state_len()).flat_map(|s| s[range.clone()].to_vec()).collect::<Vec<_>>();
+        let pick =
+            |range: std::ops::Range<usize>| state.chunks(dims.state_len()).flat_map(|s| s[range.clone()].to_vec()).collect::<Vec<_>>();
         let r = &reference[key];
         let dk = max_rel_diff(&pick(0..2), &flat(&r["k1"]));
         let dj = max_rel_diff(&pick(2..6), &flat(&r["J1"]));

@@ -7,7 +7,9 @@ use proptest::prelude::*;
 fn reference_blob() -> Vec<u8> {
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/data/rr_flow_reference.json")).unwrap();
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let flat = |key: &str| -> Vec<f64> { v[key].as_array().unwrap().iter().flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap())).collect() };
+    let flat = |key: &str| -> Vec<f64> {
+        v[key].as_array().unwrap().iter().flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap())).collect()
+    };
     let (x, p) = (f64_le_bytes(&flat("X")), f64_le_bytes(&flat("P0")));
     let model = Model {
         nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() },

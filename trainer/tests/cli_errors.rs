@@ -77,7 +77,13 @@ const RR_HEADER: &str = "q1,q2,x,y\n";
 #[test]
 fn usage_errors_exit_2_without_panic() {
     let dir = scratch("usage");
-    for args in [&["frobnicate"][..], &["fit", "--out", "a.blob"], &["eval", "--data", "x.csv"], &["simulate", "--grid", "many", "--out", "a.csv"], &[]] {
+    for args in [
+        &["frobnicate"][..],
+        &["fit", "--out", "a.blob"],
+        &["eval", "--data", "x.csv"],
+        &["simulate", "--grid", "many", "--out", "a.csv"],
+        &[],
+    ] {
         let out = cbd(&dir, args);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "cbd {args:?}: {err}");
@@ -290,7 +296,11 @@ fn model_file_malformed() {
     fails_with(&fit_with_model(&dir, &m), &["two-chains.toml", "exactly one of"]);
     let m = write(&dir, "binary.toml", b"length_unit = \"m\"\n\xff\xfe\n");
     fails_with(&fit_with_model(&dir, &m), &["binary.toml"]);
-    let m = write(&dir, "urdf.toml", "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"missing.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n");
+    let m = write(
+        &dir,
+        "urdf.toml",
+        "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"missing.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n",
+    );
     fails_with(&fit_with_model(&dir, &m), &["missing.urdf"]);
     assert!(!dir.join("a.blob").exists());
 }
@@ -326,7 +336,15 @@ fn fit_bad_solver_options_name_the_flag() {
     let dir = scratch("fit-options-named");
     let (g4, _, _) = rr_fixture();
     let g4 = g4.to_str().unwrap();
-    for (flag, value) in [("--sigma", "0"), ("--sigma", "NaN"), ("--task-width", "0"), ("--steps", "0"), ("--steps", "65"), ("--joint-b", "0"), ("--gamma", "-1")] {
+    for (flag, value) in [
+        ("--sigma", "0"),
+        ("--sigma", "NaN"),
+        ("--task-width", "0"),
+        ("--steps", "0"),
+        ("--steps", "65"),
+        ("--joint-b", "0"),
+        ("--gamma", "-1"),
+    ] {
         let arg = format!("{flag}={value}");
         let out = cbd(&dir, &["fit", "--data", g4, "--out", "a.blob", "--quiet", &arg]);
         fails_with(&out, &[flag]);
@@ -440,7 +458,10 @@ fn compare_bad_inputs() {
     lines[3] = fields.join(",");
     let f = write(&dir, "nan.csv", lines.join("\n") + "\n");
     fails_with(&cbd(&dir, &["compare", "--model", model, "--train", train, "--test", &f]), &["nan.csv:4", "column 'y_mm'", "finite"]);
-    fails_with(&cbd(&dir, &["compare", "--model", model, "--train", test, "--test", test, "--json", "no-such-dir/c.json"]), &["no-such-dir"]);
+    fails_with(
+        &cbd(&dir, &["compare", "--model", model, "--train", test, "--test", test, "--json", "no-such-dir/c.json"]),
+        &["no-such-dir"],
+    );
 }
 
 /// Fix needed (trainer/src/cli/compare.rs): `--steps 0` exits 0 and prints NaN rows for cbd and

@@ -1,9 +1,9 @@
 //! The UR5 example: model file, measurement files, and the nominal model against upstream's own.
 
+use cbd_runtime::nominal::forward_kinematics;
 use cbd_trainer::data::csv_import::read_measurements;
 use cbd_trainer::data::model_file::load_model_file;
 use cbd_trainer::report::stats::ErrorStats;
-use cbd_runtime::nominal::forward_kinematics;
 use std::path::PathBuf;
 
 fn ur5_dir() -> PathBuf {
@@ -43,9 +43,7 @@ fn ur5_measurements_load_with_the_model_files_columns() {
     let train = read_measurements(ur5_dir().join("train.csv"), &spec).unwrap();
     let test = read_measurements(ur5_dir().join("test.csv"), &spec).unwrap();
     assert_eq!((train.measurements.len(), test.measurements.len()), (1000, 20));
-    let predicted: Vec<f64> = (0..20)
-        .flat_map(|i| forward_kinematics(&model.nominal, test.measurements.joints(i)).position)
-        .collect();
+    let predicted: Vec<f64> = (0..20).flat_map(|i| forward_kinematics(&model.nominal, test.measurements.joints(i)).position).collect();
     let stats = ErrorStats::of_positions(&predicted, &test.measurements.positions, 3);
     assert!((stats.mean - 2.565).abs() < 0.01, "uncalibrated mean test error {}", stats.mean);
 }
@@ -73,7 +71,8 @@ fn ur5_compare_peers() {
     use cbd_trainer::baselines::compare::compare_files;
     use cbd_trainer::kernels::hyperparameters::SearchOptions;
     let d = ur5_dir();
-    let (c, warnings) = compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), &SearchOptions::default(), None).unwrap();
+    let (c, warnings) =
+        compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), &SearchOptions::default(), None).unwrap();
     eprintln!("warnings: {warnings:?}");
     eprintln!("{}", c.table("mm"));
     for r in &c.rows {
@@ -115,4 +114,3 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
         eprintln!("{}: {}", r.name, r.note);
     }
 }
-

@@ -141,7 +141,14 @@ fn run(args: &Args) -> Result<bool, String> {
     sorted.sort();
     let evaluated = eval_times.len();
     let mean = eval_times.iter().sum::<Duration>() / evaluated.max(1) as u32;
-    println!("control loop: {} points, {} joints, {:?} × {} steps; load {:.1} ms", model.n_points, n, model.integrator.method, model.integrator.steps, load_time.as_secs_f64() * 1e3);
+    println!(
+        "control loop: {} points, {} joints, {:?} × {} steps; load {:.1} ms",
+        model.n_points,
+        n,
+        model.integrator.method,
+        model.integrator.steps,
+        load_time.as_secs_f64() * 1e3
+    );
     println!(
         "rate {:.0} Hz, {cycles} ticks in {:.3} s (period {:.0} µs): {evaluated} evaluated, {skipped} skipped (loop not scheduled in time)",
         args.rate_hz,

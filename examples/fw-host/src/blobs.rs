@@ -64,7 +64,13 @@ pub fn six_joint_blob() -> Vec<u8> {
     let joint = |a: f64, alpha_deg: f64, d: f64| DhJoint {
         kind: JointKind::Revolute,
         a,
-        alpha: if alpha_deg == 90.0 { FRAC_PI_2 } else if alpha_deg == -90.0 { -FRAC_PI_2 } else { alpha_deg * deg },
+        alpha: if alpha_deg == 90.0 {
+            FRAC_PI_2
+        } else if alpha_deg == -90.0 {
+            -FRAC_PI_2
+        } else {
+            alpha_deg * deg
+        },
         d,
         theta_offset: 0.0,
     };
@@ -106,4 +112,3 @@ pub fn six_joint_blob() -> Vec<u8> {
     };
     encode_to_vec(&model).expect("encode 6-joint blob")
 }
-

@@ -67,7 +67,12 @@ fn eval(path: &Path, transported: bool) -> Result<(), String> {
             Ok(e) => {
                 let (pos, jac) = (e.position(), e.jacobian());
                 let (m, n) = jac.shape();
-                shared::write_result(&mut out, i, pos.iter().copied(), (0..m).flat_map(|a| (0..n).filter_map(move |d| jac.get((a, d)).copied())))
+                shared::write_result(
+                    &mut out,
+                    i,
+                    pos.iter().copied(),
+                    (0..m).flat_map(|a| (0..n).filter_map(move |d| jac.get((a, d)).copied())),
+                )
             }
             Err(_) => shared::write_error(&mut out, i),
         };

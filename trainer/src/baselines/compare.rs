@@ -91,7 +91,10 @@ impl Comparison {
     pub fn table(&self, unit: &str) -> String {
         let mut out = format!("{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}  ({unit})\n", "method", "mean", "median", "p99", "max", "fit [s]");
         for r in &self.rows {
-            out += &format!("{:<8} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.2}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds);
+            out += &format!(
+                "{:<8} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.2}\n",
+                r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds
+            );
         }
         out
     }
@@ -187,10 +190,15 @@ pub fn compare_peers(
     let dh_model = dh.as_ref().ok().map(|f| f.model.clone());
     push(
         "dh",
-        dh.as_ref().map(|f| {
-            let s = &f.stats;
-            (nominal_predictor(f.model.clone()), format!("{} iterations, rank {}/{}, train rms {:.4}", s.iterations, s.rank, s.n_parameters, s.final_rms))
-        }).map_err(|e| e.to_string()),
+        dh.as_ref()
+            .map(|f| {
+                let s = &f.stats;
+                (
+                    nominal_predictor(f.model.clone()),
+                    format!("{} iterations, rank {}/{}, train rms {:.4}", s.iterations, s.rank, s.n_parameters, s.final_rms),
+                )
+            })
+            .map_err(|e| e.to_string()),
         dh_seconds,
     );
 
@@ -246,7 +254,10 @@ mod tests {
         assert!(get("dh+krr") <= get("dh") * 1.05, "{:?}", c.rows);
         assert_eq!(get("dh+krr"), get("dh+cbd"));
         for r in &c.rows {
-            eprintln!("{:8} mean {:.4} median {:.4} p99 {:.4} max {:.4} fit {:.2}s  {}", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds, r.note);
+            eprintln!(
+                "{:8} mean {:.4} median {:.4} p99 {:.4} max {:.4} fit {:.2}s  {}",
+                r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds, r.note
+            );
         }
         let json = c.to_json();
         for name in ["nominal", "dh", "krr", "cbd", "dh+krr", "dh+cbd"] {

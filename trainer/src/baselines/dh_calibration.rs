@@ -214,7 +214,11 @@ fn rms(r: &[f64]) -> f64 {
 }
 
 /// Fits all DH parameters plus base and tool to `data` (positions in the model's length unit).
-pub fn calibrate_dh(nominal: &NominalModel, data: &Measurements, options: &DhCalibrationOptions) -> Result<DhCalibration, DhCalibrationError> {
+pub fn calibrate_dh(
+    nominal: &NominalModel,
+    data: &Measurements,
+    options: &DhCalibrationOptions,
+) -> Result<DhCalibration, DhCalibrationError> {
     let NominalModel::DhChain(chain0) = nominal else { return Err(DhCalibrationError::NotADhChain) };
     let n = chain0.joints.len();
     let np = parameter_count(n);
@@ -282,7 +286,11 @@ pub fn calibrate_dh(nominal: &NominalModel, data: &Measurements, options: &DhCal
                 *c = c.max(floor).max(f64::MIN_POSITIVE);
             }
             if frozen.is_none() {
-                let f = if options.redundancy_tolerance > 0.0 { redundant_parameters(&jac, &colnorm, options.redundancy_tolerance) } else { Vec::new() };
+                let f = if options.redundancy_tolerance > 0.0 {
+                    redundant_parameters(&jac, &colnorm, options.redundancy_tolerance)
+                } else {
+                    Vec::new()
+                };
                 redundant_at_nominal = f.clone();
                 frozen = Some(f);
             }
@@ -449,7 +457,13 @@ pub(crate) mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let p_true: Vec<f64> = parameter_names(6)
             .iter()
-            .map(|s| if s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r") { rng.gen_range(-0.01..0.01) } else { rng.gen_range(-2.0..2.0) })
+            .map(|s| {
+                if s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r") {
+                    rng.gen_range(-0.01..0.01)
+                } else {
+                    rng.gen_range(-2.0..2.0)
+                }
+            })
             .collect();
         let truth = NominalModel::DhChain(apply_parameters(&nominal, &p_true));
         let train = sample(&truth, 150, 1);
@@ -521,7 +535,12 @@ mod jacobian_tests {
                 residuals(&apply_parameters(&ur5_like(conv), &q), &data, &mut rm);
                 for i in 0..15 {
                     let fd = (rp[i] - rm[i]) / (2.0 * h);
-                    assert!((fd - jac[(i, k)]).abs() < 1e-5 * (1.0 + fd.abs()), "{conv:?} {} row {i}: fd {fd} analytic {}", parameter_names(6)[k], jac[(i, k)]);
+                    assert!(
+                        (fd - jac[(i, k)]).abs() < 1e-5 * (1.0 + fd.abs()),
+                        "{conv:?} {} row {i}: fd {fd} analytic {}",
+                        parameter_names(6)[k],
+                        jac[(i, k)]
+                    );
                 }
             }
         }

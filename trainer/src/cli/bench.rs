@@ -165,7 +165,10 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         }
         let line = String::from_utf8_lossy(&out.stdout);
         let fit: FitBench = serde_json::from_str(line.trim()).map_err(|e| format!("bench output for N = {n}: {e}"))?;
-        eprintln!("  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.2e}", fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error);
+        eprintln!(
+            "  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.2e}",
+            fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error
+        );
         report.fit.push(fit);
         let blob = std::fs::read(&blob_path).map_err(|e| format!("{}: {e}", blob_path.display()))?;
         let _ = std::fs::remove_file(&blob_path);
@@ -199,11 +202,17 @@ fn markdown(r: &BenchReport) -> String {
     s += "RR benchmark (DESIGN.md §4), default scheme (Euler × 2, σ = 1e-6), N grid measurements; test error on 1000 random configurations.\n\n";
     s += "| N | fit s | iterations | flow s | tangent s | solves s | peak MiB | test mean error |\n|---|---|---|---|---|---|---|---|\n";
     for f in &r.fit {
-        s += &format!("| {} | {:.2} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.2e} |\n", f.n, f.seconds, f.iterations, f.seconds_flow, f.seconds_tangent, f.seconds_solve, f.peak_mib, f.test_mean_error);
+        s += &format!(
+            "| {} | {:.2} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.2e} |\n",
+            f.n, f.seconds, f.iterations, f.seconds_flow, f.seconds_tangent, f.seconds_solve, f.peak_mib, f.test_mean_error
+        );
     }
     s += "\n| N | runtime eval ns | nominal FK ns | kernel ridge ns | ratio to nominal | ratio to kernel ridge |\n|---|---|---|---|---|---|\n";
     for e in &r.eval {
-        s += &format!("| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} |\n", e.n, e.ns, e.nominal_ns, e.krr_ns, e.ratio_to_nominal, e.ratio_to_krr);
+        s += &format!(
+            "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} |\n",
+            e.n, e.ns, e.nominal_ns, e.krr_ns, e.ratio_to_nominal, e.ratio_to_krr
+        );
     }
     if r.fit.len() >= 2 {
         let fit_exp = exponent(&r.fit.iter().map(|f| (f.n as f64, f.seconds)).collect::<Vec<_>>());

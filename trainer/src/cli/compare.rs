@@ -38,9 +38,7 @@ pub fn cbd_fitter(search: &SearchOptions, steps: u16) -> impl Fn(&NominalModel, 
         opts.integrator.steps = steps;
         let fit = crate::solver::fit_cbd(nominal, data, &opts).map_err(|e| e.to_string())?;
         let blob = fit.blob;
-        Ok(Box::new(move |joints: &[f64]| {
-            crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()])
-        }))
+        Ok(Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()])))
     }
 }
 
@@ -62,7 +60,8 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
         }
     }
     if let Some(dir) = &args.plots {
-        let methods: Vec<(String, Vec<f64>)> = comparison.rows.iter().filter(|r| !r.test_errors.is_empty()).map(|r| (r.name.clone(), r.test_errors.clone())).collect();
+        let methods: Vec<(String, Vec<f64>)> =
+            comparison.rows.iter().filter(|r| !r.test_errors.is_empty()).map(|r| (r.name.clone(), r.test_errors.clone())).collect();
         let files = crate::report::plots::method_comparison(dir, &methods, unit)?;
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }

@@ -154,7 +154,17 @@ fn print_report(r: &DemoReport) {
     row("grid: CbD (runtime)", &r.calibrated_grid);
     row("grid: kernel ridge", &r.krr_grid);
     println!();
-    println!("orders of magnitude (random, mean): CbD {:.2}, kernel ridge {:.2}", (r.nominal.mean / r.calibrated.mean).log10(), (r.nominal.mean / r.krr.mean).log10());
-    println!("fit time: CbD {:.2} s (flow {:.2} s, tangent {:.2} s, solves {:.2} s); kernel ridge {:.3} s", r.fit_seconds, r.fit.seconds_flow, r.fit.seconds_tangent, r.fit.seconds_solve, r.krr_fit_seconds);
-    println!("blob: {} bytes; largest runtime/trainer difference at the training points: {:.1e} (relative)", r.blob_bytes, r.max_runtime_trainer_diff);
+    println!(
+        "orders of magnitude (random, mean): CbD {:.2}, kernel ridge {:.2}",
+        (r.nominal.mean / r.calibrated.mean).log10(),
+        (r.nominal.mean / r.krr.mean).log10()
+    );
+    println!(
+        "fit time: CbD {:.2} s (flow {:.2} s, tangent {:.2} s, solves {:.2} s); kernel ridge {:.3} s",
+        r.fit_seconds, r.fit.seconds_flow, r.fit.seconds_tangent, r.fit.seconds_solve, r.krr_fit_seconds
+    );
+    println!(
+        "blob: {} bytes; largest runtime/trainer difference at the training points: {:.1e} (relative)",
+        r.blob_bytes, r.max_runtime_trainer_diff
+    );
 }

@@ -58,7 +58,9 @@ impl SolverArgs {
     /// data-scaled defaults (task space normalised to unit RMS radius).
     /// Rejects out-of-range values before any work, naming the flag.
     pub fn validate(&self) -> Result<(), String> {
-        for (flag, value) in [("--sigma", self.sigma), ("--task-width", self.task_width), ("--joint-b", self.joint_b), ("--gamma", self.gamma)] {
+        for (flag, value) in
+            [("--sigma", self.sigma), ("--task-width", self.task_width), ("--joint-b", self.joint_b), ("--gamma", self.gamma)]
+        {
             if let Some(v) = value {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(format!("{flag} must be a finite number > 0, got {v}"));
@@ -144,7 +146,10 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     let nominal = if args.dh_first {
         let options = crate::baselines::dh_calibration::DhCalibrationOptions::default();
         let dh = crate::baselines::dh_calibration::calibrate_dh(&nominal, &data, &options).map_err(|e| e.to_string())?;
-        eprintln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.stats.iterations, dh.stats.rank, dh.stats.n_parameters, dh.stats.final_rms);
+        eprintln!(
+            "DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}",
+            dh.stats.iterations, dh.stats.rank, dh.stats.n_parameters, dh.stats.final_rms
+        );
         dh.model
     } else {
         nominal

@@ -63,9 +63,18 @@ pub fn read_measurements(path: impl AsRef<Path>, spec: &ColumnSpec) -> Result<Im
 /// As [`read_measurements`], from any reader; `path` names the source in errors.
 pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &ColumnSpec) -> Result<ImportedMeasurements, ImportError> {
     let file: PathBuf = path.to_path_buf();
-    let err = |line: Option<u64>, column: Option<&str>, message: String| ImportError::Csv { file: file.clone(), line, column: column.map(str::to_string), message };
+    let err = |line: Option<u64>, column: Option<&str>, message: String| ImportError::Csv {
+        file: file.clone(),
+        line,
+        column: column.map(str::to_string),
+        message,
+    };
     if spec.joint_columns.len() != spec.joint_kinds.len() {
-        return Err(err(None, None, format!("{} joint columns named for a model with {} joints", spec.joint_columns.len(), spec.joint_kinds.len())));
+        return Err(err(
+            None,
+            None,
+            format!("{} joint columns named for a model with {} joints", spec.joint_columns.len(), spec.joint_kinds.len()),
+        ));
     }
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(true).trim(csv::Trim::All).from_reader(reader);
     let header = rdr.headers().map_err(|e| err(Some(1), None, format!("cannot read the header: {e}")))?.clone();
@@ -76,7 +85,11 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         let hits: Vec<usize> = header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
         match hits.as_slice() {
             [i] => Ok(*i),
-            [] => Err(err(Some(1), Some(name), format!("no such column in the header (columns: {})", header.iter().collect::<Vec<_>>().join(", ")))),
+            [] => Err(err(
+                Some(1),
+                Some(name),
+                format!("no such column in the header (columns: {})", header.iter().collect::<Vec<_>>().join(", ")),
+            )),
             _ => Err(err(Some(1), Some(name), "column name appears more than once in the header".into())),
         }
     };

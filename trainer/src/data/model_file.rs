@@ -315,7 +315,8 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
         let robot = urdf_rs::read_file(&urdf_path).map_err(|e| ImportError::Urdf { file: urdf_path.clone(), message: e.to_string() })?;
         let scale = LengthUnit::M.factor_to(raw.length_unit);
-        let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|message| ImportError::Urdf { file: urdf_path.clone(), message })?;
+        let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale)
+            .map_err(|message| ImportError::Urdf { file: urdf_path.clone(), message })?;
         (NominalModel::DhChain(conv.chain), conv.joint_names)
     } else {
         let lengths = raw.planar.expect("one section").lengths;
@@ -323,14 +324,25 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             return Err(model_err(format!("[planar] needs 1 to {MAX_JOINTS} finite lengths")));
         }
         let n = lengths.len();
-        (NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&lengths).expect("checked") }, (1..=n).map(|i| format!("q{i}")).collect())
+        (
+            NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&lengths).expect("checked") },
+            (1..=n).map(|i| format!("q{i}")).collect(),
+        )
     };
     if let Some(m) = &raw.measurements {
         if m.joints.len() != nominal.n_joints() {
-            return Err(model_err(format!("[measurements] names {} joint columns; the model has {} joints", m.joints.len(), nominal.n_joints())));
+            return Err(model_err(format!(
+                "[measurements] names {} joint columns; the model has {} joints",
+                m.joints.len(),
+                nominal.n_joints()
+            )));
         }
         if m.positions.len() != nominal.task_dim() {
-            return Err(model_err(format!("[measurements] names {} position columns; the task space has {} coordinates", m.positions.len(), nominal.task_dim())));
+            return Err(model_err(format!(
+                "[measurements] names {} position columns; the task space has {} coordinates",
+                m.positions.len(),
+                nominal.task_dim()
+            )));
         }
     }
     Ok(ModelFile {

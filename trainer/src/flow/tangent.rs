@@ -247,8 +247,7 @@ pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) 
     let (m, count, len) = (dims.m, cp.len(), dims.state_len());
     let jk = joint_kernel_matrices(cp);
     let stage_len = count * len;
-    let stages: Vec<StageLinearisation> =
-        flow.stage_states.chunks_exact(stage_len).map(|y| linearise_stage(cp, &jk, y)).collect();
+    let stages: Vec<StageLinearisation> = flow.stage_states.chunks_exact(stage_len).map(|y| linearise_stage(cp, &jk, y)).collect();
     let directions = count * m;
     let rows = count * len;
     let bounds: Vec<(usize, usize)> = (0..CHUNKS).map(|c| (c * directions / CHUNKS, (c + 1) * directions / CHUNKS)).collect();
@@ -261,12 +260,13 @@ pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) 
             tan[(dir - d0) * rows + (m + m * dims.n + b) * count + j] = 1.0;
         }
         let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(tan.len())];
-        let result: Result<(), ()> = cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
-            let y = MatRef::from_column_major_slice(y, rows, cols);
-            let out = MatMut::from_column_major_slice_mut(out, rows, cols);
-            tangent_rates(cp, &jk, &stages[stage], y, out);
-            Ok(())
-        });
+        let result: Result<(), ()> =
+            cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
+                let y = MatRef::from_column_major_slice(y, rows, cols);
+                let out = MatMut::from_column_major_slice_mut(out, rows, cols);
+                tangent_rates(cp, &jk, &stages[stage], y, out);
+                Ok(())
+            });
         let _ = result;
         tan
     };

@@ -12,9 +12,9 @@
 //! `KernelRidge::fit(nominal, data, h.kernel.clone(), h.ridge())` is the GP posterior mean
 //! whatever the units of `data`.
 
-use crate::data::Measurements;
 #[cfg(test)]
 use crate::baselines::krr::kernel_matrix;
+use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
 use cbd_runtime::nominal::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
@@ -144,13 +144,25 @@ fn kernel_of(template: &[bool], theta: &[f64], gamma: f64) -> JointKernel {
     let axes = template
         .iter()
         .zip(theta)
-        .map(|(&periodic, &t)| if periodic { JointKernelAxis::Periodic { b: t.exp() } } else { JointKernelAxis::Gaussian { width: t.exp() } })
+        .map(
+            |(&periodic, &t)| {
+                if periodic {
+                    JointKernelAxis::Periodic { b: t.exp() }
+                } else {
+                    JointKernelAxis::Gaussian { width: t.exp() }
+                }
+            },
+        )
         .collect::<Vec<_>>();
     JointKernel { gamma, axes: heapless::Vec::from_slice(&axes).expect("at most MAX_JOINTS axes") }
 }
 
 /// Chooses the joint-kernel widths, γ and σ for the residual of `nominal` on `data`.
-pub fn choose_hyperparameters(nominal: &NominalModel, data: &Measurements, options: &SearchOptions) -> Result<Hyperparameters, HyperparameterError> {
+pub fn choose_hyperparameters(
+    nominal: &NominalModel,
+    data: &Measurements,
+    options: &SearchOptions,
+) -> Result<Hyperparameters, HyperparameterError> {
     let count = data.len();
     if count < 3 {
         return Err(HyperparameterError::TooFewRows(count));
@@ -244,7 +256,8 @@ pub fn choose_hyperparameters(nominal: &NominalModel, data: &Measurements, optio
     let Some(mut best) = best else { return Err(HyperparameterError::NoValidSetting) };
     let budget = options.max_evaluations.max(4);
     // Coordinates: 0 = λ, 1 = shared width (all axes), 2.. = single axes (second phase).
-    let phases: Vec<Vec<usize>> = if options.per_axis && n > 1 { vec![vec![0, 1], (0..=n + 1).filter(|&k| k != 1).collect()] } else { vec![vec![0, 1]] };
+    let phases: Vec<Vec<usize>> =
+        if options.per_axis && n > 1 { vec![vec![0, 1], (0..=n + 1).filter(|&k| k != 1).collect()] } else { vec![vec![0, 1]] };
     for coords in phases {
         let mut step = 2f64.ln(); // factor 2, then halving
         while step > 1.05f64.ln() && evaluations.get() < budget {
@@ -257,7 +270,10 @@ pub fn choose_hyperparameters(nominal: &NominalModel, data: &Measurements, optio
                     let (mut th, mut ll) = (theta.clone(), log_lambda);
                     match k {
                         0 => ll = (ll + dir * step).clamp(lo_l, hi_l),
-                        1 => th.iter_mut().zip(&template).for_each(|(t, &p)| *t = (*t + if p { dir * step } else { -0.5 * dir * step }).clamp(lo_b, hi_b)),
+                        1 => th
+                            .iter_mut()
+                            .zip(&template)
+                            .for_each(|(t, &p)| *t = (*t + if p { dir * step } else { -0.5 * dir * step }).clamp(lo_b, hi_b)),
                         a => th[a - 2] = (th[a - 2] + dir * step).clamp(lo_b, hi_b),
                     }
                     if th == theta && ll == log_lambda {
@@ -335,12 +351,21 @@ mod tests {
         let (nominal, train, test) = gp_sample(300, 11);
         let opts = SearchOptions { task_scale: Some(1.0), ..SearchOptions::default() };
         let h = choose_hyperparameters(&nominal, &train, &opts).unwrap();
-        let bs: Vec<f64> = h.kernel.axes.iter().map(|a| match a { JointKernelAxis::Periodic { b } => *b, _ => panic!() }).collect();
+        let bs: Vec<f64> = h
+            .kernel
+            .axes
+            .iter()
+            .map(|a| match a {
+                JointKernelAxis::Periodic { b } => *b,
+                _ => panic!(),
+            })
+            .collect();
         assert!(bs.iter().all(|&b| (1.0..4.0).contains(&b)), "b {bs:?} (true 2)");
         assert!((h.noise_sigma - 0.02).abs() < 0.005, "σ {} (true 0.02)", h.noise_sigma);
         assert!(h.kernel.gamma > 0.003 && h.kernel.gamma < 0.03, "γ {} (true 0.01)", h.kernel.gamma);
         // The optimum is at least as likely as the generating values.
-        let residual = Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
+        let residual =
+            Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
         let truth = JointKernel { gamma: 0.01, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 2.0 }; 2]).unwrap() };
         let mut k = kernel_matrix(&truth, &train.joints, &train.joints, 2);
         for i in 0..train.len() {
@@ -358,8 +383,11 @@ mod tests {
     #[test]
     fn profiled_value_matches_the_full_likelihood() {
         let (nominal, train, _) = gp_sample(60, 5);
-        let h = choose_hyperparameters(&nominal, &train, &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() }).unwrap();
-        let residual = Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
+        let h =
+            choose_hyperparameters(&nominal, &train, &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() })
+                .unwrap();
+        let residual =
+            Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
         let mut k = kernel_matrix(&h.kernel, &train.joints, &train.joints, 2);
         for i in 0..train.len() {
             k[(i, i)] += h.ridge();

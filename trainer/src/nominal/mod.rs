@@ -22,10 +22,7 @@ impl Pose {
 
     pub fn to_transform(&self) -> Transform {
         let r = &self.r;
-        Transform {
-            rotation: [r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2]],
-            translation: self.t,
-        }
+        Transform { rotation: [r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2]], translation: self.t }
     }
 
     /// `self ∘ other`: first `other`, then `self`.

@@ -99,7 +99,12 @@ pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, 
             urdf_rs::JointType::Fixed => continue,
             urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => JointKind::Revolute,
             urdf_rs::JointType::Prismatic => JointKind::Prismatic,
-            ref other => return Err(format!("URDF joint '{}' has unsupported type {other:?} (only revolute, continuous, prismatic and fixed)", joint.name)),
+            ref other => {
+                return Err(format!(
+                    "URDF joint '{}' has unsupported type {other:?} (only revolute, continuous, prismatic and fixed)",
+                    joint.name
+                ))
+            }
         };
         let axis = unit(joint.axis.xyz.0).ok_or_else(|| format!("URDF joint '{}' has a zero axis", joint.name))?;
         lines.push(AxisLine { kind, point: pose.t, dir: pose.rotate(axis) });
@@ -109,7 +114,10 @@ pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, 
         return Err(format!("URDF: no movable joint between '{base_link}' and '{tip_link}'"));
     }
     if lines.len() > MAX_JOINTS {
-        return Err(format!("URDF: {} movable joints between '{base_link}' and '{tip_link}'; at most {MAX_JOINTS} are supported", lines.len()));
+        return Err(format!(
+            "URDF: {} movable joints between '{base_link}' and '{tip_link}'; at most {MAX_JOINTS} are supported",
+            lines.len()
+        ));
     }
     let tip = pose;
     let chain = dh_from_axis_lines(&lines, &tip);
@@ -206,7 +214,6 @@ mod tests {
     use super::*;
     use cbd_protocol::NominalModel;
     use cbd_runtime::nominal::forward_kinematics;
-
 
     #[test]
     fn urdf_chain_converts_to_an_exact_dh_chain() {

@@ -141,7 +141,9 @@ fn key_value_table(out: &mut String, rows: &[(String, String)]) {
 /// Captions of the figures `report::plots` writes.
 fn figure_caption(name: &str) -> &str {
     match name {
-        "error_heatmaps" => "log10 position error over a grid of two joints, before (left) and after (right) calibration, on one colour scale.",
+        "error_heatmaps" => {
+            "log10 position error over a grid of two joints, before (left) and after (right) calibration, on one colour scale."
+        }
         "workspace_grid" => "Images of a joint grid in the workspace: nominal vs real arm (left), calibrated vs real arm (right).",
         "error_histogram" => "Distribution of the position error before and after calibration (log axis); vertical lines mark the medians.",
         "method_comparison" => "Error distribution of every method: box = quartiles, whiskers = 1st–99th percentile, cross = maximum.",
@@ -151,7 +153,8 @@ fn figure_caption(name: &str) -> &str {
     }
 }
 
-const STYLE: &str = "body{font-family:system-ui,-apple-system,'DejaVu Sans',sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
+const STYLE: &str =
+    "body{font-family:system-ui,-apple-system,'DejaVu Sans',sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
 h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}\
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}\
 th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}\
@@ -293,7 +296,8 @@ fn convergence_section(out: &mut String, fit: &Map<String, Value>, unit: &str) -
         })
         .collect();
     let svg = crate::report::plots::convergence_svg(&points, unit)?;
-    let _ = writeln!(out, "<figure>{}<figcaption>{}</figcaption></figure>", strip_xml_declaration(&svg), escape(figure_caption("convergence")));
+    let _ =
+        writeln!(out, "<figure>{}<figcaption>{}</figcaption></figure>", strip_xml_declaration(&svg), escape(figure_caption("convergence")));
     let columns: Vec<String> = match log[0].as_object() {
         Some(o) => o.keys().cloned().collect(),
         None => return Ok(()),
@@ -336,10 +340,8 @@ const ORDER: [&str; 6] = ["error_heatmaps", "workspace_grid", "error_histogram",
 /// The PNGs in `dir`, in page order.
 pub fn collect_figures(dir: &Path) -> Result<Vec<Figure>, String> {
     let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let mut paths: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png")))
-        .collect();
+    let mut paths: Vec<PathBuf> =
+        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png"))).collect();
     let rank = |p: &PathBuf| {
         let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         (ORDER.iter().position(|o| *o == stem).unwrap_or(ORDER.len()), stem)
@@ -362,7 +364,8 @@ pub fn collect_figures(dir: &Path) -> Result<Vec<Figure>, String> {
 /// Returns the number of figures embedded.
 pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str) -> Result<usize, String> {
     let text = std::fs::read_to_string(json_path).map_err(|e| format!("{}: {e}", json_path.display()))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| format!("{}: line {}, column {}: {e}", json_path.display(), e.line(), e.column()))?;
+    let json: Value =
+        serde_json::from_str(&text).map_err(|e| format!("{}: line {}, column {}: {e}", json_path.display(), e.line(), e.column()))?;
     let unit = ["unit", "length_unit"].iter().find_map(|k| json.get(*k).and_then(|v| v.as_str())).unwrap_or(unit).to_string();
     let figures = match plots {
         Some(dir) => collect_figures(dir)?,
@@ -379,7 +382,9 @@ mod tests {
 
     #[test]
     fn base64_matches_rfc4648_vectors() {
-        for (plain, coded) in [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foob", "Zm9vYg=="), ("fooba", "Zm9vYmE="), ("foobar", "Zm9vYmFy")] {
+        for (plain, coded) in
+            [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foob", "Zm9vYg=="), ("fooba", "Zm9vYmE="), ("foobar", "Zm9vYmFy")]
+        {
             assert_eq!(base64(plain.as_bytes()), coded);
         }
     }

@@ -1,6 +1,6 @@
 //! Error statistics and tables.
 
-pub mod stats;
 pub mod html;
 pub mod plots;
 pub mod progress;
+pub mod stats;

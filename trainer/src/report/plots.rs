@@ -499,9 +499,7 @@ impl Workspace<'_> {
 
 impl Figure for Workspace<'_> {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
-        let root = root
-            .titled(&format!("Images of a {n} × {n} joint grid in the workspace", n = self.per_axis), (FONT, 28))
-            .map_err(pe)?;
+        let root = root.titled(&format!("Images of a {n} × {n} joint grid in the workspace", n = self.per_axis), (FONT, 28)).map_err(pe)?;
         // Equal aspect: one square data box shared by both panels, with room for the legend.
         let all = self.nominal.iter().chain(self.real).chain(self.calibrated);
         let xs: Vec<f64> = all.clone().map(|p| p[0]).collect();
@@ -670,7 +668,10 @@ impl Figure for Comparison<'_> {
             }
         };
         let mut chart = ChartBuilder::on(root)
-            .caption(format!("Position error by method ({} test configurations each)", self.methods.first().map_or(0, |m| m.1.len())), (FONT, 26))
+            .caption(
+                format!("Position error by method ({} test configurations each)", self.methods.first().map_or(0, |m| m.1.len())),
+                (FONT, 26),
+            )
             .margin(18)
             .x_label_area_size(60)
             .y_label_area_size(110)
@@ -790,7 +791,10 @@ impl Figure for Residuals<'_> {
                 .map_err(pe)?;
             chart
                 .draw_series(
-                    xs.iter().zip(self.residuals).filter(|(x, r)| x.is_finite() && r.is_finite()).map(|(&x, &r)| Circle::new((x, r), 2, RGBColor(90, 90, 90).mix(0.6).filled())),
+                    xs.iter()
+                        .zip(self.residuals)
+                        .filter(|(x, r)| x.is_finite() && r.is_finite())
+                        .map(|(&x, &r)| Circle::new((x, r), 2, RGBColor(90, 90, 90).mix(0.6).filled())),
                 )
                 .map_err(pe)?;
             let mut any = false;
@@ -837,11 +841,7 @@ pub fn residual_vs_joint(
 ) -> Result<Vec<PathBuf>, String> {
     let nj = joint_names.len();
     if nj == 0 || joints.len() != nj * residuals.len() || residuals.is_empty() {
-        return Err(format!(
-            "residual plot: {} joint values for {} residuals and {nj} joints",
-            joints.len(),
-            residuals.len()
-        ));
+        return Err(format!("residual plot: {} joint values for {} residuals and {nj} joints", joints.len(), residuals.len()));
     }
     if let Some((name, j, _)) = effects.iter().find(|(_, j, _)| *j >= nj) {
         return Err(format!("residual plot: effect `{name}` refers to joint {j} of {nj}"));
@@ -1036,7 +1036,12 @@ mod tests {
         assert_eq!(grid.len(), 144);
         let (before, after) = rr_like(&grid);
         let files = error_heatmaps(&dir, "q1 (rad)", "q2 (rad)", &grid, &before, &after, 12, "length units").unwrap();
-        check_pair(&files, "error_heatmaps", HEATMAP_SIZE, &["q1 (rad)", "Before calibration", "After calibration", "log10 position error (length units)"]);
+        check_pair(
+            &files,
+            "error_heatmaps",
+            HEATMAP_SIZE,
+            &["q1 (rad)", "Before calibration", "After calibration", "log10 position error (length units)"],
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -1086,7 +1091,11 @@ mod tests {
         let files = error_histograms(&dir, &before, &after, "length units").unwrap();
         check_pair(&files, "error_histogram", HISTOGRAM_SIZE, &["before calibration", "after calibration", "log scale"]);
 
-        let methods = vec![("nominal".to_string(), before.clone()), ("krr".to_string(), after.iter().map(|e| e * 100.0).collect()), ("cbd".to_string(), after.clone())];
+        let methods = vec![
+            ("nominal".to_string(), before.clone()),
+            ("krr".to_string(), after.iter().map(|e| e * 100.0).collect()),
+            ("cbd".to_string(), after.clone()),
+        ];
         let files = method_comparison(&dir, &methods, "mm").unwrap();
         check_pair(&files, "method_comparison", (COMPARISON_WIDTH, 150 + 70 * 3), &["nominal", "krr", "cbd", "median"]);
 
@@ -1094,7 +1103,8 @@ mod tests {
         let joints: Vec<f64> = (0..60).map(|i| (i as f64 * 0.7).sin() * 3.0).collect();
         let residuals: Vec<f64> = joints.chunks(3).map(|q| 0.2 * q[1].sin()).collect();
         let curve: Vec<(f64, f64)> = (0..50).map(|i| (-3.0 + 0.12 * i as f64, 0.2 * (-3.0 + 0.12 * i as f64).sin())).collect();
-        let files = residual_vs_joint(&dir, &names, &joints, &residuals, "residual norm (mm)", &[("elbow gravity".into(), 1, curve)]).unwrap();
+        let files =
+            residual_vs_joint(&dir, &names, &joints, &residuals, "residual norm (mm)", &[("elbow gravity".into(), 1, curve)]).unwrap();
         check_pair(&files, "residual_vs_joint", (RESIDUAL_WIDTH, 40 + 420 * 2), &["elbow gravity", "residual norm (mm)"]);
 
         let log: Vec<(usize, f64, f64)> = (0..6).map(|i| (i, 10f64.powi(-(i as i32)), 0.1 * 10f64.powi(-(i as i32)))).collect();
@@ -1110,7 +1120,9 @@ mod tests {
         let dir = tmp("demo");
         let fk = |l1: f64, l2: f64| {
             move |q: &[f64]| -> Result<Vec<f64>, String> {
-                Ok(q.chunks_exact(2).flat_map(|x| [l1 * x[0].cos() + l2 * (x[0] + x[1]).cos(), l1 * x[0].sin() + l2 * (x[0] + x[1]).sin()]).collect())
+                Ok(q.chunks_exact(2)
+                    .flat_map(|x| [l1 * x[0].cos() + l2 * (x[0] + x[1]).cos(), l1 * x[0].sin() + l2 * (x[0] + x[1]).sin()])
+                    .collect())
             }
         };
         let (nominal, real) = (fk(1.0, 0.5), fk(1.1, 0.45));

@@ -43,11 +43,8 @@ impl FitProgress {
 
     /// As [`FitProgress::new`] with the visibility decided by the caller.
     pub fn with_visibility(max_iterations: usize, visible: bool, unit: &str) -> FitProgress {
-        let bar = bar(
-            max_iterations as u64,
-            visible,
-            "{prefix:.bold} [{elapsed_precise}] [{bar:30.cyan/blue}] iteration {pos}/{len}  {msg}",
-        );
+        let bar =
+            bar(max_iterations as u64, visible, "{prefix:.bold} [{elapsed_precise}] [{bar:30.cyan/blue}] iteration {pos}/{len}  {msg}");
         bar.set_prefix("fit");
         bar.set_message("starting");
         if visible {

@@ -39,12 +39,7 @@ impl ErrorStats {
             let hi = pos.ceil() as usize;
             sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
         };
-        ErrorStats {
-            mean: errors.iter().sum::<f64>() / errors.len() as f64,
-            median: q(0.5),
-            p99: q(0.99),
-            max: sorted[sorted.len() - 1],
-        }
+        ErrorStats { mean: errors.iter().sum::<f64>() / errors.len() as f64, median: q(0.5), p99: q(0.99), max: sorted[sorted.len() - 1] }
     }
 }
 

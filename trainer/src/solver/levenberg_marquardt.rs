@@ -110,12 +110,25 @@ pub struct CbdFit {
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum FitError {
-    TooFewMeasurements { got: usize, needed: usize },
-    DimensionMismatch { what: &'static str, expected: usize, found: usize },
+    TooFewMeasurements {
+        got: usize,
+        needed: usize,
+    },
+    DimensionMismatch {
+        what: &'static str,
+        expected: usize,
+        found: usize,
+    },
     /// The flow produced non-finite values even with the smallest step LM tried.
-    Diverged { iteration: usize, damping: f64 },
+    Diverged {
+        iteration: usize,
+        damping: f64,
+    },
     /// The damped normal equations could not be factored.
-    Singular { iteration: usize, damping: f64 },
+    Singular {
+        iteration: usize,
+        damping: f64,
+    },
     Encode(String),
     /// The runtime could not load the blob or does not reproduce the training predictions.
     RuntimeMismatch(String),
@@ -175,11 +188,8 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         return Err(FitError::TooFewMeasurements { got: data.len(), needed: 2 });
     }
     let norm = &opts.normalisation;
-    let target: Vec<f64> = data
-        .positions
-        .chunks_exact(m)
-        .flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale))
-        .collect();
+    let target: Vec<f64> =
+        data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale)).collect();
     let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
     let dim = cp.len() * m;
     let k_reg = regulariser_matrix(&cp);
@@ -206,7 +216,14 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let mut damping = 1e-6;
     let mut log = Vec::new();
     let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / (r.len() / m) as f64).sqrt() * sigma * norm.task_scale;
-    log.push(IterationLog { iteration: 0, energy: current.energy, regulariser: current.regulariser, train_rms: rms(&current.residual), damping, seconds: start.elapsed().as_secs_f64() });
+    log.push(IterationLog {
+        iteration: 0,
+        energy: current.energy,
+        regulariser: current.regulariser,
+        train_rms: rms(&current.residual),
+        damping,
+        seconds: start.elapsed().as_secs_f64(),
+    });
     // A bar on a terminal; plain lines when verbose output goes to a pipe or file.
     let progress = crate::report::progress::FitProgress::new(opts.max_iterations, !opts.verbose, "");
     progress.update(0, current.energy, rms(&current.residual));
@@ -230,9 +247,8 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             matmul(out.as_mut(), Accum::Replace, chol_t.as_ref(), pm.as_ref(), 1.0, Par::Seq);
             out
         };
-        let scaling: Vec<f64> = (0..dim)
-            .map(|c| ((0..dim).map(|r| (jac[(r, c)] / sigma).powi(2)).sum::<f64>() + k_reg[(c, c)]).sqrt().max(1e-300))
-            .collect();
+        let scaling: Vec<f64> =
+            (0..dim).map(|c| ((0..dim).map(|r| (jac[(r, c)] / sigma).powi(2)).sum::<f64>() + k_reg[(c, c)]).sqrt().max(1e-300)).collect();
         t_solve += t0.elapsed().as_secs_f64();
         let mut accepted = None;
         while damping < 1e12 {
@@ -285,10 +301,22 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         p = trial;
         current = e;
         damping = (damping / 10.0).max(1e-30);
-        log.push(IterationLog { iteration, energy: current.energy, regulariser: current.regulariser, train_rms: rms(&current.residual), damping, seconds: start.elapsed().as_secs_f64() });
+        log.push(IterationLog {
+            iteration,
+            energy: current.energy,
+            regulariser: current.regulariser,
+            train_rms: rms(&current.residual),
+            damping,
+            seconds: start.elapsed().as_secs_f64(),
+        });
         progress.update(iteration, current.energy, rms(&current.residual));
         if print_lines {
-            eprintln!("iter {iteration:2}  energy {:.6e}  train rms {:.3e}  damping {damping:.1e}  {:.1} s", current.energy, rms(&current.residual), start.elapsed().as_secs_f64());
+            eprintln!(
+                "iter {iteration:2}  energy {:.6e}  train rms {:.3e}  damping {damping:.1e}  {:.1} s",
+                current.energy,
+                rms(&current.residual),
+                start.elapsed().as_secs_f64()
+            );
         }
         if decrease < opts.relative_tolerance {
             small_steps += 1;
@@ -312,7 +340,8 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
 
     progress.finish(&stop_reason);
     let k1 = current.flow.positions(cp.dims);
-    let train_predictions: Vec<f64> = k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
+    let train_predictions: Vec<f64> =
+        k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
     let (points, momenta) = (f64_le_bytes(&data.joints), f64_le_bytes(&p));
     let model = Model {
         nominal: nominal.clone(),
