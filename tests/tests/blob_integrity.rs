@@ -22,28 +22,7 @@ fn solver_blob() -> Vec<u8> {
     fit_cbd(&rr::nominal(), &data, &opts).expect("fit").blob
 }
 
-/// The reference flow's blob (N = 256, ~8 kB), as in runtime_robustness.rs.
-fn reference_blob() -> Vec<u8> {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/data/rr_flow_reference.json")).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let flat = |key: &str| -> Vec<f64> {
-        v[key].as_array().unwrap().iter().flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap())).collect()
-    };
-    let (x, p) = (f64_le_bytes(&flat("X")), f64_le_bytes(&flat("P0")));
-    let model = Model {
-        nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() },
-        normalisation: Normalisation::IDENTITY,
-        joint_kernel: JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
-        task_kernel: TaskKernel { width: 1.027 },
-        integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
-        momentum_law: MomentumLaw::WithDivergence,
-        sigma: 1e-4,
-        n_points: 256,
-        points: F64Slice::from_le_bytes(&x),
-        momenta: F64Slice::from_le_bytes(&p),
-    };
-    encode_to_vec(&model).unwrap()
-}
+use cbd_tests::reference_blob;
 
 fn storage_for(blob: &[u8]) -> Vec<f64> {
     let m = decode(blob).expect("the intact blob decodes");
