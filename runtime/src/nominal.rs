@@ -84,9 +84,9 @@ fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
     [[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]]
 }
 
-fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
+/// Joint axes z_i, points o_i on them and the tool point p, in the base frame, at joints `x`.
+pub fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS], [f64; 3]) {
     let mut frame = frame_of(&chain.base);
-    // Joint axes (z) and points on them, in the base frame.
     let mut axes = [[0.0; 3]; MAX_JOINTS];
     let mut origins = [[0.0; 3]; MAX_JOINTS];
     for (((joint, x_i), axis), origin) in chain.joints.iter().zip(x).zip(axes.iter_mut()).zip(origins.iter_mut()) {
@@ -112,7 +112,11 @@ fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
         }
     }
     frame = compose(&frame, &frame_of(&chain.tool));
-    let p = [frame[0][3], frame[1][3], frame[2][3]];
+    (axes, origins, [frame[0][3], frame[1][3], frame[2][3]])
+}
+
+fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
+    let (axes, origins, p) = dh_frames(chain, x);
     let mut out = Kinematics::ZERO;
     out.position = p;
     let n = chain.joints.len().min(x.len());

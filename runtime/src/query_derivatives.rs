@@ -15,9 +15,7 @@
 
 use crate::flow::{Dims, JointField, TaskField};
 use crate::kernel::task_kernel;
-use cbd_protocol::{
-    DhChain, DhConvention, JointKernel, JointKernelAxis, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT,
-};
+use cbd_protocol::{DhChain, JointKernel, JointKernelAxis, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// Second derivatives of the nominal model: `h[a][e][d] = ∂²k0_a / ∂x_e ∂x_d`, model units.
 pub type NominalHessian = [[[f64; NJ]; NJ]; MT];
@@ -109,67 +107,10 @@ fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-type Frame = [[f64; 4]; 3];
-
-fn compose(a: &Frame, b: &Frame) -> Frame {
-    let mut out = [[0.0; 4]; 3];
-    for (o_row, a_row) in out.iter_mut().zip(a.iter()) {
-        for (j, o) in o_row.iter_mut().enumerate() {
-            let mut s = if j == 3 { a_row[3] } else { 0.0 };
-            for (a_ik, b_row) in a_row.iter().zip(b.iter()) {
-                s += a_ik * b_row.get(j).copied().unwrap_or(0.0);
-            }
-            *o = s;
-        }
-    }
-    out
-}
-
-/// Joint axes z_i, points on them o_i, and the tool point p, in the base frame.
-fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; NJ], [[f64; 3]; NJ], [f64; 3]) {
-    let t = &chain.base;
-    let r = &t.rotation;
-    let mut frame: Frame =
-        [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]];
-    let mut axes = [[0.0; 3]; NJ];
-    let mut origins = [[0.0; 3]; NJ];
-    let axis_of = |f: &Frame| [f[0][2], f[1][2], f[2][2]];
-    let origin_of = |f: &Frame| [f[0][3], f[1][3], f[2][3]];
-    for (((joint, q), axis), origin) in chain.joints.iter().zip(x).zip(axes.iter_mut()).zip(origins.iter_mut()) {
-        let (theta, d) = match joint.kind {
-            JointKind::Revolute => (q + joint.theta_offset, joint.d),
-            JointKind::Prismatic => (joint.theta_offset, q + joint.d),
-        };
-        let (st, ct) = (libm::sin(theta), libm::cos(theta));
-        let (sa, ca) = (libm::sin(joint.alpha), libm::cos(joint.alpha));
-        let rz: Frame = [[ct, -st, 0.0, 0.0], [st, ct, 0.0, 0.0], [0.0, 0.0, 1.0, d]];
-        let rx: Frame = [[1.0, 0.0, 0.0, joint.a], [0.0, ca, -sa, 0.0], [0.0, sa, ca, 0.0]];
-        match chain.convention {
-            DhConvention::Standard => {
-                *axis = axis_of(&frame);
-                *origin = origin_of(&frame);
-                frame = compose(&compose(&frame, &rz), &rx);
-            }
-            DhConvention::Modified => {
-                frame = compose(&frame, &rx);
-                *axis = axis_of(&frame);
-                *origin = origin_of(&frame);
-                frame = compose(&frame, &rz);
-            }
-        }
-    }
-    let tt = &chain.tool;
-    let tr = &tt.rotation;
-    let tool: Frame =
-        [[tr[0], tr[1], tr[2], tt.translation[0]], [tr[3], tr[4], tr[5], tt.translation[1]], [tr[6], tr[7], tr[8], tt.translation[2]]];
-    frame = compose(&frame, &tool);
-    (axes, origins, origin_of(&frame))
-}
-
 // Column j of Dk0 is z_j × (p − o_j) (revolute) or z_j (prismatic). Its derivative with respect
 // to joint i: the axes and origins of joints after i turn with joint i, and p moves with every joint.
 fn dh_hessian(chain: &DhChain, x: &[f64], h: &mut NominalHessian) {
-    let (axes, origins, p) = dh_frames(chain, x);
+    let (axes, origins, p) = crate::nominal::dh_frames(chain, x);
     let n = chain.joints.len().min(x.len());
     for (j, (joint_j, (z_j, o_j))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {
         for (i, (joint_i, (z_i, o_i))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {

@@ -416,29 +416,12 @@ pub fn calibrate_dh(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use cbd_protocol::{DhConvention, DhJoint, JointKind, Transform};
+    use cbd_protocol::DhConvention;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     pub(crate) fn ur5_like(convention: DhConvention) -> DhChain {
-        let deg = std::f64::consts::PI / 180.0;
-        let j = |a, alpha: f64, d| DhJoint { kind: JointKind::Revolute, a, alpha: alpha * deg, d, theta_offset: 0.0 };
-        let mut tool = Transform::IDENTITY;
-        tool.translation = [0.0, 0.0, 31.0];
-        DhChain {
-            convention,
-            joints: heapless::Vec::from_slice(&[
-                j(0.0, 90.0, 89.159),
-                j(-425.0, 0.0, 0.0),
-                j(-392.25, 0.0, 0.0),
-                j(0.0, 90.0, 109.15),
-                j(0.0, -90.0, 94.65),
-                j(0.0, 0.0, 82.3),
-            ])
-            .unwrap(),
-            base: Transform::IDENTITY,
-            tool,
-        }
+        DhChain { convention, ..crate::simulate::six_joint::ur5_nominal() }
     }
 
     pub(crate) fn sample(model: &NominalModel, count: usize, seed: u64) -> Measurements {
