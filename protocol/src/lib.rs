@@ -14,16 +14,18 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+mod effects;
 mod model;
 mod validate;
 
+pub use effects::*;
 pub use model::*;
 pub use validate::ModelError;
 
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
 /// Bytes before the payload: magic, version, payload length.
 pub const HEADER_LEN: usize = 10;
 /// Bytes after the payload: the checksum.

@@ -3,6 +3,8 @@
 use heapless::Vec as HVec;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
+use crate::effects::Effects;
+
 /// Most joints a model may have.
 pub const MAX_JOINTS: usize = 7;
 /// Largest task-space dimension (3-D position).
@@ -42,16 +44,33 @@ impl Model<'_> {
 /// The controller's own kinematics k0.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum NominalModel {
-    /// Planar serial arm of revolute joints: y = Σ_k l_k (cos, sin)(x_1 + … + x_k).
-    PlanarChain { lengths: HVec<f64, MAX_JOINTS> },
+    /// Planar serial arm of revolute joints: y = Σ_k l_k (cos, sin)(x_1 + … + x_k), plus effects.
+    PlanarChain { lengths: HVec<f64, MAX_JOINTS>, effects: Effects },
     /// Spatial serial chain from a Denavit–Hartenberg table; task space is the tool position.
     DhChain(DhChain),
 }
 
 impl NominalModel {
+    /// A planar chain without effects.
+    pub fn planar(lengths: &[f64]) -> Option<NominalModel> {
+        Some(NominalModel::PlanarChain { lengths: HVec::from_slice(lengths).ok()?, effects: Effects::NONE_PLANAR })
+    }
+    /// The physical effects on top of the rigid chain.
+    pub fn effects(&self) -> &Effects {
+        match self {
+            NominalModel::PlanarChain { effects, .. } => effects,
+            NominalModel::DhChain(c) => &c.effects,
+        }
+    }
+    pub fn effects_mut(&mut self) -> &mut Effects {
+        match self {
+            NominalModel::PlanarChain { effects, .. } => effects,
+            NominalModel::DhChain(c) => &mut c.effects,
+        }
+    }
     pub fn n_joints(&self) -> usize {
         match self {
-            NominalModel::PlanarChain { lengths } => lengths.len(),
+            NominalModel::PlanarChain { lengths, .. } => lengths.len(),
             NominalModel::DhChain(c) => c.joints.len(),
         }
     }
@@ -112,6 +131,8 @@ pub struct DhChain {
     pub joints: HVec<DhJoint, MAX_JOINTS>,
     pub base: Transform,
     pub tool: Transform,
+    /// Physical effects on top of the rigid chain.
+    pub effects: Effects,
 }
 
 /// Task-space normalisation: internal = (user − offset) / scale.

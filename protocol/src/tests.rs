@@ -8,7 +8,7 @@ fn le(values: &[f64]) -> Vec<u8> {
 
 fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a> {
     Model {
-        nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() },
+        nominal: NominalModel::planar(&[1.0, 0.5]).unwrap(),
         normalisation: Normalisation::IDENTITY,
         joint_kernel: JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
         task_kernel: TaskKernel { width: 1.027 },

@@ -60,7 +60,7 @@ impl Model<'_> {
             return Err(ModelError::OutOfRange { field: "nominal.joints" });
         }
         match &self.nominal {
-            NominalModel::PlanarChain { lengths } => finite("nominal.lengths", lengths.iter().copied())?,
+            NominalModel::PlanarChain { lengths, .. } => finite("nominal.lengths", lengths.iter().copied())?,
             NominalModel::DhChain(c) => {
                 for j in &c.joints {
                     finite("nominal.joints", [j.a, j.alpha, j.d, j.theta_offset])?;

@@ -28,7 +28,7 @@ impl Kinematics {
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
 pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
     match model {
-        NominalModel::PlanarChain { lengths } => planar_chain(lengths, x),
+        NominalModel::PlanarChain { lengths, .. } => planar_chain(lengths, x),
         NominalModel::DhChain(chain) => dh_chain(chain, x),
     }
 }
@@ -141,7 +141,7 @@ fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cbd_protocol::DhJoint;
+    use cbd_protocol::{DhJoint, Effects};
     use heapless::Vec as HVec;
 
     fn check_jacobian(model: &NominalModel, x: &[f64]) {
@@ -165,7 +165,7 @@ mod tests {
 
     #[test]
     fn planar_rr_matches_closed_form_and_finite_differences() {
-        let model = NominalModel::PlanarChain { lengths: HVec::from_slice(&[1.0, 0.5]).unwrap() };
+        let model = NominalModel::planar(&[1.0, 0.5]).unwrap();
         let x = [0.7, -1.9];
         let k = forward_kinematics(&model, &x);
         let y = [libm::cos(0.7) + 0.5 * libm::cos(0.7 - 1.9), libm::sin(0.7) + 0.5 * libm::sin(0.7 - 1.9)];
@@ -190,6 +190,7 @@ mod tests {
             .unwrap(),
             base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [0.1, 0.0, 0.2] },
             tool,
+            effects: Effects::NONE,
         })
     }
 

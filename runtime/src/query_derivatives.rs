@@ -80,7 +80,7 @@ pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
     let mut h = [[[0.0; NJ]; NJ]; MT];
     match model {
         // ∂²y/∂x_e∂x_d = Σ_{k ≥ max(d, e)} −l_k (cos θ_k, sin θ_k)
-        NominalModel::PlanarChain { lengths } => {
+        NominalModel::PlanarChain { lengths, .. } => {
             let mut theta = 0.0;
             for (k, (l, xk)) in lengths.iter().zip(x).enumerate() {
                 theta += xk;

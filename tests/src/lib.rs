@@ -12,7 +12,7 @@ pub fn reference_blob() -> Vec<u8> {
     };
     let (x, p) = (f64_le_bytes(&flat("X")), f64_le_bytes(&flat("P0")));
     let model = Model {
-        nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).expect("two links") },
+        nominal: NominalModel::planar(&[1.0, 0.5]).expect("two links"),
         normalisation: Normalisation::IDENTITY,
         joint_kernel: JointKernel {
             gamma: 8.0,

@@ -22,6 +22,7 @@ fn six_joint(convention: DhConvention) -> NominalModel {
         .unwrap(),
         base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
         tool,
+        effects: cbd_protocol::Effects::NONE,
     })
 }
 
@@ -91,7 +92,7 @@ fn check(blob: &[u8], queries: &[Vec<f64>]) -> (f64, f64) {
 fn exact_jacobian_matches_finite_differences() {
     let mut s = 3u64;
     for (name, nominal, momentum) in [
-        ("rr", NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() }, 0.05),
+        ("rr", NominalModel::planar(&[1.0, 0.5]).unwrap(), 0.05),
         ("dh-standard", six_joint(DhConvention::Standard), 0.02),
         ("dh-modified", six_joint(DhConvention::Modified), 0.02),
     ] {

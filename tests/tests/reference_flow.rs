@@ -25,7 +25,7 @@ fn flat(v: &Value) -> Vec<f64> {
 
 fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, method: IntegratorMethod, steps: u16) -> Model<'a> {
     Model {
-        nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() },
+        nominal: NominalModel::planar(&[1.0, 0.5]).unwrap(),
         normalisation: Normalisation::IDENTITY,
         joint_kernel: JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
         task_kernel: TaskKernel { width: 1.0270 },

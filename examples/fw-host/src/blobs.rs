@@ -12,7 +12,7 @@ const RR_REFERENCE: &str = include_str!("../../../tests/data/rr_flow_reference.j
 /// The paper's RR arm settings, exactly as `tests/tests/reference_flow.rs` builds them.
 fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32) -> Model<'a> {
     Model {
-        nominal: NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).expect("2 joints") },
+        nominal: NominalModel::planar(&[1.0, 0.5]).expect("2 joints"),
         normalisation: Normalisation::IDENTITY,
         joint_kernel: JointKernel {
             gamma: 8.0,
@@ -89,6 +89,7 @@ pub fn six_joint_blob() -> Vec<u8> {
         .expect("6 joints"),
         base: Transform::IDENTITY,
         tool,
+        effects: cbd_protocol::Effects::NONE,
     };
     const N: usize = 64;
     let mut rng = Lcg(0x0005_5e1f);

@@ -486,7 +486,7 @@ pub(crate) mod tests {
 
     #[test]
     fn planar_chain_is_rejected() {
-        let planar = NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0]).unwrap() };
+        let planar = NominalModel::planar(&[1.0]).unwrap();
         let e = calibrate_dh(&planar, &Measurements::new(1, 2), &DhCalibrationOptions::default()).unwrap_err();
         assert_eq!(e, DhCalibrationError::NotADhChain);
     }

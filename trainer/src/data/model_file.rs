@@ -310,7 +310,10 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             RawConvention::Modified => DhConvention::Modified,
         };
         let n = joints.len();
-        (NominalModel::DhChain(DhChain { convention, joints, base, tool }), (1..=n).map(|i| format!("q{i}")).collect())
+        (
+            NominalModel::DhChain(DhChain { convention, joints, base, tool, effects: cbd_protocol::Effects::NONE }),
+            (1..=n).map(|i| format!("q{i}")).collect(),
+        )
     } else if let Some(u) = raw.urdf {
         let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
         let robot = urdf_rs::read_file(&urdf_path).map_err(|e| ImportError::Urdf { file: urdf_path.clone(), message: e.to_string() })?;
@@ -324,10 +327,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             return Err(model_err(format!("[planar] needs 1 to {MAX_JOINTS} finite lengths")));
         }
         let n = lengths.len();
-        (
-            NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&lengths).expect("checked") },
-            (1..=n).map(|i| format!("q{i}")).collect(),
-        )
+        (NominalModel::planar(&lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect())
     };
     if let Some(m) = &raw.measurements {
         if m.joints.len() != nominal.n_joints() {

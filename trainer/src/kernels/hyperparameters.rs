@@ -321,7 +321,7 @@ mod tests {
 
     /// Residuals drawn from the GP itself (b = 2, γ = 0.01, σ = 0.02) on a planar 2R arm.
     fn gp_sample(count: usize, seed: u64) -> (NominalModel, Measurements, Measurements) {
-        let nominal = NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).unwrap() };
+        let nominal = NominalModel::planar(&[1.0, 0.5]).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let total = count + 200;
         let joints: Vec<f64> = (0..total * 2).map(|_| rng.gen_range(0.0..std::f64::consts::TAU)).collect();

@@ -170,7 +170,13 @@ fn dh_from_axis_lines(lines: &[AxisLine], tip: &Pose) -> DhChain {
     let base = pose_of(frames[0]);
     let last = pose_of(frames[n - 1]);
     let tool = last.inverse().compose(tip);
-    DhChain { convention: DhConvention::Standard, joints, base: base.to_transform(), tool: tool.to_transform() }
+    DhChain {
+        convention: DhConvention::Standard,
+        joints,
+        base: base.to_transform(),
+        tool: tool.to_transform(),
+        effects: cbd_protocol::Effects::NONE,
+    }
 }
 
 #[cfg(test)]

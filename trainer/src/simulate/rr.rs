@@ -6,7 +6,7 @@ use cbd_protocol::NominalModel;
 
 /// The nominal model of the paper: l1 = 1, l2 = 0.5.
 pub fn nominal() -> NominalModel {
-    NominalModel::PlanarChain { lengths: heapless::Vec::from_slice(&[1.0, 0.5]).expect("two links fit") }
+    NominalModel::planar(&[1.0, 0.5]).expect("two links fit")
 }
 
 /// The simulated real arm. Gravity acts along −y.

@@ -48,6 +48,7 @@ pub fn ur5_nominal() -> DhChain {
         .expect("6 joints"),
         base: Transform::IDENTITY,
         tool,
+        effects: cbd_protocol::Effects::NONE,
     }
 }
 

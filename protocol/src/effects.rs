@@ -1,0 +1,68 @@
+//! Physical effects added to a nominal chain (what `cbd diagnose` finds and `--write-model` keeps).
+//!
+//! The augmented kinematics is k0(q + δ(q)) + b(q): joint-space deflections δ (encoder scale,
+//! transmission harmonics, compliance under gravity) and task-space link bending b. Geometric
+//! errors (joint offsets, DH lengths and angles, base and tool) need no entry here: they are
+//! written into the DH table itself.
+
+use heapless::Vec as HVec;
+use serde::{Deserialize, Serialize};
+
+use crate::model::MAX_JOINTS;
+
+/// Most effects one model may carry.
+pub const MAX_EFFECTS: usize = 48;
+
+/// The effects of a nominal chain and the gravity/mass model the gravity-driven ones use.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Effects {
+    pub gravity: GravityModel,
+    pub list: HVec<Effect, MAX_EFFECTS>,
+}
+
+impl Effects {
+    /// No effect: the chain alone (spatial default gravity).
+    pub const NONE: Effects = Effects { gravity: GravityModel::DEFAULT, list: HVec::new() };
+    /// No effect, planar default gravity (−y).
+    pub const NONE_PLANAR: Effects = Effects { gravity: GravityModel::PLANAR, list: HVec::new() };
+
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+}
+
+/// Gravity direction (unit vector, base frame) and point masses at the distal end of each link.
+/// Empty `link_masses` means the documented default: one unit mass at the end of every link.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GravityModel {
+    /// Unit vector along gravity in the base frame. For a planar chain only the first two
+    /// entries are used.
+    pub direction: [f64; 3],
+    pub link_masses: HVec<f64, MAX_JOINTS>,
+}
+
+impl GravityModel {
+    /// Gravity along −z of the base frame (a floor-mounted spatial arm).
+    pub const DEFAULT: GravityModel = GravityModel { direction: [0.0, 0.0, -1.0], link_masses: HVec::new() };
+    /// Gravity along −y: a planar arm moving in a vertical plane.
+    pub const PLANAR: GravityModel = GravityModel { direction: [0.0, -1.0, 0.0], link_masses: HVec::new() };
+}
+
+impl Default for GravityModel {
+    fn default() -> Self {
+        GravityModel::DEFAULT
+    }
+}
+
+/// One physical effect, with its parameter(s). `joint`/`link` are 0-based indices.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Effect {
+    /// δ_j = scale · q_j (encoder or gear-ratio scale error).
+    EncoderScale { joint: u8, scale: f64 },
+    /// δ_j = cos · cos(h q_j) + sin · sin(h q_j) (transmission error, harmonic h ≥ 1).
+    Transmission { joint: u8, harmonic: u8, cos: f64, sin: f64 },
+    /// δ_j = compliance · τ_j(q): τ_j the gravity torque at joint j from the mass model.
+    GravityCompliance { joint: u8, compliance: f64 },
+    /// Tool point displaced by compliance · (g − (g·u) u), u the unit direction of link `link`.
+    LinkBending { link: u8, compliance: f64 },
+}
