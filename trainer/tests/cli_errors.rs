@@ -138,7 +138,7 @@ fn fit_missing_files() {
 fn fit_unreadable_csv() {
     let dir = scratch("fit-unreadable");
     std::fs::create_dir(dir.join("a-directory.csv")).unwrap();
-    fails_with(&cbd(&dir, &["fit", "--data", "a-directory.csv", "--out", "a.blob"]), &["a-directory.csv:1"]);
+    fails_with(&cbd(&dir, &["fit", "--data", "a-directory.csv", "--out", "a.blob"]), &["a-directory.csv: Is a directory"]);
     let f = write(&dir, "binary.csv", [RR_HEADER.as_bytes(), b"0,0,1.5,0\n0,1,\xff\xfe,0\n"].concat());
     fails_with(&cbd(&dir, &["fit", "--data", &f, "--out", "a.blob"]), &["binary.csv:3", "UTF-8"]);
     let f = write(&dir, "empty.csv", "");
@@ -176,8 +176,9 @@ fn fit_bad_values_name_file_line_and_column() {
     assert!(!dir.join("a.blob").exists());
 }
 
-/// Duplicate configurations are kept (the data module's design) and reported as warnings naming
-/// both lines; contradictory duplicates (same joints, different positions) get the same warning.
+/// Repeated configurations whose positions agree are kept (a repeated measurement) and reported as
+/// warnings naming both lines; contradictory ones (same joints, positions further apart than the
+/// repeat tolerance) are errors naming both lines and the distance.
 #[test]
 fn fit_duplicate_configurations_are_reported_with_both_lines() {
     let dir = scratch("fit-duplicates");
@@ -186,14 +187,18 @@ fn fit_duplicate_configurations_are_reported_with_both_lines() {
     let second_row = text.lines().nth(2).unwrap().to_string();
     let mut contradictory: Vec<String> = second_row.split(',').map(str::to_string).collect();
     contradictory[2] = format!("{}", contradictory[2].parse::<f64>().unwrap() + 0.25);
-    text.push_str(&format!("{second_row}\n{}\n", contradictory.join(",")));
-    let f = write(&dir, "dup.csv", text);
+    text.push_str(&format!("{second_row}\n"));
+    let f = write(&dir, "dup.csv", &text);
     let out = cbd(&dir, &["fit", "--data", &f, "--out", "a.blob", "--max-iterations", "2", "--quiet"]);
     let err = stderr(&out);
     assert!(!err.contains("panicked"), "{err}");
     assert!(out.status.success(), "{err}");
-    assert!(err.contains("warning: dup.csv:18: joint configuration repeats line 3"), "{err}");
-    assert!(err.contains("warning: dup.csv:19: joint configuration repeats line 3"), "{err}");
+    assert!(err.contains("warning: dup.csv:18: joint configuration repeats line 3 (positions 0.000e0 apart)"), "{err}");
+    text.push_str(&format!("{}\n", contradictory.join(",")));
+    let f = write(&dir, "contradictory.csv", text);
+    let out = cbd(&dir, &["fit", "--data", &f, "--out", "b.blob", "--max-iterations", "2", "--quiet"]);
+    fails_with(&out, &["contradictory.csv:19", "contradictory", "repeats line 3", "2.500e-1 m apart"]);
+    assert!(!dir.join("b.blob").exists());
 }
 
 #[test]
@@ -265,6 +270,25 @@ fn model_file_wrong_units() {
     fails_with(&fit_with_model(&dir, &m), &["grad.toml", "line 6", "grad", "`deg` or `rad`"]);
     let m = ur5_model_with(&dir, "csv-unit.toml", "length_unit = \"mm\"\nmin_rows", "length_unit = \"cm\"\nmin_rows");
     fails_with(&fit_with_model(&dir, &m), &["csv-unit.toml", "cm"]);
+    assert!(!dir.join("a.blob").exists());
+}
+
+/// Declared joint limits and repeat tolerance: enforced in the columns' units, and a malformed
+/// declaration names the field.
+#[test]
+fn model_file_joint_limits() {
+    let dir = scratch("model-limits");
+    // The first UR5 training row has q1 = -22.9°: outside [-10, 10].
+    let narrow = "min_rows = 10\njoint_limits = [[-10, 10], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]";
+    let m = ur5_model_with(&dir, "narrow.toml", "min_rows = 10", narrow);
+    fails_with(&fit_with_model(&dir, &m), &["train.csv:2", "column 'q1_deg'", "-22.93", "outside the joint's range [-10, 10] deg"]);
+    let m = ur5_model_with(&dir, "count.toml", "min_rows = 10", "min_rows = 10\njoint_limits = [[-10, 10]]");
+    fails_with(&fit_with_model(&dir, &m), &["count.toml", "joint_limits has 1 pairs; the model has 6 joints"]);
+    let bad = "min_rows = 10\njoint_limits = [[10, -10], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]";
+    let m = ur5_model_with(&dir, "order.toml", "min_rows = 10", bad);
+    fails_with(&fit_with_model(&dir, &m), &["order.toml", "joint_limits[0] = [10, -10]: needs lo < hi"]);
+    let m = ur5_model_with(&dir, "tol.toml", "min_rows = 10", "min_rows = 10\nrepeat_tolerance = -1");
+    fails_with(&fit_with_model(&dir, &m), &["tol.toml", "repeat_tolerance = -1"]);
     assert!(!dir.join("a.blob").exists());
 }
 
@@ -368,10 +392,11 @@ fn eval_corrupted_blobs_name_the_file_and_the_damage() {
     fails_with(&cbd(&dir, &["eval", "--blob", &f, "--data", g4]), &["empty.blob", "truncated"]);
     let f = write(&dir, "long.blob", [&blob[..], b"\n"].concat());
     fails_with(&cbd(&dir, &["eval", "--blob", &f, "--data", g4]), &["long.blob", "trailing bytes"]);
-    let mut v2 = blob.clone();
-    v2[4] = 2;
-    let f = write(&dir, "v2.blob", &v2);
-    fails_with(&cbd(&dir, &["eval", "--blob", &f, "--data", g4]), &["v2.blob", "version 2"]);
+    let mut future = blob.clone();
+    future[4..6].copy_from_slice(&(cbd_protocol::FORMAT_VERSION + 1).to_le_bytes());
+    let f = write(&dir, "future.blob", &future);
+    let found = format!("version {}", cbd_protocol::FORMAT_VERSION + 1);
+    fails_with(&cbd(&dir, &["eval", "--blob", &f, "--data", g4]), &["future.blob", &found]);
     fails_with(&cbd(&dir, &["eval", "--blob", g4, "--data", g4]), &["g4.csv", "bad magic"]);
 }
 
@@ -499,12 +524,10 @@ fn bench_bad_sizes() {
     }
 }
 
-/// Fix needed (trainer/src/data/csv_import.rs, `read_measurements_from`; optionally per-joint
-/// `limits` in trainer/src/data/model_file.rs): joint values far outside any physical range
-/// (here q1 = 1e300 rad, where sin/cos have no meaningful digits) are accepted by `fit` and
-/// `eval` without a word. They should be an error naming file, line and column.
+/// Joint values outside the joint's range (default ±1 turn; `[measurements] joint_limits` in a
+/// model file) are errors naming file, line and column — here q1 = 1e300 rad, where sin/cos have no
+/// meaningful digits.
 #[test]
-#[ignore = "joint values out of range (q1 = 1e300 rad) are accepted silently"]
 fn joint_values_out_of_range_are_errors() {
     let dir = scratch("out-of-range");
     let (g4, blob, _) = rr_fixture();

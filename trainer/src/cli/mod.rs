@@ -64,6 +64,8 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
                 length_unit: LengthUnit::M,
                 model_length_unit: LengthUnit::M,
                 min_rows: 2,
+                joint_limits: crate::data::csv_import::default_joint_limits(&[cbd_protocol::JointKind::Revolute; 2]),
+                repeat_tolerance: None,
             },
         )),
     }

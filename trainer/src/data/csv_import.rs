@@ -5,6 +5,7 @@ use super::model_file::{AngleUnit, ImportError, LengthUnit};
 use super::Measurements;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// Which columns hold what, and in which units.
@@ -24,13 +25,30 @@ pub struct ColumnSpec {
     pub model_length_unit: LengthUnit,
     /// Fewer data rows is an error.
     pub min_rows: usize,
+    /// Allowed range of each joint, model units (radians or the model's length unit); a value
+    /// outside is an error. [`default_joint_limits`] when the model file declares none.
+    pub joint_limits: Vec<[f64; 2]>,
+    /// Largest distance, model length unit, between the positions of two rows with the same joint
+    /// configuration before they count as contradictory (an error). `None`: 1e-3 of the diagonal
+    /// of the positions' bounding box.
+    pub repeat_tolerance: Option<f64>,
 }
 
-/// A row whose joint configuration repeats an earlier row's exactly.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// One full turn each way for revolute joints (beyond that no arm we know of turns, and a larger
+/// value is a unit or column mistake); no limit for prismatic joints.
+pub fn default_joint_limits(kinds: &[JointKind]) -> Vec<[f64; 2]> {
+    let turn = 2.0 * std::f64::consts::PI;
+    kinds.iter().map(|k| if *k == JointKind::Revolute { [-turn, turn] } else { [f64::NEG_INFINITY, f64::INFINITY] }).collect()
+}
+
+/// A row whose joint configuration repeats an earlier row's exactly, with positions that agree
+/// within the repeat tolerance (kept in the data: a repeated measurement).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Duplicate {
     pub line: u64,
     pub first_line: u64,
+    /// Distance between the two measured positions, model length unit.
+    pub distance: f64,
 }
 
 /// The imported data plus what the import noticed.
@@ -48,7 +66,15 @@ impl ImportedMeasurements {
     pub fn warnings(&self, file: &Path) -> Vec<String> {
         self.duplicates
             .iter()
-            .map(|d| format!("{}:{}: joint configuration repeats line {}", file.display(), d.line, d.first_line))
+            .map(|d| {
+                format!(
+                    "{}:{}: joint configuration repeats line {} (positions {:.3e} apart)",
+                    file.display(),
+                    d.line,
+                    d.first_line,
+                    d.distance
+                )
+            })
             .collect()
     }
 }
@@ -69,14 +95,18 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         column: column.map(str::to_string),
         message,
     };
-    if spec.joint_columns.len() != spec.joint_kinds.len() {
+    if spec.joint_columns.len() != spec.joint_kinds.len() || spec.joint_limits.len() != spec.joint_kinds.len() {
         return Err(err(
             None,
             None,
             format!("{} joint columns named for a model with {} joints", spec.joint_columns.len(), spec.joint_kinds.len()),
         ));
     }
-    let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(true).trim(csv::Trim::All).from_reader(reader);
+    let mut bytes = Vec::new();
+    let mut reader = reader;
+    reader.read_to_end(&mut bytes).map_err(|e| ImportError::Io { file: file.clone(), message: e.to_string() })?;
+    let line_of = |pos: &csv::Position| line_at(&bytes, pos.byte());
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(true).trim(csv::Trim::All).from_reader(bytes.as_slice());
     let header = rdr.headers().map_err(|e| err(Some(1), None, format!("cannot read the header: {e}")))?.clone();
     if header.is_empty() || (header.len() == 1 && header[0].is_empty()) {
         return Err(err(Some(1), None, "empty file: no header row".into()));
@@ -102,19 +132,20 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     let (n, m) = (spec.joint_columns.len(), spec.position_columns.len());
     let mut data = Measurements::new(n, m);
     let mut lines = Vec::new();
-    let mut seen: HashMap<Vec<u64>, u64> = HashMap::new();
-    let mut duplicates = Vec::new();
+    // Joint configuration bits → row index of its first occurrence.
+    let mut seen: HashMap<Vec<u64>, usize> = HashMap::new();
+    let mut repeats: Vec<(usize, usize)> = Vec::new();
     let mut record = csv::StringRecord::new();
     let (mut q, mut y) = (vec![0.0; n], vec![0.0; m]);
     loop {
         let more = rdr.read_record(&mut record).map_err(|e| {
-            let line = e.position().map(|p| p.line());
+            let line = e.position().map(line_of);
             err(line, None, format!("malformed CSV: {e}"))
         })?;
         if !more {
             break;
         }
-        let line = record.position().map(|p| p.line()).unwrap_or(0);
+        let line = record.position().map(line_of).unwrap_or(0);
         if record.len() == 1 && record[0].is_empty() {
             continue; // blank line
         }
@@ -133,16 +164,32 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             Ok(v)
         };
         for d in 0..n {
-            q[d] = value(joint_idx[d], &spec.joint_columns[d])? * joint_factor[d];
+            let raw = value(joint_idx[d], &spec.joint_columns[d])?;
+            q[d] = raw * joint_factor[d];
+            let [lo, hi] = spec.joint_limits[d];
+            if !(lo..=hi).contains(&q[d]) {
+                let unit = if spec.joint_kinds[d] == JointKind::Revolute { spec.angle_unit.name() } else { spec.length_unit.name() };
+                let f = joint_factor[d];
+                return Err(err(
+                    Some(line),
+                    Some(&spec.joint_columns[d]),
+                    format!(
+                        "{raw} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
+                        short(lo / f),
+                        short(hi / f)
+                    ),
+                ));
+            }
         }
         for c in 0..m {
             y[c] = value(pos_idx[c], &spec.position_columns[c])? * len;
         }
         let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
-        if let Some(&first_line) = seen.get(&key) {
-            duplicates.push(Duplicate { line, first_line });
-        } else {
-            seen.insert(key, line);
+        match seen.get(&key) {
+            Some(&first) => repeats.push((first, data.len())),
+            None => {
+                seen.insert(key, data.len());
+            }
         }
         data.push(&q, &y);
         lines.push(line);
@@ -150,7 +197,58 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     if data.len() < spec.min_rows.max(1) {
         return Err(err(None, None, format!("{} data rows; at least {} needed", data.len(), spec.min_rows.max(1))));
     }
+    let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * bounding_box_diagonal(&data));
+    let mut duplicates = Vec::new();
+    for (first, row) in repeats {
+        let distance = data.position(first).iter().zip(data.position(row)).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+        let (line, first_line) = (lines[row], lines[first]);
+        if distance > tolerance {
+            return Err(err(
+                Some(line),
+                None,
+                format!(
+                    "contradictory measurements: the joint configuration repeats line {first_line} but the positions are {distance:.3e} {} apart (repeat tolerance {tolerance:.3e}; set `repeat_tolerance` in [measurements] if the robot really is that unrepeatable)",
+                    spec.model_length_unit.name()
+                ),
+            ));
+        }
+        duplicates.push(Duplicate { line, first_line, distance });
+    }
     Ok(ImportedMeasurements { measurements: data, lines, duplicates })
+}
+
+/// 1-based line of the record starting at byte `start`. The csv crate's own line count is one short
+/// after a CRLF line end (a record may start at the LF), so count from the bytes themselves.
+fn line_at(bytes: &[u8], start: u64) -> u64 {
+    let mut pos = usize::try_from(start).unwrap_or(usize::MAX).min(bytes.len());
+    while pos < bytes.len() && (bytes[pos] == b'\r' || bytes[pos] == b'\n') {
+        pos += 1;
+    }
+    1 + bytes[..pos].iter().filter(|&&b| b == b'\n').count() as u64
+}
+
+/// A limit converted back to the file's unit, without the conversion's rounding noise.
+fn short(v: f64) -> String {
+    let text = format!("{v:.9}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    if text == "-0" {
+        "0".into()
+    } else {
+        text.into()
+    }
+}
+
+fn bounding_box_diagonal(data: &Measurements) -> f64 {
+    let m = data.task_dim;
+    let mut lo = vec![f64::INFINITY; m];
+    let mut hi = vec![f64::NEG_INFINITY; m];
+    for i in 0..data.len() {
+        for (c, y) in data.position(i).iter().enumerate() {
+            lo[c] = lo[c].min(*y);
+            hi[c] = hi[c].max(*y);
+        }
+    }
+    lo.iter().zip(&hi).map(|(l, h)| (h - l) * (h - l)).sum::<f64>().sqrt()
 }
 
 #[cfg(test)]
@@ -166,6 +264,8 @@ mod tests {
             length_unit: LengthUnit::Mm,
             model_length_unit: LengthUnit::M,
             min_rows: 2,
+            joint_limits: default_joint_limits(&[JointKind::Revolute, JointKind::Prismatic]),
+            repeat_tolerance: None,
         }
     }
 
@@ -200,6 +300,17 @@ mod tests {
         assert!(msg.contains("no such column"));
         let e = read("q1,s2,x,y\n1,2,3,4\n").unwrap_err().to_string();
         assert!(e.starts_with("meas.csv:1: column 'z'"), "{e}");
+    }
+
+    #[test]
+    fn first_data_row_is_line_2() {
+        let (line, col, _) = csv_err("q1,s2,x,y,z\n1,2,,4,5\n1,2,3,4,5\n");
+        assert_eq!((line, col.as_deref()), (Some(2), Some("x")));
+        // Windows line ends count the same.
+        let (line, _, _) = csv_err("q1,s2,x,y,z\r\n1,2,,4,5\r\n1,2,3,4,5\r\n");
+        assert_eq!(line, Some(2));
+        let (line, _, _) = csv_err("q1,s2,x,y,z\r\n1,2,3,4,5\r\n1,2,,4,5\r\n");
+        assert_eq!(line, Some(3));
     }
 
     #[test]
@@ -245,11 +356,37 @@ mod tests {
 
     #[test]
     fn duplicate_configurations_are_reported() {
-        let r = read("q1,s2,x,y,z\n1,2,3,4,5\n7,8,9,9,9\n1,2,3.1,4,5\n").unwrap();
+        // Positions in mm, model in m: rows 2 and 4 are 0.001 mm apart, the box diagonal ~10 mm.
+        let r = read("q1,s2,x,y,z\n1,2,3,4,5\n7,8,9,9,9\n1,2,3.001,4,5\n").unwrap();
         assert_eq!(r.measurements.len(), 3);
-        assert_eq!(r.duplicates, vec![Duplicate { line: 4, first_line: 2 }]);
+        assert_eq!((r.duplicates.len(), r.duplicates[0].line, r.duplicates[0].first_line), (1, 4, 2));
+        assert!((r.duplicates[0].distance - 1e-6).abs() < 1e-12);
         let w = r.warnings(Path::new("meas.csv"));
-        assert_eq!(w, vec!["meas.csv:4: joint configuration repeats line 2".to_string()]);
+        assert_eq!(w, vec!["meas.csv:4: joint configuration repeats line 2 (positions 1.000e-6 apart)".to_string()]);
+    }
+
+    #[test]
+    fn contradictory_repeats_are_errors_naming_both_lines() {
+        let (line, col, msg) = csv_err("q1,s2,x,y,z\n1,2,3,4,5\n7,8,9,9,9\n1,2,3.5,4,5\n");
+        assert_eq!((line, col), (Some(4), None));
+        assert!(msg.contains("contradictory") && msg.contains("repeats line 2") && msg.contains("5.000e-4 m apart"), "{msg}");
+        // A declared tolerance admits them.
+        let spec = ColumnSpec { repeat_tolerance: Some(1e-3), ..spec() };
+        let r = read_measurements_from("q1,s2,x,y,z\n1,2,3,4,5\n7,8,9,9,9\n1,2,3.5,4,5\n".as_bytes(), Path::new("m.csv"), &spec).unwrap();
+        assert_eq!(r.duplicates.len(), 1);
+    }
+
+    #[test]
+    fn joint_values_outside_the_range_name_line_column_and_range() {
+        let (line, col, msg) = csv_err("q1,s2,x,y,z\n1,2,3,4,5\n400,2,3,4,5\n");
+        assert_eq!((line, col.as_deref()), (Some(3), Some("q1")));
+        assert!(msg.contains("400 deg is outside the joint's range [-360, 360] deg"), "{msg}");
+        assert!(csv_err("q1,s2,x,y,z\n1,2,3,4,5\n1e300,2,3,4,5\n").2.contains("outside"));
+        // Prismatic joints have no default range; a declared one is enforced in the file's unit.
+        assert!(read("q1,s2,x,y,z\n1,2e6,3,4,5\n7,8,9,9,9\n").is_ok());
+        let spec = ColumnSpec { joint_limits: vec![[-1.0, 1.0], [0.0, 0.5]], ..spec() };
+        let e = read_measurements_from("q1,s2,x,y,z\n1,600,3,4,5\n7,8,9,9,9\n".as_bytes(), Path::new("m.csv"), &spec).unwrap_err();
+        assert!(e.to_string().contains("m.csv:2: column 's2': 600 mm is outside the joint's range [0, 500] mm"), "{e}");
     }
 
     #[test]

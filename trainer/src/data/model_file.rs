@@ -28,12 +28,16 @@
 //! angle_unit = "deg"          # unit of revolute joint columns (default: angle_unit above)
 //! length_unit = "mm"          # unit of position and prismatic joint columns (default: length_unit above)
 //! min_rows = 10               # fewer data rows is an error (default 1)
+//! joint_limits = [[-360, 360], [-360, 360]]  # [lo, hi] per joint in the column units; a value outside
+//!                             # is an error (default: ±1 turn for revolute joints, none for prismatic)
+//! repeat_tolerance = 0.5      # rows with equal joints whose positions differ by more are an error
+//!                             # (length_unit above; default 1e-3 of the positions' bounding-box diagonal)
 //! ```
 //!
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
-use super::csv_import::ColumnSpec;
+use super::csv_import::{default_joint_limits, ColumnSpec};
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::Pose;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
@@ -163,6 +167,10 @@ pub struct MeasurementSection {
     pub angle_unit: Option<AngleUnit>,
     pub length_unit: Option<LengthUnit>,
     pub min_rows: Option<usize>,
+    /// `[lo, hi]` per joint, in the columns' units (angle_unit / length_unit of this section).
+    pub joint_limits: Option<Vec<[f64; 2]>>,
+    /// Largest distance (length_unit of this section) between positions of repeated joint configurations.
+    pub repeat_tolerance: Option<f64>,
 }
 
 impl ModelFile {
@@ -174,27 +182,56 @@ impl ModelFile {
             message: "no [measurements] section: name the CSV columns there or on the command line".into(),
         })?;
         let spec = self.column_spec_with(section.joints.clone(), section.positions.clone());
-        Ok(ColumnSpec {
-            angle_unit: section.angle_unit.unwrap_or(self.angle_unit),
-            length_unit: section.length_unit.unwrap_or(self.length_unit),
-            min_rows: section.min_rows.unwrap_or(1),
-            ..spec
-        })
+        let angle_unit = section.angle_unit.unwrap_or(self.angle_unit);
+        let length_unit = section.length_unit.unwrap_or(self.length_unit);
+        let model_err = |message: String| ImportError::Model { file: self.path.clone(), message };
+        let length_factor = length_unit.factor_to(self.length_unit);
+        let joint_limits = match &section.joint_limits {
+            None => spec.joint_limits.clone(),
+            Some(limits) => {
+                if limits.len() != spec.joint_kinds.len() {
+                    return Err(model_err(format!(
+                        "[measurements] joint_limits has {} pairs; the model has {} joints",
+                        limits.len(),
+                        spec.joint_kinds.len()
+                    )));
+                }
+                let mut out = Vec::with_capacity(limits.len());
+                for (d, ([lo, hi], kind)) in limits.iter().zip(&spec.joint_kinds).enumerate() {
+                    if lo.is_nan() || hi.is_nan() || lo >= hi {
+                        return Err(model_err(format!("[measurements] joint_limits[{d}] = [{lo}, {hi}]: needs lo < hi")));
+                    }
+                    let f = if *kind == JointKind::Revolute { angle_unit.radians() } else { length_factor };
+                    out.push([lo * f, hi * f]);
+                }
+                out
+            }
+        };
+        let repeat_tolerance = match section.repeat_tolerance {
+            Some(t) if !(t.is_finite() && t >= 0.0) => {
+                return Err(model_err(format!("[measurements] repeat_tolerance = {t}: needs a finite value ≥ 0")));
+            }
+            t => t.map(|t| t * length_factor),
+        };
+        Ok(ColumnSpec { angle_unit, length_unit, min_rows: section.min_rows.unwrap_or(1), joint_limits, repeat_tolerance, ..spec })
     }
 
     /// Column specification with the given column names (e.g. from the command line), in the
     /// model file's units.
     pub fn column_spec_with(&self, joints: Vec<String>, positions: Vec<String>) -> ColumnSpec {
+        let kinds: Vec<JointKind> = (0..self.nominal.n_joints())
+            .map(|d| if self.nominal.is_revolute(d) { JointKind::Revolute } else { JointKind::Prismatic })
+            .collect();
         ColumnSpec {
             joint_columns: joints,
             position_columns: positions,
-            joint_kinds: (0..self.nominal.n_joints())
-                .map(|d| if self.nominal.is_revolute(d) { JointKind::Revolute } else { JointKind::Prismatic })
-                .collect(),
+            joint_kinds: kinds.clone(),
             angle_unit: self.angle_unit,
             length_unit: self.length_unit,
             model_length_unit: self.length_unit,
             min_rows: 1,
+            joint_limits: default_joint_limits(&kinds),
+            repeat_tolerance: None,
         }
     }
 }
