@@ -5,7 +5,6 @@ use super::model_file::{AngleUnit, ImportError, LengthUnit};
 use super::Measurements;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// Which columns hold what, and in which units.
