@@ -9,8 +9,6 @@
 # configurations of examples/firmware/src/shared.rs; min/max are over those.
 # Builds: "sp" = thumbv7em-none-eabihf defaults (single-precision FPU: f64 in software),
 #         "dp" = -C target-cpu=cortex-m7 (the M7's double-precision FPU).
-# The software-f64 build at N = 1024 needs ~9 min of QEMU: set CBD_FW_COST_FULL=1 to run it (on the M7
-# only: the M4 runs the same ELF, and QEMU counts the same instructions, as the N = 64 and 256 rows show).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 FIRMWARE_LIB_ONLY=1 source "$ROOT/.ci/firmware.sh"
@@ -27,17 +25,35 @@ else
     SIZE=arm-none-eabi-size
 fi
 fw_host_and_blobs
+# The N = 256 row of the scheme the demo trains is the blob `cbd demo` trains (its accuracy is quoted).
+log "training the demo blob (cbd demo)"
+(cd "$ROOT" && cargo run -q --release -p cbd-trainer --bin cbd -- demo --quiet --out "$OUT/blobs/demo.blob" --json "$OUT/demo.json" >/dev/null)
+demo_mean=$(python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); print("%.2e" % d["calibrated"]["mean"], d["integrator"], d["steps"])' "$OUT/demo.json")
+read -r demo_error demo_method demo_steps <<<"$demo_mean"
+# f32 against f64 on the demo's own test configurations (cbd demo draws them with seed 2026).
+fw_host_f32
+(cd "$ROOT" && cargo run -q --release -p cbd-trainer --bin cbd -- simulate --sampling uniform --count 3000 --seed 2026 --out "$OUT/demo-test.csv" >/dev/null)
+acc_f64="$("$HOST" accuracy "$OUT/blobs/demo.blob" "$OUT/demo-test.csv")"
+acc_f32="$("$HOST_F32" accuracy "$OUT/blobs/demo.blob" "$OUT/demo-test.csv")"
+
+scheme_of() {
+    case "$1" in
+        rr | six) echo "Heun × 5" ;;
+        demo) echo "$demo_method × $demo_steps (cbd demo)" ;;
+        *) echo "Euler × 2" ;;
+    esac
+}
 
 rows=()
-for name in rr64 rr rr1024 six; do
+for name in rr64 demo rr1024 rr six; do
     read -r n_points n_joints task_dim storage blob_bytes < <("$HOST" info "$OUT/blobs/$name.blob")
-    for variant in dp sp; do
+    for variant in dp sp f32; do
+        # dp runs on the M7 only; sp (f64 in software) and f32 on the M4: QEMU counts the same
+        # instructions for the same ELF on the M7 (earlier tables showed identical rows).
         runs="m7"
-        [ "$variant" = sp ] && [ "$name" != rr1024 ] && runs="m7 m4"
-        if [ "$variant" = sp ] && [ "$name" = rr1024 ] && [ "${CBD_FW_COST_FULL:-0}" != 1 ]; then
-            log "skipping software-f64 N=1024 (CBD_FW_COST_FULL=1 runs it)"
-            continue
-        fi
+        [ "$variant" != dp ] && runs="m4"
+        bytes=8
+        [ "$variant" = f32 ] && bytes=4
         elf="$(fw_build "$name" "$variant")"
         read -r text _data bss < <($SIZE "$elf" | awk 'NR == 2 {print $1, $2, $3}')
         code=$((text - blob_bytes))
@@ -50,21 +66,28 @@ for name in rr64 rr rr1024 six; do
             ratio=$(awk -v a="$tmax" -v b="$tmin" 'BEGIN {printf "%.3f", a / b}')
             model="RR"
             [ "$n_joints" = 6 ] && model="6-joint"
-            rows+=("| $model | $n_points | $cpu | $variant | $((tmin * 40)) | $((tmax * 40)) | $ratio | $((load * 40)) | $blob_bytes | $((storage * 8)) | $code |")
+            rows+=("| $model | $(scheme_of "$name") | $n_points | $cpu | $variant | $((tmin * 40)) | $((tmax * 40)) | $ratio | $((load * 40)) | $blob_bytes | $((storage * bytes)) | $code |")
         done
     done
 done
 
 table="$(
-    echo "RR arm (2 joints, m = 2) and a 6-joint UR5-like model (m = 3); Heun × 5 steps (10 stages); 128 configurations per row."
+    echo "RR arm (2 joints, m = 2) and a 6-joint UR5-like model (m = 3); 128 configurations per row; \`evaluate\` (position and exact Jacobian)."
+    echo "The RR N = 256 row of scheme \"cbd demo\" is the blob \`cbd demo\` trains (mean error on its 3000 random configurations: $demo_error);"
+    echo "the other rows are grids with pseudo-random momenta (the evaluation has no data-dependent branches; cost depends on N and the scheme only)."
     echo "Instructions = SysTick ticks × 40 under \`qemu-system-arm -icount shift=0\` (±40; QEMU counts instructions, not cycles,"
-    echo "so the same ELF gives the same counts on the M4 and the M7). RAM = \`storage_len\` × 8 bytes (the runtime's only RAM"
-    echo "besides ~1 KiB of stack for a query). Code = ELF text − blob (whole firmware: runtime, decoder, libm, soft-float, printing)."
+    echo "so the same ELF gives the same counts on the M4 and the M7). RAM = \`storage_len\` × 8 bytes (× 4 for f32; the runtime's only RAM"
+    echo "besides the stack of a query call). Code = ELF text − blob (whole firmware: runtime, decoder, libm, soft-float, printing)."
     echo "sp = thumbv7em-none-eabihf defaults (f64 in software); dp = \`-C target-cpu=cortex-m7\` (double-precision FPU, non-fused"
-    echo "VMLA/VMLS only). Produced by \`bash .ci/firmware-cost.sh\`."
+    echo "VMLA/VMLS only); f32 = sp flags with the runtime's \`f32\` feature (evaluation in f32 on the single-precision FPU; the"
+    echo "nominal model and the query's kernel features in f64, rounded once). Produced by \`bash .ci/firmware-cost.sh\`."
     echo
-    echo "| model | N | CPU | build | instr/eval min | instr/eval max | max/min | instr to load | blob bytes | RAM bytes | code bytes |"
-    echo "|---|---|---|---|---|---|---|---|---|---|---|"
+    echo "Accuracy of the demo blob on its 3000 random test configurations (\`cbd-fw-host accuracy\`, position error, length units):"
+    echo "- $acc_f64"
+    echo "- $acc_f32"
+    echo
+    echo "| model | scheme | N | CPU | build | instr/eval min | instr/eval max | max/min | instr to load | blob bytes | RAM bytes | code bytes |"
+    echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
     printf '%s\n' "${rows[@]}"
 )"
 echo "$table"

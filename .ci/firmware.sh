@@ -8,12 +8,13 @@
 # test blobs, builds the firmware (examples/firmware) once per blob, runs it on QEMU's Cortex-M4
 # (mps2-an386) and Cortex-M7 (mps2-an500), and compares every printed f64 with the host runtime's,
 # bit for bit. Also runs a Cortex-M7 build that uses the M7's double-precision FPU
-# (-C target-cpu=cortex-m7). Exits non-zero on any difference.
+# (-C target-cpu=cortex-m7), and an f32 build (the runtime's `f32` feature) against the host
+# runtime built with the same feature. Exits non-zero on any difference.
 #
 # Last, a "panic-never" build (examples/firmware, feature panic-never): its panic handler calls an
 # undefined symbol, so the firmware links only if the optimiser removed every panic path (runtime,
-# protocol decoding, printing). Its result is reported; it fails the check only with
-# CBD_FW_REQUIRE_PANIC_NEVER=1 (cbd-protocol needs examples/firmware/protocol-panic-free.patch first).
+# protocol decoding, printing). A reachable panic fails the check (CBD_FW_REQUIRE_PANIC_NEVER=0
+# reports it without failing); examples/firmware/find-panics.py then lists where the panics are.
 #
 # Sourced with FIRMWARE_LIB_ONLY=1 (by .ci/firmware-cost.sh) it only defines the helpers.
 set -euo pipefail
@@ -48,22 +49,33 @@ fw_host_and_blobs() {
     "$HOST" make-blobs "$OUT/blobs" >&2
 }
 
+# The host tool with the runtime's f32 feature, in its own target directory: a `-p` selection, so
+# cargo's feature unification never hands f32 to the trainer.
+HOST_F32="$ROOT/target/f32-host/debug/cbd-fw-host"
+fw_host_f32() {
+    log "building cbd-fw-host (runtime feature f32)"
+    (cd "$ROOT" && CARGO_TARGET_DIR="$ROOT/target/f32-host" cargo build -q -p cbd-fw-host --features cbd-runtime/f32)
+}
+
 # fw_build BLOB_NAME VARIANT  ->  prints the path of a copy of the ELF.
-# VARIANT: "sp" (target default: single-precision FPU, f64 in software; runs on M4 and M7)
-#          "dp" (-C target-cpu=cortex-m7: the M7's double-precision FPU; M7 only)
+# VARIANT: "sp"  (target default: single-precision FPU, f64 in software; runs on M4 and M7)
+#          "dp"  (-C target-cpu=cortex-m7: the M7's double-precision FPU; M7 only)
+#          "f32" (target default, the runtime's f32 feature: evaluation in f32 on the FPU)
 fw_build() {
-    local name="$1" variant="$2" blob storage flags target_dir
+    local name="$1" variant="$2" blob storage flags target_dir features=""
     blob="$OUT/blobs/$name.blob"
     storage="$("$HOST" info "$blob" | awk '{print $4}')"
     target_dir="$FW_DIR/target/$variant"
     case "$variant" in
         sp) flags="-C link-arg=-Tlink.x" ;;
         dp) flags="-C link-arg=-Tlink.x -C target-cpu=cortex-m7" ;;
+        f32) flags="-C link-arg=-Tlink.x"; features="--features f32" ;;
         *) log "unknown variant $variant"; return 1 ;;
     esac
-    log "building firmware: blob $name, variant $variant, storage $storage f64"
+    log "building firmware: blob $name, variant $variant, storage $storage values"
+    # shellcheck disable=SC2086
     (cd "$FW_DIR" && CARGO_TARGET_DIR="$target_dir" RUSTFLAGS="$flags" CBD_BLOB="$blob" CBD_STORAGE_LEN="$storage" \
-        cargo build -q --release)
+        cargo build -q --release $features)
     mkdir -p "$OUT/elf"
     cp "$target_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/$name-$variant.elf"
     echo "$OUT/elf/$name-$variant.elf"
@@ -92,25 +104,29 @@ fw_install
 log "runtime builds for thumbv7em-none-eabihf (no_std, no heap)"
 (cd "$ROOT/runtime" && cargo build -q --target thumbv7em-none-eabihf --release)
 fw_host_and_blobs
+fw_host_f32
 
 failures=0
 summary=()
-for name in rr six; do
+for name in rr rr256 six; do
     "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
+    "$HOST_F32" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name-f32.txt"
     values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
     errors=$(grep -c ' error$' "$OUT/host-$name.txt" || true)
     if [ "$values" -eq 0 ]; then
         summary+=("FAIL  $name blob: the host printed no values")
         failures=$((failures + 1))
     fi
-    for variant in sp dp; do
+    for variant in sp dp f32; do
         elf="$(fw_build "$name" "$variant")"
         cpus="m4 m7"
         [ "$variant" = dp ] && cpus="m7"
+        host="$OUT/host-$name.txt"
+        [ "$variant" = f32 ] && host="$OUT/host-$name-f32.txt"
         for cpu in $cpus; do
             run="$OUT/fw-$name-$variant-$cpu.txt"
-            if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$OUT/host-$name.txt" >"$OUT/diff-$name-$variant-$cpu.txt"; then
-                summary+=("PASS  $name blob  ${variant} build on $cpu: $values f64 values bit-identical to the host ($errors evaluation errors)")
+            if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >"$OUT/diff-$name-$variant-$cpu.txt"; then
+                summary+=("PASS  $name blob  ${variant} build on $cpu: $values values bit-identical to the host's ($errors evaluation errors)")
             else
                 summary+=("FAIL  $name blob  ${variant} build on $cpu: see $OUT/diff-$name-$variant-$cpu.txt")
                 failures=$((failures + 1))
@@ -139,21 +155,21 @@ elif grep -q 'undefined symbol: cbd_firmware_panic_is_reachable' "$OUT/panic-nev
         python3 "$FW_DIR/find-panics.py" "$OUT/elf/rr-sp.elf" >"$OUT/panic-sites.txt" 2>&1 || true
         log "panic sites: $OUT/panic-sites.txt"
     fi
-    if [ "${CBD_FW_REQUIRE_PANIC_NEVER:-0}" = 1 ]; then
+    if [ "${CBD_FW_REQUIRE_PANIC_NEVER:-1}" = 1 ]; then
         summary+=("FAIL  panic-never build: a panic is reachable (see $OUT/panic-never.log)")
         failures=$((failures + 1))
     else
-        summary+=("INFO  panic-never build: a panic is still reachable (see $OUT/panic-sites.txt; cbd-protocol: examples/firmware/protocol-panic-free.patch)")
+        summary+=("INFO  panic-never build: a panic is reachable (see $OUT/panic-sites.txt)")
     fi
 else
     summary+=("FAIL  panic-never build failed to compile (see $OUT/panic-never.log)")
     failures=$((failures + 1))
 fi
 
-echo "== firmware check (host vs QEMU, f64 bits) =="
+echo "== firmware check (host vs QEMU, bits; f32 builds against the host's f32 build) =="
 printf '%s\n' "${summary[@]}"
 if [ "$failures" -ne 0 ]; then
     echo "firmware check: $failures failed"
     exit 1
 fi
-echo "firmware check: passed (M4 and M7, software and hardware f64, RR and 6-joint blobs)"
+echo "firmware check: passed (M4 and M7, software and hardware f64 and f32, RR (Heun × 5 and Euler × 2) and 6-joint blobs)"

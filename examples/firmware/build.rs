@@ -1,6 +1,6 @@
 //! Puts memory.x on the linker path, and picks the embedded blob and the storage size:
 //! `CBD_BLOB` (path of the blob, default `blob.bin` beside this file) and `CBD_STORAGE_LEN`
-//! (f64 values of static storage, default 131072; `cbd-fw-host info BLOB` prints what a blob needs).
+//! (values of static storage, default 131072; `cbd-fw-host info BLOB` prints what a blob needs).
 
 use std::env;
 use std::fs;
@@ -21,7 +21,7 @@ fn main() {
     // include_bytes! needs a literal or env!: hand the path over as a compile-time variable.
     println!("cargo:rustc-env=CBD_BLOB_PATH={}", blob.display());
     let storage: usize = match env::var("CBD_STORAGE_LEN") {
-        Ok(s) => s.trim().parse().expect("CBD_STORAGE_LEN must be a number of f64 values"),
+        Ok(s) => s.trim().parse().expect("CBD_STORAGE_LEN must be a number of storage values"),
         Err(_) => 131_072,
     };
     fs::write(out.join("storage_len.rs"), format!("const STORAGE_LEN: usize = {storage};\n")).expect("write storage_len.rs");

@@ -158,13 +158,16 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
         return Err(DecodeError::TrailingBytes { expected: total, got: blob.len() });
     }
     let payload_end = HEADER_LEN + payload_len;
-    let t = &blob[payload_end..];
-    let stored = u32::from_le_bytes([t[0], t[1], t[2], t[3]]);
-    let computed = CRC32.checksum(&blob[..payload_end]);
+    // Slicing without indexing: decoding has no panic path (the firmware's panic-never build checks it).
+    let (framed, trailer) = blob.split_at_checked(payload_end).ok_or(DecodeError::Truncated { needed: total, got: blob.len() })?;
+    let [t0, t1, t2, t3] = *trailer else { return Err(DecodeError::Truncated { needed: total, got: blob.len() }) };
+    let stored = u32::from_le_bytes([t0, t1, t2, t3]);
+    let computed = CRC32.checksum(framed);
     if stored != computed {
         return Err(DecodeError::ChecksumMismatch { stored, computed });
     }
-    let (model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(&blob[HEADER_LEN..payload_end]).map_err(|_| DecodeError::Payload)?;
+    let payload = framed.get(HEADER_LEN..).ok_or(DecodeError::Payload)?;
+    let (model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| DecodeError::Payload)?;
     if !rest.is_empty() {
         return Err(DecodeError::Payload);
     }

@@ -233,13 +233,17 @@ impl<'a> F64Slice<'a> {
     pub fn get(&self, i: usize) -> Option<f64> {
         let b = self.0.get(i * 8..i * 8 + 8)?;
         let mut a = [0u8; 8];
-        a.copy_from_slice(b);
+        for (d, s) in a.iter_mut().zip(b) {
+            *d = *s;
+        }
         Some(f64::from_le_bytes(a))
     }
     pub fn iter(&self) -> impl Iterator<Item = f64> + 'a {
         self.0.chunks_exact(8).map(|c| {
             let mut a = [0u8; 8];
-            a.copy_from_slice(c);
+            for (d, s) in a.iter_mut().zip(c) {
+                *d = *s;
+            }
             f64::from_le_bytes(a)
         })
     }

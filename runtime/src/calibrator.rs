@@ -1,31 +1,34 @@
 //! Loading a blob into caller-provided storage and evaluating the calibrated model (eq. 20).
 
-use crate::flow::{control_point_rates, write_samples, Dims, FlowParams};
-use crate::integrate::{integrate, scratch_len};
+use crate::flow::{control_point_rates, control_point_rates_with_features, write_samples, Dims, FlowParams};
+use crate::integrate::{integrate_checked, scratch_len};
+use crate::kernel::{features_len, joint_features, FEATURES_PER_JOINT};
 use crate::nominal::{forward_kinematics, Kinematics};
+use crate::real::Real;
 use crate::Error;
 use cbd_protocol::{decode, Integrator, Model, MAX_JOINTS, MAX_TASK_DIM};
 use nalgebra::{Dyn, MatrixView, SMatrix, U1};
 
-/// `f64` values of storage a model with these sizes needs: the configurations (`N × n`), the
-/// control points' trajectory (`stages × N × (2m + n)`), and working space for loading and queries.
+/// [`Real`] values of storage a model with these sizes needs: the configurations' kernel features
+/// (`N × n × 2`, see [`crate::kernel::joint_features`]), the control points' trajectory
+/// (`stages × N × (2m + n)`), and working space for loading and queries.
 pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, integrator: Integrator) -> usize {
     let dims = Dims { n: n_joints, m: task_dim };
     let trajectory = integrator.stage_count() * n_points * dims.sample_len();
     let load = (1 + scratch_len(1)) * n_points * dims.state_len();
-    let query = n_points * crate::query_derivatives::kernel_row_len(n_joints);
-    n_points * n_joints + trajectory + if load > query { load } else { query }
+    let query = n_points * crate::query_derivatives::kernel_row_len(n_joints) + crate::query_derivatives::query_work_len(dims);
+    features_len(n_points, n_joints) + trajectory + if load > query { load } else { query }
 }
 
 /// Sets the initial control-point state: k_i = k0(x_i), J_i = Dk0(x_i), P_i = P0_i (internal units).
-pub fn initial_state(model: &Model<'_>, state: &mut [f64]) -> Result<(), Error> {
+pub fn initial_state(model: &Model<'_>, state: &mut [Real]) -> Result<(), Error> {
     let dims = Dims { n: model.n_joints(), m: model.task_dim() };
     let (m, n) = (dims.m, dims.n);
     let mut x = [0.0; MAX_JOINTS];
     if dims.state_len() == 0 {
         return Err(Error::Internal);
     }
-    for (i, s) in state.chunks_exact_mut(dims.state_len()).enumerate() {
+    for (i, s) in state.chunks_exact_mut(dims.state_len().max(1)).enumerate() {
         for (d, xd) in x.iter_mut().enumerate().take(n) {
             *xd = model.points.get(i * n + d).ok_or(Error::Internal)?;
         }
@@ -34,23 +37,23 @@ pub fn initial_state(model: &Model<'_>, state: &mut [f64]) -> Result<(), Error> 
         let (s_jac, s_p) = rest.split_at_mut_checked(m * n).ok_or(Error::Internal)?;
         copy_kinematics(&k0, s_k, s_jac, n);
         for (a, p) in s_p.iter_mut().enumerate() {
-            *p = model.momenta.get(i * m + a).ok_or(Error::Internal)?;
+            *p = model.momenta.get(i * m + a).ok_or(Error::Internal)? as Real;
         }
     }
     Ok(())
 }
 
 /// Copies k0 into a state's `k` (m values) and `J` (m × n, row-major) parts.
-fn copy_kinematics(k0: &Kinematics, k: &mut [f64], jac: &mut [f64], n: usize) {
+fn copy_kinematics(k0: &Kinematics, k: &mut [Real], jac: &mut [Real], n: usize) {
     if n == 0 {
         return;
     }
     for (dst, src) in k.iter_mut().zip(k0.position.iter()) {
-        *dst = *src;
+        *dst = *src as Real;
     }
-    for (dst, src) in jac.chunks_exact_mut(n).zip(k0.jacobian.iter()) {
+    for (dst, src) in jac.chunks_exact_mut(n.max(1)).zip(k0.jacobian.iter()) {
         for (d, s) in dst.iter_mut().zip(src.iter()) {
-            *d = *s;
+            *d = *s as Real;
         }
     }
 }
@@ -63,13 +66,46 @@ pub fn integrate_control_points(
     params: &FlowParams<'_>,
     integrator: Integrator,
     points: &[f64],
-    state: &mut [f64],
-    scratch: &mut [f64],
-    trajectory: &mut [f64],
-    mut on_stage: impl FnMut(usize, &[f64]),
+    state: &mut [Real],
+    scratch: &mut [Real],
+    trajectory: &mut [Real],
+    on_stage: impl FnMut(usize, &[Real]),
 ) -> Result<(), Error> {
-    let dims = params.dims;
-    let n_points = points.len().checked_div(dims.n).ok_or(Error::Internal)?;
+    let n_points = points.len().checked_div(params.dims.n).ok_or(Error::Internal)?;
+    integrate_points(params.dims, integrator, n_points, state, scratch, trajectory, on_stage, |y, samples, out| {
+        control_point_rates(params, points, y, samples, 0..n_points, out)
+    })
+}
+
+/// [`integrate_control_points`] (bit-identical) from the configurations' kernel-feature table
+/// ([`crate::kernel::write_features`]) instead of the configurations: no transcendental per pair but one exp.
+#[allow(clippy::too_many_arguments)]
+pub fn integrate_control_points_with_features(
+    params: &FlowParams<'_>,
+    integrator: Integrator,
+    features: &[Real],
+    state: &mut [Real],
+    scratch: &mut [Real],
+    trajectory: &mut [Real],
+    on_stage: impl FnMut(usize, &[Real]),
+) -> Result<(), Error> {
+    let n_points = features.len().checked_div(features_len(1, params.dims.n)).ok_or(Error::Internal)?;
+    integrate_points(params.dims, integrator, n_points, state, scratch, trajectory, on_stage, |y, samples, out| {
+        control_point_rates_with_features(params, features, y, samples, 0..n_points, out)
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn integrate_points(
+    dims: Dims,
+    integrator: Integrator,
+    n_points: usize,
+    state: &mut [Real],
+    scratch: &mut [Real],
+    trajectory: &mut [Real],
+    mut on_stage: impl FnMut(usize, &[Real]),
+    rates: impl Fn(&[Real], &[Real], &mut [Real]),
+) -> Result<(), Error> {
     let block = n_points * dims.sample_len();
     // `integrate` needs this much scratch; checked here so that a short buffer is an error, not a panic.
     // (3 × len computed with a checked multiplication, so the optimiser can drop the slice checks.)
@@ -77,11 +113,11 @@ pub fn integrate_control_points(
         Some(needed) if needed == scratch_len(state.len()) && scratch.len() >= needed => {}
         _ => return Err(Error::Internal),
     }
-    integrate(integrator.method, integrator.steps, state, scratch, |stage, y, out| {
+    integrate_checked(integrator.method, integrator.steps, state, scratch, Error::Internal, |stage, y, out| {
         let samples = trajectory.get_mut(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
         write_samples(dims, y, samples);
         on_stage(stage, y);
-        control_point_rates(params, points, y, samples, 0..n_points, out);
+        rates(y, samples, out);
         if out.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
@@ -137,21 +173,22 @@ impl Evaluation {
 pub struct Calibrator<'a> {
     pub(crate) model: Model<'a>,
     pub(crate) dims: Dims,
-    pub(crate) points: &'a [f64],
-    pub(crate) trajectory: &'a mut [f64],
-    pub(crate) work: &'a mut [f64],
+    /// The configurations' kernel features ([`crate::kernel::write_features`]), N × n × 2.
+    pub(crate) features: &'a [Real],
+    pub(crate) trajectory: &'a mut [Real],
+    pub(crate) work: &'a mut [Real],
 }
 
 impl<'a> Calibrator<'a> {
     /// Decodes and validates `blob`, then integrates the control points' trajectories into `storage`,
     /// which must hold at least [`storage_len`] values for the model.
-    pub fn load(blob: &'a [u8], storage: &'a mut [f64]) -> Result<Self, Error> {
+    pub fn load(blob: &'a [u8], storage: &'a mut [Real]) -> Result<Self, Error> {
         let model = decode(blob).map_err(Error::Blob)?;
         Self::from_model(model, storage)
     }
 
     /// As [`Calibrator::load`], for a model already decoded.
-    pub fn from_model(model: Model<'a>, storage: &'a mut [f64]) -> Result<Self, Error> {
+    pub fn from_model(model: Model<'a>, storage: &'a mut [Real]) -> Result<Self, Error> {
         model.validate().map_err(|e| Error::Blob(cbd_protocol::DecodeError::Invalid(e)))?;
         let dims = Dims { n: model.n_joints(), m: model.task_dim() };
         let n_points = model.n_points as usize;
@@ -160,21 +197,47 @@ impl<'a> Calibrator<'a> {
             return Err(Error::StorageTooSmall { needed, got: storage.len() });
         }
         let traj_len = model.integrator.stage_count() * n_points * dims.sample_len();
-        let (points, rest) =
-            storage.get_mut(..needed).ok_or(Error::Internal)?.split_at_mut_checked(n_points * dims.n).ok_or(Error::Internal)?;
+        let (features, rest) = storage
+            .get_mut(..needed)
+            .ok_or(Error::Internal)?
+            .split_at_mut_checked(features_len(n_points, dims.n))
+            .ok_or(Error::Internal)?;
         let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
-        // The blob stores configurations as unaligned bytes; the flow slices them as f64.
-        for (p, v) in points.iter_mut().zip(model.points.iter()) {
-            *p = v;
+        let features: &'a [Real] = Self::integrate_at_load(&model, dims, features, trajectory, work)?;
+        Ok(Calibrator { model, dims, features, trajectory, work })
+    }
+
+    /// Writes the kernel features of the configurations and the control points' trajectory;
+    /// `work` is scratch.
+    fn integrate_at_load<'f>(
+        model: &Model<'_>,
+        dims: Dims,
+        features: &'f mut [Real],
+        trajectory: &mut [Real],
+        work: &mut [Real],
+    ) -> Result<&'f [Real], Error> {
+        let n_points = model.n_points as usize;
+        // K_V's features of every configuration, from the blob's f64 values (unaligned bytes).
+        let n = dims.n;
+        let mut points = model.points.iter();
+        let (mut x, mut f) = ([0.0; MAX_JOINTS], [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS]);
+        for out in features.chunks_exact_mut((n * FEATURES_PER_JOINT).max(1)) {
+            for xd in x.iter_mut().take(n) {
+                *xd = points.next().ok_or(Error::Internal)?;
+            }
+            joint_features(&model.joint_kernel, x.get(..n).ok_or(Error::Internal)?, &mut f);
+            for (dst, src) in out.iter_mut().zip(f.iter().flatten()) {
+                *dst = *src;
+            }
         }
         let state_len = n_points * dims.state_len();
         let (state, rest) = work.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
-        initial_state(&model, state)?;
+        initial_state(model, state)?;
         let params = FlowParams { dims, joint_kernel: &model.joint_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
         let scratch = rest.get_mut(..scratch_len(state_len)).ok_or(Error::Internal)?;
-        integrate_control_points(&params, model.integrator, points, state, scratch, trajectory, |_, _| {})?;
-        let points: &'a [f64] = points;
-        Ok(Calibrator { model, dims, points, trajectory, work })
+        let features: &'f [Real] = features;
+        integrate_control_points_with_features(&params, model.integrator, features, state, scratch, trajectory, |_, _| {})?;
+        Ok(features)
     }
 
     /// The model this calibrator evaluates.

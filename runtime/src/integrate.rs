@@ -1,6 +1,7 @@
 //! Fixed-step explicit integrators on t ∈ [0, 1]. Training optimises exactly this discrete flow,
 //! so this file is the single source of truth for the time discretisation.
 
+use crate::real::Real;
 use cbd_protocol::IntegratorMethod;
 
 /// Scratch needed by [`integrate`] for a state of `len` values.
@@ -12,19 +13,50 @@ pub const fn scratch_len(len: usize) -> usize {
 ///
 /// `rhs(stage, y_stage, out)` is called once for every stage, in order, `stage` counting
 /// from 0 to `method.stages() * steps - 1`; callers use the index to pick stored trajectories.
-/// `scratch` must hold at least [`scratch_len`]`(y.len())` values.
+/// `scratch` must hold at least [`scratch_len`]`(y.len())` values: this panics otherwise
+/// (the runtime itself calls [`integrate_checked`], which cannot panic).
 pub fn integrate<E>(
     method: IntegratorMethod,
     steps: u16,
-    y: &mut [f64],
-    scratch: &mut [f64],
-    mut rhs: impl FnMut(usize, &[f64], &mut [f64]) -> Result<(), E>,
+    y: &mut [Real],
+    scratch: &mut [Real],
+    rhs: impl FnMut(usize, &[Real], &mut [Real]) -> Result<(), E>,
 ) -> Result<(), E> {
     let len = y.len();
     let (acc, rest) = scratch.split_at_mut(len);
     let (slope, rest) = rest.split_at_mut(len);
     let (stage_state, _) = rest.split_at_mut(len);
-    let h = 1.0 / steps as f64;
+    steps_of(method, steps, y, acc, slope, stage_state, rhs)
+}
+
+/// [`integrate`], returning `Err(short_scratch)` instead of panicking when `scratch` is shorter
+/// than [`scratch_len`]`(y.len())`.
+pub fn integrate_checked<E>(
+    method: IntegratorMethod,
+    steps: u16,
+    y: &mut [Real],
+    scratch: &mut [Real],
+    short_scratch: E,
+    rhs: impl FnMut(usize, &[Real], &mut [Real]) -> Result<(), E>,
+) -> Result<(), E> {
+    let len = y.len();
+    let Some((acc, rest)) = scratch.split_at_mut_checked(len) else { return Err(short_scratch) };
+    let Some((slope, rest)) = rest.split_at_mut_checked(len) else { return Err(short_scratch) };
+    let Some((stage_state, _)) = rest.split_at_mut_checked(len) else { return Err(short_scratch) };
+    steps_of(method, steps, y, acc, slope, stage_state, rhs)
+}
+
+/// The steps themselves; `acc`, `slope` and `stage_state` hold as many values as `y`.
+fn steps_of<E>(
+    method: IntegratorMethod,
+    steps: u16,
+    y: &mut [Real],
+    acc: &mut [Real],
+    slope: &mut [Real],
+    stage_state: &mut [Real],
+    mut rhs: impl FnMut(usize, &[Real], &mut [Real]) -> Result<(), E>,
+) -> Result<(), E> {
+    let h = 1.0 / steps as Real;
     let mut stage = 0;
     for _ in 0..steps {
         match method {

@@ -1,41 +1,153 @@
 //! The two reproducing kernels: K_V on joint space, K_W on task space (DESIGN.md §2).
 
+use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, JointKernelAxis, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
 
-/// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) and its gradient with respect to x.
-/// f_d = b (cos Δ − 1) on periodic axes, −Δ²/(2ℓ²) on Gaussian axes.
+/// Values per joint of a configuration's kernel features ([`joint_features`]).
+pub const FEATURES_PER_JOINT: usize = 2;
+
+/// The per-joint quantities K_V needs from one configuration: (cos x_d, sin x_d) on periodic
+/// axes, (x_d, 0) on Gaussian axes. Computed once per configuration (for the control points at
+/// load time), so that a kernel value costs one `exp` and no other transcendental.
 #[inline]
-pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [f64; MAX_JOINTS]) -> f64 {
-    let mut exponent = 0.0;
-    for (g, (axis, (a, b))) in grad.iter_mut().zip(kernel.axes.iter().zip(x.iter().zip(xp.iter()))) {
-        let delta = a - b;
-        let (f, df) = match *axis {
-            JointKernelAxis::Periodic { b } => (b * (libm::cos(delta) - 1.0), -b * libm::sin(delta)),
-            JointKernelAxis::Gaussian { width } => {
-                let s = 1.0 / (width * width);
-                (-0.5 * delta * delta * s, -delta * s)
+pub fn joint_features(kernel: &JointKernel, x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
+    for (o, (axis, xd)) in out.iter_mut().zip(kernel.axes.iter().zip(x.iter())) {
+        *o = match axis {
+            JointKernelAxis::Periodic { .. } => {
+                // In f64, rounded once to the evaluation scalar.
+                let (s, c) = libm::sincos(*xd);
+                [c as Real, s as Real]
             }
+            JointKernelAxis::Gaussian { .. } => [*xd as Real, 0.0],
         };
-        exponent += f;
-        *g = df;
     }
-    let value = kernel.gamma * libm::exp(exponent);
+}
+
+/// Values of the kernel-feature table of `n_points` configurations ([`write_features`]).
+pub const fn features_len(n_points: usize, n_joints: usize) -> usize {
+    n_points * n_joints * FEATURES_PER_JOINT
+}
+
+/// The [`joint_features`] of every configuration in `points` (N × n), N × n × 2 values.
+pub fn write_features(kernel: &JointKernel, n: usize, points: &[f64], features: &mut [Real]) {
+    let mut f = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
+    for (x, out) in points.chunks_exact(n.max(1)).zip(features.chunks_exact_mut((n * FEATURES_PER_JOINT).max(1))) {
+        joint_features(kernel, x, &mut f);
+        for (dst, src) in out.iter_mut().zip(f.iter().flatten()) {
+            *dst = *src;
+        }
+    }
+}
+
+/// Reads configuration `j`'s features from a [`write_features`] table.
+#[inline]
+pub(crate) fn read_features(features: &[Real], n: usize, j: usize) -> [[Real; FEATURES_PER_JOINT]; MAX_JOINTS] {
+    let mut f = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
+    let len = n * FEATURES_PER_JOINT;
+    if let Some(src) = features.get(j * len..(j + 1) * len) {
+        for (dst, s) in f.iter_mut().zip(src.chunks_exact(FEATURES_PER_JOINT)) {
+            if let &[c, s] = s {
+                *dst = [c, s];
+            }
+        }
+    }
+    f
+}
+
+/// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) from both configurations' [`joint_features`], with the
+/// per-axis first and second derivatives f'_d, f''_d (with respect to x) in `first`, `second`.
+/// Periodic: f = b (cos Δ − 1), cos Δ = cos x cos x' + sin x sin x', sin Δ = sin x cos x' − cos x sin x'.
+/// Gaussian: f = −Δ²/(2ℓ²).
+#[inline]
+pub fn joint_kernel_parts(
+    kernel: &JointKernel,
+    fx: &[[Real; FEATURES_PER_JOINT]],
+    fxp: &[[Real; FEATURES_PER_JOINT]],
+    first: &mut [Real; MAX_JOINTS],
+    second: &mut [Real; MAX_JOINTS],
+) -> Real {
+    joint_kernel_parts_n(kernel, MAX_JOINTS, fx, fxp, first, second)
+}
+
+/// [`joint_kernel_parts`] (bit-identical) over at most `n` axes: with `n` a constant the loop unrolls.
+#[inline(always)]
+pub fn joint_kernel_parts_n(
+    kernel: &JointKernel,
+    n: usize,
+    fx: &[[Real; FEATURES_PER_JOINT]],
+    fxp: &[[Real; FEATURES_PER_JOINT]],
+    first: &mut [Real; MAX_JOINTS],
+    second: &mut [Real; MAX_JOINTS],
+) -> Real {
+    let mut exponent = 0.0;
+    let axes = first.iter_mut().zip(second.iter_mut()).zip(kernel.axes.iter().zip(fx.iter().zip(fxp.iter())));
+    for ((f1, f2), (axis, (a, b))) in axes.take(n) {
+        let (f, df, ddf) = axis_terms(axis, a, b);
+        exponent += f;
+        *f1 = df;
+        *f2 = ddf;
+    }
+    kernel.gamma as Real * exp(exponent)
+}
+
+/// f_d, f'_d and f''_d of one axis from the two configurations' features (the one place of the formula).
+#[inline(always)]
+fn axis_terms(axis: &JointKernelAxis, a: &[Real; FEATURES_PER_JOINT], b: &[Real; FEATURES_PER_JOINT]) -> (Real, Real, Real) {
+    match *axis {
+        JointKernelAxis::Periodic { b: beta } => {
+            let beta = beta as Real;
+            let cos_delta = a[0] * b[0] + a[1] * b[1];
+            let sin_delta = a[1] * b[0] - a[0] * b[1];
+            (beta * (cos_delta - 1.0), -beta * sin_delta, -beta * cos_delta)
+        }
+        JointKernelAxis::Gaussian { width } => {
+            let width = width as Real;
+            let s = 1.0 / (width * width);
+            let delta = a[0] - b[0];
+            (-0.5 * delta * delta * s, -delta * s, -s)
+        }
+    }
+}
+
+/// K_V(x, x') and its gradient with respect to x (`grad_d = K f'_d`) from [`joint_features`].
+#[inline]
+pub fn joint_kernel_from_features(
+    kernel: &JointKernel,
+    fx: &[[Real; FEATURES_PER_JOINT]],
+    fxp: &[[Real; FEATURES_PER_JOINT]],
+    grad: &mut [Real; MAX_JOINTS],
+) -> Real {
+    let mut second = [0.0; MAX_JOINTS];
+    let value = joint_kernel_parts(kernel, fx, fxp, grad, &mut second);
     for g in grad.iter_mut().take(kernel.axes.len()) {
         *g *= value;
     }
     value
 }
 
+/// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) and its gradient with respect to x.
+/// f_d = b (cos Δ − 1) on periodic axes, −Δ²/(2ℓ²) on Gaussian axes. The same arithmetic as
+/// [`joint_kernel_from_features`] (which the flows use), so every caller gets identical values.
+#[inline]
+pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [Real; MAX_JOINTS]) -> Real {
+    let mut fx = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
+    let mut fxp = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
+    joint_features(kernel, x, &mut fx);
+    joint_features(kernel, xp, &mut fxp);
+    joint_kernel_from_features(kernel, &fx, &fxp, grad)
+}
+
 /// K_W(y, y') = exp(−|y − y'|²/(2a²)) with y − y' = `diff`; also returns the gradient
 /// with respect to y, −K e / a².
 #[inline]
-pub fn task_kernel(kernel: &TaskKernel, diff: &[f64; MAX_TASK_DIM], m: usize, grad: &mut [f64; MAX_TASK_DIM]) -> f64 {
-    let inv_a2 = 1.0 / (kernel.width * kernel.width);
+pub fn task_kernel(kernel: &TaskKernel, diff: &[Real; MAX_TASK_DIM], m: usize, grad: &mut [Real; MAX_TASK_DIM]) -> Real {
+    let width = kernel.width as Real;
+    let inv_a2 = 1.0 / (width * width);
     let mut r2 = 0.0;
     for e in diff.iter().take(m) {
         r2 += e * e;
     }
-    let value = libm::exp(-0.5 * r2 * inv_a2);
+    let value = exp(-0.5 * r2 * inv_a2);
     for (g, e) in grad.iter_mut().zip(diff.iter()).take(m) {
         *g = -value * *e * inv_a2;
     }
@@ -104,5 +216,23 @@ mod tests {
             let fd = (task_kernel(&k, &ea, 3, &mut s) - task_kernel(&k, &eb, 3, &mut s)) / (2.0 * h);
             assert!((fd - g[c]).abs() < 1e-9);
         }
+    }
+
+    #[test]
+    fn features_give_the_direct_formula() {
+        // Independent check: γ exp(Σ b (cos(x − x') − 1) − Σ Δ²/(2ℓ²)) with cos of the difference.
+        let k = mixed_kernel();
+        let (x, xp) = ([0.3, -0.2, 2.9], [1.1, 0.4, -2.5]);
+        let mut g = [0.0; MAX_JOINTS];
+        let v = joint_kernel(&k, &x, &xp, &mut g);
+        let direct =
+            3.0 * libm::exp(1.3 * (libm::cos(0.3 - 1.1) - 1.0) - 0.5 * 0.6 * 0.6 / (0.7 * 0.7) + 0.4 * (libm::cos(2.9 + 2.5) - 1.0));
+        assert!((v - direct).abs() < 1e-15 * direct, "{v} vs {direct}");
+        let (mut fx, mut fxp) = ([[0.0; FEATURES_PER_JOINT]; MAX_JOINTS], [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS]);
+        joint_features(&k, &x, &mut fx);
+        joint_features(&k, &xp, &mut fxp);
+        let mut g2 = [0.0; MAX_JOINTS];
+        assert_eq!(joint_kernel_from_features(&k, &fx, &fxp, &mut g2).to_bits(), v.to_bits());
+        assert_eq!(g2.map(f64::to_bits), g.map(f64::to_bits));
     }
 }

@@ -2,7 +2,7 @@
 //! controller: `#![no_std]`, no heap, fixed-step integration of eq. (20), position and Jacobian.
 //!
 //! ```ignore
-//! let mut storage = [0.0f64; 200_000]; // ≥ storage_len(N, n, m, integrator)
+//! let mut storage = [0.0; 200_000]; // Real values (f64, or f32 with the `f32` feature), ≥ storage_len(N, n, m, integrator)
 //! let mut cal = Calibrator::load(BLOB, &mut storage)?;
 //! let e = cal.evaluate(&[0.3, -1.2])?;
 //! let (y, dy) = (e.position(), e.jacobian());
@@ -16,8 +16,11 @@ pub mod integrate;
 pub mod kernel;
 pub mod nominal;
 pub mod query_derivatives;
+pub mod real;
 
-pub use calibrator::{initial_state, integrate_control_points, storage_len, Calibrator, Evaluation};
+pub use calibrator::{
+    initial_state, integrate_control_points, integrate_control_points_with_features, storage_len, Calibrator, Evaluation,
+};
 pub use cbd_protocol as protocol;
 
 /// Why loading or evaluation failed. The runtime returns these; it never panics.
@@ -43,7 +46,7 @@ impl core::fmt::Display for Error {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Error::Blob(e) => write!(f, "{e}"),
-            Error::StorageTooSmall { needed, got } => write!(f, "storage too small: model needs {needed} f64 values, got {got}"),
+            Error::StorageTooSmall { needed, got } => write!(f, "storage too small: model needs {needed} values, got {got}"),
             Error::QueryDimension { expected, found } => write!(f, "query has {found} joints, model has {expected}"),
             Error::NonFiniteQuery { index } => write!(f, "query joint {index} is not finite"),
             Error::Diverged => write!(f, "the control points' flow diverged (non-finite state)"),

@@ -13,66 +13,110 @@
 //! and Dk1(ξ)[:, d] = δk_d(1) exactly for the discrete flow (the tangent of a fixed-step explicit
 //! scheme is the same scheme applied to the tangent system).
 
-use crate::flow::{Dims, JointField, TaskField};
-use crate::kernel::task_kernel;
-use cbd_protocol::{DhChain, JointKernel, JointKernelAxis, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use crate::flow::{
+    position_rates_shaped, task_field_shaped, task_field_with_hessian, Dims, Fixed, JointField, Shape, TaskField, TaskHessian,
+};
+use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
+use crate::real::Real;
+use cbd_protocol::{DhChain, JointKernel, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// Second derivatives of the nominal model: `h[a][e][d] = ∂²k0_a / ∂x_e ∂x_d`, model units.
 pub type NominalHessian = [[[f64; NJ]; NJ]; MT];
 
-/// ∂²K_V(x, x')/∂x_b ∂x_d = K (f'_b f'_d + δ_bd f''_b), given K = `value`.
-pub fn joint_kernel_hessian(kernel: &JointKernel, value: f64, x: &[f64], xp: &[f64], hess: &mut [[f64; NJ]; NJ]) {
-    let mut first = [0.0; NJ];
-    let mut second = [0.0; NJ];
-    for (((axis, (a, b)), f1), f2) in kernel.axes.iter().zip(x.iter().zip(xp.iter())).zip(first.iter_mut()).zip(second.iter_mut()) {
-        let delta = a - b;
-        match *axis {
-            JointKernelAxis::Periodic { b } => {
-                *f1 = -b * libm::sin(delta);
-                *f2 = -b * libm::cos(delta);
-            }
-            JointKernelAxis::Gaussian { width } => {
-                let s = 1.0 / (width * width);
-                *f1 = -delta * s;
-                *f2 = -s;
-            }
-        }
-    }
-    let n = kernel.axes.len();
-    for (b, ((row, f1b), f2b)) in hess.iter_mut().zip(first.iter()).zip(second.iter()).enumerate().take(n) {
-        for (d, (h, f1d)) in row.iter_mut().zip(first.iter()).enumerate().take(n) {
-            *h = value * (f1b * f1d + if b == d { *f2b } else { 0.0 });
-        }
-    }
+/// `∂_d Dv(ξ)[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V(ξ, x_j)`, indexed `[d][f][e]`.
+pub type JointHessian = [[[Real; NJ]; NJ]; NJ];
+
+/// Values per point of the query's kernel cache: K_V, its gradient (n) and Hessian (n × n).
+pub const fn kernel_row_len(n: usize) -> usize {
+    1 + n + n * n
 }
 
-/// Σ_j P_j[a] ∂²K_W(k, k_j)/∂k_c ∂k_b over one stage's samples: `t[a][c][b]`.
-pub fn task_field_hessian(dims: Dims, kernel: &TaskKernel, k: &[f64], samples: &[f64]) -> [[[f64; MT]; MT]; MT] {
-    let m = dims.m;
-    let mut t = [[[0.0; MT]; MT]; MT];
-    let inv_a2 = 1.0 / (kernel.width * kernel.width);
-    let mut diff = [0.0; MT];
-    let mut grad = [0.0; MT];
-    let sample_len = dims.sample_len();
-    if sample_len == 0 {
-        return t;
+/// Writes the query's kernel rows against every control point (K_V(ξ, x_j), ∇ = K f', and with
+/// `hessian` ∂_e ∂_d K_V = K (f'_e f'_d + δ_ed f''_e)) and returns the largest K_V.
+/// `fq` are the query's features, `features` the control points' (N × n × 2).
+pub fn write_kernel_rows<S: Shape>(
+    shape: S,
+    kernel: &JointKernel,
+    fq: &[[Real; FEATURES_PER_JOINT]; NJ],
+    features: &[Real],
+    rows: &mut [Real],
+    hessian: bool,
+) -> Real {
+    let n = shape.n();
+    let mut support: Real = 0.0;
+    let row_len = kernel_row_len(n);
+    if n == 0 {
+        return support;
     }
-    for s in samples.chunks_exact(sample_len) {
-        for ((d, ki), sj) in diff.iter_mut().zip(k.iter()).zip(s.iter()).take(m) {
-            *d = ki - sj;
+    // Walks the feature pairs by splitting (a zip of two `chunks_exact` keeps a division-by-zero
+    // panic path the optimiser cannot remove).
+    let (mut pairs, _) = features.as_chunks::<FEATURES_PER_JOINT>();
+    for r in rows.chunks_exact_mut(row_len.max(1)) {
+        let Some((fxj, rest)) = pairs.split_at_checked(n) else { break };
+        pairs = rest;
+        let (mut first, mut second) = ([0.0; NJ], [0.0; NJ]);
+        let k = joint_kernel_parts_n(kernel, n, fq, fxj, &mut first, &mut second);
+        let Some((r_k, rest)) = r.split_first_mut() else { return support };
+        let Some((r_grad, r_hess)) = rest.split_at_mut_checked(n) else { return support };
+        *r_k = k;
+        for (dst, f1) in r_grad.iter_mut().zip(first.iter()) {
+            *dst = f1 * k;
         }
-        let kw = task_kernel(kernel, &diff, m, &mut grad);
-        let p = s.get(m..2 * m).unwrap_or(&[]);
-        for (t_a, p_a) in t.iter_mut().zip(p.iter()) {
-            for (c, (t_ac, e_c)) in t_a.iter_mut().zip(diff.iter()).enumerate().take(m) {
-                for (b, (t_acb, e_b)) in t_ac.iter_mut().zip(diff.iter()).enumerate().take(m) {
-                    let h = kw * (e_c * e_b * inv_a2 * inv_a2 - if b == c { inv_a2 } else { 0.0 });
-                    *t_acb += p_a * h;
+        if hessian {
+            for ((dst_row, f1e), (e, f2e)) in r_hess.chunks_exact_mut(n.max(1)).zip(first.iter()).zip(second.iter().enumerate()) {
+                let kf1e = k * f1e;
+                for (dst, f1d) in dst_row.iter_mut().zip(first.iter()) {
+                    *dst = kf1e * f1d;
+                }
+                if let Some(diagonal) = dst_row.get_mut(e) {
+                    *diagonal += k * f2e;
+                }
+            }
+        }
+        support = support.max(k);
+    }
+    support
+}
+
+/// v(ξ) = Σ_j K_V(ξ, x_j) u_j and Dv = Σ_j u_j ∇K_Vᵀ over one stage's samples from the kernel rows
+/// (the arithmetic of [`crate::flow::joint_field`]), and (HESSIAN) ∂_d Dv[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V.
+#[inline(always)]
+fn joint_sums<S: Shape, const HESSIAN: bool>(shape: S, samples: &[Real], rows: &[Real]) -> (JointField, JointHessian) {
+    let (m, n) = (shape.m(), shape.n());
+    let mut f = JointField { v: [0.0; NJ], dv: [[0.0; NJ]; NJ] };
+    let mut ddv = [[[0.0; NJ]; NJ]; NJ];
+    let (sample_len, row_len) = (2 * m + n, kernel_row_len(n));
+    if n == 0 {
+        return (f, ddv);
+    }
+    // Pairs by hand: a `zip` of two `chunks_exact` keeps a division-by-zero panic path (its length).
+    let mut sample_iter = samples.chunks_exact(sample_len.max(1));
+    for row in rows.chunks_exact(row_len.max(1)) {
+        let Some(s) = sample_iter.next() else { break };
+        let mut u = [0.0; NJ];
+        for (dst, src) in u.iter_mut().zip(s.iter().skip(2 * m)).take(n) {
+            *dst = *src;
+        }
+        let Some((k, rest)) = row.split_first() else { break };
+        let Some((grad, hess)) = rest.split_at_checked(n) else { break };
+        for ((v_a, dv_a), u_a) in f.v.iter_mut().zip(f.dv.iter_mut()).zip(u.iter()).take(n) {
+            *v_a += k * u_a;
+            for (dv_ab, g_b) in dv_a.iter_mut().zip(grad.iter()).take(n) {
+                *dv_ab += u_a * g_b;
+            }
+        }
+        if HESSIAN {
+            // The Hessian is symmetric: row d of the cache is ∂_d ∂_e K_V for every e.
+            for (ddv_d, h_d) in ddv.iter_mut().zip(hess.chunks_exact(n.max(1))).take(n) {
+                for (ddv_df, u_f) in ddv_d.iter_mut().zip(u.iter()).take(n) {
+                    for (o, h) in ddv_df.iter_mut().zip(h_d.iter()).take(n) {
+                        *o += u_f * h;
+                    }
                 }
             }
         }
     }
-    t
+    (f, ddv)
 }
 
 /// Second derivatives of the nominal forward kinematics at `x`.
@@ -133,93 +177,69 @@ fn dh_hessian(chain: &DhChain, x: &[f64], h: &mut NominalHessian) {
     }
 }
 
-/// Per-stage quantities the tangent needs besides the primal fields.
-pub struct SecondOrder {
-    /// Σ_j P_j[a] ∂²K_W/∂k_c∂k_b, `[a][c][b]`.
-    pub task: [[[f64; MT]; MT]; MT],
-    /// ∂_d Dv(ξ)[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V(ξ, x_j), `[d][f][e]`.
-    pub joint: [[[f64; NJ]; NJ]; NJ],
-}
-
-/// ∂_d Dv at the query from the samples and the cached kernel rows ([`kernel_row_len`] per point;
-/// the Hessian ∂_e ∂_d K_V sits after the value and gradient, at `1 + n + e·n + d`).
-pub fn joint_field_hessian_from_rows(dims: Dims, samples: &[f64], kernel_rows: &[f64]) -> [[[f64; NJ]; NJ]; NJ] {
-    let (m, n) = (dims.m, dims.n);
-    let mut out = [[[0.0; NJ]; NJ]; NJ];
-    let (sample_len, row_len) = (dims.sample_len(), kernel_row_len(n));
-    if sample_len == 0 || n == 0 {
-        return out;
-    }
-    for (s, row) in samples.chunks_exact(sample_len).zip(kernel_rows.chunks_exact(row_len)) {
-        let u = s.get(2 * m..2 * m + n).unwrap_or(&[]);
-        let hrow = row.get(1 + n..).unwrap_or(&[]);
-        // hrow[e * n + d] = ∂_e ∂_d K_V
-        for (d, out_d) in out.iter_mut().enumerate().take(n) {
-            for (out_df, u_f) in out_d.iter_mut().zip(u.iter()) {
-                for (e, o) in out_df.iter_mut().enumerate().take(n) {
-                    *o += u_f * hrow.get(e * n + d).copied().unwrap_or(0.0);
-                }
-            }
-        }
-    }
-    out
-}
-
-/// The rates of one direction's tangent (δk, δJ) given the stage's fields.
+/// The rates of one direction's tangent (δk, δJ) given the stage's fields:
+/// δk' = Dw δk − δJ v − J ∂_d v,  δJ' = (D²w δk) J + Dw δJ − δJ Dv − J ∂_d Dv.
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub fn tangent_rates(
-    dims: Dims,
+fn tangent_rates<S: Shape>(
+    shape: S,
     direction: usize,
-    jac: &[f64],
+    jac: &[[Real; NJ]; MT],
     tf: &TaskField,
+    t: &TaskHessian,
     jf: &JointField,
-    second: &SecondOrder,
-    dk: &[f64],
-    djac: &[f64],
-    out_dk: &mut [f64],
-    out_djac: &mut [f64],
+    ddv_d: &[[Real; NJ]; NJ],
+    dk: &[Real; MT],
+    djac: &[[Real; NJ]; MT],
+    out_dk: &mut [Real],
+    out_djac: &mut [Real],
 ) {
-    let (m, n) = (dims.m, dims.n);
-    fn row(mat: &[f64], a: usize, n: usize) -> &[f64] {
-        mat.get(a * n..(a + 1) * n).unwrap_or(&[])
+    let (m, n) = (shape.m(), shape.n());
+    if n == 0 {
+        return;
     }
-    let ddv = second.joint.get(direction);
-    // (D²w δk)[a][c] = Σ_b t[a][c][b] δk[b]
+    // (D²w δk)[a][c] = Σ_b T[a][c][b] δk[b]
     let mut d2w = [[0.0; MT]; MT];
-    for (d2w_a, t_a) in d2w.iter_mut().zip(second.task.iter()).take(m) {
+    for (d2w_a, t_a) in d2w.iter_mut().zip(t.iter()).take(m) {
         for (v, t_ac) in d2w_a.iter_mut().zip(t_a.iter()).take(m) {
-            *v = t_ac.iter().zip(dk.iter()).map(|(t, d)| t * d).sum();
-        }
-    }
-    for (a, (out_a, (dw_a, d2w_a))) in out_dk.iter_mut().zip(tf.dw.iter().zip(d2w.iter())).enumerate().take(m) {
-        // δk' = Dw δk − δJ v − J Dv[:, d]
-        let mut r: f64 = dw_a.iter().zip(dk.iter()).map(|(w, d)| w * d).sum();
-        for ((dj, j), (v, dv_row)) in row(djac, a, n).iter().zip(row(jac, a, n)).zip(jf.v.iter().zip(jf.dv.iter())) {
-            r -= dj * v + j * dv_row.get(direction).copied().unwrap_or(0.0);
-        }
-        *out_a = r;
-        // δJ'[a][e] = Σ_c (D²w δk)[a][c] J[c][e] + Σ_c Dw[a][c] δJ[c][e] − Σ_f δJ[a][f] Dv[f][e] − Σ_f J[a][f] ∂_d Dv[f][e]
-        let out_row = out_djac.get_mut(a * n..(a + 1) * n).unwrap_or(&mut []);
-        for (e, o) in out_row.iter_mut().enumerate() {
             let mut r = 0.0;
-            for (c, (d2, w)) in d2w_a.iter().zip(dw_a.iter()).enumerate().take(m) {
-                let jce = row(jac, c, n).get(e).copied().unwrap_or(0.0);
-                let djce = row(djac, c, n).get(e).copied().unwrap_or(0.0);
-                r += d2 * jce + w * djce;
+            for (t_acb, dk_b) in t_ac.iter().zip(dk.iter()).take(m) {
+                r += t_acb * dk_b;
             }
-            for (f, (djf, jf_)) in row(djac, a, n).iter().zip(row(jac, a, n)).enumerate() {
-                let dv_fe = jf.dv.get(f).and_then(|r| r.get(e)).copied().unwrap_or(0.0);
-                let ddv_fe = ddv.and_then(|m| m.get(f)).and_then(|r| r.get(e)).copied().unwrap_or(0.0);
-                r -= djf * dv_fe + jf_ * ddv_fe;
-            }
-            *o = r;
+            *v = r;
         }
     }
-}
-
-/// Values per point of the query's kernel cache: K_V, its gradient (n) and Hessian (n × n).
-pub const fn kernel_row_len(n: usize) -> usize {
-    1 + n + n * n
+    // ∂_d v = Dv[:, d]
+    let mut dv_d = [0.0; NJ];
+    for (dst, dv_f) in dv_d.iter_mut().zip(jf.dv.iter()).take(n) {
+        *dst = dv_f.get(direction).copied().unwrap_or(0.0);
+    }
+    let rows =
+        out_dk.iter_mut().zip(out_djac.chunks_exact_mut(n.max(1))).zip(tf.dw.iter().zip(d2w.iter())).zip(jac.iter().zip(djac.iter()));
+    for (((o_k, o_jac), (dw_a, d2w_a)), (jac_a, djac_a)) in rows.take(m) {
+        let mut r = 0.0;
+        for (w, d) in dw_a.iter().zip(dk.iter()).take(m) {
+            r += w * d;
+        }
+        for ((dj, j), (v, dvd)) in djac_a.iter().zip(jac_a.iter()).zip(jf.v.iter().zip(dv_d.iter())).take(n) {
+            r -= dj * v + j * dvd;
+        }
+        *o_k = r;
+        let mut acc = [0.0; NJ];
+        for ((d2, w), (jac_c, djac_c)) in d2w_a.iter().zip(dw_a.iter()).zip(jac.iter().zip(djac.iter())).take(m) {
+            for (o, (jce, djce)) in acc.iter_mut().zip(jac_c.iter().zip(djac_c.iter())).take(n) {
+                *o += d2 * jce + w * djce;
+            }
+        }
+        for ((djf, jf_), (dv_f, ddv_f)) in djac_a.iter().zip(jac_a.iter()).zip(jf.dv.iter().zip(ddv_d.iter())).take(n) {
+            for (o, (dv_fe, ddv_fe)) in acc.iter_mut().zip(dv_f.iter().zip(ddv_f.iter())).take(n) {
+                *o -= djf * dv_fe + jf_ * ddv_fe;
+            }
+        }
+        for (dst, src) in o_jac.iter_mut().zip(acc.iter()) {
+            *dst = *src;
+        }
+    }
 }
 
 /// Length of the query state with its tangents: (k, J) and one (δk, δJ) per joint.
@@ -227,66 +247,89 @@ pub const fn query_tangent_len(dims: Dims) -> usize {
     dims.query_len() * (1 + dims.n)
 }
 
-/// The combined query state's right-hand side at one stage: the primal rates (eq. 20, the same
-/// arithmetic as the position-only evaluation) and every direction's tangent rates.
-pub fn query_rates_with_tangents(
-    dims: Dims,
-    task_kernel: &TaskKernel,
-    samples: &[f64],
-    kernel_rows: &[f64],
-    state: &[f64],
-    out: &mut [f64],
-) -> Option<()> {
-    let (m, n, q) = (dims.m, dims.n, dims.query_len());
-    let row_len = kernel_row_len(n);
-    let (primal, tangents) = state.split_at_checked(q)?;
-    let (out_primal, out_tangents) = out.split_at_mut_checked(q)?;
-    let (s_k, s_jac) = primal.split_at_checked(m)?;
-    let tf = crate::flow::task_field(dims, task_kernel, s_k, samples);
-    let jf = crate::flow::joint_field(dims, samples, |j, g| {
-        match kernel_rows.get(j * row_len..j * row_len + 1 + n).and_then(|r| r.split_first()) {
-            Some((k, r_grad)) => {
-                for (dst, src) in g.iter_mut().zip(r_grad) {
-                    *dst = *src;
-                }
-                *k
-            }
-            None => {
-                *g = [0.0; NJ];
-                0.0
+/// Copies (k, J) of a query state (`m + m·n` values) into fixed arrays.
+#[inline(always)]
+fn unpack<S: Shape>(shape: S, state: &[Real]) -> ([Real; MT], [[Real; NJ]; MT]) {
+    let (m, n) = (shape.m(), shape.n());
+    let (mut k, mut jac) = ([0.0; MT], [[0.0; NJ]; MT]);
+    for (dst, src) in k.iter_mut().zip(state.iter()).take(m) {
+        *dst = *src;
+    }
+    if n > 0 {
+        for (dst_row, src_row) in jac.iter_mut().zip(state.get(m..).unwrap_or(&[]).chunks_exact(n.max(1))).take(m) {
+            for (dst, src) in dst_row.iter_mut().zip(src_row.iter()) {
+                *dst = *src;
             }
         }
-    });
+    }
+    (k, jac)
+}
+
+/// The query state's right-hand side at one stage: the primal rates (eq. 20, the arithmetic of the
+/// control points' flow) and, if `state` holds them, every direction's tangent rates.
+#[inline(always)]
+fn query_rates<S: Shape>(
+    shape: S,
+    task_kernel: &TaskKernel,
+    samples: &[Real],
+    kernel_rows: &[Real],
+    state: &[Real],
+    out: &mut [Real],
+) -> Option<()> {
+    let (m, n) = (shape.m(), shape.n());
+    let q = m + m * n;
+    let (primal, tangents) = state.split_at_checked(q)?;
+    let (out_primal, out_tangents) = out.split_at_mut_checked(q)?;
+    let (k, jac) = unpack(shape, primal);
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
-    crate::flow::position_rates(dims, s_jac, &tf, &jf, dk, djac);
+    let s_jac = primal.get(m..)?;
     if tangents.is_empty() {
+        let tf = task_field_shaped(shape, task_kernel, &k, samples);
+        let (jf, _) = joint_sums::<_, false>(shape, samples, kernel_rows);
+        position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
         return Some(());
     }
-    let joint = joint_field_hessian_from_rows(dims, samples, kernel_rows);
-    let second = SecondOrder { task: task_field_hessian(dims, task_kernel, s_k, samples), joint };
-    for (d, (t, o)) in tangents.chunks_exact(q).zip(out_tangents.chunks_exact_mut(q)).enumerate().take(n) {
-        let (t_k, t_jac) = t.split_at_checked(m)?;
+    let (tf, t) = task_field_with_hessian(shape, task_kernel, &k, samples);
+    let (jf, ddv) = joint_sums::<_, true>(shape, samples, kernel_rows);
+    position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
+    for (d, ((tan, o), ddv_d)) in
+        tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).zip(ddv.iter()).enumerate().take(n)
+    {
+        let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
-        tangent_rates(dims, d, s_jac, &tf, &jf, &second, t_k, t_jac, o_k, o_jac);
+        tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
     }
     Some(())
 }
 
-/// Largest query state with tangents: (m + m·n)(1 + n).
-const MAX_QUERY_TANGENT: usize = (MT + MT * NJ) * (1 + NJ);
+/// Values of working space a query needs besides the kernel rows: its state with tangents and the
+/// integrator's scratch.
+pub const fn query_work_len(dims: Dims) -> usize {
+    query_tangent_len(dims) + crate::integrate::scratch_len(query_tangent_len(dims))
+}
 
 impl crate::Calibrator<'_> {
     /// eq. (20): the calibrated position k1(ξ) and the paper's transported J(1); with
     /// `exact_jacobian`, also the exact Jacobian Dk1(ξ) of the discrete flow (otherwise the
     /// Jacobian reported is J(1)). The position's arithmetic is the same either way.
     pub(crate) fn evaluate_query(&mut self, q: &[f64], exact_jacobian: bool) -> Result<crate::Evaluation, crate::Error> {
+        // The common shapes get loops unrolled at compile time; the arithmetic is the same.
+        match (self.dims.m, self.dims.n) {
+            (2, 2) => self.evaluate_shaped(Fixed::<2, 2>, q, exact_jacobian),
+            (3, 6) => self.evaluate_shaped(Fixed::<3, 6>, q, exact_jacobian),
+            _ => self.evaluate_shaped(self.dims, q, exact_jacobian),
+        }
+    }
+
+    #[inline(always)]
+    fn evaluate_shaped<S: Shape>(&mut self, shape: S, q: &[f64], exact_jacobian: bool) -> Result<crate::Evaluation, crate::Error> {
         use crate::Error;
-        let dims = self.dims;
+        let dims = shape.dims();
         let (m, n) = (dims.m, dims.n);
         if q.len() != n {
             return Err(Error::QueryDimension { expected: n, found: q.len() });
         }
-        if n == 0 {
+        if n == 0 || dims != self.dims {
             return Err(Error::Internal);
         }
         if let Some(index) = q.iter().position(|v| !v.is_finite()) {
@@ -294,97 +337,88 @@ impl crate::Calibrator<'_> {
         }
         let n_points = self.model.n_points as usize;
         // K_V(ξ, x_j), its gradient and Hessian do not change along the flow: once per query.
-        let row_len = kernel_row_len(n);
-        let rows = self.work.get_mut(..n_points * row_len).ok_or(Error::Internal)?;
-        let mut grad = [0.0; NJ];
-        let mut hess = [[0.0; NJ]; NJ];
-        let mut support: f64 = 0.0;
-        for (j, r) in rows.chunks_exact_mut(row_len).enumerate() {
-            let xj = self.points.get(j * n..(j + 1) * n).ok_or(Error::Internal)?;
-            let k = crate::kernel::joint_kernel(&self.model.joint_kernel, q, xj, &mut grad);
-            if exact_jacobian {
-                joint_kernel_hessian(&self.model.joint_kernel, k, q, xj, &mut hess);
-            }
-            let (r_k, rest) = r.split_first_mut().ok_or(Error::Internal)?;
-            let (r_grad, r_hess) = rest.split_at_mut_checked(n).ok_or(Error::Internal)?;
-            *r_k = k;
-            for (dst, g) in r_grad.iter_mut().zip(grad.iter()) {
-                *dst = *g;
-            }
-            for (dst_row, h_row) in r_hess.chunks_exact_mut(n).zip(hess.iter()) {
-                for (dst, h) in dst_row.iter_mut().zip(h_row.iter()) {
-                    *dst = *h;
-                }
-            }
-            support = support.max(k);
-        }
-        let rows: &[f64] = rows;
+        // Working space: the kernel rows, then the query state and the integrator's scratch
+        // (in storage rather than on the stack: no zeroing of the largest possible state per query).
+        let (rows, rest) = self.work.split_at_mut_checked(n_points * kernel_row_len(n)).ok_or(Error::Internal)?;
+        let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
+        joint_features(&self.model.joint_kernel, q, &mut fq);
+        let support = write_kernel_rows(shape, &self.model.joint_kernel, &fq, self.features, rows, exact_jacobian);
+        let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
         let k0 = crate::nominal::forward_kinematics(&self.model.nominal, q).normalised(norm);
         let h0 = if exact_jacobian { nominal_hessian(&self.model.nominal, q) } else { [[[0.0; NJ]; NJ]; MT] };
         let ql = dims.query_len();
-        let mut y = [0.0; MAX_QUERY_TANGENT];
         let state_len = if exact_jacobian { query_tangent_len(dims) } else { ql };
-        let y = y.get_mut(..state_len).ok_or(Error::Internal)?;
+        let (y, rest) = rest.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
+        let scratch = rest.get_mut(..crate::integrate::scratch_len(state_len)).ok_or(Error::Internal)?;
+        // Every value is written before it is read; cleared anyway so that nothing of the previous
+        // query can leak into this one.
+        y.fill(0.0);
+        scratch.fill(0.0);
         let inv_scale = 1.0 / norm.task_scale;
         {
             let (primal, tangents) = y.split_at_mut_checked(ql).ok_or(Error::Internal)?;
             let (y_k, y_jac) = primal.split_at_mut_checked(m).ok_or(Error::Internal)?;
             for (dst, src) in y_k.iter_mut().zip(k0.position.iter()) {
-                *dst = *src;
+                *dst = *src as Real;
             }
-            for (dst, src) in y_jac.chunks_exact_mut(n).zip(k0.jacobian.iter()) {
+            for (dst, src) in y_jac.chunks_exact_mut(n.max(1)).zip(k0.jacobian.iter()) {
                 for (d, s) in dst.iter_mut().zip(src.iter()) {
-                    *d = *s;
+                    *d = *s as Real;
                 }
             }
             // δk_d(0) = ∂_d k0, δJ_d(0)[a][e] = ∂_e ∂_d k0_a (internal units).
-            for (d, t) in tangents.chunks_exact_mut(ql).enumerate() {
+            for (d, t) in tangents.chunks_exact_mut(ql.max(1)).enumerate() {
                 let (t_k, t_jac) = t.split_at_mut_checked(m).ok_or(Error::Internal)?;
                 for (dst, row) in t_k.iter_mut().zip(k0.jacobian.iter()) {
-                    *dst = row.get(d).copied().unwrap_or(0.0);
+                    *dst = row.get(d).copied().unwrap_or(0.0) as Real;
                 }
-                for (dst_row, h_a) in t_jac.chunks_exact_mut(n).zip(h0.iter()) {
+                for (dst_row, h_a) in t_jac.chunks_exact_mut(n.max(1)).zip(h0.iter()) {
                     for (dst, h_ae) in dst_row.iter_mut().zip(h_a.iter()) {
-                        *dst = h_ae.get(d).copied().unwrap_or(0.0) * inv_scale;
+                        *dst = (h_ae.get(d).copied().unwrap_or(0.0) * inv_scale) as Real;
                     }
                 }
             }
         }
-        let mut scratch = [0.0; crate::integrate::scratch_len(MAX_QUERY_TANGENT)];
-        let scratch = scratch.get_mut(..crate::integrate::scratch_len(y.len())).ok_or(Error::Internal)?;
         let block = n_points * dims.sample_len();
-        let trajectory: &[f64] = self.trajectory;
+        let trajectory: &[Real] = self.trajectory;
         let task_kernel = self.model.task_kernel;
-        crate::integrate::integrate(self.model.integrator.method, self.model.integrator.steps, y, scratch, |stage, s, out| {
-            let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-            query_rates_with_tangents(dims, &task_kernel, samples, rows, s, out).ok_or(Error::Internal)
-        })?;
+        crate::integrate::integrate_checked(
+            self.model.integrator.method,
+            self.model.integrator.steps,
+            y,
+            scratch,
+            Error::Internal,
+            |stage, s, out| {
+                let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
+                query_rates(shape, &task_kernel, samples, rows, s, out).ok_or(Error::Internal)
+            },
+        )?;
         let mut out = crate::Evaluation {
             position: nalgebra::SMatrix::zeros(),
             jacobian: nalgebra::SMatrix::zeros(),
             transported_jacobian: nalgebra::SMatrix::zeros(),
             task_dim: m,
             n_joints: n,
-            support: support / self.model.joint_kernel.gamma,
+            support: crate::real::to_f64(support) / self.model.joint_kernel.gamma,
         };
         let (primal, tangents) = y.split_at_checked(ql).ok_or(Error::Internal)?;
         let (y_k, y_jac) = primal.split_at_checked(m).ok_or(Error::Internal)?;
         for ((dst, offset), v) in out.position.iter_mut().zip(norm.task_offset.iter()).zip(y_k) {
-            *dst = offset + norm.task_scale * v;
+            *dst = offset + norm.task_scale * crate::real::to_f64(*v);
         }
-        for (a, y_row) in y_jac.chunks_exact(n).enumerate() {
+        for (a, y_row) in y_jac.chunks_exact(n.max(1)).enumerate() {
             for (d, v) in y_row.iter().enumerate() {
                 if let Some(dst) = out.transported_jacobian.get_mut((a, d)) {
-                    *dst = norm.task_scale * v;
+                    *dst = norm.task_scale * crate::real::to_f64(*v);
                 }
             }
         }
         if exact_jacobian {
-            for (d, t) in tangents.chunks_exact(ql).enumerate() {
+            for (d, t) in tangents.chunks_exact(ql.max(1)).enumerate() {
                 for (a, v) in t.iter().take(m).enumerate() {
                     if let Some(dst) = out.jacobian.get_mut((a, d)) {
-                        *dst = norm.task_scale * v;
+                        *dst = norm.task_scale * crate::real::to_f64(*v);
                     }
                 }
             }

@@ -5,6 +5,7 @@
 pub mod baselines;
 pub mod cli;
 pub mod data;
+pub mod diagnose;
 pub mod flow;
 pub mod kernels;
 pub mod nominal;

@@ -6,7 +6,8 @@
 //! cbd-control-loop [BLOB] [--rate HZ] [--seconds S] [--strict]
 //! ```
 //!
-//! Without BLOB it uses the RR benchmark blob of the firmware check (256 points, Heun × 5).
+//! Without BLOB it uses the 256-point RR grid blob of the firmware check with the scheme `cbd demo` trains
+//! (Euler × 2; pass a blob from `cbd demo --out FILE` for a trained model).
 //! It reports evaluation times (worst, p99, median, mean), the worst lateness of a cycle's start,
 //! the deadline misses (a cycle whose evaluation ends after the next tick) and the ticks skipped
 //! because the loop was not scheduled for a whole period. The trajectory is a
@@ -69,7 +70,7 @@ fn percentile(sorted: &[Duration], p: f64) -> Duration {
 fn run(args: &Args) -> Result<bool, String> {
     let blob = match &args.blob {
         Some(path) => std::fs::read(path).map_err(|e| format!("{path}: {e}"))?,
-        None => blobs::rr_reference_blob(),
+        None => blobs::rr_grid_blob(16, 0x0000_0100, blobs::DEMO_SCHEME),
     };
     let model = cbd_protocol::decode(&blob).map_err(|e| e.to_string())?;
     let n = model.n_joints();

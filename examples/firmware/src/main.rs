@@ -14,6 +14,7 @@ use core::hint::black_box;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cbd_runtime::protocol::MAX_JOINTS;
+use cbd_runtime::real::Real;
 use cbd_runtime::Calibrator;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::{entry, exception};
@@ -30,8 +31,9 @@ include!(concat!(env!("OUT_DIR"), "/storage_len.rs"));
 /// The model, in flash; the runtime reads its arrays in place.
 static BLOB: &[u8] = include_bytes!(env!("CBD_BLOB_PATH"));
 
-/// All the RAM the runtime uses: `storage_len(…)` f64 values (the control points' trajectories).
-static mut STORAGE: [f64; STORAGE_LEN] = [0.0; STORAGE_LEN];
+/// All the RAM the runtime uses: `storage_len(…)` values of the evaluation scalar (f64, or f32
+/// with the feature `f32`): kernel features, the control points' trajectories, working space.
+static mut STORAGE: [Real; STORAGE_LEN] = [0.0; STORAGE_LEN];
 
 /// SysTick wrap-arounds (the counter has 24 bits).
 static WRAPS: AtomicU32 = AtomicU32::new(0);
@@ -83,7 +85,7 @@ impl Line {
 fn run(out: &mut hio::HostStream) -> Result<(), ()> {
     let mut line = Line::new();
     // SAFETY: the only reference to STORAGE, taken once before any other use.
-    let storage: &'static mut [f64; STORAGE_LEN] = unsafe { &mut *core::ptr::addr_of_mut!(STORAGE) };
+    let storage: &'static mut [Real; STORAGE_LEN] = unsafe { &mut *core::ptr::addr_of_mut!(STORAGE) };
     let t0 = ticks();
     let loaded = Calibrator::load(black_box(BLOB), storage);
     let t1 = ticks();
@@ -114,7 +116,12 @@ fn run(out: &mut hio::HostStream) -> Result<(), ()> {
             Ok(e) => {
                 let (pos, jac) = (e.position(), e.jacobian());
                 let (m, n) = jac.shape();
-                shared::write_result(&mut line, i, pos.iter().copied(), (0..m).flat_map(|a| (0..n).filter_map(move |d| jac.get((a, d)).copied())))
+                shared::write_result(
+                    &mut line,
+                    i,
+                    pos.iter().copied(),
+                    (0..m).flat_map(|a| (0..n).filter_map(move |d| jac.get((a, d)).copied())),
+                )
             }
             Err(_) => shared::write_error(&mut line, i),
         }

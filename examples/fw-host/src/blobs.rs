@@ -10,7 +10,7 @@ use crate::shared::Lcg;
 const RR_REFERENCE: &str = include_str!("../../../tests/data/rr_flow_reference.json");
 
 /// The paper's RR arm settings, exactly as `tests/tests/reference_flow.rs` builds them.
-fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32) -> Model<'a> {
+fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: Integrator) -> Model<'a> {
     Model {
         nominal: NominalModel::planar(&[1.0, 0.5]).expect("2 joints"),
         normalisation: Normalisation::IDENTITY,
@@ -19,7 +19,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32) -> Model<'a>
             axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("2 axes"),
         },
         task_kernel: TaskKernel { width: 1.0270 },
-        integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
+        integrator,
         momentum_law: MomentumLaw::WithDivergence,
         sigma: 1.0,
         n_points,
@@ -36,7 +36,10 @@ fn flat(v: &Value, out: &mut Vec<f64>) {
     }
 }
 
-/// The RR benchmark: 16 × 16 grid and the reference momenta of `tests/data/rr_flow_reference.json`.
+/// The scheme `cbd demo` trains (and the cost blobs use): Euler × 2 steps.
+pub const DEMO_SCHEME: Integrator = Integrator { method: IntegratorMethod::Euler, steps: 2 };
+
+/// The RR benchmark: 16 × 16 grid and the reference momenta of `tests/data/rr_flow_reference.json`, Heun × 5.
 pub fn rr_reference_blob() -> Vec<u8> {
     let reference: Value = serde_json::from_str(RR_REFERENCE).expect("RR reference JSON");
     let (mut x, mut p0) = (Vec::new(), Vec::new());
@@ -44,17 +47,18 @@ pub fn rr_reference_blob() -> Vec<u8> {
     flat(&reference["P0"], &mut p0);
     assert_eq!((x.len(), p0.len()), (512, 512));
     let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
-    encode_to_vec(&rr_model(&pb, &mb, 256)).expect("encode RR blob")
+    encode_to_vec(&rr_model(&pb, &mb, 256, Integrator { method: IntegratorMethod::Heun, steps: 5 })).expect("encode RR blob")
 }
 
-/// RR arm on a side × side grid of the torus with small pseudo-random momenta (cost measurement).
-pub fn rr_grid_blob(side: usize, seed: u32) -> Vec<u8> {
+/// RR arm on a side × side grid of the torus with small pseudo-random momenta and `scheme`
+/// (cost measurement: the evaluation has no data-dependent branches, so the momenta do not matter).
+pub fn rr_grid_blob(side: usize, seed: u32, scheme: Integrator) -> Vec<u8> {
     let step = 2.0 * PI / side as f64;
     let x: Vec<f64> = (0..side * side).flat_map(|k| [(k / side) as f64 * step, (k % side) as f64 * step]).collect();
     let mut rng = Lcg(seed);
     let p0: Vec<f64> = (0..2 * side * side).map(|_| 1e-3 * rng.symmetric()).collect();
     let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
-    encode_to_vec(&rr_model(&pb, &mb, (side * side) as u32)).expect("encode RR grid blob")
+    encode_to_vec(&rr_model(&pb, &mb, (side * side) as u32, scheme)).expect("encode RR grid blob")
 }
 
 /// A 6-joint model: UR5 standard DH table (mm, data/ur5/README.md), 64 random configurations,

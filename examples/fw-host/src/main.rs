@@ -1,10 +1,12 @@
 //! Host side of the firmware check (issue 5).
 //!
 //! ```text
-//! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, rr64.blob, rr1024.blob
+//! cbd-fw-host make-blobs OUT_DIR   # rr.blob (Heun × 5), six.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2)
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
 //! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
 //! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len blob_bytes
+//! cbd-fw-host time BLOB            # host ns per evaluation (exact and transported Jacobian)
+//! cbd-fw-host accuracy BLOB CSV    # position error against measured rows (joints…, position…)
 //! ```
 //!
 //! Blobs are deterministic: the same bytes on every run and machine.
@@ -17,15 +19,16 @@ use std::process::ExitCode;
 mod blobs;
 #[path = "../../firmware/src/shared.rs"]
 mod shared;
-use blobs::{rr_grid_blob, rr_reference_blob, six_joint_blob};
+use blobs::{rr_grid_blob, rr_reference_blob, six_joint_blob, DEMO_SCHEME};
 
 fn make_blobs(out_dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
     for (name, blob) in [
         ("rr.blob", rr_reference_blob()),
         ("six.blob", six_joint_blob()),
-        ("rr64.blob", rr_grid_blob(8, 0x0000_0064)),
-        ("rr1024.blob", rr_grid_blob(32, 0x0000_0400)),
+        ("rr64.blob", rr_grid_blob(8, 0x0000_0064, DEMO_SCHEME)),
+        ("rr256.blob", rr_grid_blob(16, 0x0000_0100, DEMO_SCHEME)),
+        ("rr1024.blob", rr_grid_blob(32, 0x0000_0400, DEMO_SCHEME)),
     ] {
         let path = out_dir.join(name);
         std::fs::write(&path, &blob).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -82,6 +85,72 @@ fn eval(path: &Path, transported: bool) -> Result<(), String> {
     Ok(())
 }
 
+/// Median over rounds of the mean ns per evaluation of the `COUNT` shared configurations.
+fn time(path: &Path) -> Result<(), String> {
+    let blob = read_blob(path)?;
+    let (model, len) = needed_storage(&blob)?;
+    let n = model.n_joints();
+    let mut storage = vec![0.0; len];
+    let mut cal = Calibrator::load(&blob, &mut storage).map_err(|e| e.to_string())?;
+    let mut queries = vec![0.0; shared::COUNT * n];
+    for (i, q) in queries.chunks_exact_mut(n).enumerate() {
+        shared::config(i, q);
+    }
+    for transported in [false, true] {
+        let mut rounds: Vec<f64> = (0..21)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                for q in queries.chunks_exact(n) {
+                    let e =
+                        if transported { cal.evaluate_transported(std::hint::black_box(q)) } else { cal.evaluate(std::hint::black_box(q)) };
+                    std::hint::black_box(e.ok());
+                }
+                t0.elapsed().as_secs_f64() * 1e9 / shared::COUNT as f64
+            })
+            .collect();
+        rounds.sort_by(f64::total_cmp);
+        println!(
+            "{} ns/eval (median of 21 rounds, min {:.0}): {:.0}",
+            if transported { "transported" } else { "exact" },
+            rounds[0],
+            rounds[10]
+        );
+    }
+    Ok(())
+}
+
+/// Position error |k1(q) − y| of the runtime (this build's scalar) over the rows of a measurement
+/// CSV with a header line, joint columns then position columns (`cbd simulate` writes one).
+fn accuracy(path: &Path, csv: &Path) -> Result<(), String> {
+    let blob = read_blob(path)?;
+    let (model, len) = needed_storage(&blob)?;
+    let (n, m) = (model.n_joints(), model.task_dim());
+    let mut storage = vec![0.0; len];
+    let mut cal = Calibrator::load(&blob, &mut storage).map_err(|e| e.to_string())?;
+    let text = std::fs::read_to_string(csv).map_err(|e| format!("{}: {e}", csv.display()))?;
+    let mut errors = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let row: Vec<f64> =
+            line.split(',').map(|v| v.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| format!("line {}: {e}", i + 1))?;
+        if row.len() != n + m {
+            return Err(format!("line {}: {} values, expected {}", i + 1, row.len(), n + m));
+        }
+        let e = cal.evaluate(&row[..n]).map_err(|e| format!("line {}: {e}", i + 1))?;
+        let err2: f64 = e.position().iter().zip(&row[n..]).map(|(a, b)| (a - b) * (a - b)).sum();
+        errors.push(err2.sqrt());
+    }
+    errors.sort_by(f64::total_cmp);
+    let count = errors.len();
+    if count == 0 {
+        return Err("no rows".into());
+    }
+    let mean = errors.iter().sum::<f64>() / count as f64;
+    let p99 = errors[((count as f64 * 0.99).ceil() as usize).clamp(1, count) - 1];
+    let scalar = std::mem::size_of_val(&storage[0]) * 8;
+    println!("f{scalar} rows {count} mean {mean:.3e} median {:.3e} p99 {p99:.3e} max {:.3e}", errors[count / 2], errors[count - 1]);
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
     let result = match args.iter().map(String::as_str).collect::<Vec<_>>()[1..] {
@@ -89,7 +158,9 @@ fn main() -> ExitCode {
         ["eval", blob] => eval(Path::new(blob), false),
         ["eval", "--transported", blob] => eval(Path::new(blob), true),
         ["info", blob] => info(Path::new(blob)),
-        _ => Err("usage: cbd-fw-host make-blobs OUT_DIR | eval [--transported] BLOB | info BLOB".into()),
+        ["time", blob] => time(Path::new(blob)),
+        ["accuracy", blob, csv] => accuracy(Path::new(blob), Path::new(csv)),
+        _ => Err("usage: cbd-fw-host make-blobs OUT_DIR | eval [--transported] BLOB | info BLOB | time BLOB | accuracy BLOB CSV".into()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

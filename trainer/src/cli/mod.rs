@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod compare;
 pub mod demo;
+pub mod diagnose;
 pub mod eval;
 pub mod fit;
 pub mod report;
@@ -34,6 +35,8 @@ pub enum Command {
     Compare(compare::CompareArgs),
     /// Fit time, memory and evaluation time against N (writes BENCHMARKS.md with --markdown).
     Bench(bench::BenchArgs),
+    /// Trace the residual to physical effects (library fit, out-of-sample selection) and report before/after.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// The nominal model: a model file, or the built-in planar RR arm.
@@ -81,6 +84,7 @@ pub fn run(cli: Cli) -> Result<(), String> {
         Command::Bench(args) => bench::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Report(args) => report::run(args),
+        Command::Diagnose(args) => diagnose::run(args),
     }
 }
 

@@ -26,6 +26,17 @@ pub struct SimulateArgs {
     /// Output CSV (columns q1, q2 in radians, x, y in length units).
     #[arg(long)]
     pub out: PathBuf,
+    /// Inject an effect nobody declares (repeatable): `type:key=value,...` with joints/links
+    /// 1-based, angles in radians, lengths in the model's unit (rr: 1 = l1; six: mm), compliance
+    /// in rad per (mass·length) under unit link masses and unit gravity (−y for rr, −z for six).
+    /// Library types: encoder_scale:joint=,scale= | transmission:joint=,harmonic=,cos=,sin= |
+    /// gravity_compliance:joint=,compliance= | link_bending:link=,compliance=. Outside the
+    /// library: bump:centre=q1;q2;...,width=,dx=,dy=,dz= | dead_zone:joint=,width= |
+    /// thermal:dx=,dy=,dz= (drift per row). With any --effect the robot is its geometry (rr:
+    /// link lengths 1.09, 0.46; six: its DH, base and tool errors) plus these effects only: the
+    /// built-in bending/stretch/base offset (rr) and joint compliance (six) are left out.
+    #[arg(long = "effect")]
+    pub effects: Vec<String>,
 }
 
 pub fn run(args: SimulateArgs) -> Result<(), String> {
@@ -50,7 +61,14 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
         "uniform" => Sampling::Uniform { count: args.count, seed: args.seed },
         other => return Err(format!("unknown sampling `{other}` (expected grid or uniform)")),
     };
-    let mut data = rr::RealRr::default().measure(&configurations(sampling, 2));
+    let joints = configurations(sampling, 2);
+    let mut data = if args.effects.is_empty() {
+        rr::RealRr::default().measure(&joints)
+    } else {
+        let lengths = rr::RealRr::default().lengths;
+        let rigid = cbd_protocol::NominalModel::planar(&lengths).ok_or("two links fit")?;
+        effect_arm(rigid, &args.effects)?.measure(&joints, 0.0, 0)
+    };
     add_noise(&mut data.positions, args.noise.unwrap_or(0.0), args.seed.wrapping_add(0x5eed));
     let mut text = String::from("q1,q2,x,y\n");
     for i in 0..data.len() {
@@ -71,7 +89,13 @@ fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
     if let Some(noise) = args.noise {
         robot.noise_std = noise;
     }
-    let data = robot.measure(&random_configurations(args.count, args.seed), args.seed.wrapping_add(0x5eed));
+    let joints = random_configurations(args.count, args.seed);
+    let data = if args.effects.is_empty() {
+        robot.measure(&joints, args.seed.wrapping_add(0x5eed))
+    } else {
+        let rigid = cbd_protocol::NominalModel::DhChain(robot.real.clone());
+        effect_arm(rigid, &args.effects)?.measure(&joints, robot.noise_std, args.seed.wrapping_add(0x5eed))
+    };
     let mut text = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
     for i in 0..data.len() {
         let q: Vec<String> = data.joints(i).iter().map(|v| format!("{:?}", v.to_degrees())).collect();
@@ -81,4 +105,14 @@ fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
     crate::cli::write_atomically(&args.out, text.as_bytes())?;
     eprintln!("wrote {} measurements of the simulated six-joint arm to {}", data.len(), args.out.display());
     Ok(())
+}
+
+/// The rigid "real" geometry plus the `--effect` specs (undeclared: only the CSV carries them).
+fn effect_arm(rigid: cbd_protocol::NominalModel, specs: &[String]) -> Result<crate::simulate::effects::EffectArm, String> {
+    let n = rigid.n_joints();
+    let mut arm = crate::simulate::effects::EffectArm::new(rigid);
+    for spec in specs {
+        arm = arm.with(crate::simulate::effects::parse_effect(spec, n)?);
+    }
+    Ok(arm)
 }

@@ -56,7 +56,9 @@ fn joint_kernel_matrices(cp: &ControlPoints) -> JointKernelMatrices {
     JointKernelMatrices { kv, gv }
 }
 
-fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64]) -> StageLinearisation {
+/// With `positions_only` (the last stage) the second derivatives H of K_W are not formed: only
+/// the k rows of that stage's rates are needed, and they do not involve H.
+fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64], positions_only: bool) -> StageLinearisation {
     let Dims { m, n } = cp.dims;
     let (len, count) = (cp.dims.state_len(), cp.len());
     let inv_a2 = 1.0 / (cp.task_kernel.width * cp.task_kernel.width);
@@ -77,7 +79,7 @@ fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64]) 
     }
     let mut kw = Mat::zeros(count, count);
     let mut g: Vec<Mat<f64>> = (0..m).map(|_| Mat::zeros(count, count)).collect();
-    let mut h: Vec<Mat<f64>> = (0..m * m).map(|_| Mat::zeros(count, count)).collect();
+    let mut h: Vec<Mat<f64>> = if positions_only { Vec::new() } else { (0..m * m).map(|_| Mat::zeros(count, count)).collect() };
     let (mut dw, mut t) = (per_point(m * m), per_point(m * m * m));
     for j in 0..count {
         let kj = &at(j)[..m];
@@ -96,6 +98,9 @@ fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64]) 
                 g[b][(i, j)] = gb;
                 for a in 0..m {
                     dw[a * m + b][i] += p[a][j] * gb;
+                }
+                if positions_only {
+                    continue;
                 }
                 for c in 0..m {
                     let hbc = k * (e[b] * e[c] * inv_a2 * inv_a2 - if b == c { inv_a2 } else { 0.0 });
@@ -136,12 +141,41 @@ fn add_row_scaled(mut out: MatMut<'_, f64>, scale: &[f64], input: MatRef<'_, f64
     }
 }
 
-fn gemm(out: MatMut<'_, f64>, accum: Accum, lhs: MatRef<'_, f64>, rhs: MatRef<'_, f64>, alpha: f64) {
-    matmul(out, accum, lhs, rhs, alpha, Par::Seq);
+/// out (+)= alpha · lhs · rhs. A GEMM, except when rhs is mostly zeros (the first stage's tangent is
+/// the identity in the momentum rows and zero elsewhere): then only its nonzeros' columns of lhs are
+/// combined, O(nnz · rows) instead of O(rows · inner · cols).
+fn gemm(mut out: MatMut<'_, f64>, accum: Accum, lhs: MatRef<'_, f64>, rhs: MatRef<'_, f64>, alpha: f64) {
+    let nonzeros = (0..rhs.ncols()).map(|c| rhs.col(c).iter().filter(|v| **v != 0.0).count()).sum::<usize>();
+    if nonzeros * 8 > rhs.nrows() * rhs.ncols() {
+        matmul(out, accum, lhs, rhs, alpha, Par::Seq);
+        return;
+    }
+    if matches!(accum, Accum::Replace) {
+        out.fill(0.0);
+    }
+    for col in 0..rhs.ncols() {
+        for (r, &v) in rhs.col(col).iter().enumerate() {
+            if v != 0.0 {
+                let scale = alpha * v;
+                for (o, l) in out.as_mut().col_mut(col).iter_mut().zip(lhs.col(r).iter()) {
+                    *o += scale * l;
+                }
+            }
+        }
+    }
 }
 
-/// Linearised right-hand side of the control-point dynamics for one column chunk.
-fn tangent_rates(cp: &ControlPoints, jk: &JointKernelMatrices, lin: &StageLinearisation, tan: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
+/// Linearised right-hand side of the control-point dynamics for one column chunk. With
+/// `positions_only` only the k rows are formed (the last stage: its J and P rates reach nothing
+/// that is read), which skips the δDw and δDv products, two thirds of the GEMMs.
+fn tangent_rates(
+    cp: &ControlPoints,
+    jk: &JointKernelMatrices,
+    lin: &StageLinearisation,
+    tan: MatRef<'_, f64>,
+    mut out: MatMut<'_, f64>,
+    positions_only: bool,
+) {
     let Dims { m, n } = cp.dims;
     let count = cp.len();
     let cols = tan.ncols();
@@ -175,6 +209,24 @@ fn tangent_rates(cp: &ControlPoints, jk: &JointKernelMatrices, lin: &StageLinear
             add_row_scaled(dw[a].as_mut(), &lin.dw[a * m + b], blk(k_of(b)), 1.0);
         }
     }
+    // δv_d = K_V δu_d
+    let mut dvv = zeros(n);
+    for d in 0..n {
+        gemm(dvv[d].as_mut(), Accum::Replace, jk.kv.as_ref(), du[d].as_ref(), 1.0);
+    }
+    out.fill(0.0);
+    // δ(dk_a) = δw_a − Σ_d (diag(v_d) δJ_ad + diag(J_ad) δv_d)
+    for a in 0..m {
+        let mut o = out.as_mut().subrows_mut(k_of(a) * count, count);
+        o.copy_from(dw[a].as_ref());
+        for d in 0..n {
+            add_row_scaled(o.as_mut(), &lin.v[d], blk(j_of(a, d)), -1.0);
+            add_row_scaled(o.as_mut(), &lin.jac[a * n + d], dvv[d].as_ref(), -1.0);
+        }
+    }
+    if positions_only {
+        return;
+    }
     // δDw_ab = G_b δP_a + Σ_c (diag(T_abc) δk_c − H_bc S_ac)
     let mut ddw = zeros(m * m);
     for a in 0..m {
@@ -187,23 +239,11 @@ fn tangent_rates(cp: &ControlPoints, jk: &JointKernelMatrices, lin: &StageLinear
             }
         }
     }
-    // δv_d = K_V δu_d, δDv_de = ∂_e K_V δu_d
-    let mut dvv = zeros(n);
+    // δDv_de = ∂_e K_V δu_d
     let mut ddv = zeros(n * n);
     for d in 0..n {
-        gemm(dvv[d].as_mut(), Accum::Replace, jk.kv.as_ref(), du[d].as_ref(), 1.0);
         for e in 0..n {
             gemm(ddv[d * n + e].as_mut(), Accum::Replace, jk.gv[e].as_ref(), du[d].as_ref(), 1.0);
-        }
-    }
-    out.fill(0.0);
-    // δ(dk_a) = δw_a − Σ_d (diag(v_d) δJ_ad + diag(J_ad) δv_d)
-    for a in 0..m {
-        let mut o = out.as_mut().subrows_mut(k_of(a) * count, count);
-        o.copy_from(dw[a].as_ref());
-        for d in 0..n {
-            add_row_scaled(o.as_mut(), &lin.v[d], blk(j_of(a, d)), -1.0);
-            add_row_scaled(o.as_mut(), &lin.jac[a * n + d], dvv[d].as_ref(), -1.0);
         }
     }
     // δ(dJ_ad) = Σ_c (J_cd δDw_ac + Dw_ac δJ_cd) − Σ_e (Dv_ed δJ_ae + J_ae δDv_ed)
@@ -237,21 +277,32 @@ fn tangent_rates(cp: &ControlPoints, jk: &JointKernelMatrices, lin: &StageLinear
     }
 }
 
-/// Number of column chunks: fixed, so the result does not depend on how many threads run them.
-const CHUNKS: usize = 2;
+/// Tangent columns per chunk: bounds the working set (about 20 blocks of N × columns per chunk in
+/// flight) while keeping the products GEMM-shaped. The split depends on N only, never on threads.
+const CHUNK_COLUMNS: usize = 256;
 
 /// ∂k1(x_i)/∂P0 of the discrete flow: an (N·m) × (N·m) matrix, rows i·m + a (output point and
 /// coordinate), columns j·m + b (momentum of point j, coordinate b). Internal units.
 pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) -> Mat<f64> {
+    super::with_threads(threads, || position_jacobian_in_pool(cp, flow))
+}
+
+/// `position_jacobian` on the current rayon pool: column chunks run in parallel.
+pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f64> {
+    use rayon::prelude::*;
     let dims = cp.dims;
     let (m, count, len) = (dims.m, cp.len(), dims.state_len());
     let jk = joint_kernel_matrices(cp);
     let stage_len = count * len;
-    let stages: Vec<StageLinearisation> = flow.stage_states.chunks_exact(stage_len).map(|y| linearise_stage(cp, &jk, y)).collect();
+    let stage_count = flow.stage_states.len() / stage_len;
+    let stages: Vec<StageLinearisation> =
+        flow.stage_states.chunks_exact(stage_len).enumerate().map(|(k, y)| linearise_stage(cp, &jk, y, k + 1 == stage_count)).collect();
     let directions = count * m;
     let rows = count * len;
-    let bounds: Vec<(usize, usize)> = (0..CHUNKS).map(|c| (c * directions / CHUNKS, (c + 1) * directions / CHUNKS)).collect();
-    let run_chunk = |(d0, d1): (usize, usize)| -> Vec<f64> {
+    let chunks = directions.div_ceil(CHUNK_COLUMNS).max(2);
+    let bounds: Vec<(usize, usize)> = (0..chunks).map(|c| (c * directions / chunks, (c + 1) * directions / chunks)).collect();
+    // Each chunk returns only the position rows it ends with (m·N × columns), not its whole state.
+    let run_chunk = |&(d0, d1): &(usize, usize)| -> Vec<f64> {
         let cols = d1 - d0;
         let mut tan = vec![0.0; rows * cols];
         // Initial tangent: δP_{j,b} = 1 for direction j·m + b.
@@ -264,24 +315,22 @@ pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) 
             cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
                 let y = MatRef::from_column_major_slice(y, rows, cols);
                 let out = MatMut::from_column_major_slice_mut(out, rows, cols);
-                tangent_rates(cp, &jk, &stages[stage], y, out);
+                tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
                 Ok(())
             });
         let _ = result;
-        tan
+        drop(scratch);
+        let mut positions = vec![0.0; m * count * cols];
+        for c in 0..cols {
+            positions[c * m * count..(c + 1) * m * count].copy_from_slice(&tan[c * rows..c * rows + m * count]);
+        }
+        positions
     };
-    let chunks: Vec<Vec<f64>> = if threads > 1 {
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = bounds.iter().map(|&b| scope.spawn(move || run_chunk(b))).collect();
-            handles.into_iter().map(|h| h.join().expect("tangent worker panicked")).collect()
-        })
-    } else {
-        bounds.iter().map(|&b| run_chunk(b)).collect()
-    };
+    let results: Vec<Vec<f64>> = bounds.par_iter().map(run_chunk).collect();
     let mut jac = Mat::zeros(count * m, directions);
-    for (&(d0, d1), tan) in bounds.iter().zip(&chunks) {
+    for (&(d0, d1), tan) in bounds.iter().zip(&results) {
         for dir in d0..d1 {
-            let col = &tan[(dir - d0) * rows..(dir - d0 + 1) * rows];
+            let col = &tan[(dir - d0) * m * count..(dir - d0 + 1) * m * count];
             for i in 0..count {
                 for a in 0..m {
                     jac[(i * m + a, dir)] = col[a * count + i];
@@ -316,7 +365,7 @@ mod tests {
     #[test]
     fn tangent_matches_central_finite_differences() {
         for law in [MomentumLaw::WithDivergence, MomentumLaw::WithoutDivergence] {
-            for method in [IntegratorMethod::Heun, IntegratorMethod::Rk4] {
+            for method in [IntegratorMethod::Euler, IntegratorMethod::Heun, IntegratorMethod::Rk4] {
                 let (cp, p0) = small_problem(law, method);
                 let flow = cp.integrate(&p0).unwrap();
                 let jac = position_jacobian(&cp, &flow, 2);

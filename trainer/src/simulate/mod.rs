@@ -1,5 +1,6 @@
 //! Simulated robots: a nominal model and a "real" arm that differs from it.
 
+pub mod effects;
 pub mod rr;
 
 use rand::{Rng, SeedableRng};

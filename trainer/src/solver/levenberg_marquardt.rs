@@ -1,33 +1,18 @@
 //! Levenberg–Marquardt on E(P0) = ½ P0ᵀ K_lin P0 + 1/(2σ²) Σ |k1(x_i) − y_i|² (energy 16).
+//!
+//! Undamped Gauss–Newton first (the regulariser keeps each step well posed; damping only after a
+//! failed step and never relaxed back to a level that failed), starting from the linearised
+//! model's solution; while steps shrink fast, chord steps reuse the last Jacobian's QR factors
+//! (a flow and two triangular applications instead of a tangent and a factorisation).
 
 use super::regulariser::{linear_response, regulariser_matrix};
+use super::step::StepFactor;
 use crate::data::Measurements;
-use crate::flow::tangent::position_jacobian;
+use crate::flow::tangent::position_jacobian_in_pool;
 use crate::flow::ControlPoints;
 use cbd_protocol::{f64_le_bytes, F64Slice, Integrator, JointKernel, Model, MomentumLaw, NominalModel, Normalisation, TaskKernel};
-use faer::linalg::matmul::matmul;
-use faer::linalg::solvers::SolveLstsq;
-use faer::{Accum, Mat, Par, Side};
+use faer::{Mat, Par};
 
-/// Lᵀ with K = L Lᵀ. Kernel matrices of distinct points are positive definite but can be
-/// numerically singular; a jitter of 1e-13 · mean diagonal, grown tenfold until the factorisation
-/// succeeds, keeps the regulariser a norm.
-fn regulariser_factor(k: &Mat<f64>) -> Result<Mat<f64>, FitError> {
-    let dim = k.nrows();
-    let mean_diag = (0..dim).map(|i| k[(i, i)]).sum::<f64>() / dim as f64;
-    let mut jitter = 1e-13 * mean_diag;
-    for _ in 0..8 {
-        let mut kj = k.clone();
-        for i in 0..dim {
-            kj[(i, i)] += jitter;
-        }
-        if let Ok(llt) = kj.llt(Side::Lower) {
-            return Ok(llt.L().transpose().to_owned());
-        }
-        jitter *= 10.0;
-    }
-    Err(FitError::Singular { iteration: 0, damping: jitter })
-}
 use std::time::Instant;
 
 /// Everything that defines a CbD fit besides the data.
@@ -43,7 +28,10 @@ pub struct CbdOptions {
     pub max_iterations: usize,
     /// Stop when an accepted step lowers the energy by less than this fraction.
     pub relative_tolerance: f64,
-    /// Threads for the tangent (results do not depend on it).
+    /// Or when an exact Gauss–Newton step moves no training prediction by more than this, in
+    /// internal units (normalised: the workspace's scale is about 1).
+    pub prediction_tolerance: f64,
+    /// Threads for the tangent's column chunks and the factorisations (results do not depend on it).
     pub threads: usize,
     /// Print one line per iteration to stderr.
     pub verbose: bool,
@@ -66,6 +54,7 @@ impl CbdOptions {
             normalisation: Normalisation::IDENTITY,
             max_iterations: 30,
             relative_tolerance: 1e-5,
+            prediction_tolerance: 1e-9,
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
             verbose: false,
         }
@@ -93,6 +82,8 @@ pub struct FitReport {
     pub seconds_flow: f64,
     pub seconds_tangent: f64,
     pub seconds_solve: f64,
+    /// Exact Jacobians formed by the tangent flow (the first, at P0 = 0, is in closed form).
+    pub tangents: usize,
     /// Largest |runtime − trainer| at the training points relative to the largest |position|.
     pub max_runtime_trainer_diff: f64,
 }
@@ -174,8 +165,30 @@ fn quad_form(k: &Mat<f64>, p: &[f64]) -> f64 {
     s
 }
 
-/// Fits the initial momenta to `data` (user units) on top of `nominal`.
+/// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
+/// depend on how many threads the pool running it has (`Par::Seq` would round differently).
+const FIXED_SPLIT: Par = Par::Rayon(match std::num::NonZeroUsize::new(2) {
+    Some(n) => n,
+    None => unreachable!(),
+});
+/// Marquardt damping λ after the first failed Gauss–Newton step, then ×DAMPING_GROWTH per failure
+/// (λ D² is relative to JᵀJ/σ², so tiny values already matter).
+const FIRST_DAMPING: f64 = 1e-18;
+const DAMPING_GROWTH: f64 = 100.0;
+/// Proximal term μ·mean(diag K)·|δ|² of every step (grown if K + μ I does not factor): keeps steps out
+/// of directions that neither data nor regulariser determine to working precision.
+const PROXIMAL: f64 = 1e-11;
+/// A chord step (reusing an older Jacobian's factorisation) follows a step whose energy decrement
+/// is at most this fraction of the previous one; slower progress asks for the exact Jacobian.
+const CHORD_CONTRACTION: f64 = 0.5;
+
+/// Fits the initial momenta to `data` (user units) on top of `nominal`, on `opts.threads` threads.
 pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
+    super::allocator::keep_freed_memory();
+    crate::flow::with_threads(opts.threads, || fit_in_pool(nominal, data, opts))
+}
+
+fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
     let start = Instant::now();
     let (n, m) = (nominal.n_joints(), nominal.task_dim());
     if data.n_joints != n {
@@ -193,7 +206,6 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
     let dim = cp.len() * m;
     let k_reg = regulariser_matrix(&cp);
-    let chol_t = regulariser_factor(&k_reg)?;
     let sigma = opts.sigma;
     let (mut t_flow, mut t_tangent, mut t_solve) = (0.0, 0.0, 0.0);
 
@@ -213,7 +225,20 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     // Warm start: at P0 = 0 the model is linear, so the first Gauss–Newton step is the
     // linearised (kernel) model's solution; its Jacobian is known in closed form.
     let mut jac = linear_response(&cp);
-    let mut damping = 1e-6;
+    // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
+    // Jacobian stays exact everywhere and no tangent is ever needed.
+    let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
+    // Whether `jac` is the derivative at the current P0 (else it is an older one: a chord step).
+    let mut jacobian_is_current = true;
+    // The step's factorisation for the Jacobian in `jac` and damping λ, reused by chord steps.
+    let mut factor: Option<StepFactor> = None;
+    // The largest damping whose step failed with an exact Jacobian: relaxing stops above it.
+    let mut failed_damping: Option<f64> = None;
+    // Pure Gauss–Newton (the regulariser keeps it well posed); Marquardt damping only after a failed step.
+    let mut damping = 0.0;
+    let mut tangents = 0;
+    let mut previous_decrease = f64::INFINITY;
+    let mut chords_pay = true;
     let mut log = Vec::new();
     let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / (r.len() / m) as f64).sqrt() * sigma * norm.task_scale;
     log.push(IterationLog {
@@ -234,59 +259,47 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let mut converged = false;
     let mut stop_reason = String::from("iteration limit");
     let mut iterations = 0;
-    let mut small_steps = 0;
     for iteration in 1..=opts.max_iterations {
         iterations = iteration;
         // Gauss–Newton step as a least-squares problem, never forming JᵀJ (which would square
-        // the condition number): minimise |J δ/σ + r|² + |Lᵀ (P + δ)|² + λ |D δ|², K = L Lᵀ,
-        // D² = diag(JᵀJ/σ² + K) (Marquardt scaling).
-        let t0 = Instant::now();
-        let lt_p = {
-            let pm = Mat::from_fn(dim, 1, |i, _| p[i]);
-            let mut out = Mat::zeros(dim, 1);
-            matmul(out.as_mut(), Accum::Replace, chol_t.as_ref(), pm.as_ref(), 1.0, Par::Seq);
-            out
-        };
-        let scaling: Vec<f64> =
-            (0..dim).map(|c| ((0..dim).map(|r| (jac[(r, c)] / sigma).powi(2)).sum::<f64>() + k_reg[(c, c)]).sqrt().max(1e-300)).collect();
-        t_solve += t0.elapsed().as_secs_f64();
+        // the condition number): minimise |J δ/σ + r|² + (P + δ)ᵀ K (P + δ) + λ |D δ|²,
+        // D² = diag(JᵀJ/σ² + K) (Marquardt scaling); see `step`.
         let mut accepted = None;
-        while damping < 1e12 {
+        let mut exact_step = jacobian_is_current;
+        loop {
             let t0 = Instant::now();
-            let sqrt_damping = damping.sqrt();
-            let a = Mat::from_fn(3 * dim, dim, |r, c| {
-                if r < dim {
-                    jac[(r, c)] / sigma
-                } else if r < 2 * dim {
-                    chol_t[(r - dim, c)]
-                } else if r - 2 * dim == c {
-                    sqrt_damping * scaling[c]
-                } else {
-                    0.0
-                }
-            });
-            let b = Mat::from_fn(3 * dim, 1, |r, _| {
-                if r < dim {
-                    -current.residual[r]
-                } else if r < 2 * dim {
-                    -lt_p[(r - dim, 0)]
-                } else {
-                    0.0
-                }
-            });
-            let solution = a.qr().solve_lstsq(&b);
-            t_solve += t0.elapsed().as_secs_f64();
-            if !(0..dim).all(|i| solution[(i, 0)].is_finite()) {
-                damping *= 10.0;
-                continue;
+            if factor.as_ref().is_none_or(|f| f.damping != damping) {
+                factor = Some(
+                    StepFactor::new(&jac, &k_reg, sigma, damping, PROXIMAL, FIXED_SPLIT)
+                        .ok_or(FitError::Singular { iteration, damping })?,
+                );
             }
-            let trial: Vec<f64> = p.iter().enumerate().map(|(i, v)| v + solution[(i, 0)]).collect();
-            match evaluate(&trial, &mut t_flow) {
-                Some(e) if e.energy < current.energy => {
+            let step = factor.as_ref().map(|f| f.step(&k_reg, &current.residual, &p)).unwrap_or_default();
+            t_solve += t0.elapsed().as_secs_f64();
+            if step.iter().all(|v| v.is_finite()) {
+                let trial: Vec<f64> = p.iter().zip(&step).map(|(v, d)| v + d).collect();
+                if let Some(e) = evaluate(&trial, &mut t_flow).filter(|e| e.energy < current.energy) {
                     accepted = Some((trial, e));
                     break;
                 }
-                _ => damping *= 4.0,
+            }
+            if !jacobian_is_current {
+                // A chord step (older Jacobian) failed: take the exact Jacobian here instead of
+                // damping, and no more chord steps (each failure costs a flow).
+                chords_pay = false;
+                let t0 = Instant::now();
+                jac = position_jacobian_in_pool(&cp, &current.flow);
+                t_tangent += t0.elapsed().as_secs_f64();
+                tangents += 1;
+                factor = None;
+                jacobian_is_current = true;
+                exact_step = true;
+                continue;
+            }
+            failed_damping = Some(failed_damping.map_or(damping, |f| f.max(damping)));
+            damping = if damping == 0.0 { FIRST_DAMPING } else { damping * DAMPING_GROWTH };
+            if damping > 1e12 {
+                break;
             }
         }
         let Some((trial, e)) = accepted else {
@@ -297,10 +310,13 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             stop_reason = "no further decrease at any damping (converged to rounding)".into();
             break;
         };
-        let decrease = (current.energy - e.energy) / current.energy;
+        let decrease = current.energy - e.energy;
+        let relative = decrease / current.energy;
+        // Largest change of a training prediction, internal (normalised) length units.
+        let moved = sigma * current.residual.iter().zip(&e.residual).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         p = trial;
         current = e;
-        damping = (damping / 10.0).max(1e-30);
+        jacobian_is_current = linear_scheme;
         log.push(IterationLog {
             iteration,
             energy: current.energy,
@@ -312,29 +328,50 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         progress.update(iteration, current.energy, rms(&current.residual));
         if print_lines {
             eprintln!(
-                "iter {iteration:2}  energy {:.6e}  train rms {:.3e}  damping {damping:.1e}  {:.1} s",
+                "iter {iteration:2}  energy {:.6e}  train rms {:.3e}  damping {damping:.1e}  {}  {:.1} s",
                 current.energy,
                 rms(&current.residual),
+                if exact_step { "exact J" } else { "chord" },
                 start.elapsed().as_secs_f64()
             );
         }
-        if decrease < opts.relative_tolerance {
-            small_steps += 1;
-            if small_steps >= 2 {
-                converged = true;
-                stop_reason = format!("relative energy decrease below {:.0e}", opts.relative_tolerance);
-                break;
-            }
-        } else {
-            small_steps = 0;
+        // Damping relaxes tenfold per success, back to pure Gauss–Newton, but not down to a level
+        // that already failed (each new level costs a factorisation).
+        damping = match damping / 10.0 {
+            _ if damping == 0.0 => 0.0,
+            relaxed if failed_damping.is_some_and(|f| relaxed <= f) => damping,
+            relaxed if relaxed < FIRST_DAMPING => 0.0,
+            relaxed => relaxed,
+        };
+        let small = relative < opts.relative_tolerance;
+        if small && exact_step {
+            // Converged: a step with the exact Jacobian gains (almost) nothing.
+            converged = true;
+            stop_reason = format!("relative energy decrease below {:.0e}", opts.relative_tolerance);
+            break;
         }
-        // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
-        // Jacobian stays exact and no tangent is needed.
-        let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
-        if iteration < opts.max_iterations && !linear_scheme {
+        if exact_step && moved < opts.prediction_tolerance {
+            // Settled: what is left of the energy's decrease is the regulariser in directions the
+            // data do not resolve to working precision, which the (necessary) damping lets converge
+            // only linearly. (An absolute length, not a multiple of σ: σ and the kernel amplitudes
+            // can be rescaled together without changing the model.)
+            converged = true;
+            stop_reason = format!("no training prediction moved by {:.0e} (normalised units)", opts.prediction_tolerance);
+            break;
+        }
+        // Keep the factorisation for a chord step while the energy's decrements shrink fast
+        // (at least CHORD_CONTRACTION per step); otherwise form the exact Jacobian here.
+        let chord = chords_pay && !small && decrease <= CHORD_CONTRACTION * previous_decrease;
+        previous_decrease = decrease;
+        if !linear_scheme && !chord {
+            factor = None;
+        }
+        if !linear_scheme && !chord && iteration < opts.max_iterations {
             let t0 = Instant::now();
-            jac = position_jacobian(&cp, &current.flow, opts.threads);
+            jac = position_jacobian_in_pool(&cp, &current.flow);
             t_tangent += t0.elapsed().as_secs_f64();
+            tangents += 1;
+            jacobian_is_current = true;
         }
     }
 
@@ -376,6 +413,7 @@ pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             seconds_flow: t_flow,
             seconds_tangent: t_tangent,
             seconds_solve: t_solve,
+            tangents,
             max_runtime_trainer_diff: max_diff,
         },
     })

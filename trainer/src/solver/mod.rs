@@ -2,7 +2,10 @@
 //! Levenberg–Marquardt on the stacked residual, exact Jacobian from the tangent flow,
 //! warm-started from the linearised (kernel) model.
 
+pub mod allocator;
+pub mod least_squares;
 pub mod levenberg_marquardt;
 pub mod regulariser;
+pub mod step;
 
 pub use levenberg_marquardt::{fit_cbd, CbdFit, CbdOptions, FitError, FitReport, IterationLog};

@@ -1,0 +1,368 @@
+//! The library of candidate effects: named scalar parameters, grouped (a group is selected or
+//! not as a whole), how a parameter vector changes the model, and each parameter's Jacobian
+//! column ∂k/∂θ over the data.
+//!
+//! Geometric parameters are those of `baselines::dh_calibration` (a, α, d, θ_offset per joint,
+//! base, tool; planar chains: the link lengths) and are written into the chain itself. Joint
+//! effects: ∂k/∂θ = Dk_rigid(q + δ) · response; task effects (link bending): ∂k/∂θ = response.
+
+use super::kinematics::{self, Response};
+use crate::baselines::dh_calibration::{apply_parameters, parameter_count, parameter_names};
+use crate::data::Measurements;
+use cbd_protocol::{Effect, NominalModel};
+use faer::Mat;
+
+/// One scalar parameter of the library.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Param {
+    /// Index into the DH parameter vector (`dh_calibration::parameter_names`) or, for a planar
+    /// chain, the link index.
+    Geometric(usize),
+    EncoderScale {
+        joint: usize,
+    },
+    TransmissionCos {
+        joint: usize,
+        harmonic: u8,
+    },
+    TransmissionSin {
+        joint: usize,
+        harmonic: u8,
+    },
+    GravityCompliance {
+        joint: usize,
+    },
+    LinkBending {
+        link: usize,
+    },
+}
+
+/// What kind of effect a group is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum GroupKind {
+    Geometric,
+    EncoderScale,
+    Transmission { harmonic: u8 },
+    GravityCompliance,
+    LinkBending,
+}
+
+impl GroupKind {
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            GroupKind::Geometric => "geometric",
+            GroupKind::EncoderScale => "encoder_scale",
+            GroupKind::Transmission { .. } => "transmission",
+            GroupKind::GravityCompliance => "gravity_compliance",
+            GroupKind::LinkBending => "link_bending",
+        }
+    }
+}
+
+/// Parameters selected or rejected together.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Group {
+    pub name: String,
+    pub kind: GroupKind,
+    /// 0-based joint (or link, for bending); `None` for the geometric group.
+    pub joint: Option<usize>,
+    pub params: Vec<Param>,
+}
+
+/// Settings of the library.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LibraryOptions {
+    /// Transmission harmonics 1..=H per revolute joint.
+    pub harmonics: u8,
+}
+
+impl Default for LibraryOptions {
+    fn default() -> Self {
+        LibraryOptions { harmonics: 3 }
+    }
+}
+
+/// Names of the parameters (1-based joints), e.g. `a2`, `transmission q3 h2 cos`.
+pub fn param_name(model: &NominalModel, p: &Param) -> String {
+    match *p {
+        Param::Geometric(k) => match model {
+            NominalModel::DhChain(c) => parameter_names(c.joints.len())[k].clone(),
+            NominalModel::PlanarChain { .. } => format!("l{}", k + 1),
+        },
+        Param::EncoderScale { joint } => format!("scale q{}", joint + 1),
+        Param::TransmissionCos { joint, harmonic } => format!("q{} h{harmonic} cos", joint + 1),
+        Param::TransmissionSin { joint, harmonic } => format!("q{} h{harmonic} sin", joint + 1),
+        Param::GravityCompliance { joint } => format!("compliance q{}", joint + 1),
+        Param::LinkBending { link } => format!("bending link {}", link + 1),
+    }
+}
+
+/// Whether a geometric parameter is an angle (radians) rather than a length.
+pub fn is_angle(model: &NominalModel, p: &Param) -> bool {
+    match (model, p) {
+        (NominalModel::DhChain(c), Param::Geometric(k)) => {
+            let name = &parameter_names(c.joints.len())[*k];
+            name.starts_with("alpha") || name.starts_with("theta") || name.starts_with("base_r")
+        }
+        (_, Param::TransmissionCos { .. } | Param::TransmissionSin { .. }) => true,
+        _ => false,
+    }
+}
+
+fn geometric_count(model: &NominalModel) -> usize {
+    match model {
+        NominalModel::DhChain(c) => parameter_count(c.joints.len()),
+        NominalModel::PlanarChain { lengths, .. } => lengths.len(),
+    }
+}
+
+/// Every candidate group for `model` (geometric parameters not yet pruned to an identifiable set).
+pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions) -> Vec<Group> {
+    let n = model.n_joints();
+    let mut groups = vec![Group {
+        name: "geometric".into(),
+        kind: GroupKind::Geometric,
+        joint: None,
+        params: (0..geometric_count(model)).map(Param::Geometric).collect(),
+    }];
+    for j in 0..n {
+        let revolute = model.is_revolute(j);
+        groups.push(Group {
+            name: format!("encoder scale q{}", j + 1),
+            kind: GroupKind::EncoderScale,
+            joint: Some(j),
+            params: vec![Param::EncoderScale { joint: j }],
+        });
+        if revolute {
+            for h in 1..=options.harmonics {
+                groups.push(Group {
+                    name: format!("transmission q{} harmonic {h}", j + 1),
+                    kind: GroupKind::Transmission { harmonic: h },
+                    joint: Some(j),
+                    params: vec![Param::TransmissionCos { joint: j, harmonic: h }, Param::TransmissionSin { joint: j, harmonic: h }],
+                });
+            }
+        }
+        groups.push(Group {
+            name: format!("gravity compliance q{}", j + 1),
+            kind: GroupKind::GravityCompliance,
+            joint: Some(j),
+            params: vec![Param::GravityCompliance { joint: j }],
+        });
+        groups.push(Group {
+            name: format!("link bending {}", j + 1),
+            kind: GroupKind::LinkBending,
+            joint: Some(j),
+            params: vec![Param::LinkBending { link: j }],
+        });
+    }
+    groups
+}
+
+/// The effect a non-geometric parameter stands for, with value `v`.
+fn effect_of(p: &Param, v: f64) -> Option<Effect> {
+    Some(match *p {
+        Param::Geometric(_) => return None,
+        Param::EncoderScale { joint } => Effect::EncoderScale { joint: joint as u8, scale: v },
+        Param::TransmissionCos { joint, harmonic } => Effect::Transmission { joint: joint as u8, harmonic, cos: v, sin: 0.0 },
+        Param::TransmissionSin { joint, harmonic } => Effect::Transmission { joint: joint as u8, harmonic, cos: 0.0, sin: v },
+        Param::GravityCompliance { joint } => Effect::GravityCompliance { joint: joint as u8, compliance: v },
+        Param::LinkBending { link } => Effect::LinkBending { link: link as u8, compliance: v },
+    })
+}
+
+/// Adds `e` to `list`, merging it into an entry of the same type and joint (parameters add).
+fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>, e: Effect) -> Result<(), String> {
+    for old in list.iter_mut() {
+        match (old, e) {
+            (Effect::EncoderScale { joint: a, scale }, Effect::EncoderScale { joint: b, scale: s }) if *a == b => {
+                *scale += s;
+                return Ok(());
+            }
+            (Effect::Transmission { joint: a, harmonic: h, cos, sin }, Effect::Transmission { joint: b, harmonic: g, cos: c, sin: s })
+                if *a == b && *h == g =>
+            {
+                *cos += c;
+                *sin += s;
+                return Ok(());
+            }
+            (Effect::GravityCompliance { joint: a, compliance }, Effect::GravityCompliance { joint: b, compliance: c }) if *a == b => {
+                *compliance += c;
+                return Ok(());
+            }
+            (Effect::LinkBending { link: a, compliance }, Effect::LinkBending { link: b, compliance: c }) if *a == b => {
+                *compliance += c;
+                return Ok(());
+            }
+            _ => {}
+        }
+    }
+    list.push(e).map_err(|_| format!("more than {} effects", cbd_protocol::MAX_EFFECTS))
+}
+
+/// `model` changed by `values` of `params`: geometric changes written into the chain, effects
+/// merged into its effect list.
+pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<NominalModel, String> {
+    let mut out = match model {
+        NominalModel::DhChain(chain) => {
+            let mut p = vec![0.0; parameter_count(chain.joints.len())];
+            for (param, v) in params.iter().zip(values) {
+                if let Param::Geometric(k) = param {
+                    p[*k] += v;
+                }
+            }
+            if p.iter().any(|v| *v != 0.0) {
+                NominalModel::DhChain(apply_parameters(chain, &p))
+            } else {
+                model.clone()
+            }
+        }
+        NominalModel::PlanarChain { lengths, effects } => {
+            let mut lengths = lengths.clone();
+            for (param, v) in params.iter().zip(values) {
+                if let Param::Geometric(k) = param {
+                    lengths[*k] += v;
+                }
+            }
+            NominalModel::PlanarChain { lengths, effects: effects.clone() }
+        }
+    };
+    for (param, v) in params.iter().zip(values) {
+        if let Some(e) = effect_of(param, *v) {
+            merge_effect(&mut out.effects_mut().list, e)?;
+        }
+    }
+    Ok(out)
+}
+
+/// Predicted positions of `model` at every row of `data` (row-major).
+pub fn predict(model: &NominalModel, joints: &[f64]) -> Vec<f64> {
+    let n = model.n_joints();
+    joints.chunks_exact(n).flat_map(|q| kinematics::position(model, q)).collect()
+}
+
+/// Step of the central difference for geometric parameter `p`: 1e-6 rad, or 1e-6 of the
+/// workspace's size for lengths.
+fn fd_step(model: &NominalModel, p: &Param, length_scale: f64) -> f64 {
+    if is_angle(model, p) {
+        1e-6
+    } else {
+        1e-6 * length_scale
+    }
+}
+
+/// The Jacobian ∂k(q_i)/∂θ of every `params` at `model` over `data`: (N·m) × params.len(),
+/// rows ordered (row i, coordinate c) → m·i + c.
+pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> Mat<f64> {
+    let (n, m, rows) = (model.n_joints(), model.task_dim(), data.len());
+    let mut jac = Mat::<f64>::zeros(m * rows, params.len());
+    // Size of the workspace (for the difference step of lengths): the model's own positions.
+    let length_scale = predict(model, &data.joints).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
+    // Geometric columns: central differences of the whole augmented model.
+    for (col, p) in params.iter().enumerate() {
+        if let Param::Geometric(_) = p {
+            let h = fd_step(model, p, length_scale);
+            let plus = apply(model, &[*p], &[h]).expect("geometric change adds no effect");
+            let minus = apply(model, &[*p], &[-h]).expect("geometric change adds no effect");
+            for i in 0..rows {
+                let (a, b) = (kinematics::position(&plus, data.joints(i)), kinematics::position(&minus, data.joints(i)));
+                for c in 0..m {
+                    jac[(m * i + c, col)] = (a[c] - b[c]) / (2.0 * h);
+                }
+            }
+        }
+    }
+    // Effect columns: responses of unit-valued effects.
+    let rigid = kinematics::rigid(model);
+    let effects: Vec<(usize, Effect)> = params.iter().enumerate().filter_map(|(col, p)| effect_of(p, 1.0).map(|e| (col, e))).collect();
+    if effects.is_empty() {
+        return jac;
+    }
+    for i in 0..rows {
+        let q = data.joints(i);
+        let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q);
+        for (col, e) in &effects {
+            match kinematics::response(model, e, q) {
+                Response::Joint(delta) => {
+                    for c in 0..m {
+                        jac[(m * i + c, *col)] = (0..n).map(|d| dk[c * n + d] * delta[d]).sum();
+                    }
+                }
+                Response::Task(b) => {
+                    for c in 0..m {
+                        jac[(m * i + c, *col)] = b[c];
+                    }
+                }
+            }
+        }
+    }
+    jac
+}
+
+/// Indices of the columns of `jac` (among `candidates`) that form an identifiable set: greedy
+/// column-pivoted Gram–Schmidt on unit-scaled columns; a column whose part orthogonal to those
+/// kept is below `tol` of its own norm is left out (a redundant or unidentifiable direction).
+pub fn identifiable_columns(jac: &Mat<f64>, candidates: &[usize], tol: f64) -> Vec<usize> {
+    let rows = jac.nrows();
+    let mut cols: Vec<(usize, Vec<f64>)> = candidates
+        .iter()
+        .filter_map(|&k| {
+            let norm = (0..rows).map(|i| jac[(i, k)].powi(2)).sum::<f64>().sqrt();
+            (norm > 0.0).then(|| (k, (0..rows).map(|i| jac[(i, k)] / norm).collect()))
+        })
+        .collect();
+    let mut kept = Vec::new();
+    loop {
+        let best = cols
+            .iter()
+            .enumerate()
+            .map(|(pos, (_, v))| (pos, v.iter().map(|x| x * x).sum::<f64>().sqrt()))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        let Some((pos, size)) = best else { break };
+        if size <= tol {
+            break;
+        }
+        let (k, v) = cols.remove(pos);
+        let unit: Vec<f64> = v.iter().map(|x| x / size).collect();
+        for (_, w) in cols.iter_mut() {
+            let d: f64 = unit.iter().zip(w.iter()).map(|(a, b)| a * b).sum();
+            for (x, u) in w.iter_mut().zip(&unit) {
+                *x -= d * u;
+            }
+        }
+        kept.push(k);
+    }
+    kept.sort_unstable();
+    kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn geometric_and_effect_columns_match_finite_differences() {
+        let model = crate::simulate::rr::nominal();
+        let groups = candidate_groups(&model, &LibraryOptions { harmonics: 2 });
+        let params: Vec<Param> = groups.iter().flat_map(|g| g.params.clone()).collect();
+        let mut data = Measurements::new(2, 2);
+        for q in [[0.3, 1.2], [-2.0, 0.4], [2.5, -1.1]] {
+            data.push(&q, &[0.0, 0.0]);
+        }
+        let jac = jacobian(&model, &data, &params);
+        for (col, p) in params.iter().enumerate() {
+            let h = 1e-6;
+            let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
+            let (a, b) = (predict(&plus, &data.joints), predict(&minus, &data.joints));
+            for r in 0..a.len() {
+                let fd = (a[r] - b[r]) / (2.0 * h);
+                assert!(
+                    (fd - jac[(r, col)]).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "{} row {r}: fd {fd} vs {}",
+                    param_name(&model, p),
+                    jac[(r, col)]
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,329 @@
+//! `cbd diagnose`: find the structure left in a model's residual, trace it to physical effects of
+//! a library, keep the effects that hold up out of sample, and report the error before and after.
+//!
+//! Stages (one file each): residual structure tests (`structure`, `f_test`) → library Jacobians
+//! (`library`, `kinematics`) → cross-validated forward selection (`selection`) → Gauss–Newton
+//! refinement with uncertainties (`refine`) → held-out comparison and report (`report`).
+
+pub mod f_test;
+pub mod kinematics;
+pub mod library;
+pub mod refine;
+pub mod report;
+pub mod selection;
+pub mod structure;
+
+use crate::baselines::compare::CorrectionFitter;
+use crate::data::Measurements;
+use crate::report::stats::ErrorStats;
+use cbd_protocol::NominalModel;
+use library::{candidate_groups, identifiable_columns, jacobian, predict, Group, GroupKind, LibraryOptions, Param};
+use selection::{forward_select, LinearProblem, Selection, SelectionOptions};
+use structure::{structure_tests, StructureOptions, StructureTest};
+
+/// Settings of a diagnosis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiagnoseOptions {
+    pub library: LibraryOptions,
+    pub selection: SelectionOptions,
+    pub structure: StructureOptions,
+    /// Share of the rows held out when no test set is given.
+    pub holdout_fraction: f64,
+    /// Geometric columns whose part orthogonal to the others is below this (relative) are
+    /// unidentifiable and stay at their nominal values.
+    pub identifiability_tolerance: f64,
+    pub gauss_newton_iterations: usize,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            library: LibraryOptions::default(),
+            selection: SelectionOptions::default(),
+            structure: StructureOptions::default(),
+            holdout_fraction: 0.2,
+            identifiability_tolerance: 1e-5,
+            gauss_newton_iterations: 10,
+        }
+    }
+}
+
+/// One parameter of a found effect.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FoundParameter {
+    pub name: String,
+    pub param: Param,
+    pub value: f64,
+    pub std_error: f64,
+}
+
+/// An effect group the selection kept.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FoundEffect {
+    pub name: String,
+    pub kind: GroupKind,
+    /// 0-based joint (link, for bending); `None` for geometric.
+    pub joint: Option<usize>,
+    pub parameters: Vec<FoundParameter>,
+    /// Share of the training residual sum of squares of the starting model that this group
+    /// explains when added in selection order (SSE before it minus SSE after, over the start's).
+    pub share: f64,
+    /// What this group alone explains of what all the other selected groups leave (drop-one:
+    /// SSE without it minus SSE with all, over SSE without it).
+    pub partial_share: f64,
+    /// Cross-validated RMS position error after this group was added (selection order).
+    pub cv_rms: f64,
+}
+
+/// One line of the held-out table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableRow {
+    pub name: String,
+    pub stats: ErrorStats,
+    pub errors: Vec<f64>,
+}
+
+/// Everything a diagnosis found.
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    /// Anything the report must mention (rows skipped and why).
+    pub notes: Vec<String>,
+    pub train_rows: usize,
+    pub test_rows: usize,
+    /// `test set` or `held-out split`.
+    pub held_out: &'static str,
+    pub structure_before: Vec<StructureTest>,
+    pub structure_after: Vec<StructureTest>,
+    pub selection: Selection,
+    pub candidates: usize,
+    /// Names of all candidate groups (indices of `selection`).
+    pub group_names: Vec<String>,
+    /// The selection's margin (relative CV drop a group needed).
+    pub margin: f64,
+    pub found: Vec<FoundEffect>,
+    /// The model with the found effects (geometric corrections in the chain, effects listed).
+    pub model_after: NominalModel,
+    /// Structure still significant after the effects: CbD is what absorbs it.
+    pub unexplained_structure: bool,
+    pub table: Vec<TableRow>,
+    /// Training residual (row-major) of the starting model and of `model_after`.
+    pub residual_before: Vec<f64>,
+    pub residual_after: Vec<f64>,
+    /// Training rows actually used (after any held-out split).
+    pub train: Measurements,
+}
+
+impl Diagnosis {
+    /// The found effects other than geometric corrections.
+    pub fn physical_effects(&self) -> Vec<&FoundEffect> {
+        self.found.iter().filter(|f| f.kind != GroupKind::Geometric).collect()
+    }
+
+    pub fn row(&self, name: &str) -> Option<&TableRow> {
+        self.table.iter().find(|r| r.name == name)
+    }
+}
+
+/// Splits `data` into (fit, held-out) rows by a seeded permutation.
+pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurements, Measurements) {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let mut order: Vec<usize> = (0..data.len()).collect();
+    order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+    let held = ((data.len() as f64 * fraction).round() as usize).clamp(1, data.len().saturating_sub(2).max(1));
+    let (test, train) = order.split_at(held);
+    let (mut train, mut test) = (train.to_vec(), test.to_vec());
+    train.sort_unstable();
+    test.sort_unstable();
+    (data.subset(&train), data.subset(&test))
+}
+
+/// Largest difference between the runtime's forward kinematics and the diagnosis's augmented
+/// kinematics over the rows of `data`.
+fn runtime_gap(model: &NominalModel, data: &Measurements) -> f64 {
+    let m = model.task_dim();
+    (0..data.len())
+        .map(|i| {
+            let q = data.joints(i);
+            let runtime = cbd_runtime::nominal::forward_kinematics(model, q).position;
+            kinematics::position(model, q).iter().zip(&runtime[..m]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
+}
+
+fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
+    predict(model, &data.joints).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
+}
+
+/// Columns of each group that enter the selection: geometric pruned to an identifiable set,
+/// other groups' columns kept when not (numerically) zero and not in the span of the
+/// identifiable geometric columns.
+fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol: f64) -> Vec<Vec<usize>> {
+    let norms: Vec<f64> = (0..jac.ncols()).map(|k| (0..jac.nrows()).map(|i| jac[(i, k)].powi(2)).sum::<f64>().sqrt()).collect();
+    // A column of rounding noise (e.g. the gravity torque about a vertical axis) is zero:
+    // compare with the largest column of the same effect type.
+    let mut largest = std::collections::BTreeMap::new();
+    for (g, group) in groups.iter().enumerate() {
+        let e = largest.entry(group.kind.type_name()).or_insert(0.0f64);
+        *e = norms[offsets[g]..offsets[g] + group.params.len()].iter().fold(*e, |a, &b| a.max(b));
+    }
+    let mut geometric: Vec<usize> = Vec::new();
+    groups
+        .iter()
+        .enumerate()
+        .map(|(g, group)| {
+            let cols: Vec<usize> = (offsets[g]..offsets[g] + group.params.len())
+                .filter(|&k| norms[k] > 1e-9 * largest[group.kind.type_name()] && norms[k] > 0.0)
+                .collect();
+            if group.kind == GroupKind::Geometric {
+                geometric = identifiable_columns(jac, &cols, tol);
+                geometric.clone()
+            } else {
+                let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
+                let kept = identifiable_columns(jac, &with, tol);
+                if cols.iter().all(|c| kept.contains(c)) {
+                    cols
+                } else {
+                    Vec::new()
+                }
+            }
+        })
+        .collect()
+}
+
+/// Diagnoses `model` (nominal plus any effects it already declares) on `data`. Held-out rows:
+/// `test` when given, otherwise a split of `data`. `cbd` fits the nonparametric correction for
+/// the table's CbD rows (skipped when `None`).
+pub fn diagnose(
+    model: &NominalModel,
+    data: &Measurements,
+    test: Option<&Measurements>,
+    cbd: Option<CorrectionFitter>,
+    options: &DiagnoseOptions,
+) -> Result<Diagnosis, String> {
+    let (train, test, held_out) = match test {
+        Some(t) => (data.clone(), t.clone(), "test set"),
+        None => {
+            let (a, b) = holdout_split(data, options.holdout_fraction, options.selection.seed.wrapping_add(17));
+            (a, b, "held-out split")
+        }
+    };
+    if train.len() < 10 {
+        return Err(format!("diagnose needs at least 10 training rows, got {}", train.len()));
+    }
+    let m = model.task_dim();
+    // 1. Residuals of the current model and 2. their structure.
+    let r0 = residual(model, &train);
+    let structure_before = structure_tests(model, &train, &r0, &options.structure);
+    // 3. The library's columns at the current model.
+    let groups = candidate_groups(model, &options.library);
+    let params: Vec<Param> = groups.iter().flat_map(|g| g.params.clone()).collect();
+    let mut offsets = Vec::with_capacity(groups.len());
+    let mut at = 0;
+    for g in &groups {
+        offsets.push(at);
+        at += g.params.len();
+    }
+    let jac = jacobian(model, &train, &params);
+    let group_cols = usable_columns(&groups, &offsets, &jac, options.identifiability_tolerance);
+    // 4. Selection, judged out of sample.
+    let problem = LinearProblem::new(&jac, &r0, m, options.selection.folds, options.selection.seed);
+    let selection = forward_select(&problem, &group_cols, &options.selection);
+    let chosen_cols: Vec<usize> = selection.selected.iter().flat_map(|&g| group_cols[g].clone()).collect();
+    let (start, full_sse) = problem.fit(&chosen_cols);
+    let chosen_params: Vec<Param> = chosen_cols.iter().map(|&k| params[k]).collect();
+    let refined = refine::refine(model, &train, &chosen_params, &start, options.gauss_newton_iterations)?;
+    let base_sse = problem.base_sse().max(f64::MIN_POSITIVE);
+    let found: Vec<FoundEffect> = selection
+        .selected
+        .iter()
+        .zip(&selection.steps)
+        .enumerate()
+        .map(|(order, (&g, step))| {
+            let earlier: Vec<usize> = selection.selected[..order].iter().flat_map(|&e| group_cols[e].clone()).collect();
+            let with: Vec<usize> = earlier.iter().chain(&group_cols[g]).copied().collect();
+            let gain = problem.fit(&earlier).1 - problem.fit(&with).1;
+            let without: Vec<usize> = chosen_cols.iter().copied().filter(|c| !group_cols[g].contains(c)).collect();
+            let (_, sse_without) = problem.fit(&without);
+            let parameters = group_cols[g]
+                .iter()
+                .map(|c| {
+                    let pos = chosen_cols.iter().position(|k| k == c).expect("chosen");
+                    FoundParameter {
+                        name: library::param_name(model, &params[*c]),
+                        param: params[*c],
+                        value: refined.values[pos],
+                        std_error: refined.std_errors[pos],
+                    }
+                })
+                .collect();
+            FoundEffect {
+                name: groups[g].name.clone(),
+                kind: groups[g].kind,
+                joint: groups[g].joint,
+                parameters,
+                share: (gain / base_sse).max(0.0),
+                partial_share: ((sse_without - full_sse) / sse_without.max(f64::MIN_POSITIVE)).max(0.0),
+                cv_rms: step.cv_rms,
+            }
+        })
+        .collect();
+    // 6. Structure left after the effects.
+    let r1 = residual(&refined.model, &train);
+    let structure_after = structure_tests(&refined.model, &train, &r1, &options.structure);
+    let unexplained_structure = structure_after.iter().any(|t| t.significant);
+    // 5. Held-out table.
+    let mut table = Vec::new();
+    let mut push = |name: &str, predicted: Vec<f64>| {
+        let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
+        table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
+    };
+    push("nominal", predict(model, &test.joints));
+    // What the geometric corrections alone give (refitted alone), beside the full set.
+    let mut geometric_only = None;
+    if found.iter().any(|f| f.kind == GroupKind::Geometric) && found.len() > 1 {
+        let gp: Vec<Param> = chosen_params.iter().copied().filter(|p| matches!(p, Param::Geometric(_))).collect();
+        let gs: Vec<f64> = chosen_params.iter().zip(&start).filter(|(p, _)| matches!(p, Param::Geometric(_))).map(|(_, v)| *v).collect();
+        let geo = refine::refine(model, &train, &gp, &gs, options.gauss_newton_iterations)?;
+        push("nominal + geometric", predict(&geo.model, &test.joints));
+        geometric_only = Some(geo.model);
+    }
+    push("nominal + effects", predict(&refined.model, &test.joints));
+    let mut notes = Vec::new();
+    if let Some(fit) = cbd {
+        // CbD runs on the runtime's kinematics: only meaningful if it evaluates the effects as
+        // the diagnosis does.
+        let gap = runtime_gap(&refined.model, &train);
+        if gap <= 1e-9 * (1.0 + train.positions.iter().fold(0.0f64, |a, v| a.max(v.abs()))) {
+            let with_effects = fit(&refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+            push("nominal + effects + CbD", with_effects(&test.joints));
+        } else {
+            notes.push(format!("nominal + effects + CbD skipped: the runtime's forward kinematics differs from the diagnosis's by {gap:.3e} (effects not evaluated by the runtime)"));
+        }
+        if let Some(geo) = &geometric_only {
+            let with_geometry = fit(geo, &train).map_err(|e| format!("CbD on nominal + geometric: {e}"))?;
+            push("nominal + geometric + CbD", with_geometry(&test.joints));
+        }
+        let plain = fit(model, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
+        push("nominal + CbD", plain(&test.joints));
+    }
+    Ok(Diagnosis {
+        notes,
+        train_rows: train.len(),
+        test_rows: test.len(),
+        held_out,
+        structure_before,
+        structure_after,
+        candidates: group_cols.iter().filter(|c| !c.is_empty()).count(),
+        selection,
+        margin: options.selection.margin,
+        group_names: groups.iter().map(|g| g.name.clone()).collect(),
+        found,
+        model_after: refined.model,
+        unexplained_structure,
+        table,
+        residual_before: r0,
+        residual_after: r1,
+        train,
+    })
+}

@@ -1,0 +1,211 @@
+//! The diagnosis as text (stdout) and JSON (`--json`), and the residual figure (`--plots`).
+
+use super::library::{is_angle, GroupKind, Param};
+use super::{Diagnosis, FoundEffect};
+use crate::report::plots::EffectCurve;
+use cbd_protocol::NominalModel;
+use serde_json::{json, Value};
+
+/// Unit of a parameter, as printed: angles in degrees, lengths in the model's unit.
+fn unit_of(model: &NominalModel, p: &Param, length: &str) -> String {
+    match p {
+        _ if is_angle(model, p) => "deg".into(),
+        Param::Geometric(_) => length.into(),
+        Param::EncoderScale { .. } => "(ratio)".into(),
+        Param::GravityCompliance { .. } => format!("rad/(mass·{length})"),
+        Param::LinkBending { .. } => length.into(),
+        _ => String::new(),
+    }
+}
+
+fn shown(model: &NominalModel, p: &Param, v: f64) -> f64 {
+    if is_angle(model, p) {
+        v.to_degrees()
+    } else {
+        v
+    }
+}
+
+/// The stdout report.
+pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
+    let mut out = format!(
+        "diagnosis on {} training rows; held-out rows: {} ({})\n\nstructure in the residual of the current model (significant, strongest first):\n",
+        d.train_rows, d.test_rows, d.held_out
+    );
+    let list = |tests: &[super::structure::StructureTest]| -> String {
+        let s = super::structure::significant(tests);
+        if s.is_empty() {
+            return "  none\n".into();
+        }
+        s.iter()
+            .map(|t| {
+                format!("  {:<24} explains {:>6.2} %  F = {:.3e}  p = {:.1e}\n", t.name, 100.0 * t.test.explained, t.test.f, t.test.p_value)
+            })
+            .collect()
+    };
+    out += &list(&d.structure_before);
+    out +=
+        &format!("\nselection ({} candidate groups, cross-validated RMS {:.4e} {unit} before):\n", d.candidates, d.selection.cv_rms_before);
+    if d.found.is_empty() {
+        out += "  no effect lowers the cross-validated error by the required margin: none found\n";
+    }
+    for f in &d.found {
+        out += &format!(
+            "  {:<32} explains {:>6.2} % of the residual ({:>6.2} % of what the others leave); CV RMS after {:.4e}\n",
+            f.name,
+            100.0 * f.share,
+            100.0 * f.partial_share,
+            f.cv_rms
+        );
+        if f.kind == GroupKind::Geometric && f.parameters.len() > 8 {
+            out += &format!("      {} identifiable DH/base/tool parameters (see --json); largest changes:\n", f.parameters.len());
+        }
+        let mut ps: Vec<_> = f.parameters.iter().collect();
+        if f.kind == GroupKind::Geometric {
+            ps.sort_by(|a, b| (b.value / b.std_error.max(1e-300)).abs().total_cmp(&(a.value / a.std_error.max(1e-300)).abs()));
+            ps.truncate(8);
+        }
+        for p in ps {
+            out += &format!(
+                "      {:<22} {:>+12.5e} ± {:.1e} {}\n",
+                p.name,
+                shown(model, &p.param, p.value),
+                shown(model, &p.param, p.std_error),
+                unit_of(model, &p.param, unit)
+            );
+        }
+    }
+    if let Some((g, cv)) = d.selection.best_refused {
+        let before = d.selection.cv_rms_after();
+        out += &format!(
+            "  (best refused: {}, CV RMS {cv:.4e}, {:.1} % lower: below the {:.0} % margin)\n",
+            d.group_names[g],
+            100.0 * (1.0 - cv / before),
+            100.0 * d.margin
+        );
+    }
+    out += "\nstructure left after the effects:\n";
+    out += &list(&d.structure_after);
+    if d.unexplained_structure {
+        out += "  => unexplained structure: no library effect accounts for it; CbD absorbs it (table below)\n";
+    }
+    out += &format!("\nheld-out error ({unit}), {} rows:\n", d.test_rows);
+    out += &format!("  {:<26} {:>11} {:>11} {:>11} {:>11}\n", "model", "mean", "median", "p99", "max");
+    for r in &d.table {
+        out +=
+            &format!("  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max);
+    }
+    for n in &d.notes {
+        out += &format!("  note: {n}\n");
+    }
+    out
+}
+
+fn effect_json(model: &NominalModel, f: &FoundEffect, unit: &str) -> Value {
+    json!({
+        "name": f.name,
+        "type": f.kind.type_name(),
+        "joint": f.joint.map(|j| j + 1),
+        "harmonic": match f.kind { GroupKind::Transmission { harmonic } => Some(harmonic), _ => None },
+        "share": f.share,
+        "partial_share": f.partial_share,
+        "cv_rms_after": f.cv_rms,
+        "parameters": f.parameters.iter().map(|p| json!({
+            "name": p.name, "value": shown(model, &p.param, p.value), "std_error": shown(model, &p.param, p.std_error),
+            "unit": unit_of(model, &p.param, unit),
+        })).collect::<Vec<_>>(),
+    })
+}
+
+/// The `--json` shape: `{found: [...], structure_before/after: [...], unexplained_structure,
+/// selection: {...}, held_out: {name: {mean, median, p99, max}}, ...}`.
+pub fn to_json(d: &Diagnosis, model: &NominalModel, unit: &str) -> Value {
+    let tests = |t: &[super::structure::StructureTest]| -> Vec<Value> {
+        t.iter()
+            .map(|t| {
+                json!({"name": t.name, "family": t.family, "joint": t.joint.map(|j| j + 1), "f": t.test.f, "df1": t.test.df1,
+                       "df2": t.test.df2, "p_value": t.test.p_value, "explained": t.test.explained, "significant": t.significant})
+            })
+            .collect()
+    };
+    let mut held = serde_json::Map::new();
+    for r in &d.table {
+        held.insert(r.name.clone(), json!({"mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max}));
+    }
+    json!({
+        "unit": unit,
+        "train_rows": d.train_rows,
+        "test_rows": d.test_rows,
+        "held_out_source": d.held_out,
+        "found": d.found.iter().map(|f| effect_json(model, f, unit)).collect::<Vec<_>>(),
+        "physical_effects": d.physical_effects().len(),
+        "unexplained_structure": d.unexplained_structure,
+        "structure_before": tests(&d.structure_before),
+        "structure_after": tests(&d.structure_after),
+        "selection": {"candidates": d.candidates, "margin": d.margin,
+                      "best_refused": d.selection.best_refused.map(|(g, cv)| json!({"group": d.group_names[g], "cv_rms": cv})), "cv_rms_before": d.selection.cv_rms_before, "cv_rms_after": d.selection.cv_rms_after()},
+        "held_out": held,
+        "notes": d.notes,
+    })
+}
+
+/// `residual_vs_joint` figure: the norm of the residual left by the geometric corrections (the
+/// training residual of the final model plus the physical effects' own contribution) against
+/// each joint, with each joint effect's contribution (mean over the rows) drawn as a curve.
+pub fn plots(
+    dir: &std::path::Path,
+    d: &Diagnosis,
+    model_start: &NominalModel,
+    joint_names: &[String],
+    unit: &str,
+) -> Result<Vec<std::path::PathBuf>, String> {
+    use super::library::{apply, predict};
+    let n = model_start.n_joints();
+    let m = model_start.task_dim();
+    // The model with only the geometric part of the found corrections.
+    let (gp, gv): (Vec<Param>, Vec<f64>) =
+        d.found.iter().filter(|f| f.kind == GroupKind::Geometric).flat_map(|f| f.parameters.iter().map(|p| (p.param, p.value))).unzip();
+    let geometric = apply(model_start, &gp, &gv)?;
+    let before = predict(&geometric, &d.train.joints);
+    let residual: Vec<f64> = before
+        .chunks_exact(m)
+        .zip(d.train.positions.chunks_exact(m))
+        .map(|(k, y)| k.iter().zip(y).map(|(a, b)| (b - a).powi(2)).sum::<f64>().sqrt())
+        .collect();
+    let mut curves: Vec<EffectCurve> = Vec::new();
+    for f in d.physical_effects() {
+        let Some(j) = f.joint else { continue };
+        if !matches!(f.kind, GroupKind::Transmission { .. } | GroupKind::EncoderScale) {
+            continue;
+        }
+        // |Δk| of this effect alone at each row, averaged in bins of q_j.
+        let (p, v): (Vec<Param>, Vec<f64>) = f.parameters.iter().map(|p| (p.param, p.value)).unzip();
+        let alone = apply(&geometric, &p, &v)?;
+        let with = predict(&alone, &d.train.joints);
+        let bins = 48;
+        let qs: Vec<f64> = d.train.joints.chunks_exact(n).map(|q| q[j]).collect();
+        let (lo, hi) = qs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let mut sum = vec![(0.0, 0usize); bins];
+        for (i, q) in qs.iter().enumerate() {
+            let b = (((q - lo) / (hi - lo).max(1e-12)) * bins as f64).min(bins as f64 - 1.0) as usize;
+            let dist = (0..m).map(|c| (with[m * i + c] - before[m * i + c]).powi(2)).sum::<f64>().sqrt();
+            sum[b].0 += dist;
+            sum[b].1 += 1;
+        }
+        let curve = sum
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.1 > 0)
+            .map(|(b, s)| (lo + (b as f64 + 0.5) * (hi - lo) / bins as f64, s.0 / s.1 as f64))
+            .collect();
+        curves.push((f.name.clone(), j, curve));
+    }
+    crate::report::plots::residual_vs_joint(
+        dir,
+        joint_names,
+        &d.train.joints,
+        &residual,
+        &format!("residual norm after geometric corrections ({unit})"),
+        &curves,
+    )
+}

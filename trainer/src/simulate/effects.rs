@@ -1,0 +1,327 @@
+//! Physical effects injected into simulated measurements, implemented here independently of the
+//! runtime's `cbd_runtime::effects` (own frame walk, gravity torques by differentiating the
+//! potential energy numerically): an independent check of what `cbd diagnose` finds and of what
+//! the runtime evaluates. Also effects outside the diagnosis library (a localized bump, a dead
+//! zone, a thermal-like drift) for testing that they are reported as unexplained structure.
+//!
+//! Augmented kinematics (h4-common.md): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
+
+use crate::nominal::{dh_frames, dot, norm, scale, sub};
+use cbd_protocol::{GravityModel, NominalModel};
+use cbd_runtime::nominal::forward_kinematics;
+
+/// One injected effect. `joint`/`link` are 0-based.
+#[derive(Debug, Clone, PartialEq)]
+pub enum InjectedEffect {
+    /// δ_j += scale · q_j.
+    EncoderScale { joint: usize, scale: f64 },
+    /// δ_j += cos · cos(h q_j) + sin · sin(h q_j).
+    Transmission { joint: usize, harmonic: u32, cos: f64, sin: f64 },
+    /// δ_j += compliance · τ_j(q), τ_j = ∂V/∂q_j with V(q) = Σ_k m_k g·c_k(q) (rigid chain at q).
+    GravityCompliance { joint: usize, compliance: f64 },
+    /// b += compliance · (g − (g·u_k) u_k), u_k the unit direction of link k (rigid chain at q).
+    LinkBending { link: usize, compliance: f64 },
+    /// Outside the library: task-space displacement `amplitude` · exp(−|q − centre|² / (2 width²))
+    /// (joint-space distance, angles wrapped to (−π, π]).
+    Bump { centre: Vec<f64>, width: f64, amplitude: [f64; 3] },
+    /// Outside the library: joint `joint` does not move within ±`width` of zero
+    /// (q_eff = sign(q) max(|q| − width, 0)), a hysteresis-free dead zone.
+    DeadZone { joint: usize, width: f64 },
+    /// Outside the library: every task coordinate drifts by `per_row` × row index (a warming
+    /// machine measured in sequence; not a function of the configuration at all).
+    ThermalDrift { per_row: [f64; 3] },
+}
+
+impl InjectedEffect {
+    /// Whether `cbd diagnose`'s library can represent it.
+    pub fn in_library(&self) -> bool {
+        matches!(
+            self,
+            InjectedEffect::EncoderScale { .. }
+                | InjectedEffect::Transmission { .. }
+                | InjectedEffect::GravityCompliance { .. }
+                | InjectedEffect::LinkBending { .. }
+        )
+    }
+}
+
+/// A simulated arm: a rigid chain (the "real" geometry; its own effect list is ignored) plus
+/// undeclared effects, under the gravity/mass model `gravity`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectArm {
+    pub rigid: NominalModel,
+    pub gravity: GravityModel,
+    pub effects: Vec<InjectedEffect>,
+}
+
+/// Distal ends c_k of every link (k = 0..n) and the start of link 0, on the rigid chain at `q`.
+/// DH: origins of frames 1..n (frame 0 = base); planar: ends of the links from the origin.
+fn link_points(rigid: &NominalModel, q: &[f64]) -> Vec<[f64; 3]> {
+    match rigid {
+        NominalModel::DhChain(chain) => dh_frames(chain, q).iter().take(chain.joints.len() + 1).map(|f| f.t).collect(),
+        NominalModel::PlanarChain { lengths, .. } => {
+            let mut out = vec![[0.0; 3]];
+            let (mut p, mut theta) = ([0.0; 3], 0.0);
+            for (l, qk) in lengths.iter().zip(q) {
+                theta += qk;
+                p[0] += l * theta.cos();
+                p[1] += l * theta.sin();
+                out.push(p);
+            }
+            out
+        }
+    }
+}
+
+fn gravity_vector(rigid: &NominalModel, gravity: &GravityModel) -> [f64; 3] {
+    match rigid {
+        NominalModel::PlanarChain { .. } => [gravity.direction[0], gravity.direction[1], 0.0],
+        NominalModel::DhChain(_) => gravity.direction,
+    }
+}
+
+fn mass(gravity: &GravityModel, k: usize) -> f64 {
+    gravity.link_masses.get(k).copied().unwrap_or(1.0)
+}
+
+/// V(q) = Σ_k m_k g·c_k(q): minus the potential energy of the point masses (so that τ = ∂V/∂q).
+fn gravity_potential(rigid: &NominalModel, gravity: &GravityModel, q: &[f64]) -> f64 {
+    let g = gravity_vector(rigid, gravity);
+    link_points(rigid, q).iter().skip(1).enumerate().map(|(k, c)| mass(gravity, k) * dot(g, *c)).sum()
+}
+
+/// τ_j(q) = ∂V/∂q_j by central differences (step 1e-6; V is smooth, error ~1e-12 relative).
+pub fn gravity_torques_numerical(rigid: &NominalModel, gravity: &GravityModel, q: &[f64]) -> Vec<f64> {
+    let h = 1e-6;
+    (0..q.len())
+        .map(|j| {
+            let mut qp = q.to_vec();
+            qp[j] += h;
+            let vp = gravity_potential(rigid, gravity, &qp);
+            qp[j] -= 2.0 * h;
+            let vm = gravity_potential(rigid, gravity, &qp);
+            (vp - vm) / (2.0 * h)
+        })
+        .collect()
+}
+
+fn wrap(a: f64) -> f64 {
+    a.sin().atan2(a.cos())
+}
+
+impl EffectArm {
+    /// A rigid chain with no effect yet, gravity from the chain's own effects' gravity model.
+    pub fn new(rigid: NominalModel) -> EffectArm {
+        let gravity = rigid.effects().gravity.clone();
+        let mut rigid = rigid;
+        rigid.effects_mut().list.clear();
+        EffectArm { rigid, gravity, effects: Vec::new() }
+    }
+
+    pub fn with(mut self, effect: InjectedEffect) -> EffectArm {
+        self.effects.push(effect);
+        self
+    }
+
+    /// Joint deflection δ(q).
+    pub fn deflection(&self, q: &[f64]) -> Vec<f64> {
+        let mut delta = vec![0.0; q.len()];
+        let mut tau: Option<Vec<f64>> = None;
+        for e in &self.effects {
+            match *e {
+                InjectedEffect::EncoderScale { joint, scale } => delta[joint] += scale * q[joint],
+                InjectedEffect::Transmission { joint, harmonic, cos, sin } => {
+                    let hq = harmonic as f64 * q[joint];
+                    delta[joint] += cos * hq.cos() + sin * hq.sin();
+                }
+                InjectedEffect::GravityCompliance { joint, compliance } => {
+                    let t = tau.get_or_insert_with(|| gravity_torques_numerical(&self.rigid, &self.gravity, q));
+                    delta[joint] += compliance * t[joint];
+                }
+                InjectedEffect::DeadZone { joint, width } => {
+                    let v = q[joint];
+                    delta[joint] += v.signum() * (v.abs() - width).max(0.0) - v;
+                }
+                _ => {}
+            }
+        }
+        delta
+    }
+
+    /// Task-space terms that do not go through the joints: bending, bumps, drift at row `row`.
+    fn task_terms(&self, q: &[f64], row: usize) -> [f64; 3] {
+        let mut b = [0.0; 3];
+        let g = gravity_vector(&self.rigid, &self.gravity);
+        for e in &self.effects {
+            match e {
+                InjectedEffect::LinkBending { link, compliance } => {
+                    let pts = link_points(&self.rigid, q);
+                    let along = sub(pts[link + 1], pts[*link]);
+                    let len = norm(along);
+                    if len > 0.0 {
+                        let u = scale(along, 1.0 / len);
+                        let gu = dot(g, u);
+                        for c in 0..3 {
+                            b[c] += compliance * (g[c] - gu * u[c]);
+                        }
+                    }
+                }
+                InjectedEffect::Bump { centre, width, amplitude } => {
+                    let d2: f64 = q.iter().zip(centre).map(|(a, c)| wrap(a - c).powi(2)).sum();
+                    let w = (-d2 / (2.0 * width * width)).exp();
+                    for c in 0..3 {
+                        b[c] += amplitude[c] * w;
+                    }
+                }
+                InjectedEffect::ThermalDrift { per_row } => {
+                    for c in 0..3 {
+                        b[c] += per_row[c] * row as f64;
+                    }
+                }
+                _ => {}
+            }
+        }
+        b
+    }
+
+    /// Noise-free position at commanded joints `q`, measured as row `row` of a sequence.
+    pub fn position(&self, q: &[f64], row: usize) -> Vec<f64> {
+        let delta = self.deflection(q);
+        let moved: Vec<f64> = q.iter().zip(&delta).map(|(a, d)| a + d).collect();
+        let k = forward_kinematics(&self.rigid, &moved);
+        let b = self.task_terms(q, row);
+        (0..self.rigid.task_dim()).map(|c| k.position[c] + b[c]).collect()
+    }
+
+    /// Measurements at `joints` (row-major), with Gaussian noise of standard deviation `noise`.
+    pub fn measure(&self, joints: &[f64], noise: f64, seed: u64) -> crate::data::Measurements {
+        let n = self.rigid.n_joints();
+        let mut positions: Vec<f64> = joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i)).collect();
+        super::add_noise(&mut positions, noise, seed);
+        crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), joints: joints.to_vec(), positions }
+    }
+}
+
+/// Parses `type:key=value,...`, e.g. `transmission:joint=2,harmonic=2,cos=0.001,sin=0`
+/// (joints and links 1-based on the command line; angles in radians, lengths in model units).
+/// Types: encoder_scale (scale), transmission (harmonic, cos, sin), gravity_compliance
+/// (compliance), link_bending (link, compliance), bump (centre=a;b;..., width, dx, dy, dz),
+/// dead_zone (width), thermal (dx, dy, dz per row).
+pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, String> {
+    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+    let mut kv = std::collections::BTreeMap::new();
+    for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
+        let (k, v) = part.split_once('=').ok_or_else(|| format!("--effect {spec}: `{part}` is not key=value"))?;
+        kv.insert(k.trim().to_string(), v.trim().to_string());
+    }
+    let num = |k: &str, default: Option<f64>| -> Result<f64, String> {
+        match kv.get(k) {
+            Some(v) => {
+                v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("--effect {spec}: {k}={v} is not a finite number"))
+            }
+            None => default.ok_or_else(|| format!("--effect {spec}: missing {k}=")),
+        }
+    };
+    let index = |k: &str| -> Result<usize, String> {
+        let v = num(k, None)?;
+        if v.fract() != 0.0 || v < 1.0 || v > n_joints as f64 {
+            return Err(format!("--effect {spec}: {k} must be between 1 and {n_joints}"));
+        }
+        Ok(v as usize - 1)
+    };
+    let effect = match kind {
+        "encoder_scale" => InjectedEffect::EncoderScale { joint: index("joint")?, scale: num("scale", None)? },
+        "transmission" => {
+            let h = num("harmonic", None)?;
+            if h.fract() != 0.0 || !(1.0..=16.0).contains(&h) {
+                return Err(format!("--effect {spec}: harmonic must be an integer from 1 to 16"));
+            }
+            InjectedEffect::Transmission { joint: index("joint")?, harmonic: h as u32, cos: num("cos", Some(0.0))?, sin: num("sin", Some(0.0))? }
+        }
+        "gravity_compliance" => InjectedEffect::GravityCompliance { joint: index("joint")?, compliance: num("compliance", None)? },
+        "link_bending" => InjectedEffect::LinkBending { link: index("link")?, compliance: num("compliance", None)? },
+        "bump" => {
+            let centre: Result<Vec<f64>, String> = kv
+                .get("centre")
+                .ok_or_else(|| format!("--effect {spec}: missing centre=q1;q2;..."))?
+                .split(';')
+                .map(|v| v.trim().parse::<f64>().map_err(|_| format!("--effect {spec}: bad centre value `{v}`")))
+                .collect();
+            let centre = centre?;
+            if centre.len() != n_joints {
+                return Err(format!("--effect {spec}: centre needs {n_joints} values"));
+            }
+            InjectedEffect::Bump {
+                centre,
+                width: num("width", None)?,
+                amplitude: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?],
+            }
+        }
+        "dead_zone" => InjectedEffect::DeadZone { joint: index("joint")?, width: num("width", None)? },
+        "thermal" => InjectedEffect::ThermalDrift { per_row: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?] },
+        other => {
+            return Err(format!(
+                "--effect {spec}: unknown type `{other}` (encoder_scale, transmission, gravity_compliance, link_bending, bump, dead_zone, thermal)"
+            ))
+        }
+    };
+    Ok(effect)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planar_gravity_torque_matches_the_hand_formula() {
+        // RR arm, g = −y, unit masses at the link ends: V = −(l1 s1 + l1 s1 + l2 s12),
+        // τ1 = −(2 l1 c1 + l2 c12), τ2 = −l2 c12.
+        let arm = EffectArm::new(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap());
+        let q = [0.7, -1.9];
+        let tau = gravity_torques_numerical(&arm.rigid, &arm.gravity, &q);
+        let c1 = q[0].cos();
+        let c12 = (q[0] + q[1]).cos();
+        assert!((tau[0] + 2.0 * c1 + 0.5 * c12).abs() < 1e-9, "{tau:?}");
+        assert!((tau[1] + 0.5 * c12).abs() < 1e-9, "{tau:?}");
+    }
+
+    #[test]
+    fn transmission_moves_the_joint_by_the_stated_angle() {
+        let arm = EffectArm::new(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap()).with(InjectedEffect::Transmission {
+            joint: 1,
+            harmonic: 2,
+            cos: 0.01,
+            sin: -0.02,
+        });
+        let q = [0.3, 1.1];
+        let d = arm.deflection(&q);
+        assert_eq!(d[0], 0.0);
+        assert!((d[1] - (0.01 * 2.2f64.cos() - 0.02 * 2.2f64.sin())).abs() < 1e-15);
+        let p = arm.position(&q, 0);
+        let t = 0.3 + 1.1 + d[1];
+        assert!((p[0] - (0.3f64.cos() + 0.5 * t.cos())).abs() < 1e-14);
+    }
+
+    #[test]
+    fn bending_of_a_horizontal_link_is_along_gravity() {
+        let arm = EffectArm::new(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap())
+            .with(InjectedEffect::LinkBending { link: 0, compliance: 0.01 });
+        let rigid = forward_kinematics(&arm.rigid, &[0.0, 0.4]).position;
+        let p = arm.position(&[0.0, 0.4], 0);
+        assert!((p[0] - rigid[0]).abs() < 1e-15 && (p[1] - rigid[1] + 0.01).abs() < 1e-15);
+        // A vertical link does not bend.
+        let p = arm.position(&[std::f64::consts::FRAC_PI_2, 0.4], 0);
+        let rigid = forward_kinematics(&arm.rigid, &[std::f64::consts::FRAC_PI_2, 0.4]).position;
+        assert!((p[0] - rigid[0]).abs() < 1e-15 && (p[1] - rigid[1]).abs() < 1e-15);
+    }
+
+    #[test]
+    fn parses_effect_specs() {
+        let e = parse_effect("transmission:joint=2,harmonic=2,cos=0.001", 2).unwrap();
+        assert_eq!(e, InjectedEffect::Transmission { joint: 1, harmonic: 2, cos: 0.001, sin: 0.0 });
+        assert!(parse_effect("transmission:joint=3,harmonic=2", 2).is_err());
+        assert!(parse_effect("wobble:joint=1", 2).is_err());
+        let b = parse_effect("bump:centre=1;2,width=0.3,dy=0.01", 2).unwrap();
+        assert!(!b.in_library());
+    }
+}

@@ -1,0 +1,106 @@
+//! The (damped) Gauss–Newton step of energy (16) as one least-squares problem:
+//! min_δ |J δ/σ + r|² + (P + δ)ᵀ K (P + δ) + δᵀ (μ I + λ D²) δ,  D² = diag(JᵀJ/σ² + K),
+//! solved by QR of [J/σ; Lᵀ] with L Lᵀ = K + μ I + λ D² (never JᵀJ: that would square J's condition).
+//! The regulariser and damping terms combine exactly: with M = L Lᵀ,
+//! Pᵀ K P + 2 δᵀ K P + δᵀ M δ = |Lᵀ δ + L⁻¹ K P|² + const, so the damping costs no extra rows.
+
+use super::least_squares::QrLeastSquares;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::{Accum, Mat, Par};
+
+/// The factorisation behind steps with one Jacobian and one damping; reusable for any residual
+/// and P (chord steps).
+pub struct StepFactor {
+    pub damping: f64,
+    /// Lᵀ, upper triangular.
+    lt: Mat<f64>,
+    qr: QrLeastSquares,
+}
+
+/// Lᵀ with L Lᵀ = K + diag(shift) + μ·mean(diag K)·I. μ starts at `proximal` and grows tenfold until the
+/// factorisation succeeds: kernel matrices of distinct points are positive definite but numerically
+/// singular. μ|δ|² is a proximal term (it vanishes at a fixed point, δ = 0).
+/// `par` is explicit (faer's global default follows the pool's thread count, which would make the
+/// rounding depend on it).
+fn factor_metric(k: &Mat<f64>, shift: Option<&[f64]>, proximal: f64, par: Par) -> Option<Mat<f64>> {
+    let dim = k.nrows();
+    let mean_diag = (0..dim).map(|i| k[(i, i)]).sum::<f64>() / dim as f64;
+    let mut jitter = proximal * mean_diag;
+    let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(dim, par, Default::default()));
+    for _ in 0..8 {
+        let mut kj = k.clone();
+        for i in 0..dim {
+            kj[(i, i)] += jitter + shift.map_or(0.0, |s| s[i]);
+        }
+        if cholesky_in_place(kj.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default()).is_ok() {
+            // L is in the lower triangle; Lᵀ, upper triangular.
+            return Some(Mat::from_fn(dim, dim, |r, c| if r <= c { kj[(c, r)] } else { 0.0 }));
+        }
+        jitter *= 10.0;
+    }
+    None
+}
+
+/// λ D² = λ diag(JᵀJ/σ² + K) (Marquardt's scaling).
+fn marquardt_shift(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64) -> Vec<f64> {
+    let dim = jac.ncols();
+    (0..dim).map(|c| damping * ((0..dim).map(|r| (jac[(r, c)] / sigma).powi(2)).sum::<f64>() + k[(c, c)])).collect()
+}
+
+impl StepFactor {
+    /// Factors the step for Jacobian `jac` (internal units) and damping `damping` (0: Gauss–Newton).
+    /// None when K + shifts cannot be factored.
+    pub fn new(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64, proximal: f64, par: Par) -> Option<Self> {
+        let shift = (damping > 0.0).then(|| marquardt_shift(jac, k, sigma, damping));
+        let lt = factor_metric(k, shift.as_deref(), proximal, par)?;
+        let dim = jac.ncols();
+        let stacked = Mat::from_fn(2 * dim, dim, |r, c| if r < dim { jac[(r, c)] / sigma } else { lt[(r - dim, c)] });
+        Some(StepFactor { damping, lt, qr: QrLeastSquares::factor(stacked, par) })
+    }
+
+    /// δ for the current momenta `p` and scaled residual `residual` = (k1 − y)/σ: the solution of
+    /// [J/σ; Lᵀ] δ ≈ [−r; −L⁻¹ K P].
+    pub fn step(&self, k: &Mat<f64>, residual: &[f64], p: &[f64]) -> Vec<f64> {
+        let dim = p.len();
+        let pm = Mat::from_fn(dim, 1, |i, _| p[i]);
+        let mut kp = Mat::zeros(dim, 1);
+        matmul(kp.as_mut(), Accum::Replace, k.as_ref(), pm.as_ref(), 1.0, Par::Seq);
+        solve_lower_triangular_in_place(self.lt.transpose(), kp.as_mut(), Par::Seq);
+        let rhs: Vec<f64> = residual.iter().map(|r| -r).chain((0..dim).map(|i| -kp[(i, 0)])).collect();
+        self.qr.solve(&rhs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The step minimises the stated quadratic: its gradient there vanishes,
+    /// Jᵀ(J δ/σ + r)/σ + K (P + δ) + (μ' I + λ D²) δ = 0 (μ' = μ·mean diag K).
+    #[test]
+    fn step_zeroes_the_gradient_of_the_damped_model() {
+        let dim = 12;
+        let jac = Mat::from_fn(dim, dim, |i, j| ((i * 5 + j * 3) % 7) as f64 * 0.1 + if i == j { 1.0 } else { 0.0 });
+        let k = Mat::from_fn(dim, dim, |i, j| (-((i as f64 - j as f64).powi(2)) / 8.0).exp());
+        let (sigma, damping, proximal) = (1e-2, 1e-3, 1e-6);
+        let residual: Vec<f64> = (0..dim).map(|i| (i as f64 * 0.7).cos()).collect();
+        let p: Vec<f64> = (0..dim).map(|i| (i as f64 * 0.3).sin()).collect();
+        let f = StepFactor::new(&jac, &k, sigma, damping, proximal, Par::Seq).unwrap();
+        let d = f.step(&k, &residual, &p);
+        let mean_diag = (0..dim).map(|i| k[(i, i)]).sum::<f64>() / dim as f64;
+        let shift = marquardt_shift(&jac, &k, sigma, damping);
+        let model_residual: Vec<f64> = (0..dim).map(|r| (0..dim).map(|c| jac[(r, c)] * d[c]).sum::<f64>() / sigma + residual[r]).collect();
+        let mut worst: f64 = 0.0;
+        for c in 0..dim {
+            let g = (0..dim).map(|r| jac[(r, c)] * model_residual[r]).sum::<f64>() / sigma
+                + (0..dim).map(|j| k[(c, j)] * (p[j] + d[j])).sum::<f64>()
+                + (proximal * mean_diag + shift[c]) * d[c];
+            worst = worst.max(g.abs());
+        }
+        let scale = (0..dim).map(|r| residual[r].abs()).fold(0.0, f64::max) / sigma;
+        assert!(worst < 1e-9 * scale, "gradient {worst:e} (scale {scale:e})");
+    }
+}
