@@ -190,3 +190,44 @@ fn bad_diagnose_arguments_are_errors_naming_the_flag() {
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
     }
 }
+
+#[test]
+fn write_model_keeps_the_found_effect_for_fit_and_eval() {
+    let dir = std::env::temp_dir().join(format!("cbd-diagnose-write-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cbd = env!("CARGO_BIN_EXE_cbd");
+    let model = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5/ur5.toml");
+    // Gravity compliance of joint 3 (compliance in rad per mass·mm, unit masses), injected by
+    // `cbd simulate` and declared nowhere.
+    let effect = "gravity_compliance:joint=3,compliance=4e-7";
+    for (name, seed) in [("train.csv", "1"), ("test.csv", "2")] {
+        let out = std::process::Command::new(cbd)
+            .args(["simulate", "--robot", "six", "--sampling", "uniform", "--count", "400", "--seed", seed, "--effect", effect, "--out"])
+            .arg(dir.join(name))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let written = dir.join("augmented.toml");
+    let out = std::process::Command::new(cbd)
+        .args(["diagnose", "--no-cbd", "--model", model, "--data"])
+        .arg(dir.join("train.csv"))
+        .arg("--test")
+        .arg(dir.join("test.csv"))
+        .arg("--write-model")
+        .arg(&written)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let file = cbd_trainer::data::model_file::load_model_file(&written).unwrap();
+    let effects = &file.nominal.effects().list;
+    assert!(
+        effects.iter().any(|e| matches!(e, cbd_protocol::Effect::GravityCompliance { joint: 2, .. })),
+        "{effects:?}\n{}",
+        std::fs::read_to_string(&written).unwrap()
+    );
+    // The written file keeps the measurement columns: it is a model file `fit` accepts.
+    assert_eq!(file.measurements.as_ref().map(|m| m.joints.len()), Some(6));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -94,11 +94,38 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
-        // TODO(H4a): `data::model_file::write_model_file` is not there yet; then:
-        // file.nominal = d.model_after.clone(); write_atomically(path, write_model_file(&file)).
         file.nominal = d.model_after.clone();
-        let _ = file;
-        return Err(format!("{}: writing model files is not available yet (waiting for write_model_file)", path.display()));
+        let found: Vec<&str> = d.found.iter().map(|f| f.name.as_str()).collect();
+        let header = format!(
+            "{} with the corrections `cbd diagnose` found on {} ({} rows): {}.\nFit the nonparametric correction on top: cbd fit --model {} ...",
+            args.model.model.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
+            args.data.display(),
+            d.train_rows,
+            if found.is_empty() { "none".to_string() } else { found.join(", ") },
+            path.display()
+        );
+        let text = crate::data::model_file::write_model_file(&file, &header);
+        // What is written must read back to the model the diagnosis evaluated.
+        let back = crate::data::model_file::parse_model_file(&text, path)
+            .map_err(|e| format!("internal: the written model file does not read back: {e}"))?;
+        let gap = max_position_gap(&back.nominal, &d.model_after, &data);
+        if gap > 1e-9 * (1.0 + data.positions.iter().fold(0.0f64, |a, v| a.max(v.abs()))) {
+            return Err(format!("internal: the written model file differs from the diagnosed model by {gap:.3e} at the data"));
+        }
+        crate::cli::write_atomically(path, text.as_bytes())?;
+        println!("model with the found effects written to {}", path.display());
     }
     Ok(())
+}
+
+/// Largest position difference between two nominal models over the rows of `data`.
+fn max_position_gap(a: &cbd_protocol::NominalModel, b: &cbd_protocol::NominalModel, data: &crate::data::Measurements) -> f64 {
+    let m = a.task_dim();
+    (0..data.len())
+        .map(|i| {
+            let (pa, pb) =
+                (crate::diagnose::kinematics::position(a, data.joints(i)), crate::diagnose::kinematics::position(b, data.joints(i)));
+            pa.iter().zip(&pb).take(m).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
 }

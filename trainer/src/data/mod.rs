@@ -43,4 +43,5 @@ impl Measurements {
 }
 
 pub mod csv_import;
+pub mod effects_section;
 pub mod model_file;

@@ -32,12 +32,15 @@
 //!                             # is an error (default: ±1 turn for revolute joints, none for prismatic)
 //! repeat_tolerance = 0.5      # rows with equal joints whose positions differ by more are an error
 //!                             # (length_unit above; default 1e-3 of the positions' bounding-box diagonal)
+//!
+//! # [gravity] and [[effects]]: physical effects on top of the chain (see `data::effects_section`)
 //! ```
 //!
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
 use super::csv_import::{default_joint_limits, ColumnSpec};
+use super::effects_section::{self, RawEffect, RawGravity};
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::Pose;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
@@ -247,6 +250,9 @@ struct RawModelFile {
     urdf: Option<RawUrdf>,
     planar: Option<RawPlanar>,
     measurements: Option<MeasurementSection>,
+    gravity: Option<RawGravity>,
+    #[serde(default)]
+    effects: Vec<RawEffect>,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize)]
@@ -323,7 +329,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     if sections != 1 {
         return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({sections} found)")));
     }
-    let (nominal, joint_names) = if let Some(chain) = raw.chain {
+    let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
         if chain.joints.is_empty() || chain.joints.len() > MAX_JOINTS {
             return Err(model_err(format!("[chain] has {} joints; 1 to {MAX_JOINTS} are supported", chain.joints.len())));
         }
@@ -366,6 +372,8 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         let n = lengths.len();
         (NominalModel::planar(&lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect())
     };
+    effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(model_err)?;
+    effects_section::check_joint_kinds(&nominal).map_err(model_err)?;
     if let Some(m) = &raw.measurements {
         if m.joints.len() != nominal.n_joints() {
             return Err(model_err(format!(
@@ -391,6 +399,97 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         joint_names,
         measurements: raw.measurements,
     })
+}
+
+/// A TOML basic string.
+fn quoted(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out += "\\\"",
+            '\\' => out += "\\\\",
+            c if (c as u32) < 0x20 || c == '\u{7f}' => out += &format!("\\u{:04X}", c as u32),
+            c => out.push(c),
+        }
+    }
+    out + "\""
+}
+
+/// The model file for `m` (the inverse of [`parse_model_file`]): its chain (a URDF-based model is
+/// written as the DH table it was converted to), measurement columns, gravity model and effects.
+/// Every number is written so that it reads back to the same value in the file's units; angles
+/// go through the file's angle unit (degrees: equal to within an ulp or two).
+pub fn write_model_file(m: &ModelFile, header: &str) -> String {
+    use std::fmt::Write as _;
+    let f = |v: f64| format!("{v:?}");
+    let per_unit = m.angle_unit.radians();
+    let mut out = String::new();
+    for line in header.lines() {
+        let _ = writeln!(out, "# {line}");
+    }
+    if let Some(name) = &m.name {
+        let _ = writeln!(out, "name = {}", quoted(name));
+    }
+    let _ = writeln!(out, "length_unit = \"{}\"\nangle_unit = \"{}\"", m.length_unit.name(), m.angle_unit.name());
+    match &m.nominal {
+        NominalModel::DhChain(c) => {
+            let convention = match c.convention {
+                DhConvention::Standard => "standard",
+                DhConvention::Modified => "modified",
+            };
+            let _ = writeln!(out, "\n[chain]\nconvention = \"{convention}\"\njoints = [");
+            for j in &c.joints {
+                let kind = match j.kind {
+                    JointKind::Revolute => "revolute",
+                    JointKind::Prismatic => "prismatic",
+                };
+                let _ = writeln!(
+                    out,
+                    "  {{ a = {}, alpha = {}, d = {}, theta_offset = {}, kind = \"{kind}\" }},",
+                    f(j.a),
+                    f(j.alpha / per_unit),
+                    f(j.d),
+                    f(j.theta_offset / per_unit)
+                );
+            }
+            out += "]\n";
+            for (name, t) in [("base", &c.base), ("tool", &c.tool)] {
+                let r = &t.rotation;
+                let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
+                let _ = writeln!(
+                    out,
+                    "{name} = {{ translation = {}, rotation = [{}] }}",
+                    effects_section::list(&t.translation),
+                    rows.join(", ")
+                );
+            }
+        }
+        NominalModel::PlanarChain { lengths, .. } => {
+            let _ = writeln!(out, "\n[planar]\nlengths = {}", effects_section::list(lengths));
+        }
+    }
+    if let Some(s) = &m.measurements {
+        let names = |v: &[String]| v.iter().map(|n| quoted(n)).collect::<Vec<_>>().join(", ");
+        let _ = writeln!(out, "\n[measurements]\njoints = [{}]\npositions = [{}]", names(&s.joints), names(&s.positions));
+        if let Some(u) = s.angle_unit {
+            let _ = writeln!(out, "angle_unit = \"{}\"", u.name());
+        }
+        if let Some(u) = s.length_unit {
+            let _ = writeln!(out, "length_unit = \"{}\"", u.name());
+        }
+        if let Some(r) = s.min_rows {
+            let _ = writeln!(out, "min_rows = {r}");
+        }
+        if let Some(limits) = &s.joint_limits {
+            let pairs: Vec<String> = limits.iter().map(|p| effects_section::list(p)).collect();
+            let _ = writeln!(out, "joint_limits = [{}]", pairs.join(", "));
+        }
+        if let Some(t) = s.repeat_tolerance {
+            let _ = writeln!(out, "repeat_tolerance = {}", f(t));
+        }
+    }
+    out += &effects_section::write(m.nominal.effects(), matches!(m.nominal, NominalModel::PlanarChain { .. }), per_unit);
+    out
 }
 
 fn transform(raw: Option<&RawTransform>, deg: f64) -> Result<Transform, String> {
@@ -428,6 +527,7 @@ fn transform(raw: Option<&RawTransform>, deg: f64) -> Result<Transform, String> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use cbd_protocol::Effect;
     use cbd_runtime::nominal::forward_kinematics;
 
     const SMALL: &str = r#"
@@ -481,6 +581,96 @@ length_unit = "mm"
         assert!(parse_model_file(&bad, Path::new("x.toml")).unwrap_err().to_string().contains("orthonormal"));
         let both = format!("{SMALL}\n[planar]\nlengths = [1.0]\n");
         assert!(parse_model_file(&both, Path::new("x.toml")).unwrap_err().to_string().contains("exactly one"));
+    }
+
+    const EFFECTS: &str = r#"
+[gravity]
+direction = [0, 0, -2]
+link_masses = [2.5, 1]
+
+[[effects]]
+type = "gravity_compliance"
+joint = 1
+compliance = 0.01
+
+[[effects]]
+type = "encoder_scale"
+joint = 2
+scale = 1e-4
+
+[[effects]]
+type = "link_bending"
+link = 2
+compliance = 0.5
+"#;
+
+    #[test]
+    fn effects_sections_are_read_in_the_files_units() {
+        let m = parse_model_file(&format!("{SMALL}{EFFECTS}"), Path::new("fx.toml")).unwrap();
+        let e = m.nominal.effects();
+        assert_eq!(e.gravity.direction, [0.0, 0.0, -1.0]);
+        assert_eq!(e.gravity.link_masses.as_slice(), &[2.5, 1.0]);
+        assert_eq!(e.list.len(), 3);
+        // Angles in the file's unit (rad here); joints 1-based in the file.
+        assert_eq!(e.list[0], cbd_protocol::Effect::GravityCompliance { joint: 0, compliance: 0.01 });
+        assert_eq!(e.list[2], cbd_protocol::Effect::LinkBending { link: 1, compliance: 0.5 });
+    }
+
+    #[test]
+    fn written_model_files_read_back_to_the_same_model() {
+        let deg_text = SMALL.replace("angle_unit = \"rad\"", "angle_unit = \"deg\"").replace("1.5707963267948966", "90");
+        let deg_fx = EFFECTS
+            .replace("type = \"encoder_scale\"", "type = \"transmission\"\nharmonic = 3\ncos = 0.2\nsin = -0.1")
+            .replace("joint = 2\nscale = 1e-4", "joint = 1");
+        for text in [format!("{SMALL}{EFFECTS}"), format!("{deg_text}{deg_fx}"), format!("name = \"a \\\"b\\\"\"\n{SMALL}")] {
+            let m = parse_model_file(&text, Path::new("in.toml")).unwrap();
+            let written = write_model_file(&m, "written by a test\nsecond line");
+            let back = parse_model_file(&written, Path::new("in.toml")).unwrap_or_else(|e| panic!("{e}\n{written}"));
+            assert_eq!(back.name, m.name);
+            assert_eq!(back.measurements, m.measurements);
+            assert_eq!(back.nominal.effects().gravity, m.nominal.effects().gravity);
+            // Degrees round-trip to within an ulp or two; positions agree to rounding.
+            let q = [0.4, -0.02];
+            let (a, b) = (forward_kinematics(&m.nominal, &q), forward_kinematics(&back.nominal, &q));
+            for c in 0..3 {
+                assert!((a.position[c] - b.position[c]).abs() < 1e-12, "{written}");
+            }
+            for (x, y) in m.nominal.effects().list.iter().zip(back.nominal.effects().list.iter()) {
+                let close = |u: f64, v: f64| (u - v).abs() <= 1e-15 * u.abs().max(1e-300);
+                let ok = match (x, y) {
+                    (Effect::Transmission { cos: c1, sin: s1, .. }, Effect::Transmission { cos: c2, sin: s2, .. }) => {
+                        close(*c1, *c2) && close(*s1, *s2)
+                    }
+                    (Effect::GravityCompliance { compliance: a, .. }, Effect::GravityCompliance { compliance: b, .. }) => close(*a, *b),
+                    _ => x == y,
+                };
+                assert!(ok, "{x:?} vs {y:?}");
+            }
+            assert_eq!(back.nominal.effects().list.len(), m.nominal.effects().list.len());
+            // The written file is stable: writing what was read gives the same text.
+            assert_eq!(write_model_file(&back, "written by a test\nsecond line"), written);
+        }
+    }
+
+    #[test]
+    fn bad_effects_are_errors_naming_entry_and_field() {
+        let cases = [
+            ("joint = 1\ncompliance = 0.01", "joint = 3\ncompliance = 0.01", "entry 1: joint = 3"),
+            ("compliance = 0.01\n", "compliance = 0.01\nstiffness = 2\n", "stiffness"),
+            ("type = \"link_bending\"", "type = \"wobble\"", "wobble"),
+            ("scale = 1e-4", "scale = nan", "scale = NaN is not finite"),
+            ("direction = [0, 0, -2]", "direction = [0, -2]", "[gravity] direction has 2 entries"),
+            ("link_masses = [2.5, 1]", "link_masses = [2.5, -1]", "link_masses[2] = -1"),
+            ("link = 2", "link = 0", "link = 0"),
+            // Joint 2 of SMALL is prismatic: a gravity compliance there makes no sense.
+            ("type = \"gravity_compliance\"\njoint = 1", "type = \"gravity_compliance\"\njoint = 2", "joint 2 is prismatic"),
+        ];
+        for (from, to, needle) in cases {
+            assert!(EFFECTS.contains(from), "{from}");
+            let text = format!("{SMALL}{}", EFFECTS.replacen(from, to, 1));
+            let e = parse_model_file(&text, Path::new("fx.toml")).unwrap_err().to_string();
+            assert!(e.contains(needle) && e.contains("fx.toml"), "{needle}: {e}");
+        }
     }
 
     #[test]

@@ -1,0 +1,189 @@
+//! The model file's `[gravity]` and `[[effects]]` sections: the physical effects on top of the
+//! rigid chain (what `cbd diagnose --write-model` finds), read into and written from the
+//! protocol's [`Effects`].
+//!
+//! ```toml
+//! [gravity]                        # optional: the mass model of the gravity-driven effects
+//! direction = [0, 0, -1]           # unit vector along gravity, base frame (default −z; planar arms −y)
+//! link_masses = [1, 1, 1, 1, 1, 1] # point mass at the distal end of each link (default 1 each)
+//!
+//! [[effects]]                      # joints and links are 1-based
+//! type = "transmission"            # δ_j = cos·cos(h q_j) + sin·sin(h q_j)
+//! joint = 2
+//! harmonic = 2
+//! cos = 0.1146                     # angle_unit
+//! sin = -0.0573
+//!
+//! [[effects]]
+//! type = "encoder_scale"           # δ_j = scale·q_j
+//! joint = 1
+//! scale = 1e-4
+//!
+//! [[effects]]
+//! type = "gravity_compliance"      # δ_j = compliance·τ_j(q), τ_j the gravity torque of the mass model
+//! joint = 3
+//! compliance = 2.3e-5              # angle_unit per (mass·length_unit)
+//!
+//! [[effects]]
+//! type = "link_bending"            # tool moved by compliance·(g − (g·u)u), u along link `link`
+//! link = 2
+//! compliance = 0.05                # length_unit
+//! ```
+
+use cbd_protocol::{Effect, Effects, GravityModel, NominalModel, MAX_EFFECTS};
+use serde::Deserialize;
+use std::fmt::Write as _;
+
+/// `[gravity]` as written in the file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawGravity {
+    direction: Option<Vec<f64>>,
+    link_masses: Option<Vec<f64>>,
+}
+
+/// One `[[effects]]` entry as written in the file (1-based joints, the file's angle unit).
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum RawEffect {
+    EncoderScale { joint: usize, scale: f64 },
+    Transmission { joint: usize, harmonic: u8, cos: f64, sin: f64 },
+    GravityCompliance { joint: usize, compliance: f64 },
+    LinkBending { link: usize, compliance: f64 },
+}
+
+fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, String> {
+    if value == 0 || value > n {
+        return Err(format!("[[effects]] entry {entry}: {what} = {value}, the model has {n} (1 to {n})"));
+    }
+    Ok((value - 1) as u8)
+}
+
+fn check_finite(entry: usize, values: &[(&str, f64)]) -> Result<(), String> {
+    match values.iter().find(|(_, v)| !v.is_finite()) {
+        Some((name, v)) => Err(format!("[[effects]] entry {entry}: {name} = {v} is not finite")),
+        None => Ok(()),
+    }
+}
+
+/// Puts the file's `[gravity]` and `[[effects]]` into `nominal` (lengths already in the model's
+/// unit, which is the file's; `rad_per_unit` converts the file's angles). Errors name the entry
+/// and the field.
+pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: f64, nominal: &mut NominalModel) -> Result<(), String> {
+    let n = nominal.n_joints();
+    let planar = matches!(nominal, NominalModel::PlanarChain { .. });
+    let target = nominal.effects_mut();
+    if let Some(g) = gravity {
+        if let Some(d) = &g.direction {
+            let want = if planar { 2 } else { 3 };
+            if d.len() != want {
+                return Err(format!("[gravity] direction has {} entries; this model needs {want}", d.len()));
+            }
+            let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !(norm.is_finite() && norm > 0.0) {
+                return Err(format!("[gravity] direction = {d:?} has no direction"));
+            }
+            let mut unit = [0.0; 3];
+            for (u, v) in unit.iter_mut().zip(d) {
+                *u = v / norm;
+            }
+            target.gravity.direction = unit;
+        }
+        if let Some(masses) = &g.link_masses {
+            if masses.len() != n {
+                return Err(format!("[gravity] link_masses has {} entries; the model has {n} links", masses.len()));
+            }
+            if let Some((k, m)) = masses.iter().enumerate().find(|(_, m)| !(m.is_finite() && **m >= 0.0)) {
+                return Err(format!("[gravity] link_masses[{}] = {m}: needs a finite mass ≥ 0", k + 1));
+            }
+            target.gravity.link_masses = heapless::Vec::from_slice(masses).map_err(|_| "[gravity] link_masses: too many".to_string())?;
+        }
+    }
+    if effects.len() > MAX_EFFECTS {
+        return Err(format!("{} [[effects]] entries; at most {MAX_EFFECTS} are supported", effects.len()));
+    }
+    for (k, raw) in effects.iter().enumerate() {
+        let entry = k + 1;
+        let effect = match *raw {
+            RawEffect::EncoderScale { joint, scale } => {
+                check_finite(entry, &[("scale", scale)])?;
+                Effect::EncoderScale { joint: check_index(entry, "joint", joint, n)?, scale }
+            }
+            RawEffect::Transmission { joint, harmonic, cos, sin } => {
+                check_finite(entry, &[("cos", cos), ("sin", sin)])?;
+                if !(1..=16).contains(&harmonic) {
+                    return Err(format!("[[effects]] entry {entry}: harmonic = {harmonic}, needs 1 to 16"));
+                }
+                let joint = check_index(entry, "joint", joint, n)?;
+                Effect::Transmission { joint, harmonic, cos: cos * rad_per_unit, sin: sin * rad_per_unit }
+            }
+            RawEffect::GravityCompliance { joint, compliance } => {
+                check_finite(entry, &[("compliance", compliance)])?;
+                Effect::GravityCompliance { joint: check_index(entry, "joint", joint, n)?, compliance: compliance * rad_per_unit }
+            }
+            RawEffect::LinkBending { link, compliance } => {
+                check_finite(entry, &[("compliance", compliance)])?;
+                Effect::LinkBending { link: check_index(entry, "link", link, n)?, compliance }
+            }
+        };
+        target.list.push(effect).map_err(|_| format!("[[effects]] entry {entry}: too many effects"))?;
+    }
+    Ok(())
+}
+
+/// Rejects angle-valued effects on prismatic joints (transmission and compliance act on angles).
+pub fn check_joint_kinds(nominal: &NominalModel) -> Result<(), String> {
+    for (k, e) in nominal.effects().list.iter().enumerate() {
+        let joint = match *e {
+            Effect::Transmission { joint, .. } | Effect::GravityCompliance { joint, .. } => joint as usize,
+            _ => continue,
+        };
+        if !nominal.is_revolute(joint) {
+            return Err(format!("[[effects]] entry {}: joint {} is prismatic; this effect needs a revolute joint", k + 1, joint + 1));
+        }
+    }
+    Ok(())
+}
+
+/// The `[gravity]` (when not the default) and `[[effects]]` sections for `effects`, angles in the
+/// unit with `rad_per_unit` radians.
+pub fn write(effects: &Effects, planar: bool, rad_per_unit: f64) -> String {
+    let mut out = String::new();
+    let default = if planar { GravityModel::PLANAR } else { GravityModel::DEFAULT };
+    if effects.gravity != default {
+        out += "\n[gravity]\n";
+        let dims = if planar { 2 } else { 3 };
+        let _ = writeln!(out, "direction = {}", list(&effects.gravity.direction[..dims]));
+        if !effects.gravity.link_masses.is_empty() {
+            let _ = writeln!(out, "link_masses = {}", list(&effects.gravity.link_masses));
+        }
+    }
+    for e in &effects.list {
+        out += "\n[[effects]]\n";
+        let _ = match *e {
+            Effect::EncoderScale { joint, scale } => {
+                writeln!(out, "type = \"encoder_scale\"\njoint = {}\nscale = {scale:?}", joint + 1)
+            }
+            Effect::Transmission { joint, harmonic, cos, sin } => writeln!(
+                out,
+                "type = \"transmission\"\njoint = {}\nharmonic = {harmonic}\ncos = {:?}\nsin = {:?}",
+                joint + 1,
+                cos / rad_per_unit,
+                sin / rad_per_unit
+            ),
+            Effect::GravityCompliance { joint, compliance } => {
+                writeln!(out, "type = \"gravity_compliance\"\njoint = {}\ncompliance = {:?}", joint + 1, compliance / rad_per_unit)
+            }
+            Effect::LinkBending { link, compliance } => {
+                writeln!(out, "type = \"link_bending\"\nlink = {}\ncompliance = {compliance:?}", link + 1)
+            }
+        };
+    }
+    out
+}
+
+/// A TOML array of floats, each written so that it reads back to the same f64.
+pub fn list(values: &[f64]) -> String {
+    let items: Vec<String> = values.iter().map(|v| format!("{v:?}")).collect();
+    format!("[{}]", items.join(", "))
+}
