@@ -22,9 +22,9 @@
 //! Everything is f64 through `libm`, with no fused multiply-add: host and firmware agree bit for
 //! bit. Out-of-range joint or link indices (rejected by validation) are ignored, never a panic.
 
-use crate::nominal::{compose, frame_of, rigid_kinematics, rot_z_trans_z, trans_x_rot_x, Kinematics};
-use crate::query_derivatives::{rigid_hessian, NominalHessian};
-use cbd_protocol::{DhConvention, Effect, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use crate::nominal::{compose, forward_kinematics, frame_of, rot_z_trans_z, trans_x_rot_x, Kinematics};
+use crate::query_derivatives::{nominal_hessian, NominalHessian};
+use cbd_protocol::{DhChain, DhConvention, Effect, Effects, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 type V3 = [f64; 3];
 
@@ -451,6 +451,31 @@ pub fn effect_terms(model: &NominalModel, effects: &[Effect], q: &[f64], order: 
     out
 }
 
+/// `model`'s chain without its effects.
+fn without_effects(model: &NominalModel) -> NominalModel {
+    match model {
+        NominalModel::PlanarChain { lengths, .. } => NominalModel::PlanarChain { lengths: lengths.clone(), effects: Effects::NONE_PLANAR },
+        NominalModel::DhChain(c) => NominalModel::DhChain(DhChain {
+            convention: c.convention,
+            joints: c.joints.clone(),
+            base: c.base,
+            tool: c.tool,
+            effects: Effects::NONE,
+        }),
+    }
+}
+
+/// k_rigid(q) and Dk_rigid(q): the chain alone, its effects ignored (evaluated by the effect-free
+/// code path of [`forward_kinematics`], so that the rigid part is the same arithmetic either way).
+pub fn rigid_kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
+    forward_kinematics(&without_effects(model), q)
+}
+
+/// D²k_rigid(q): the chain alone (the effect-free code path of [`nominal_hessian`]).
+pub fn rigid_hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
+    nominal_hessian(&without_effects(model), q)
+}
+
 /// s = q + δ(q) (first `n` entries).
 fn deflected(q: &[f64], t: &EffectTerms, n: usize) -> [f64; NJ] {
     let mut s = [0.0; NJ];
@@ -461,12 +486,15 @@ fn deflected(q: &[f64], t: &EffectTerms, n: usize) -> [f64; NJ] {
 }
 
 /// k0_aug(q) = k_rigid(q + δ(q)) + b(q) and Dk0_aug = Dk_rigid(s)(I + Dδ) + Db, model units.
+/// (Out of line: the effect-free path of [`forward_kinematics`] keeps its code and cost.)
+#[inline(never)]
+#[cold]
 pub fn kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
     let n = model.n_joints().min(q.len()).min(NJ);
     let m = model.task_dim();
     let t = effect_terms(model, &model.effects().list, q, Order::First);
     let s = deflected(q, &t, n);
-    let rigid = rigid_kinematics(model, s.get(..n).unwrap_or(&[]));
+    let rigid = forward_kinematics(&without_effects(model), s.get(..n).unwrap_or(&[]));
     let mut out = rigid;
     for (a, ((p, b), (row, rigid_row))) in
         out.position.iter_mut().zip(t.b.iter()).zip(out.jacobian.iter_mut().zip(rigid.jacobian.iter())).enumerate()
@@ -488,14 +516,18 @@ pub fn kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
 }
 
 /// D²k0_aug = D²k_rigid(s)[A·, A·] + Dk_rigid(s) D²δ + D²b, A = I + Dδ, `[a][e][d]`, model units.
+/// (Out of line, like [`kinematics`].)
+#[inline(never)]
+#[cold]
 pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
     let n = model.n_joints().min(q.len()).min(NJ);
     let m = model.task_dim();
     let t = effect_terms(model, &model.effects().list, q, Order::Second);
     let s = deflected(q, &t, n);
     let s = s.get(..n).unwrap_or(&[]);
-    let jac = rigid_kinematics(model, s).jacobian;
-    let h = rigid_hessian(model, s);
+    let rigid = without_effects(model);
+    let jac = forward_kinematics(&rigid, s).jacobian;
+    let h = nominal_hessian(&rigid, s);
     let mut out = [[[0.0; NJ]; NJ]; MT];
     for (((out_a, h_a), jac_a), d2b_a) in out.iter_mut().zip(h.iter()).zip(jac.iter()).zip(t.d2_b.iter()).take(m) {
         // right[i][d] = Σ_j H[a][i][j] A[j][d] = H[a][i][d] + Σ_j H[a][i][j] Dδ[j][d]
@@ -709,8 +741,8 @@ mod tests {
             rigid.effects_mut().list.clear();
             let q = config(n, 9);
             let q = &q[..n];
-            assert_eq!(forward_kinematics(&rigid, q), rigid_kinematics(&rigid, q));
-            assert_eq!(nominal_hessian(&rigid, q), rigid_hessian(&rigid, q));
+            assert_eq!(forward_kinematics(&rigid, q), rigid_kinematics(&model, q));
+            assert_eq!(nominal_hessian(&rigid, q), rigid_hessian(&model, q));
             // Effects that are all zero change nothing either (the augmented path, same values).
             let mut zero = model.clone();
             for e in zero.effects_mut().list.iter_mut() {
@@ -720,9 +752,9 @@ mod tests {
                     Effect::GravityCompliance { compliance, .. } | Effect::LinkBending { compliance, .. } => *compliance = 0.0,
                 }
             }
-            let (a, b) = (forward_kinematics(&zero, q), rigid_kinematics(&rigid, q));
+            let (a, b) = (forward_kinematics(&zero, q), forward_kinematics(&rigid, q));
             assert_eq!(a, b);
-            assert_eq!(nominal_hessian(&zero, q), rigid_hessian(&rigid, q));
+            assert_eq!(nominal_hessian(&zero, q), nominal_hessian(&rigid, q));
         }
     }
 

@@ -26,19 +26,12 @@ impl Kinematics {
 }
 
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
-/// With effects, the augmented k0_aug and Dk0_aug of [`crate::effects::kinematics`]; without,
-/// the rigid chain's ([`rigid_kinematics`]).
+/// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::effects::kinematics`]).
 pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
-    if model.effects().is_empty() {
-        rigid_kinematics(model, x)
-    } else {
-        crate::effects::kinematics(model, x)
+    // Effect-free models take the rigid chain's code below, unchanged (same bits, same cost).
+    if !model.effects().is_empty() {
+        return crate::effects::kinematics(model, x);
     }
-}
-
-/// k_rigid(x) and Dk_rigid(x): the chain alone, its effects ignored.
-#[inline]
-pub fn rigid_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
     match model {
         NominalModel::PlanarChain { lengths, .. } => planar_chain(lengths, x),
         NominalModel::DhChain(chain) => dh_chain(chain, x),
