@@ -12,6 +12,10 @@ use crate::model::MAX_JOINTS;
 
 /// Most effects one model may carry.
 pub const MAX_EFFECTS: usize = 48;
+/// Highest harmonic a transmission effect may have.
+pub const MAX_HARMONIC: u8 = 16;
+/// How far from 1 the length of the gravity direction may be.
+pub const GRAVITY_UNIT_TOLERANCE: f64 = 1e-9;
 
 /// The effects of a nominal chain and the gravity/mass model the gravity-driven ones use.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]

@@ -102,3 +102,152 @@ fn invalid_models_are_not_encoded() {
     model.task_kernel.width = 0.0;
     assert_eq!(encode(&model, &mut buf), Err(EncodeError::Invalid(ModelError::OutOfRange { field: "task_kernel.width" })));
 }
+
+fn with_effects(effects: Effects, check: impl Fn(Result<usize, EncodeError>)) {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.0; 6]);
+    let mut model = sample_model(&p, &m);
+    *model.nominal.effects_mut() = effects;
+    let mut buf = [0u8; 2048];
+    check(encode(&model, &mut buf));
+}
+
+fn effects_of(list: &[Effect]) -> Effects {
+    Effects { gravity: GravityModel::PLANAR, list: heapless::Vec::from_slice(list).unwrap() }
+}
+
+#[test]
+fn valid_effects_round_trip() {
+    let gravity = GravityModel { direction: [0.6, -0.8, 0.0], link_masses: heapless::Vec::from_slice(&[2.0, 0.0]).unwrap() };
+    let effects = Effects {
+        gravity,
+        list: heapless::Vec::from_slice(&[
+            Effect::EncoderScale { joint: 0, scale: 1e-3 },
+            Effect::Transmission { joint: 1, harmonic: 16, cos: 1e-3, sin: -2e-3 },
+            Effect::GravityCompliance { joint: 1, compliance: 0.01 },
+            Effect::LinkBending { link: 1, compliance: -0.02 },
+        ])
+        .unwrap(),
+    };
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.0; 6]);
+    let mut model = sample_model(&p, &m);
+    *model.nominal.effects_mut() = effects;
+    let mut buf = [0u8; 2048];
+    let len = encode(&model, &mut buf).unwrap();
+    assert_eq!(decode(&buf[..len]).unwrap(), model);
+}
+
+#[test]
+fn every_invalid_effect_is_named() {
+    let invalid = |field: &'static str, index: usize| {
+        move |r: Result<usize, EncodeError>| {
+            assert_eq!(r, Err(EncodeError::Invalid(ModelError::OutOfRangeAt { field, index })));
+        }
+    };
+    let non_finite = |field: &'static str, index: usize| {
+        move |r: Result<usize, EncodeError>| {
+            assert_eq!(r, Err(EncodeError::Invalid(ModelError::NonFinite { field, index })));
+        }
+    };
+    let ok = Effect::EncoderScale { joint: 1, scale: 0.0 };
+    // Joint and link indices below n_joints (= 2), reported with the effect's position in the list.
+    with_effects(effects_of(&[ok, Effect::EncoderScale { joint: 2, scale: 0.0 }]), invalid("nominal.effects.list.EncoderScale.joint", 1));
+    with_effects(
+        effects_of(&[Effect::Transmission { joint: 7, harmonic: 1, cos: 0.0, sin: 0.0 }]),
+        invalid("nominal.effects.list.Transmission.joint", 0),
+    );
+    with_effects(
+        effects_of(&[ok, ok, Effect::GravityCompliance { joint: 255, compliance: 0.0 }]),
+        invalid("nominal.effects.list.GravityCompliance.joint", 2),
+    );
+    with_effects(effects_of(&[Effect::LinkBending { link: 2, compliance: 0.0 }]), invalid("nominal.effects.list.LinkBending.link", 0));
+    // Harmonics 1..=16.
+    for h in [0, 17, 255] {
+        with_effects(
+            effects_of(&[Effect::Transmission { joint: 0, harmonic: h, cos: 0.0, sin: 0.0 }]),
+            invalid("nominal.effects.list.Transmission.harmonic", 0),
+        );
+    }
+    with_effects(effects_of(&[Effect::Transmission { joint: 0, harmonic: 1, cos: 0.0, sin: 0.0 }]), |r| assert!(r.is_ok()));
+    // Every value finite.
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        with_effects(
+            effects_of(&[Effect::EncoderScale { joint: 0, scale: bad }]),
+            non_finite("nominal.effects.list.EncoderScale.scale", 0),
+        );
+        with_effects(
+            effects_of(&[ok, Effect::Transmission { joint: 0, harmonic: 2, cos: bad, sin: 0.0 }]),
+            non_finite("nominal.effects.list.Transmission.cos", 1),
+        );
+        with_effects(
+            effects_of(&[Effect::Transmission { joint: 0, harmonic: 2, cos: 0.0, sin: bad }]),
+            non_finite("nominal.effects.list.Transmission.sin", 0),
+        );
+        with_effects(
+            effects_of(&[Effect::GravityCompliance { joint: 0, compliance: bad }]),
+            non_finite("nominal.effects.list.GravityCompliance.compliance", 0),
+        );
+        with_effects(
+            effects_of(&[Effect::LinkBending { link: 0, compliance: bad }]),
+            non_finite("nominal.effects.list.LinkBending.compliance", 0),
+        );
+    }
+    // Link masses: empty or one per joint, finite, ≥ 0.
+    let masses = |m: &[f64]| Effects {
+        gravity: GravityModel { direction: [0.0, -1.0, 0.0], link_masses: heapless::Vec::from_slice(m).unwrap() },
+        list: heapless::Vec::new(),
+    };
+    with_effects(masses(&[1.0]), |r| {
+        assert_eq!(
+            r,
+            Err(EncodeError::Invalid(ModelError::Dimension { field: "nominal.effects.gravity.link_masses", expected: 2, found: 1 }))
+        )
+    });
+    with_effects(masses(&[1.0, 1.0, 1.0]), |r| {
+        assert_eq!(
+            r,
+            Err(EncodeError::Invalid(ModelError::Dimension { field: "nominal.effects.gravity.link_masses", expected: 2, found: 3 }))
+        )
+    });
+    with_effects(masses(&[1.0, f64::NAN]), non_finite("nominal.effects.gravity.link_masses", 1));
+    with_effects(masses(&[f64::INFINITY, 1.0]), non_finite("nominal.effects.gravity.link_masses", 0));
+    with_effects(masses(&[1.0, -1e-300]), invalid("nominal.effects.gravity.link_masses (negative)", 1));
+    with_effects(masses(&[0.0, 0.0]), |r| assert!(r.is_ok()));
+    with_effects(masses(&[]), |r| assert!(r.is_ok()));
+    // Gravity direction finite and of unit length within 1e-9.
+    let direction =
+        |d: [f64; 3]| Effects { gravity: GravityModel { direction: d, link_masses: heapless::Vec::new() }, list: heapless::Vec::new() };
+    with_effects(direction([0.0, f64::NAN, 0.0]), non_finite("nominal.effects.gravity.direction", 1));
+    with_effects(direction([0.0, 0.0, f64::NEG_INFINITY]), non_finite("nominal.effects.gravity.direction", 2));
+    let not_unit = |r: Result<usize, EncodeError>| {
+        assert_eq!(r, Err(EncodeError::Invalid(ModelError::OutOfRange { field: "nominal.effects.gravity.direction (not unit length)" })))
+    };
+    with_effects(direction([0.0, 0.0, 0.0]), not_unit);
+    with_effects(direction([0.0, -1.0 - 2e-9, 0.0]), not_unit);
+    with_effects(direction([0.0, -1.0 + 2e-9, 0.0]), not_unit);
+    with_effects(direction([0.6, 0.8, 1e-4]), not_unit);
+    with_effects(direction([0.0, -1.0 - 5e-10, 0.0]), |r| assert!(r.is_ok()));
+    with_effects(direction([0.6, 0.0, -0.8]), |r| assert!(r.is_ok()));
+}
+
+#[test]
+fn a_blob_with_an_invalid_effect_does_not_decode() {
+    // Framed by hand (encode refuses it): decode must validate the effects too.
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.0; 6]);
+    let mut model = sample_model(&p, &m);
+    model.nominal.effects_mut().list.push(Effect::GravityCompliance { joint: 2, compliance: 1e-3 }).unwrap();
+    let payload = postcard::to_allocvec(&model).unwrap();
+    let mut blob = Vec::new();
+    blob.extend_from_slice(&MAGIC);
+    blob.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    blob.extend_from_slice(&payload);
+    let crc = CRC32.checksum(&blob);
+    blob.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(
+        decode(&blob),
+        Err(DecodeError::Invalid(ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 }))
+    );
+}

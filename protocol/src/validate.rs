@@ -1,5 +1,6 @@
 //! Consistency checks run on every encode and decode.
 
+use crate::effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
 use crate::model::*;
 
 /// What is wrong with a model, naming the field.
@@ -11,6 +12,8 @@ pub enum ModelError {
     OutOfRange { field: &'static str },
     /// Array or table sizes disagree.
     Dimension { field: &'static str, expected: usize, found: usize },
+    /// A field of entry `index` of a list is outside its allowed range (e.g. the joint of an effect).
+    OutOfRangeAt { field: &'static str, index: usize },
 }
 
 impl core::fmt::Display for ModelError {
@@ -18,6 +21,7 @@ impl core::fmt::Display for ModelError {
         match self {
             ModelError::NonFinite { field, index } => write!(f, "field `{field}` has a non-finite value at index {index}"),
             ModelError::OutOfRange { field } => write!(f, "field `{field}` is out of range"),
+            ModelError::OutOfRangeAt { field, index } => write!(f, "field `{field}` is out of range at index {index}"),
             ModelError::Dimension { field, expected, found } => {
                 write!(f, "field `{field}` has size {found}, expected {expected}")
             }
@@ -51,6 +55,64 @@ fn dimension(field: &'static str, expected: usize, found: usize) -> Result<(), M
     }
 }
 
+impl Effects {
+    /// Checks the effects of a chain of `n_joints` joints: every joint/link index below
+    /// `n_joints`, harmonics 1..=[`MAX_HARMONIC`], every value finite, `link_masses` empty or one
+    /// finite value ≥ 0 per joint, the gravity direction finite and of unit length (within
+    /// [`GRAVITY_UNIT_TOLERANCE`]). `index` in the errors is the effect's position in `list`
+    /// (the joint for `link_masses`, the component for `direction`).
+    pub fn validate(&self, n_joints: usize) -> Result<(), ModelError> {
+        let g = &self.gravity;
+        finite("nominal.effects.gravity.direction", g.direction)?;
+        let [x, y, z] = g.direction;
+        let length2 = x * x + y * y + z * z;
+        let (lo, hi) = (1.0 - GRAVITY_UNIT_TOLERANCE, 1.0 + GRAVITY_UNIT_TOLERANCE);
+        if !(length2 >= lo * lo && length2 <= hi * hi) {
+            return Err(ModelError::OutOfRange { field: "nominal.effects.gravity.direction (not unit length)" });
+        }
+        if !g.link_masses.is_empty() {
+            dimension("nominal.effects.gravity.link_masses", n_joints, g.link_masses.len())?;
+            finite("nominal.effects.gravity.link_masses", g.link_masses.iter().copied())?;
+            if let Some(index) = g.link_masses.iter().position(|m| *m < 0.0) {
+                return Err(ModelError::OutOfRangeAt { field: "nominal.effects.gravity.link_masses (negative)", index });
+            }
+        }
+        for (index, effect) in self.list.iter().enumerate() {
+            let in_range = |field: &'static str, i: u8| {
+                if (i as usize) < n_joints {
+                    Ok(())
+                } else {
+                    Err(ModelError::OutOfRangeAt { field, index })
+                }
+            };
+            let value = |field: &'static str, v: f64| if v.is_finite() { Ok(()) } else { Err(ModelError::NonFinite { field, index }) };
+            match *effect {
+                Effect::EncoderScale { joint, scale } => {
+                    in_range("nominal.effects.list.EncoderScale.joint", joint)?;
+                    value("nominal.effects.list.EncoderScale.scale", scale)?;
+                }
+                Effect::Transmission { joint, harmonic, cos, sin } => {
+                    in_range("nominal.effects.list.Transmission.joint", joint)?;
+                    if !(1..=MAX_HARMONIC).contains(&harmonic) {
+                        return Err(ModelError::OutOfRangeAt { field: "nominal.effects.list.Transmission.harmonic", index });
+                    }
+                    value("nominal.effects.list.Transmission.cos", cos)?;
+                    value("nominal.effects.list.Transmission.sin", sin)?;
+                }
+                Effect::GravityCompliance { joint, compliance } => {
+                    in_range("nominal.effects.list.GravityCompliance.joint", joint)?;
+                    value("nominal.effects.list.GravityCompliance.compliance", compliance)?;
+                }
+                Effect::LinkBending { link, compliance } => {
+                    in_range("nominal.effects.list.LinkBending.link", link)?;
+                    value("nominal.effects.list.LinkBending.compliance", compliance)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Model<'_> {
     /// Checks every dimension and value; a model that passes can be evaluated.
     pub fn validate(&self) -> Result<(), ModelError> {
@@ -70,6 +132,7 @@ impl Model<'_> {
                 }
             }
         }
+        self.nominal.effects().validate(n)?;
         finite("normalisation.task_offset", self.normalisation.task_offset)?;
         positive("normalisation.task_scale", self.normalisation.task_scale)?;
         positive("joint_kernel.gamma", self.joint_kernel.gamma)?;

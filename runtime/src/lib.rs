@@ -11,6 +11,7 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
 pub mod calibrator;
+pub mod effects;
 pub mod flow;
 pub mod integrate;
 pub mod kernel;

@@ -26,7 +26,12 @@ impl Kinematics {
 }
 
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
+/// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::effects::kinematics`]).
 pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
+    // Effect-free models take the rigid chain's code below, unchanged (same bits, same cost).
+    if !model.effects().is_empty() {
+        return crate::effects::kinematics(model, x);
+    }
     match model {
         NominalModel::PlanarChain { lengths, .. } => planar_chain(lengths, x),
         NominalModel::DhChain(chain) => dh_chain(chain, x),
@@ -53,14 +58,14 @@ fn planar_chain(lengths: &[f64], x: &[f64]) -> Kinematics {
 }
 
 /// A rigid transform as a 3×4 row-major matrix [R | t].
-type Frame = [[f64; 4]; 3];
+pub(crate) type Frame = [[f64; 4]; 3];
 
-fn frame_of(t: &Transform) -> Frame {
+pub(crate) fn frame_of(t: &Transform) -> Frame {
     let r = &t.rotation;
     [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]]
 }
 
-fn compose(a: &Frame, b: &Frame) -> Frame {
+pub(crate) fn compose(a: &Frame, b: &Frame) -> Frame {
     let mut out = [[0.0; 4]; 3];
     // out_ij = [j = 3] a_i3 + Σ_k a_ik b_kj, summed over k in order for every j.
     for (out_i, a_i) in out.iter_mut().zip(a.iter()) {
@@ -74,12 +79,12 @@ fn compose(a: &Frame, b: &Frame) -> Frame {
     out
 }
 
-fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
+pub(crate) fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
     let (s, c) = (libm::sin(theta), libm::cos(theta));
     [[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, d]]
 }
 
-fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
+pub(crate) fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
     let (s, c) = (libm::sin(alpha), libm::cos(alpha));
     [[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]]
 }

@@ -119,8 +119,12 @@ fn joint_sums<S: Shape, const HESSIAN: bool>(shape: S, samples: &[Real], rows: &
     (f, ddv)
 }
 
-/// Second derivatives of the nominal forward kinematics at `x`.
+/// Second derivatives of the nominal forward kinematics at `x` (with effects, the augmented
+/// D²k0_aug of [`crate::effects::hessian`]).
 pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
+    if !model.effects().is_empty() {
+        return crate::effects::hessian(model, x);
+    }
     let mut h = [[[0.0; NJ]; NJ]; MT];
     match model {
         // ∂²y/∂x_e∂x_d = Σ_{k ≥ max(d, e)} −l_k (cos θ_k, sin θ_k)

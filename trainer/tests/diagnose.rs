@@ -135,6 +135,34 @@ fn an_effect_outside_the_library_is_unexplained_structure_absorbed_by_cbd() {
 }
 
 #[test]
+fn cbd_runs_on_top_of_the_effects_found() {
+    // A transmission error (in the library) and a bump (outside it): the diagnosis finds the
+    // former, and CbD on nominal + effects (the runtime evaluates them) absorbs the latter.
+    let arm = rr_real().with(InjectedEffect::Transmission { joint: 1, harmonic: 2, cos: 0.002, sin: -0.001 }).with(InjectedEffect::Bump {
+        centre: vec![1.0, 2.0],
+        width: 0.5,
+        amplitude: [0.0, 2e-3, 0.0],
+    });
+    let train = arm.measure(&configurations(Sampling::Grid { per_axis: 16 }, 2), 1e-5, 7);
+    let test = arm.measure(&configurations(Sampling::Uniform { count: 500, seed: 9 }, 2), 1e-5, 8);
+    let nominal = cbd_trainer::simulate::rr::nominal();
+    let search = cbd_trainer::kernels::hyperparameters::SearchOptions::default();
+    let fitter = cbd_trainer::cli::compare::cbd_fitter(&search, 1);
+    let d = diagnose(&nominal, &train, Some(&test), Some(&fitter), &DiagnoseOptions::default()).unwrap();
+    eprintln!("{}; notes {:?}", summary(&d), d.notes);
+    assert!(d.notes.is_empty(), "{:?}", d.notes);
+    assert!(
+        d.physical_effects().iter().any(|f| (f.kind, f.joint) == (GroupKind::Transmission { harmonic: 2 }, Some(1))),
+        "{}",
+        summary(&d)
+    );
+    assert!(!d.model_after.effects().is_empty());
+    let (effects, with_cbd, plain_cbd) = (mean(&d, "nominal + effects"), mean(&d, "nominal + effects + CbD"), mean(&d, "nominal + CbD"));
+    assert!(with_cbd < 0.5 * effects, "{}", summary(&d));
+    assert!(with_cbd <= plain_cbd, "{}", summary(&d));
+}
+
+#[test]
 fn the_command_line_finds_an_effect_injected_by_cbd_simulate() {
     let dir = std::env::temp_dir().join(format!("cbd-diagnose-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

@@ -64,6 +64,34 @@ pub fn rr_grid_blob(side: usize, seed: u32, scheme: Integrator) -> Vec<u8> {
 /// A 6-joint model: UR5 standard DH table (mm, data/ur5/README.md), 64 random configurations,
 /// small pseudo-random momenta, Heun × 5.
 pub fn six_joint_blob() -> Vec<u8> {
+    six_joint_blob_with(cbd_protocol::Effects::NONE)
+}
+
+/// [`six_joint_blob`] with physical effects of all four types on the chain: encoder scale,
+/// transmission harmonics, gravity compliance (tilted gravity, UR5 link masses) and link bending,
+/// sized like a real arm's (joint deflections of about a milliradian, bending of 0.05–0.1 mm).
+pub fn six_effects_blob() -> Vec<u8> {
+    let (s, c) = (0.05f64, (1.0f64 - 0.05 * 0.05).sqrt());
+    let gravity = GravityModel {
+        direction: [0.0, s, -c],
+        link_masses: heapless::Vec::from_slice(&[3.7, 8.393, 2.275, 1.219, 1.219, 0.1879]).expect("6 masses"),
+    };
+    let list = [
+        Effect::EncoderScale { joint: 0, scale: 1.5e-3 },
+        Effect::EncoderScale { joint: 3, scale: -8e-4 },
+        Effect::Transmission { joint: 1, harmonic: 2, cos: 4e-4, sin: -2.5e-4 },
+        Effect::Transmission { joint: 4, harmonic: 1, cos: -3e-4, sin: 6e-4 },
+        Effect::Transmission { joint: 5, harmonic: 3, cos: 1e-4, sin: 1e-4 },
+        Effect::GravityCompliance { joint: 1, compliance: 8e-8 },
+        Effect::GravityCompliance { joint: 2, compliance: 1.2e-7 },
+        Effect::GravityCompliance { joint: 3, compliance: 3e-7 },
+        Effect::LinkBending { link: 1, compliance: 0.1 },
+        Effect::LinkBending { link: 2, compliance: 0.06 },
+    ];
+    six_joint_blob_with(Effects { gravity, list: heapless::Vec::from_slice(&list).expect("fits MAX_EFFECTS") })
+}
+
+fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
     let deg = PI / 180.0;
     let joint = |a: f64, alpha_deg: f64, d: f64| DhJoint {
         kind: JointKind::Revolute,
@@ -93,7 +121,7 @@ pub fn six_joint_blob() -> Vec<u8> {
         .expect("6 joints"),
         base: Transform::IDENTITY,
         tool,
-        effects: cbd_protocol::Effects::NONE,
+        effects,
     };
     const N: usize = 64;
     let mut rng = Lcg(0x0005_5e1f);

@@ -1,7 +1,7 @@
 //! Host side of the firmware check (issue 5).
 //!
 //! ```text
-//! cbd-fw-host make-blobs OUT_DIR   # rr.blob (Heun × 5), six.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2)
+//! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, six-effects.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2)
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
 //! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
 //! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len blob_bytes
@@ -19,13 +19,14 @@ use std::process::ExitCode;
 mod blobs;
 #[path = "../../firmware/src/shared.rs"]
 mod shared;
-use blobs::{rr_grid_blob, rr_reference_blob, six_joint_blob, DEMO_SCHEME};
+use blobs::{rr_grid_blob, rr_reference_blob, six_effects_blob, six_joint_blob, DEMO_SCHEME};
 
 fn make_blobs(out_dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
     for (name, blob) in [
         ("rr.blob", rr_reference_blob()),
         ("six.blob", six_joint_blob()),
+        ("six-effects.blob", six_effects_blob()),
         ("rr64.blob", rr_grid_blob(8, 0x0000_0064, DEMO_SCHEME)),
         ("rr256.blob", rr_grid_blob(16, 0x0000_0100, DEMO_SCHEME)),
         ("rr1024.blob", rr_grid_blob(32, 0x0000_0400, DEMO_SCHEME)),

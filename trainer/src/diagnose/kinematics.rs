@@ -1,10 +1,10 @@
-//! The augmented nominal kinematics k0_aug(q) = k_rigid(q + δ(q)) + b(q) (h4-common.md) and the
-//! response of one effect, as the diagnosis needs them: the one place that evaluates effects.
-//! INTERIM (until the runtime's `cbd_runtime::effects` exists): evaluated with the simulator's
-//! independent implementation.
+//! The augmented nominal kinematics k0_aug(q) = k_rigid(q + δ(q)) + b(q) and the response of one
+//! effect, as the diagnosis needs them: evaluated by the runtime (`cbd_runtime::effects`), so that
+//! the diagnosis, the CbD fit on top of it and the controller all use one implementation. (The
+//! simulator's independent implementation, `simulate::effects`, only makes test data.)
 
-use crate::simulate::effects::{gravity_torques_numerical, EffectArm, InjectedEffect};
 use cbd_protocol::{Effect, NominalModel};
+use cbd_runtime::effects::{effect_terms, Order};
 use cbd_runtime::nominal::forward_kinematics;
 
 /// What one effect adds at q, with its own parameter values: to δ (joint) or to b (task).
@@ -14,26 +14,9 @@ pub enum Response {
     Task([f64; 3]),
 }
 
-fn injected(e: &Effect) -> InjectedEffect {
-    match *e {
-        Effect::EncoderScale { joint, scale } => InjectedEffect::EncoderScale { joint: joint as usize, scale },
-        Effect::Transmission { joint, harmonic, cos, sin } => {
-            InjectedEffect::Transmission { joint: joint as usize, harmonic: harmonic as u32, cos, sin }
-        }
-        Effect::GravityCompliance { joint, compliance } => InjectedEffect::GravityCompliance { joint: joint as usize, compliance },
-        Effect::LinkBending { link, compliance } => InjectedEffect::LinkBending { link: link as usize, compliance },
-    }
-}
-
-fn arm(model: &NominalModel) -> EffectArm {
-    let mut a = EffectArm::new(model.clone());
-    a.effects = model.effects().list.iter().map(injected).collect();
-    a
-}
-
 /// k0_aug(q), the first `task_dim` coordinates.
 pub fn position(model: &NominalModel, q: &[f64]) -> Vec<f64> {
-    arm(model).position(q, 0)
+    forward_kinematics(model, q).position[..model.task_dim()].to_vec()
 }
 
 /// The model without its effects (same geometry and gravity model).
@@ -47,32 +30,22 @@ pub fn rigid(model: &NominalModel) -> NominalModel {
 /// moves the tool. `rigid` is [`rigid`]`(model)`.
 pub fn deflected_rigid_jacobian(model: &NominalModel, rigid: &NominalModel, q: &[f64]) -> Vec<f64> {
     let n = q.len();
-    let d = arm(model).deflection(q);
-    let moved: Vec<f64> = q.iter().zip(&d).map(|(a, b)| a + b).collect();
+    let delta = effect_terms(model, &model.effects().list, q, Order::Value).delta;
+    let moved: Vec<f64> = q.iter().zip(&delta).map(|(a, b)| a + b).collect();
     let k = forward_kinematics(rigid, &moved);
     (0..model.task_dim()).flat_map(|c| k.jacobian[c][..n].to_vec()).collect()
 }
 
 /// The contribution of `effect` at q (its own parameter values).
 pub fn response(model: &NominalModel, effect: &Effect, q: &[f64]) -> Response {
-    let mut a = EffectArm::new(model.clone());
-    a.effects = vec![injected(effect)];
+    let t = effect_terms(model, std::slice::from_ref(effect), q, Order::Value);
     match effect {
-        Effect::LinkBending { .. } => {
-            let r = rigid(model);
-            let p0 = forward_kinematics(&r, q).position;
-            let p = a.position(q, 0);
-            let mut b = [0.0; 3];
-            for (c, v) in p.iter().enumerate() {
-                b[c] = v - p0[c];
-            }
-            Response::Task(b)
-        }
-        _ => Response::Joint(a.deflection(q)),
+        Effect::LinkBending { .. } => Response::Task(t.b),
+        _ => Response::Joint(t.delta.iter().copied().take(q.len()).collect()),
     }
 }
 
 /// Gravity torque τ_j(q) of the nominal chain under its mass model.
 pub fn gravity_torques(model: &NominalModel, q: &[f64]) -> Vec<f64> {
-    gravity_torques_numerical(&rigid(model), &model.effects().gravity, q)
+    cbd_runtime::effects::gravity_torques(model, q).iter().copied().take(q.len()).collect()
 }
