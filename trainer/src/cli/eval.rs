@@ -20,9 +20,15 @@ pub struct EvalArgs {
     /// Write figures (error histograms; heatmaps for two-joint arms) into this directory.
     #[arg(long)]
     pub plots: Option<PathBuf>,
+    /// Write the error statistics as JSON here (keys `nominal`, `calibrated`, `rows`, `extrapolating`).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 pub fn run(args: EvalArgs) -> Result<(), String> {
+    if let Some(path) = &args.json {
+        crate::cli::check_output_dir(path)?;
+    }
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     let (data, lines) = (imported.measurements, imported.lines);
@@ -65,6 +71,11 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     println!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
     for (name, s) in [("nominal", before), ("calibrated", after)] {
         println!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
+    }
+    if let Some(path) = &args.json {
+        let v = serde_json::json!({"rows": data.len(), "extrapolating": far, "nominal": before, "calibrated": after});
+        let text = serde_json::to_string_pretty(&v).map_err(|e| e.to_string())?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
         use crate::report::plots::{error_heatmaps, error_histograms, position_errors};

@@ -86,8 +86,6 @@ pub struct TableRow {
 /// Everything a diagnosis found.
 #[derive(Debug, Clone)]
 pub struct Diagnosis {
-    /// Anything the report must mention (rows skipped and why).
-    pub notes: Vec<String>,
     pub train_rows: usize,
     pub test_rows: usize,
     /// `test set` or `held-out split`.
@@ -136,19 +134,6 @@ pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurem
     train.sort_unstable();
     test.sort_unstable();
     (data.subset(&train), data.subset(&test))
-}
-
-/// Largest difference between the runtime's forward kinematics and the diagnosis's augmented
-/// kinematics over the rows of `data`.
-fn runtime_gap(model: &NominalModel, data: &Measurements) -> f64 {
-    let m = model.task_dim();
-    (0..data.len())
-        .map(|i| {
-            let q = data.joints(i);
-            let runtime = cbd_runtime::nominal::forward_kinematics(model, q).position;
-            kinematics::position(model, q).iter().zip(&runtime[..m]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max)
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
@@ -289,17 +274,10 @@ pub fn diagnose(
         geometric_only = Some(geo.model);
     }
     push("nominal + effects", predict(&refined.model, &test.joints));
-    let mut notes = Vec::new();
     if let Some(fit) = cbd {
-        // CbD runs on the runtime's kinematics: only meaningful if it evaluates the effects as
-        // the diagnosis does.
-        let gap = runtime_gap(&refined.model, &train);
-        if gap <= 1e-9 * (1.0 + train.positions.iter().fold(0.0f64, |a, v| a.max(v.abs()))) {
-            let with_effects = fit(&refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
-            push("nominal + effects + CbD", with_effects(&test.joints));
-        } else {
-            notes.push(format!("nominal + effects + CbD skipped: the runtime's forward kinematics differs from the diagnosis's by {gap:.3e} (effects not evaluated by the runtime)"));
-        }
+        // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
+        let with_effects = fit(&refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+        push("nominal + effects + CbD", with_effects(&test.joints));
         if let Some(geo) = &geometric_only {
             let with_geometry = fit(geo, &train).map_err(|e| format!("CbD on nominal + geometric: {e}"))?;
             push("nominal + geometric + CbD", with_geometry(&test.joints));
@@ -308,7 +286,6 @@ pub fn diagnose(
         push("nominal + CbD", plain(&test.joints));
     }
     Ok(Diagnosis {
-        notes,
         train_rows: train.len(),
         test_rows: test.len(),
         held_out,

@@ -95,9 +95,6 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
         out +=
             &format!("  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max);
     }
-    for n in &d.notes {
-        out += &format!("  note: {n}\n");
-    }
     out
 }
 
@@ -145,7 +142,6 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, unit: &str) -> Value {
         "selection": {"candidates": d.candidates, "margin": d.margin,
                       "best_refused": d.selection.best_refused.map(|(g, cv)| json!({"group": d.group_names[g], "cv_rms": cv})), "cv_rms_before": d.selection.cv_rms_before, "cv_rms_after": d.selection.cv_rms_after()},
         "held_out": held,
-        "notes": d.notes,
     })
 }
 
