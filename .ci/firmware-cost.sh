@@ -39,13 +39,14 @@ acc_f32="$("$HOST_F32" accuracy "$OUT/blobs/demo.blob" "$OUT/demo-test.csv")"
 scheme_of() {
     case "$1" in
         rr | six) echo "Heun × 5" ;;
+        six-effects) echo "Heun × 5, 4 effects" ;;
         demo) echo "$demo_method × $demo_steps (cbd demo)" ;;
         *) echo "Euler × 2" ;;
     esac
 }
 
 rows=()
-for name in rr64 demo rr1024 rr six; do
+for name in rr64 demo rr1024 rr six six-effects; do
     read -r n_points n_joints task_dim storage blob_bytes < <("$HOST" info "$OUT/blobs/$name.blob")
     for variant in dp sp f32; do
         # dp runs on the M7 only; sp (f64 in software) and f32 on the M4: QEMU counts the same
