@@ -22,9 +22,9 @@
 //! Everything is f64 through `libm`, with no fused multiply-add: host and firmware agree bit for
 //! bit. Out-of-range joint or link indices (rejected by validation) are ignored, never a panic.
 
-use crate::nominal::{compose, forward_kinematics, frame_of, rot_z_trans_z, trans_x_rot_x, Kinematics};
+use crate::nominal::{dh_walk, forward_kinematics, Kinematics};
 use crate::query_derivatives::{nominal_hessian, NominalHessian};
-use cbd_protocol::{DhChain, DhConvention, Effect, Effects, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use cbd_protocol::{DhChain, Effect, Effects, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 type V3 = [f64; 3];
 
@@ -111,32 +111,11 @@ impl Chain {
                 }
             }
             NominalModel::DhChain(chain) => {
-                let mut frame = frame_of(&chain.base);
-                out.start = [frame[0][3], frame[1][3], frame[2][3]];
-                let joints = chain.joints.iter().zip(q).zip(out.prismatic.iter_mut());
-                for (((joint, q_i), prismatic), ((axis, origin), end)) in
-                    joints.zip(out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut()))
-                {
+                let walk = dh_walk(chain, q);
+                out.start = walk.start;
+                (out.axes, out.origins, out.ends) = (walk.axes, walk.origins, walk.ends);
+                for (prismatic, joint) in out.prismatic.iter_mut().zip(chain.joints.iter()).take(q.len()) {
                     *prismatic = joint.kind == JointKind::Prismatic;
-                    let (theta, d) = match joint.kind {
-                        JointKind::Revolute => (q_i + joint.theta_offset, joint.d),
-                        JointKind::Prismatic => (joint.theta_offset, q_i + joint.d),
-                    };
-                    match chain.convention {
-                        DhConvention::Standard => {
-                            *axis = [frame[0][2], frame[1][2], frame[2][2]];
-                            *origin = [frame[0][3], frame[1][3], frame[2][3]];
-                            frame = compose(&frame, &rot_z_trans_z(theta, d));
-                            frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
-                        }
-                        DhConvention::Modified => {
-                            frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
-                            *axis = [frame[0][2], frame[1][2], frame[2][2]];
-                            *origin = [frame[0][3], frame[1][3], frame[2][3]];
-                            frame = compose(&frame, &rot_z_trans_z(theta, d));
-                        }
-                    }
-                    *end = [frame[0][3], frame[1][3], frame[2][3]];
                     out.n += 1;
                 }
             }
@@ -565,6 +544,7 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 mod tests {
     extern crate std;
     use super::*;
+    use cbd_protocol::DhConvention;
     use crate::nominal::forward_kinematics;
     use crate::query_derivatives::nominal_hessian;
     use cbd_protocol::{DhChain, DhJoint, Effects, Transform};

@@ -58,14 +58,14 @@ fn planar_chain(lengths: &[f64], x: &[f64]) -> Kinematics {
 }
 
 /// A rigid transform as a 3×4 row-major matrix [R | t].
-pub(crate) type Frame = [[f64; 4]; 3];
+type Frame = [[f64; 4]; 3];
 
-pub(crate) fn frame_of(t: &Transform) -> Frame {
+fn frame_of(t: &Transform) -> Frame {
     let r = &t.rotation;
     [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]]
 }
 
-pub(crate) fn compose(a: &Frame, b: &Frame) -> Frame {
+fn compose(a: &Frame, b: &Frame) -> Frame {
     let mut out = [[0.0; 4]; 3];
     // out_ij = [j = 3] a_i3 + Σ_k a_ik b_kj, summed over k in order for every j.
     for (out_i, a_i) in out.iter_mut().zip(a.iter()) {
@@ -79,22 +79,43 @@ pub(crate) fn compose(a: &Frame, b: &Frame) -> Frame {
     out
 }
 
-pub(crate) fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
+fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
     let (s, c) = (libm::sin(theta), libm::cos(theta));
     [[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, d]]
 }
 
-pub(crate) fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
+fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
     let (s, c) = (libm::sin(alpha), libm::cos(alpha));
     [[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]]
 }
 
-/// Joint axes z_i, points o_i on them and the tool point p, in the base frame, at joints `x`.
-pub fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS], [f64; 3]) {
+/// Per joint of a DH chain at joints `x`, in the base frame: its axis z_i, a point o_i on it, and
+/// `ends[i]`, the origin of the frame after the joint's full transform (the distal end of link i).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct DhWalk {
+    pub axes: [[f64; 3]; MAX_JOINTS],
+    pub origins: [[f64; 3]; MAX_JOINTS],
+    pub ends: [[f64; 3]; MAX_JOINTS],
+    /// The base origin (start of link 0).
+    pub start: [f64; 3],
+    /// The tool point.
+    pub tool: [f64; 3],
+}
+
+/// The one DH frame walk: forward kinematics, its Hessian and the effects all use it. Callers
+/// that do not read `ends` pay nothing for it (dead stores to a local are removed).
+#[inline(always)]
+pub(crate) fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
     let mut frame = frame_of(&chain.base);
-    let mut axes = [[0.0; 3]; MAX_JOINTS];
-    let mut origins = [[0.0; 3]; MAX_JOINTS];
-    for (((joint, x_i), axis), origin) in chain.joints.iter().zip(x).zip(axes.iter_mut()).zip(origins.iter_mut()) {
+    let mut out = DhWalk {
+        axes: [[0.0; 3]; MAX_JOINTS],
+        origins: [[0.0; 3]; MAX_JOINTS],
+        ends: [[0.0; 3]; MAX_JOINTS],
+        start: [frame[0][3], frame[1][3], frame[2][3]],
+        tool: [0.0; 3],
+    };
+    let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut());
+    for ((joint, x_i), ((axis, origin), end)) in chain.joints.iter().zip(x).zip(slots) {
         let (theta, d) = match joint.kind {
             JointKind::Revolute => (x_i + joint.theta_offset, joint.d),
             JointKind::Prismatic => (joint.theta_offset, x_i + joint.d),
@@ -115,9 +136,17 @@ pub fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; MAX_JOINTS], [[f64; 
                 frame = compose(&frame, &rot_z_trans_z(theta, d));
             }
         }
+        *end = [frame[0][3], frame[1][3], frame[2][3]];
     }
     frame = compose(&frame, &frame_of(&chain.tool));
-    (axes, origins, [frame[0][3], frame[1][3], frame[2][3]])
+    out.tool = [frame[0][3], frame[1][3], frame[2][3]];
+    out
+}
+
+/// Joint axes z_i, points o_i on them and the tool point p, in the base frame, at joints `x`.
+pub fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS], [f64; 3]) {
+    let walk = dh_walk(chain, x);
+    (walk.axes, walk.origins, walk.tool)
 }
 
 fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {

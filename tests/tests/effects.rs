@@ -9,15 +9,10 @@ use cbd_protocol::*;
 use cbd_runtime::nominal::forward_kinematics;
 use cbd_runtime::query_derivatives::nominal_hessian;
 use cbd_runtime::{Calibrator, Error};
+use cbd_tests::{lcg, model_blob};
 use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
 use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
 use cbd_trainer::simulate::{configurations, rr, Sampling};
-
-/// A deterministic pseudo-random sequence in [−1, 1).
-fn lcg(state: &mut u64) -> f64 {
-    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-    ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-}
 
 fn injected(e: &Effect) -> InjectedEffect {
     match *e {
@@ -245,33 +240,6 @@ fn augmented_jacobian_and_hessian_match_finite_differences_on_the_test_arms() {
     }
 }
 
-/// A blob of `nominal` (effects included) with random points and momenta.
-fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integrator: Integrator) -> Vec<u8> {
-    let n = nominal.n_joints();
-    let m = nominal.task_dim();
-    let mut s = 7u64;
-    let points: Vec<f64> = (0..n_points * n).map(|_| 3.0 * lcg(&mut s)).collect();
-    let momenta: Vec<f64> = (0..n_points * m).map(|_| momentum * lcg(&mut s)).collect();
-    let axes: heapless::Vec<JointKernelAxis, 7> = (0..n)
-        .map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 100.0 } })
-        .collect();
-    let (pb, mb) = (f64_le_bytes(&points), f64_le_bytes(&momenta));
-    let normalisation = if m == 3 { Normalisation { task_offset: [0.0, 0.0, 300.0], task_scale: 500.0 } } else { Normalisation::IDENTITY };
-    let model = Model {
-        nominal,
-        normalisation,
-        joint_kernel: JointKernel { gamma: 2.0, axes },
-        task_kernel: TaskKernel { width: 0.8 },
-        integrator,
-        momentum_law: MomentumLaw::WithDivergence,
-        sigma: 1e-3,
-        n_points: n_points as u32,
-        points: F64Slice::from_le_bytes(&pb),
-        momenta: F64Slice::from_le_bytes(&mb),
-    };
-    encode_to_vec(&model).unwrap()
-}
-
 /// Largest |exact Jacobian − central differences of the positions| / max |Dk1| over `queries`.
 fn exact_jacobian_error(cal: &mut Calibrator<'_>, queries: &[Vec<f64>], step: f64) -> f64 {
     let mut worst: f64 = 0.0;
@@ -351,7 +319,7 @@ fn six_joint_blobs_with_effects_have_exact_jacobians() {
         let nominal = with_effects(&case.rigid, &every_effect(n, case.reach, case.torque));
         for integrator in [Integrator { method: IntegratorMethod::Euler, steps: 2 }, Integrator { method: IntegratorMethod::Rk4, steps: 3 }]
         {
-            let blob = model_blob(nominal.clone(), 30, 0.02, integrator);
+            let blob = model_blob(nominal.clone(), 30, 0.02, integrator, 100.0);
             let mut storage = vec![0.0; 200_000];
             let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
             assert_eq!(cal.model().nominal.effects().list.len(), 4 * n);

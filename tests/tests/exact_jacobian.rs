@@ -4,6 +4,7 @@
 use cbd_protocol::*;
 use cbd_runtime::query_derivatives::nominal_hessian;
 use cbd_runtime::Calibrator;
+use cbd_tests::{lcg, model_blob};
 
 fn six_joint(convention: DhConvention) -> NominalModel {
     let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
@@ -24,38 +25,6 @@ fn six_joint(convention: DhConvention) -> NominalModel {
         tool,
         effects: cbd_protocol::Effects::NONE,
     })
-}
-
-/// A deterministic pseudo-random sequence in [−1, 1).
-fn lcg(state: &mut u64) -> f64 {
-    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-    ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-}
-
-fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integrator: Integrator) -> Vec<u8> {
-    let n = nominal.n_joints();
-    let m = nominal.task_dim();
-    let mut s = 7u64;
-    let points: Vec<f64> = (0..n_points * n).map(|_| 3.0 * lcg(&mut s)).collect();
-    let momenta: Vec<f64> = (0..n_points * m).map(|_| momentum * lcg(&mut s)).collect();
-    let axes: heapless::Vec<JointKernelAxis, 7> = (0..n)
-        .map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 2.0 } })
-        .collect();
-    let (pb, mb) = (f64_le_bytes(&points), f64_le_bytes(&momenta));
-    let normalisation = if m == 3 { Normalisation { task_offset: [0.0, 0.0, 300.0], task_scale: 500.0 } } else { Normalisation::IDENTITY };
-    let model = Model {
-        nominal,
-        normalisation,
-        joint_kernel: JointKernel { gamma: 2.0, axes },
-        task_kernel: TaskKernel { width: 0.8 },
-        integrator,
-        momentum_law: MomentumLaw::WithDivergence,
-        sigma: 1e-3,
-        n_points: n_points as u32,
-        points: F64Slice::from_le_bytes(&pb),
-        momenta: F64Slice::from_le_bytes(&mb),
-    };
-    encode_to_vec(&model).unwrap()
 }
 
 fn check(blob: &[u8], queries: &[Vec<f64>]) -> (f64, f64) {
@@ -99,7 +68,7 @@ fn exact_jacobian_matches_finite_differences() {
         for integrator in [Integrator { method: IntegratorMethod::Euler, steps: 2 }, Integrator { method: IntegratorMethod::Rk4, steps: 3 }]
         {
             let n = nominal.n_joints();
-            let blob = model_blob(nominal.clone(), 40, momentum, integrator);
+            let blob = model_blob(nominal.clone(), 40, momentum, integrator, 2.0);
             let queries: Vec<Vec<f64>> = (0..5).map(|_| (0..n).map(|_| 3.0 * lcg(&mut s)).collect()).collect();
             let (exact, transported) = check(&blob, &queries);
             eprintln!("{name} {integrator:?}: exact {exact:.1e}, transported J(1) {transported:.1e} (relative to max |Dk1|)");
