@@ -544,9 +544,9 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 mod tests {
     extern crate std;
     use super::*;
-    use cbd_protocol::DhConvention;
     use crate::nominal::forward_kinematics;
     use crate::query_derivatives::nominal_hessian;
+    use cbd_protocol::DhConvention;
     use cbd_protocol::{DhChain, DhJoint, Effects, Transform};
     use heapless::Vec as HVec;
     use std::format;

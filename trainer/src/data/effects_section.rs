@@ -20,9 +20,9 @@
 //! scale = 1e-4
 //!
 //! [[effects]]
-//! type = "gravity_compliance"      # δ_j = compliance·τ_j(q), τ_j the gravity torque of the mass model
-//! joint = 3
-//! compliance = 2.3e-5              # angle_unit per (mass·length_unit)
+//! type = "gravity_compliance"      # δ_j = compliance·τ_j(q), τ_j the gravity torque (force, for a
+//! joint = 3                        # prismatic joint) of the mass model
+//! compliance = 2.3e-5              # angle_unit (prismatic: length_unit) per (mass·length_unit)
 //!
 //! [[effects]]
 //! type = "link_bending"            # tool moved by compliance·(g − (g·u)u), u along link `link`
@@ -30,7 +30,7 @@
 //! compliance = 0.05                # length_unit
 //! ```
 
-use cbd_protocol::{Effect, Effects, GravityModel, NominalModel, MAX_EFFECTS};
+use cbd_protocol::{Effect, GravityModel, NominalModel, MAX_EFFECTS};
 use serde::Deserialize;
 use std::fmt::Write as _;
 
@@ -72,6 +72,7 @@ fn check_finite(entry: usize, values: &[(&str, f64)]) -> Result<(), String> {
 pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: f64, nominal: &mut NominalModel) -> Result<(), String> {
     let n = nominal.n_joints();
     let planar = matches!(nominal, NominalModel::PlanarChain { .. });
+    let revolute: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
     let target = nominal.effects_mut();
     if let Some(g) = gravity {
         if let Some(d) = &g.direction {
@@ -115,11 +116,20 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
                     return Err(format!("[[effects]] entry {entry}: harmonic = {harmonic}, needs 1 to 16"));
                 }
                 let joint = check_index(entry, "joint", joint, n)?;
+                if !revolute[joint as usize] {
+                    return Err(format!(
+                        "[[effects]] entry {entry}: joint {} is prismatic; a transmission harmonic needs a revolute joint",
+                        joint + 1
+                    ));
+                }
                 Effect::Transmission { joint, harmonic, cos: cos * rad_per_unit, sin: sin * rad_per_unit }
             }
             RawEffect::GravityCompliance { joint, compliance } => {
                 check_finite(entry, &[("compliance", compliance)])?;
-                Effect::GravityCompliance { joint: check_index(entry, "joint", joint, n)?, compliance: compliance * rad_per_unit }
+                let joint = check_index(entry, "joint", joint, n)?;
+                // A revolute joint deflects by an angle, a prismatic one by a length.
+                let unit = if revolute[joint as usize] { rad_per_unit } else { 1.0 };
+                Effect::GravityCompliance { joint, compliance: compliance * unit }
             }
             RawEffect::LinkBending { link, compliance } => {
                 check_finite(entry, &[("compliance", compliance)])?;
@@ -131,23 +141,10 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
     Ok(())
 }
 
-/// Rejects angle-valued effects on prismatic joints (transmission and compliance act on angles).
-pub fn check_joint_kinds(nominal: &NominalModel) -> Result<(), String> {
-    for (k, e) in nominal.effects().list.iter().enumerate() {
-        let joint = match *e {
-            Effect::Transmission { joint, .. } | Effect::GravityCompliance { joint, .. } => joint as usize,
-            _ => continue,
-        };
-        if !nominal.is_revolute(joint) {
-            return Err(format!("[[effects]] entry {}: joint {} is prismatic; this effect needs a revolute joint", k + 1, joint + 1));
-        }
-    }
-    Ok(())
-}
-
-/// The `[gravity]` (when not the default) and `[[effects]]` sections for `effects`, angles in the
+/// The `[gravity]` (when not the default) and `[[effects]]` sections of `nominal`, angles in the
 /// unit with `rad_per_unit` radians.
-pub fn write(effects: &Effects, planar: bool, rad_per_unit: f64) -> String {
+pub fn write(nominal: &NominalModel, rad_per_unit: f64) -> String {
+    let (effects, planar) = (nominal.effects(), matches!(nominal, NominalModel::PlanarChain { .. }));
     let mut out = String::new();
     let default = if planar { GravityModel::PLANAR } else { GravityModel::DEFAULT };
     if effects.gravity != default {
@@ -172,7 +169,8 @@ pub fn write(effects: &Effects, planar: bool, rad_per_unit: f64) -> String {
                 sin / rad_per_unit
             ),
             Effect::GravityCompliance { joint, compliance } => {
-                writeln!(out, "type = \"gravity_compliance\"\njoint = {}\ncompliance = {:?}", joint + 1, compliance / rad_per_unit)
+                let unit = if nominal.is_revolute(joint as usize) { rad_per_unit } else { 1.0 };
+                writeln!(out, "type = \"gravity_compliance\"\njoint = {}\ncompliance = {:?}", joint + 1, compliance / unit)
             }
             Effect::LinkBending { link, compliance } => {
                 writeln!(out, "type = \"link_bending\"\nlink = {}\ncompliance = {compliance:?}", link + 1)

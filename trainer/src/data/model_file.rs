@@ -373,7 +373,6 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         (NominalModel::planar(&lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect())
     };
     effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(model_err)?;
-    effects_section::check_joint_kinds(&nominal).map_err(model_err)?;
     if let Some(m) = &raw.measurements {
         if m.joints.len() != nominal.n_joints() {
             return Err(model_err(format!(
@@ -488,7 +487,7 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
             let _ = writeln!(out, "repeat_tolerance = {}", f(t));
         }
     }
-    out += &effects_section::write(m.nominal.effects(), matches!(m.nominal, NominalModel::PlanarChain { .. }), per_unit);
+    out += &effects_section::write(&m.nominal, per_unit);
     out
 }
 
@@ -621,7 +620,8 @@ compliance = 0.5
         let deg_text = SMALL.replace("angle_unit = \"rad\"", "angle_unit = \"deg\"").replace("1.5707963267948966", "90");
         let deg_fx = EFFECTS
             .replace("type = \"encoder_scale\"", "type = \"transmission\"\nharmonic = 3\ncos = 0.2\nsin = -0.1")
-            .replace("joint = 2\nscale = 1e-4", "joint = 1");
+            .replace("joint = 2\nscale = 1e-4", "joint = 1")
+            + "\n[[effects]]\ntype = \"gravity_compliance\"\njoint = 2\ncompliance = 0.003\n";
         for text in [format!("{SMALL}{EFFECTS}"), format!("{deg_text}{deg_fx}"), format!("name = \"a \\\"b\\\"\"\n{SMALL}")] {
             let m = parse_model_file(&text, Path::new("in.toml")).unwrap();
             let written = write_model_file(&m, "written by a test\nsecond line");
@@ -647,6 +647,10 @@ compliance = 0.5
                 assert!(ok, "{x:?} vs {y:?}");
             }
             assert_eq!(back.nominal.effects().list.len(), m.nominal.effects().list.len());
+            // A prismatic joint's compliance is a length per force: never converted as an angle.
+            if text.contains("compliance = 0.003") {
+                assert!(m.nominal.effects().list.contains(&Effect::GravityCompliance { joint: 1, compliance: 0.003 }));
+            }
             // The written file is stable: writing what was read gives the same text.
             assert_eq!(write_model_file(&back, "written by a test\nsecond line"), written);
         }
@@ -662,8 +666,12 @@ compliance = 0.5
             ("direction = [0, 0, -2]", "direction = [0, -2]", "[gravity] direction has 2 entries"),
             ("link_masses = [2.5, 1]", "link_masses = [2.5, -1]", "link_masses[2] = -1"),
             ("link = 2", "link = 0", "link = 0"),
-            // Joint 2 of SMALL is prismatic: a gravity compliance there makes no sense.
-            ("type = \"gravity_compliance\"\njoint = 1", "type = \"gravity_compliance\"\njoint = 2", "joint 2 is prismatic"),
+            // Joint 2 of SMALL is prismatic: a transmission harmonic needs an angle.
+            (
+                "type = \"gravity_compliance\"\njoint = 1\ncompliance = 0.01",
+                "type = \"transmission\"\njoint = 2\nharmonic = 1\ncos = 0\nsin = 0",
+                "joint 2 is prismatic",
+            ),
         ];
         for (from, to, needle) in cases {
             assert!(EFFECTS.contains(from), "{from}");

@@ -12,6 +12,7 @@ fn unit_of(model: &NominalModel, p: &Param, length: &str) -> String {
         _ if is_angle(model, p) => "deg".into(),
         Param::Geometric(_) => length.into(),
         Param::EncoderScale { .. } => "(ratio)".into(),
+        Param::GravityCompliance { joint } if !model.is_revolute(*joint) => format!("{length}/(mass·{length})"),
         Param::GravityCompliance { .. } => format!("rad/(mass·{length})"),
         Param::LinkBending { .. } => length.into(),
         _ => String::new(),
