@@ -289,3 +289,26 @@ fn write_model_keeps_the_found_effect_for_fit_and_eval() {
     assert!(augmented < 0.5 * plain && augmented < 0.03, "CbD on the written model {augmented} mm vs on the nominal {plain} mm");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn diagnose_bad_files_are_errors_naming_the_file() {
+    let dir = std::env::temp_dir().join(format!("cbd-diagnose-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cbd = env!("CARGO_BIN_EXE_cbd");
+    let run = |args: &[&str]| std::process::Command::new(cbd).arg("diagnose").args(args).current_dir(&dir).output().unwrap();
+    // A missing data file, a missing test file.
+    std::fs::write(dir.join("few.csv"), "q1,q2,x,y\n0.1,0.2,1.3,0.4\n0.3,0.1,1.2,0.5\n").unwrap();
+    for (args, needle) in [
+        (vec!["--data", "missing.csv"], "missing.csv"),
+        (vec!["--data", "few.csv", "--test", "gone.csv"], "gone.csv"),
+        (vec!["--data", "few.csv"], "at least 10 training rows"),
+        (vec!["--data", "few.csv", "--json", "no/such/dir/d.json"], "no/such/dir"),
+    ] {
+        let out = run(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
