@@ -11,7 +11,7 @@
 use super::primal::{ControlPoints, PrimalFlow};
 use cbd_protocol::{MomentumLaw, MAX_JOINTS};
 use cbd_runtime::flow::Dims;
-use cbd_runtime::kernel::joint_kernel;
+use cbd_runtime::kernel::{joint_kernel_from_features, read_features};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
@@ -43,10 +43,12 @@ fn joint_kernel_matrices(cp: &ControlPoints) -> JointKernelMatrices {
     let mut kv = Mat::zeros(count, count);
     let mut gv: Vec<Mat<f64>> = (0..n).map(|_| Mat::zeros(count, count)).collect();
     let mut grad = [0.0; MAX_JOINTS];
+    let features = |i: usize| read_features(&cp.features, n, i);
     for j in 0..count {
-        let xj = &cp.points[j * n..(j + 1) * n];
+        let fj = features(j);
         for i in 0..count {
-            let value = joint_kernel(&cp.joint_kernel, &cp.points[i * n..(i + 1) * n], xj, &mut grad);
+            // Bit-identical to `joint_kernel` of the configurations (which computes the features first).
+            let value = joint_kernel_from_features(&cp.joint_kernel, &features(i), &fj, &mut grad);
             kv[(i, j)] = value;
             for e in 0..n {
                 gv[e][(i, j)] = grad[e];
@@ -113,19 +115,23 @@ fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64], 
         }
     }
     let (mut v, mut dv) = (per_point(n), per_point(n * n));
-    let mut div = vec![0.0; count];
-    for i in 0..count {
-        for j in 0..count {
-            let kvij = jk.kv[(i, j)];
-            for d in 0..n {
-                v[d][i] += kvij * u[d][j];
-                for e in 0..n {
-                    dv[d * n + e][i] += u[d][j] * jk.gv[e][(i, j)];
+    // Column by column (contiguous in the column-major matrices); every v[d][i] and dv[..][i]
+    // still sums over j in order.
+    for j in 0..count {
+        let kv_j = jk.kv.col(j);
+        for d in 0..n {
+            let u_dj = u[d][j];
+            for (v_i, k) in v[d].iter_mut().zip(kv_j.iter()) {
+                *v_i += k * u_dj;
+            }
+            for e in 0..n {
+                for (dv_i, g) in dv[d * n + e].iter_mut().zip(jk.gv[e].col(j).iter()) {
+                    *dv_i += u_dj * g;
                 }
             }
         }
-        div[i] = (0..n).map(|d| dv[d * n + d][i]).sum();
     }
+    let mut div: Vec<f64> = (0..count).map(|i| (0..n).map(|d| dv[d * n + d][i]).sum()).collect();
     if cp.law == MomentumLaw::WithoutDivergence {
         div.iter_mut().for_each(|x| *x = 0.0);
     }
@@ -289,6 +295,29 @@ pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) 
 
 /// `position_jacobian` on the current rayon pool: column chunks run in parallel.
 pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f64> {
+    let m = cp.dims.m;
+    // Initial tangent of direction j·m + b: δP_{j,b} = 1.
+    propagate(cp, flow, cp.len() * m, |dir, p_rows| p_rows[(dir % m) * cp.len() + dir / m] = 1.0)
+}
+
+/// ∂k1/∂P0 · D for momentum directions D ((N·m) × r, rows j·m + b like P0): the (N·m) × r matrix
+/// of the discrete flow's derivatives along D's columns, on the current rayon pool. Costs r/(N·m)
+/// of [`position_jacobian_in_pool`]'s GEMMs after the first stage (the identity's sparsity makes
+/// that one cheap there).
+pub fn position_jacobian_along(cp: &ControlPoints, flow: &PrimalFlow, directions: MatRef<'_, f64>) -> Mat<f64> {
+    let (m, count) = (cp.dims.m, cp.len());
+    assert_eq!(directions.nrows(), count * m, "direction length");
+    propagate(cp, flow, directions.ncols(), |dir, p_rows| {
+        for (r, v) in directions.col(dir).iter().enumerate() {
+            p_rows[(r % m) * count + r / m] = *v;
+        }
+    })
+}
+
+/// Propagates `directions` tangents (column `dir` starts with zero k and J rows and the momentum
+/// rows that `init(dir, p_rows)` writes, component-major: row b·N + j) through the scheme and
+/// returns the positions of t = 1, rows i·m + a.
+fn propagate(cp: &ControlPoints, flow: &PrimalFlow, directions: usize, init: impl Fn(usize, &mut [f64]) + Sync) -> Mat<f64> {
     use rayon::prelude::*;
     let dims = cp.dims;
     let (m, count, len) = (dims.m, cp.len(), dims.state_len());
@@ -297,18 +326,17 @@ pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f
     let stage_count = flow.stage_states.len() / stage_len;
     let stages: Vec<StageLinearisation> =
         flow.stage_states.chunks_exact(stage_len).enumerate().map(|(k, y)| linearise_stage(cp, &jk, y, k + 1 == stage_count)).collect();
-    let directions = count * m;
     let rows = count * len;
     let chunks = directions.div_ceil(CHUNK_COLUMNS).max(2);
     let bounds: Vec<(usize, usize)> = (0..chunks).map(|c| (c * directions / chunks, (c + 1) * directions / chunks)).collect();
+    let p_start = (m + m * dims.n) * count;
     // Each chunk returns only the position rows it ends with (m·N × columns), not its whole state.
     let run_chunk = |&(d0, d1): &(usize, usize)| -> Vec<f64> {
         let cols = d1 - d0;
         let mut tan = vec![0.0; rows * cols];
-        // Initial tangent: δP_{j,b} = 1 for direction j·m + b.
         for dir in d0..d1 {
-            let (j, b) = (dir / m, dir % m);
-            tan[(dir - d0) * rows + (m + m * dims.n + b) * count + j] = 1.0;
+            let col = &mut tan[(dir - d0) * rows..(dir - d0 + 1) * rows];
+            init(dir, &mut col[p_start..p_start + m * count]);
         }
         let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(tan.len())];
         let result: Result<(), ()> =
@@ -385,6 +413,23 @@ mod tests {
                 assert!(worst < 1e-7, "{law:?} {method:?}: worst relative difference {worst:e}");
             }
         }
+    }
+
+    #[test]
+    fn jacobian_along_directions_is_the_jacobian_times_them() {
+        let (cp, p0) = small_problem(MomentumLaw::WithDivergence, IntegratorMethod::Heun);
+        let flow = cp.integrate(&p0).unwrap();
+        let jac = position_jacobian(&cp, &flow, 2);
+        let dirs = Mat::from_fn(14, 5, |r, c| ((r * 7 + c * 3) % 11) as f64 / 11.0 - 0.5);
+        let along = super::super::with_threads(2, || position_jacobian_along(&cp, &flow, dirs.as_ref()));
+        let mut worst: f64 = 0.0;
+        for c in 0..5 {
+            for r in 0..14 {
+                let expected: f64 = (0..14).map(|k| jac[(r, k)] * dirs[(k, c)]).sum();
+                worst = worst.max((along[(r, c)] - expected).abs());
+            }
+        }
+        assert!(worst < 1e-12, "{worst:e}");
     }
 
     #[test]
