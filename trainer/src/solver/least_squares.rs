@@ -26,6 +26,11 @@ impl QrLeastSquares {
         QrLeastSquares { qr: a, h, par }
     }
 
+    /// |R_jj|, j < cols.
+    pub fn r_diagonal(&self) -> Vec<f64> {
+        (0..self.qr.ncols().min(self.qr.nrows())).map(|j| self.qr[(j, j)].abs()).collect()
+    }
+
     /// The first `cols` columns of Q: an orthonormal basis of A's columns (rows × cols).
     pub fn thin_q(&self) -> Mat<f64> {
         let (rows, cols) = (self.qr.nrows(), self.qr.ncols());

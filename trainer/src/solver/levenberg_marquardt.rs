@@ -7,7 +7,7 @@
 
 use super::regulariser::{linear_response, regulariser_matrix};
 use super::step::StepFactor;
-use super::subspace::{dominant_eigenspace, Eigenspace};
+use super::subspace::{dominant_eigenspace, Declined, Eigenspace};
 use crate::data::Measurements;
 use crate::flow::tangent::{position_jacobian_along, position_jacobian_in_pool};
 use crate::flow::ControlPoints;
@@ -92,19 +92,17 @@ fn choose_basis(method: SolverMethod, k_reg: &Mat<f64>) -> Option<Eigenspace> {
     match method {
         SolverMethod::Dense => None,
         // Forced: every probe the problem has, so the eigenspace is found whatever its size.
-        SolverMethod::Eigenspace => dominant_eigenspace(k_reg, dim, FIXED_SPLIT),
+        SolverMethod::Eigenspace => dominant_eigenspace(k_reg, dim, FIXED_SPLIT).ok(),
         SolverMethod::Auto if dim <= DENSE_MAX_UNKNOWNS => None,
         SolverMethod::Auto => {
             let limit = dim * 5 / 8;
             let mut probes = FIRST_PROBES.min(limit);
             loop {
-                if let Some(e) = dominant_eigenspace(k_reg, probes, FIXED_SPLIT) {
-                    return Some(e);
+                match dominant_eigenspace(k_reg, probes, FIXED_SPLIT) {
+                    Ok(e) => return Some(e),
+                    Err(Declined::Full) if probes < limit => probes = (2 * probes).min(limit),
+                    Err(_) => return None,
                 }
-                if probes >= limit {
-                    return None;
-                }
-                probes = (2 * probes).min(limit);
             }
         }
     }
