@@ -171,9 +171,13 @@ fn gemm(mut out: MatMut<'_, f64>, accum: Accum, lhs: MatRef<'_, f64>, rhs: MatRe
     }
 }
 
+/// δDw_ab (index a·m + b) and δDv_de (index d·n + e) blocks of one stage's tangent rates.
+type FieldTangents = (Vec<Mat<f64>>, Vec<Mat<f64>>);
+
 /// Linearised right-hand side of the control-point dynamics for one column chunk. With
 /// `positions_only` only the k rows are formed (the last stage: its J and P rates reach nothing
-/// that is read), which skips the δDw and δDv products, two thirds of the GEMMs.
+/// that is read), which skips the δDw and δDv products, two thirds of the GEMMs; otherwise the
+/// δDw and δDv blocks are returned too.
 fn tangent_rates(
     cp: &ControlPoints,
     jk: &JointKernelMatrices,
@@ -181,7 +185,7 @@ fn tangent_rates(
     tan: MatRef<'_, f64>,
     mut out: MatMut<'_, f64>,
     positions_only: bool,
-) {
+) -> Option<FieldTangents> {
     let Dims { m, n } = cp.dims;
     let count = cp.len();
     let cols = tan.ncols();
@@ -231,7 +235,7 @@ fn tangent_rates(
         }
     }
     if positions_only {
-        return;
+        return None;
     }
     // δDw_ab = G_b δP_a + Σ_c (diag(T_abc) δk_c − H_bc S_ac)
     let mut ddw = zeros(m * m);
@@ -266,7 +270,24 @@ fn tangent_rates(
             }
         }
     }
-    // δ(dP_a) = −Σ_c (P_c δDw_ca + Dw_ca δP_c) − (P_a δdiv + div δP_a)
+    momentum_rates(cp, lin, tan, &ddw, &ddv, out);
+    Some((ddw, ddv))
+}
+
+/// The momentum rows of the tangent rates, δ(dP_a) = −Σ_c (P_c δDw_ca + Dw_ca δP_c) − (P_a δdiv + div δP_a),
+/// from the stage's δDw and δDv blocks (`ddv` indexed d·n + e; only d = e is read).
+fn momentum_rates(
+    cp: &ControlPoints,
+    lin: &StageLinearisation,
+    tan: MatRef<'_, f64>,
+    ddw: &[Mat<f64>],
+    ddv: &[Mat<f64>],
+    mut out: MatMut<'_, f64>,
+) {
+    let Dims { m, n } = cp.dims;
+    let count = cp.len();
+    let blk = |c: usize| tan.subrows(c * count, count);
+    let p_of = |a: usize| m + m * n + a;
     let with_div = cp.law == MomentumLaw::WithDivergence;
     for a in 0..m {
         let mut o = out.as_mut().subrows_mut(p_of(a) * count, count);
@@ -297,7 +318,7 @@ pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) 
 pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f64> {
     let m = cp.dims.m;
     // Initial tangent of direction j·m + b: δP_{j,b} = 1.
-    propagate(cp, flow, cp.len() * m, |dir, p_rows| p_rows[(dir % m) * cp.len() + dir / m] = 1.0)
+    propagate(cp, flow, cp.len() * m, |dir, p_rows| p_rows[(dir % m) * cp.len() + dir / m] = 1.0, None)
 }
 
 /// ∂k1/∂P0 · D for momentum directions D ((N·m) × r, rows j·m + b like P0): the (N·m) × r matrix
@@ -307,17 +328,94 @@ pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f
 pub fn position_jacobian_along(cp: &ControlPoints, flow: &PrimalFlow, directions: MatRef<'_, f64>) -> Mat<f64> {
     let (m, count) = (cp.dims.m, cp.len());
     assert_eq!(directions.nrows(), count * m, "direction length");
-    propagate(cp, flow, directions.ncols(), |dir, p_rows| {
-        for (r, v) in directions.col(dir).iter().enumerate() {
-            p_rows[(r % m) * count + r / m] = *v;
-        }
-    })
+    propagate(cp, flow, directions.ncols(), |dir, p| fill_direction(directions, m, count, dir, p), None)
 }
 
-/// Propagates `directions` tangents (column `dir` starts with zero k and J rows and the momentum
-/// rows that `init(dir, p_rows)` writes, component-major: row b·N + j) through the scheme and
-/// returns the positions of t = 1, rows i·m + a.
-fn propagate(cp: &ControlPoints, flow: &PrimalFlow, directions: usize, init: impl Fn(usize, &mut [f64]) + Sync) -> Mat<f64> {
+/// The first stage's tangent rates along fixed directions as far as they do not depend on P0: the
+/// first stage of every scheme is evaluated at the initial state, whose k and J do not depend on
+/// P0, with the initial tangent (δk, δJ, δP) = (0, 0, D). Its k and J rows and its δDw, δDv blocks
+/// are therefore the same at every P0 (12 of the 20 N × N GEMMs of a Gauss–Newton Jacobian for
+/// Euler × 2); only the momentum rows are formed again. The values are the uncached ones exactly.
+pub struct TangentAlong {
+    directions: Mat<f64>,
+    /// Per column chunk: the first stage's rates and its δDw, δDv blocks (None: one-stage scheme).
+    first: Vec<Option<(Mat<f64>, FieldTangents)>>,
+}
+
+impl TangentAlong {
+    /// Forms the first stage's P0-independent part for `directions` ((N·m) × r, rows j·m + b), on
+    /// the current rayon pool.
+    pub fn new(cp: &ControlPoints, directions: Mat<f64>) -> Self {
+        use rayon::prelude::*;
+        let (m, count) = (cp.dims.m, cp.len());
+        assert_eq!(directions.nrows(), count * m, "direction length");
+        let single_stage = cp.integrator.stage_count() == 1;
+        let first = if single_stage {
+            vec![None; chunk_bounds(directions.ncols()).len()]
+        } else {
+            let jk = joint_kernel_matrices(cp);
+            // The linearisation at the initial state with P0 = 0: its kernel matrices and J are those
+            // of any P0; the P0-dependent vectors (P, Dw, v, Dv, div, T) multiply zero blocks.
+            let lin = linearise_stage(cp, &jk, &cp.initial, false);
+            let rows = count * cp.dims.state_len();
+            chunk_bounds(directions.ncols())
+                .par_iter()
+                .map(|&(d0, d1)| {
+                    let tan = initial_tangent(cp, d0, d1, |dir, p| fill_direction(directions.as_ref(), m, count, dir, p));
+                    let mut out = Mat::zeros(rows, d1 - d0);
+                    let tan = MatRef::from_column_major_slice(&tan, rows, d1 - d0);
+                    let fields = tangent_rates(cp, &jk, &lin, tan, out.as_mut(), false);
+                    fields.map(|f| (out, f))
+                })
+                .collect()
+        };
+        TangentAlong { directions, first }
+    }
+
+    /// ∂k1/∂P0 · D at `flow`'s momenta: (N·m) × r, as [`position_jacobian_along`].
+    pub fn jacobian(&self, cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f64> {
+        let (m, count) = (cp.dims.m, cp.len());
+        propagate(cp, flow, self.directions.ncols(), |dir, p| fill_direction(self.directions.as_ref(), m, count, dir, p), Some(&self.first))
+    }
+}
+
+fn fill_direction(directions: MatRef<'_, f64>, m: usize, count: usize, dir: usize, p_rows: &mut [f64]) {
+    for (r, v) in directions.col(dir).iter().enumerate() {
+        p_rows[(r % m) * count + r / m] = *v;
+    }
+}
+
+/// Column chunks of `directions` tangent directions; depends on their count only, never on threads.
+fn chunk_bounds(directions: usize) -> Vec<(usize, usize)> {
+    let chunks = directions.div_ceil(CHUNK_COLUMNS).max(2);
+    (0..chunks).map(|c| (c * directions / chunks, (c + 1) * directions / chunks)).collect()
+}
+
+/// The initial tangent of directions d0..d1 (column-major, N·state_len rows component-major): zero k and J
+/// rows, the momentum rows that `init(dir, p_rows)` writes (row b·N + j).
+fn initial_tangent(cp: &ControlPoints, d0: usize, d1: usize, init: impl Fn(usize, &mut [f64])) -> Vec<f64> {
+    let dims = cp.dims;
+    let (m, count) = (dims.m, cp.len());
+    let rows = count * dims.state_len();
+    let p_start = (m + m * dims.n) * count;
+    let mut tan = vec![0.0; rows * (d1 - d0)];
+    for dir in d0..d1 {
+        let col = &mut tan[(dir - d0) * rows..(dir - d0 + 1) * rows];
+        init(dir, &mut col[p_start..p_start + m * count]);
+    }
+    tan
+}
+
+/// Propagates `directions` tangents (initial tangents from `init`, see [`initial_tangent`]) through
+/// the scheme and returns the positions of t = 1, rows i·m + a. With `first`, the first stage's
+/// P0-independent part comes from [`TangentAlong`]'s cache.
+fn propagate(
+    cp: &ControlPoints,
+    flow: &PrimalFlow,
+    directions: usize,
+    init: impl Fn(usize, &mut [f64]) + Sync,
+    first: Option<&[Option<(Mat<f64>, FieldTangents)>]>,
+) -> Mat<f64> {
     use rayon::prelude::*;
     let dims = cp.dims;
     let (m, count, len) = (dims.m, cp.len(), dims.state_len());
@@ -327,23 +425,27 @@ fn propagate(cp: &ControlPoints, flow: &PrimalFlow, directions: usize, init: imp
     let stages: Vec<StageLinearisation> =
         flow.stage_states.chunks_exact(stage_len).enumerate().map(|(k, y)| linearise_stage(cp, &jk, y, k + 1 == stage_count)).collect();
     let rows = count * len;
-    let chunks = directions.div_ceil(CHUNK_COLUMNS).max(2);
-    let bounds: Vec<(usize, usize)> = (0..chunks).map(|c| (c * directions / chunks, (c + 1) * directions / chunks)).collect();
-    let p_start = (m + m * dims.n) * count;
+    let bounds = chunk_bounds(directions);
     // Each chunk returns only the position rows it ends with (m·N × columns), not its whole state.
-    let run_chunk = |&(d0, d1): &(usize, usize)| -> Vec<f64> {
+    let run_chunk = |(chunk, &(d0, d1)): (usize, &(usize, usize))| -> Vec<f64> {
         let cols = d1 - d0;
-        let mut tan = vec![0.0; rows * cols];
-        for dir in d0..d1 {
-            let col = &mut tan[(dir - d0) * rows..(dir - d0 + 1) * rows];
-            init(dir, &mut col[p_start..p_start + m * count]);
-        }
+        let cached = first.and_then(|f| f[chunk].as_ref());
+        let mut tan = initial_tangent(cp, d0, d1, &init);
         let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(tan.len())];
         let result: Result<(), ()> =
             cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
                 let y = MatRef::from_column_major_slice(y, rows, cols);
-                let out = MatMut::from_column_major_slice_mut(out, rows, cols);
-                tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
+                let mut out = MatMut::from_column_major_slice_mut(out, rows, cols);
+                match cached {
+                    Some((rates, (ddw, ddv))) if stage == 0 => {
+                        out.copy_from(rates);
+                        out.as_mut().subrows_mut((m + m * dims.n) * count, m * count).fill(0.0);
+                        momentum_rates(cp, &stages[0], y, ddw, ddv, out);
+                    }
+                    _ => {
+                        tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
+                    }
+                }
                 Ok(())
             });
         let _ = result;
@@ -354,7 +456,7 @@ fn propagate(cp: &ControlPoints, flow: &PrimalFlow, directions: usize, init: imp
         }
         positions
     };
-    let results: Vec<Vec<f64>> = bounds.par_iter().map(run_chunk).collect();
+    let results: Vec<Vec<f64>> = bounds.par_iter().enumerate().map(run_chunk).collect();
     let mut jac = Mat::zeros(count * m, directions);
     for (&(d0, d1), tan) in bounds.iter().zip(&results) {
         for dir in d0..d1 {
@@ -430,6 +532,26 @@ mod tests {
             }
         }
         assert!(worst < 1e-12, "{worst:e}");
+    }
+
+    /// The first-stage cache gives the uncached values exactly, for every scheme (one stage:
+    /// nothing cached) and both momentum laws.
+    #[test]
+    fn cached_first_stage_gives_the_uncached_jacobian() {
+        for law in [MomentumLaw::WithDivergence, MomentumLaw::WithoutDivergence] {
+            for method in [IntegratorMethod::Euler, IntegratorMethod::Heun, IntegratorMethod::Rk4] {
+                let (mut cp, p0) = small_problem(law, method);
+                for steps in [1, 3] {
+                    cp.integrator.steps = steps;
+                    let flow = cp.integrate(&p0).unwrap();
+                    let dirs = Mat::from_fn(14, 9, |r, c| ((r * 5 + c * 7) % 13) as f64 / 13.0 - 0.4);
+                    let (plain, cached) = super::super::with_threads(2, || {
+                        (position_jacobian_along(&cp, &flow, dirs.as_ref()), TangentAlong::new(&cp, dirs.clone()).jacobian(&cp, &flow))
+                    });
+                    assert!(plain == cached, "{law:?} {method:?} × {steps}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -9,7 +9,7 @@ use super::regulariser::{linear_response, regulariser_matrix};
 use super::step::StepFactor;
 use super::subspace::{dominant_eigenspace, Declined, Eigenspace};
 use crate::data::Measurements;
-use crate::flow::tangent::{position_jacobian_along, position_jacobian_in_pool};
+use crate::flow::tangent::{position_jacobian_in_pool, TangentAlong};
 use crate::flow::ControlPoints;
 use cbd_protocol::{f64_le_bytes, F64Slice, Integrator, JointKernel, Model, MomentumLaw, NominalModel, Normalisation, TaskKernel};
 use faer::linalg::matmul::matmul;
@@ -292,9 +292,12 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             }
         }
     };
+    // Along the eigenspace, the first stage's P0-independent part is formed once (when the first
+    // exact Jacobian is needed) and kept.
+    let along: std::cell::OnceCell<TangentAlong> = std::cell::OnceCell::new();
     let exact_jacobian = |flow: &crate::flow::PrimalFlow| match &basis {
         None => position_jacobian_in_pool(&cp, flow),
-        Some(e) => position_jacobian_along(&cp, flow, e.basis.as_ref()),
+        Some(e) => along.get_or_init(|| TangentAlong::new(&cp, e.basis.clone())).jacobian(&cp, flow),
     };
     if opts.verbose {
         eprintln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
