@@ -283,7 +283,7 @@ fn markdown(r: &BenchReport) -> String {
     s +=
         "Solver: Gauss–Newton from the linearised model's solution (QR of the stacked [J/σ; Lᵀ], damping only after a failed step, chord\n";
     s += "steps reusing a factorisation while they pay); stops when an exact step lowers the energy by < 1e-5 (relative) or moves no\n";
-    s += "training prediction by 1e-9 (normalised units). The search space is chosen automatically: up to 1024 unknowns all N·m\n";
+    s += "training prediction by 1e-10 (normalised units). The search space is chosen automatically: up to 1024 unknowns all N·m\n";
     s += "momenta (\"dense\": N·m tangent directions per Jacobian, a 2Nm × Nm QR, O(N³)); above, when K_lin's dominant eigenspace is\n";
     s += "small next to N·m, P0 = S c with S its eigenvectors above 3e-14 of the largest eigenvalue (\"eigenspace\", from randomised\n";
     s += "subspace iteration; its size does not grow with N for smooth kernels: r tangent directions per Jacobian, an (Nm + r) × r QR,\n";

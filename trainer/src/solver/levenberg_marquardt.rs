@@ -58,7 +58,7 @@ impl CbdOptions {
             normalisation: Normalisation::IDENTITY,
             max_iterations: 30,
             relative_tolerance: 1e-5,
-            prediction_tolerance: 1e-9,
+            prediction_tolerance: 1e-10,
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
             method: SolverMethod::Auto,
             verbose: false,
