@@ -95,8 +95,13 @@ pub fn integrate_control_points_with_features(
     })
 }
 
+/// The control points' integration (the one loop behind [`integrate_control_points`] and
+/// [`integrate_control_points_with_features`]) with the rates of every stage computed by
+/// `rates(state, samples, out)`: for the same discrete flow it must write what
+/// [`control_point_rates_with_features`] writes for rows `0..n_points` — the trainer splits those
+/// rows across threads (a row's rate does not depend on the split, so the bits do not either).
 #[allow(clippy::too_many_arguments)]
-fn integrate_points(
+pub fn integrate_points(
     dims: Dims,
     integrator: Integrator,
     n_points: usize,

@@ -41,7 +41,7 @@ pub fn write_features(kernel: &JointKernel, n: usize, points: &[f64], features: 
 
 /// Reads configuration `j`'s features from a [`write_features`] table.
 #[inline]
-pub(crate) fn read_features(features: &[Real], n: usize, j: usize) -> [[Real; FEATURES_PER_JOINT]; MAX_JOINTS] {
+pub fn read_features(features: &[Real], n: usize, j: usize) -> [[Real; FEATURES_PER_JOINT]; MAX_JOINTS] {
     let mut f = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     let len = n * FEATURES_PER_JOINT;
     if let Some(src) = features.get(j * len..(j + 1) * len) {

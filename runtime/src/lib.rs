@@ -20,7 +20,7 @@ pub mod query_derivatives;
 pub mod real;
 
 pub use calibrator::{
-    initial_state, integrate_control_points, integrate_control_points_with_features, storage_len, Calibrator, Evaluation,
+    initial_state, integrate_control_points, integrate_control_points_with_features, integrate_points, storage_len, Calibrator, Evaluation,
 };
 pub use cbd_protocol as protocol;
 

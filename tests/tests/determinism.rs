@@ -61,6 +61,26 @@ fn rr_blob_at_n_256_is_identical_on_one_and_two_threads() {
     assert!(one == two, "1 vs 2 threads: {}", first_difference(&one, &two));
 }
 
+/// The large-N solver (momenta in K_lin's dominant eigenspace: randomised eigen-solver, Jacobians
+/// along the basis, column chunks on the pool) forced on a small problem: the same bits on 1–3 threads.
+#[test]
+fn eigenspace_solver_blob_is_identical_across_thread_counts() {
+    let data = rr_data(12);
+    let blob = |threads: usize| {
+        let mut opts = CbdOptions::paper_rr();
+        opts.max_iterations = 4;
+        opts.threads = threads;
+        opts.method = cbd_trainer::solver::SolverMethod::Eigenspace;
+        let fit = fit_cbd(&rr::nominal(), &data, &opts).expect("fit");
+        assert!(fit.report.method == "eigenspace" && fit.report.tangents >= 1);
+        fit.blob
+    };
+    let (one, two, three, two_again) = (blob(1), blob(2), blob(3), blob(2));
+    assert!(one == two, "1 vs 2 threads: {}", first_difference(&one, &two));
+    assert!(one == three, "1 vs 3 threads: {}", first_difference(&one, &three));
+    assert!(two == two_again, "2 threads, run to run: {}", first_difference(&two, &two_again));
+}
+
 /// A 6-joint DH arm with data-scaled normalisation (the UR5 example's first 40 rows).
 #[test]
 fn ur5_blob_is_identical_across_thread_counts() {

@@ -342,6 +342,7 @@ fn fit_bad_solver_options_fail_cleanly() {
         cbd(&dir, &args)
     };
     fails_with(&fit(&["--integrator", "leapfrog"]), &["leapfrog"]);
+    fails_with(&fit(&["--solver", "cg"]), &["--solver", "cg"]);
     fails_with(&fit(&["--steps", "65"]), &["steps"]);
     fails_with(&fit(&["--joint-b=0"]), &[]);
     fails_with(&fit(&["--joint-b=-1"]), &[]);
@@ -368,6 +369,7 @@ fn fit_bad_solver_options_name_the_flag() {
         ("--steps", "65"),
         ("--joint-b", "0"),
         ("--gamma", "-1"),
+        ("--solver", "lsqr"),
     ] {
         let arg = format!("{flag}={value}");
         let out = cbd(&dir, &["fit", "--data", g4, "--out", "a.blob", "--quiet", &arg]);
@@ -555,4 +557,19 @@ fn cli_fit_twice_gives_identical_files() {
     let (a, b) = (std::fs::read(dir.join("a.blob")).unwrap(), std::fs::read(dir.join("b.blob")).unwrap());
     assert!(a == b, "two `cbd fit` runs differ at byte {:?}", a.iter().zip(&b).position(|(x, y)| x != y));
     cbd_protocol::decode(&a).expect("a complete blob");
+}
+
+/// `--solver` chooses the search space; every choice fits a small grid, and on it (6 × 6 points,
+/// 72 unknowns, below the automatic threshold) `auto` is `dense`, bit for bit.
+#[test]
+fn cli_fit_with_each_solver() {
+    let dir = scratch("solvers");
+    assert!(cbd(&dir, &["simulate", "--grid", "6", "--out", "g.csv"]).status.success());
+    for solver in ["auto", "dense", "eigenspace"] {
+        let blob = format!("{solver}.blob");
+        let out = cbd(&dir, &["fit", "--data", "g.csv", "--out", &blob, "--max-iterations", "3", "--quiet", "--solver", solver]);
+        assert!(out.status.success(), "{solver}: {}", stderr(&out));
+        cbd_protocol::decode(&std::fs::read(dir.join(&blob)).unwrap()).expect("a complete blob");
+    }
+    assert_eq!(std::fs::read(dir.join("auto.blob")).unwrap(), std::fs::read(dir.join("dense.blob")).unwrap());
 }

@@ -11,7 +11,7 @@ use std::time::Instant;
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
     /// Measurement counts for the RR benchmark (perfect squares: a √N × √N grid).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![64usize, 256, 1024])]
+    #[arg(long, value_delimiter = ',', default_values_t = vec![64usize, 256, 1024, 4096])]
     pub sizes: Vec<usize>,
     /// Write the results as JSON here.
     #[arg(long)]
@@ -41,6 +41,12 @@ pub struct FitBench {
     pub n: usize,
     /// Exact Jacobians formed by the tangent flow.
     pub tangents: usize,
+    /// The solver's search space: "dense" (all N·m momenta) or "eigenspace" (K_lin's dominant eigenspace).
+    pub method: String,
+    /// Its dimension.
+    pub unknowns: usize,
+    /// Choosing it (the eigen-solver; part of `seconds_solve`).
+    pub seconds_basis: f64,
     /// Hyperparameter choice by the GP marginal likelihood before the fit (UR5 only; not in `seconds`).
     pub hyperparameter_seconds: f64,
     pub seconds: f64,
@@ -112,6 +118,9 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
         case: "rr".into(),
         n,
         tangents: r.tangents,
+        method: r.method.clone(),
+        unknowns: r.unknowns,
+        seconds_basis: r.seconds_basis,
         hyperparameter_seconds: 0.0,
         seconds: r.seconds,
         iterations: r.iterations,
@@ -144,6 +153,9 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
         case: "ur5".into(),
         n: train.len(),
         tangents: r.tangents,
+        method: r.method.clone(),
+        unknowns: r.unknowns,
+        seconds_basis: r.seconds_basis,
         hyperparameter_seconds,
         seconds: r.seconds,
         iterations: r.iterations,
@@ -268,19 +280,26 @@ fn markdown(r: &BenchReport) -> String {
     let mut s = String::from("## Trainer and runtime\n\n");
     s += &format!("Machine: {}. Command: `cargo run --release -p cbd-trainer --bin cbd -- bench --markdown BENCHMARKS.md`.\n", r.machine);
     s += "RR benchmark (DESIGN.md §4), default scheme (Euler × 2, σ = 1e-6), N grid measurements; test error on 1000 random configurations.\n";
-    s += "Solver: Gauss–Newton from the linearised model's solution (QR of [J/σ; Lᵀ], damping only after a failed step, chord steps\n";
-    s += "reusing a factorisation while they pay); stops when an exact step lowers the energy by < 1e-5 (relative) or moves no\n";
-    s += "training prediction by 1e-9 (normalised units). One process per row (peak MiB = its VmHWM). Timings on 2 shared cores are noisy (±20 %).\n\n";
+    s +=
+        "Solver: Gauss–Newton from the linearised model's solution (QR of the stacked [J/σ; Lᵀ], damping only after a failed step, chord\n";
+    s += "steps reusing a factorisation while they pay); stops when an exact step lowers the energy by < 1e-5 (relative) or moves no\n";
+    s += "training prediction by 1e-10 (normalised units). The search space is chosen automatically: up to 1024 unknowns all N·m\n";
+    s += "momenta (\"dense\": N·m tangent directions per Jacobian, a 2Nm × Nm QR, O(N³)); above, when K_lin's dominant eigenspace is\n";
+    s += "small next to N·m, P0 = S c with S its eigenvectors above 3e-14 of the largest eigenvalue (\"eigenspace\", from randomised\n";
+    s += "subspace iteration; its size does not grow with N for smooth kernels: r tangent directions per Jacobian, an (Nm + r) × r QR,\n";
+    s += "O(N² r) per iteration, memory O(N² + N r)). One process per row (peak MiB = its VmHWM). Timings on 2 shared cores are noisy (±20 %).\n\n";
     s += "UR5: the example's 1000 training rows fitted as `cbd compare` fits them (GP-chosen kernels, Euler × 1: the\n";
     s += "linearised model, exact Jacobian in closed form), test error in mm on its 20 test rows; hyperparameter search not in fit s.\n";
-    s += "Derivatives = tangent flow (exact Jacobians; the first is in closed form); solves = QR factorisations and solves.\n\n";
-    s += "| case | N | fit s | iterations | exact Jacobians | flow s | derivatives s | solves s | peak MiB | test mean error |\n";
-    s += "|---|---|---|---|---|---|---|---|---|---|\n";
+    s += "Derivatives = tangent flow (exact Jacobians; the first is in closed form); solves = eigenspace (if tried), QR factorisations and solves.\n\n";
+    s += "| case | N | method (unknowns) | fit s | iterations | exact Jacobians | flow s | derivatives s | solves s | peak MiB | test mean error |\n";
+    s += "|---|---|---|---|---|---|---|---|---|---|---|\n";
     for f in &r.fit {
         s += &format!(
-            "| {} | {} | {:.2} | {} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.2e} |\n",
+            "| {} | {} | {} ({}) | {:.2} | {} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.2e} |\n",
             f.case,
             f.n,
+            f.method,
+            f.unknowns,
             f.seconds,
             f.iterations,
             f.tangents,
@@ -298,12 +317,21 @@ fn markdown(r: &BenchReport) -> String {
             e.n, e.ns, e.nominal_ns, e.krr_ns, e.ratio_to_nominal, e.ratio_to_krr
         );
     }
-    if r.fit.len() >= 2 {
-        let rr: Vec<&FitBench> = r.fit.iter().filter(|f| f.case == "rr").collect();
+    let rr: Vec<&FitBench> = r.fit.iter().filter(|f| f.case == "rr").collect();
+    if rr.len() >= 2 {
         let fit_exp = exponent(&rr.iter().map(|f| (f.n as f64, f.seconds)).collect::<Vec<_>>());
         let mem_exp = exponent(&rr.iter().map(|f| (f.n as f64, f.peak_mib)).collect::<Vec<_>>());
         let eval_exp = exponent(&r.eval.iter().map(|e| (e.n as f64, e.ns)).collect::<Vec<_>>());
-        s += &format!("\nMeasured growth on the RR rows (least-squares exponent of N): fit time N^{fit_exp:.2}, peak memory N^{mem_exp:.2}, evaluation time N^{eval_exp:.2}.\n");
+        s += &format!("\nMeasured growth on the RR rows (least-squares exponent of N): fit time N^{fit_exp:.2}, peak memory N^{mem_exp:.2}, evaluation time N^{eval_exp:.2}");
+        let (a, b) = (rr[rr.len() - 2], rr[rr.len() - 1]);
+        let local = |x: f64, y: f64| (y / x).ln() / (b.n as f64 / a.n as f64).ln();
+        s += &format!(
+            "; between N = {} and {}: fit time N^{:.2}, peak memory N^{:.2}.\n",
+            a.n,
+            b.n,
+            local(a.seconds, b.seconds),
+            local(a.peak_mib, b.peak_mib)
+        );
     }
     s
 }

@@ -49,8 +49,23 @@ pub struct SolverArgs {
     /// Drop the −(div v) P term from the momentum law.
     #[arg(long)]
     pub no_divergence: bool,
+    /// auto, dense or eigenspace: search all N·m momenta (O(N³) per iteration), or K_lin's dominant
+    /// eigenspace (O(N² r), r independent of N for smooth kernels); auto picks by problem size and spectrum.
+    #[arg(long)]
+    pub solver: Option<String>,
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `--solver` values.
+pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod, String> {
+    use crate::solver::SolverMethod;
+    match name {
+        "auto" => Ok(SolverMethod::Auto),
+        "dense" => Ok(SolverMethod::Dense),
+        "eigenspace" => Ok(SolverMethod::Eigenspace),
+        other => Err(format!("--solver must be auto, dense or eigenspace, got {other:?}")),
+    }
 }
 
 impl SolverArgs {
@@ -74,6 +89,9 @@ impl SolverArgs {
         }
         if let Some(method) = &self.integrator {
             crate::cli::demo::parse_integrator(method)?;
+        }
+        if let Some(solver) = &self.solver {
+            parse_solver(solver)?;
         }
         if self.max_iterations == 0 {
             return Err("--max-iterations must be at least 1".into());
@@ -126,6 +144,9 @@ impl SolverArgs {
             opts.integrator.steps = steps;
         }
         opts.max_iterations = self.max_iterations;
+        if let Some(solver) = &self.solver {
+            opts.method = parse_solver(solver)?;
+        }
         opts.verbose = !self.quiet;
         if self.no_divergence {
             opts.law = cbd_protocol::MomentumLaw::WithoutDivergence;

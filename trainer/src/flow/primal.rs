@@ -13,6 +13,9 @@ pub struct ControlPoints {
     pub points: Vec<f64>,
     /// N × state_len initial state with P = 0: k0(x_i), Dk0(x_i) in internal units.
     pub initial: Vec<f64>,
+    /// The configurations' joint-kernel features (`cbd_runtime::kernel::write_features`), as the
+    /// runtime keeps them.
+    pub features: Vec<f64>,
     pub joint_kernel: JointKernel,
     pub task_kernel: TaskKernel,
     pub law: MomentumLaw,
@@ -48,7 +51,9 @@ impl ControlPoints {
                 s[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);
             }
         }
-        ControlPoints { dims, points, initial, joint_kernel, task_kernel, law, integrator }
+        let mut features = vec![0.0; cbd_runtime::kernel::features_len(points.len() / n, n)];
+        cbd_runtime::kernel::write_features(&joint_kernel, n, &points, &mut features);
+        ControlPoints { dims, points, initial, features, joint_kernel, task_kernel, law, integrator }
     }
 
     pub fn len(&self) -> usize {
@@ -69,9 +74,13 @@ impl ControlPoints {
         self.initial.chunks_exact(len).flat_map(|s| s[..m].to_vec()).collect()
     }
 
-    /// Integrates from initial momenta `p0` (N × m) with the runtime's scheme.
+    /// Integrates from initial momenta `p0` (N × m) with the runtime's scheme: the runtime's
+    /// integration loop and rates (from the kernel-feature table, as a loaded model does), each
+    /// stage's rows split across the current rayon pool (bit-identical to the runtime's one pass).
     pub fn integrate(&self, p0: &[f64]) -> Result<PrimalFlow, cbd_runtime::Error> {
+        use rayon::prelude::*;
         let (m, n, len) = (self.dims.m, self.dims.n, self.dims.state_len());
+        let count = self.len();
         let mut state = self.initial.clone();
         for (s, p) in state.chunks_exact_mut(len).zip(p0.chunks_exact(m)) {
             s[m + m * n..].copy_from_slice(p);
@@ -79,16 +88,25 @@ impl ControlPoints {
         let stages = self.integrator.stage_count();
         let mut stage_states = vec![0.0; stages * state.len()];
         let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(state.len())];
-        let mut trajectory = vec![0.0; stages * self.len() * self.dims.sample_len()];
+        let mut trajectory = vec![0.0; stages * count * self.dims.sample_len()];
         let block = state.len();
-        cbd_runtime::integrate_control_points(
-            &self.params(),
+        let params = self.params();
+        let rows_per_task = count.div_ceil(16).max(1);
+        cbd_runtime::integrate_points(
+            self.dims,
             self.integrator,
-            &self.points,
+            count,
             &mut state,
             &mut scratch,
             &mut trajectory,
             |stage, y| stage_states[stage * block..(stage + 1) * block].copy_from_slice(y),
+            |y, samples, out| {
+                out.par_chunks_mut(rows_per_task * len).enumerate().for_each(|(task, out)| {
+                    let start = task * rows_per_task;
+                    let rows = start..start + out.len() / len;
+                    cbd_runtime::flow::control_point_rates_with_features(&params, &self.features, y, samples, rows, out);
+                });
+            },
         )?;
         Ok(PrimalFlow { stage_states, last: state })
     }

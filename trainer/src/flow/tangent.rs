@@ -11,7 +11,7 @@
 use super::primal::{ControlPoints, PrimalFlow};
 use cbd_protocol::{MomentumLaw, MAX_JOINTS};
 use cbd_runtime::flow::Dims;
-use cbd_runtime::kernel::joint_kernel;
+use cbd_runtime::kernel::{joint_kernel_from_features, read_features};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
@@ -43,10 +43,12 @@ fn joint_kernel_matrices(cp: &ControlPoints) -> JointKernelMatrices {
     let mut kv = Mat::zeros(count, count);
     let mut gv: Vec<Mat<f64>> = (0..n).map(|_| Mat::zeros(count, count)).collect();
     let mut grad = [0.0; MAX_JOINTS];
+    let features = |i: usize| read_features(&cp.features, n, i);
     for j in 0..count {
-        let xj = &cp.points[j * n..(j + 1) * n];
+        let fj = features(j);
         for i in 0..count {
-            let value = joint_kernel(&cp.joint_kernel, &cp.points[i * n..(i + 1) * n], xj, &mut grad);
+            // Bit-identical to `joint_kernel` of the configurations (which computes the features first).
+            let value = joint_kernel_from_features(&cp.joint_kernel, &features(i), &fj, &mut grad);
             kv[(i, j)] = value;
             for e in 0..n {
                 gv[e][(i, j)] = grad[e];
@@ -113,19 +115,23 @@ fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64], 
         }
     }
     let (mut v, mut dv) = (per_point(n), per_point(n * n));
-    let mut div = vec![0.0; count];
-    for i in 0..count {
-        for j in 0..count {
-            let kvij = jk.kv[(i, j)];
-            for d in 0..n {
-                v[d][i] += kvij * u[d][j];
-                for e in 0..n {
-                    dv[d * n + e][i] += u[d][j] * jk.gv[e][(i, j)];
+    // Column by column (contiguous in the column-major matrices); every v[d][i] and dv[..][i]
+    // still sums over j in order.
+    for j in 0..count {
+        let kv_j = jk.kv.col(j);
+        for d in 0..n {
+            let u_dj = u[d][j];
+            for (v_i, k) in v[d].iter_mut().zip(kv_j.iter()) {
+                *v_i += k * u_dj;
+            }
+            for e in 0..n {
+                for (dv_i, g) in dv[d * n + e].iter_mut().zip(jk.gv[e].col(j).iter()) {
+                    *dv_i += u_dj * g;
                 }
             }
         }
-        div[i] = (0..n).map(|d| dv[d * n + d][i]).sum();
     }
+    let mut div: Vec<f64> = (0..count).map(|i| (0..n).map(|d| dv[d * n + d][i]).sum()).collect();
     if cp.law == MomentumLaw::WithoutDivergence {
         div.iter_mut().for_each(|x| *x = 0.0);
     }
@@ -165,9 +171,13 @@ fn gemm(mut out: MatMut<'_, f64>, accum: Accum, lhs: MatRef<'_, f64>, rhs: MatRe
     }
 }
 
+/// δDw_ab (index a·m + b) and δDv_de (index d·n + e) blocks of one stage's tangent rates.
+type FieldTangents = (Vec<Mat<f64>>, Vec<Mat<f64>>);
+
 /// Linearised right-hand side of the control-point dynamics for one column chunk. With
 /// `positions_only` only the k rows are formed (the last stage: its J and P rates reach nothing
-/// that is read), which skips the δDw and δDv products, two thirds of the GEMMs.
+/// that is read), which skips the δDw and δDv products, two thirds of the GEMMs; otherwise the
+/// δDw and δDv blocks are returned too.
 fn tangent_rates(
     cp: &ControlPoints,
     jk: &JointKernelMatrices,
@@ -175,7 +185,7 @@ fn tangent_rates(
     tan: MatRef<'_, f64>,
     mut out: MatMut<'_, f64>,
     positions_only: bool,
-) {
+) -> Option<FieldTangents> {
     let Dims { m, n } = cp.dims;
     let count = cp.len();
     let cols = tan.ncols();
@@ -225,7 +235,7 @@ fn tangent_rates(
         }
     }
     if positions_only {
-        return;
+        return None;
     }
     // δDw_ab = G_b δP_a + Σ_c (diag(T_abc) δk_c − H_bc S_ac)
     let mut ddw = zeros(m * m);
@@ -260,7 +270,24 @@ fn tangent_rates(
             }
         }
     }
-    // δ(dP_a) = −Σ_c (P_c δDw_ca + Dw_ca δP_c) − (P_a δdiv + div δP_a)
+    momentum_rates(cp, lin, tan, &ddw, &ddv, out);
+    Some((ddw, ddv))
+}
+
+/// The momentum rows of the tangent rates, δ(dP_a) = −Σ_c (P_c δDw_ca + Dw_ca δP_c) − (P_a δdiv + div δP_a),
+/// from the stage's δDw and δDv blocks (`ddv` indexed d·n + e; only d = e is read).
+fn momentum_rates(
+    cp: &ControlPoints,
+    lin: &StageLinearisation,
+    tan: MatRef<'_, f64>,
+    ddw: &[Mat<f64>],
+    ddv: &[Mat<f64>],
+    mut out: MatMut<'_, f64>,
+) {
+    let Dims { m, n } = cp.dims;
+    let count = cp.len();
+    let blk = |c: usize| tan.subrows(c * count, count);
+    let p_of = |a: usize| m + m * n + a;
     let with_div = cp.law == MomentumLaw::WithDivergence;
     for a in 0..m {
         let mut o = out.as_mut().subrows_mut(p_of(a) * count, count);
@@ -289,6 +316,106 @@ pub fn position_jacobian(cp: &ControlPoints, flow: &PrimalFlow, threads: usize) 
 
 /// `position_jacobian` on the current rayon pool: column chunks run in parallel.
 pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f64> {
+    let m = cp.dims.m;
+    // Initial tangent of direction j·m + b: δP_{j,b} = 1.
+    propagate(cp, flow, cp.len() * m, |dir, p_rows| p_rows[(dir % m) * cp.len() + dir / m] = 1.0, None)
+}
+
+/// ∂k1/∂P0 · D for momentum directions D ((N·m) × r, rows j·m + b like P0): the (N·m) × r matrix
+/// of the discrete flow's derivatives along D's columns, on the current rayon pool. Costs r/(N·m)
+/// of [`position_jacobian_in_pool`]'s GEMMs after the first stage (the identity's sparsity makes
+/// that one cheap there).
+pub fn position_jacobian_along(cp: &ControlPoints, flow: &PrimalFlow, directions: MatRef<'_, f64>) -> Mat<f64> {
+    let (m, count) = (cp.dims.m, cp.len());
+    assert_eq!(directions.nrows(), count * m, "direction length");
+    propagate(cp, flow, directions.ncols(), |dir, p| fill_direction(directions, m, count, dir, p), None)
+}
+
+/// The first stage's tangent rates along fixed directions as far as they do not depend on P0: the
+/// first stage of every scheme is evaluated at the initial state, whose k and J do not depend on
+/// P0, with the initial tangent (δk, δJ, δP) = (0, 0, D). Its k and J rows and its δDw, δDv blocks
+/// are therefore the same at every P0 (12 of the 20 N × N GEMMs of a Gauss–Newton Jacobian for
+/// Euler × 2); only the momentum rows are formed again. The values are the uncached ones exactly.
+pub struct TangentAlong {
+    directions: Mat<f64>,
+    /// Per column chunk: the first stage's rates and its δDw, δDv blocks (None: one-stage scheme).
+    first: Vec<Option<(Mat<f64>, FieldTangents)>>,
+}
+
+impl TangentAlong {
+    /// Forms the first stage's P0-independent part for `directions` ((N·m) × r, rows j·m + b), on
+    /// the current rayon pool.
+    pub fn new(cp: &ControlPoints, directions: Mat<f64>) -> Self {
+        use rayon::prelude::*;
+        let (m, count) = (cp.dims.m, cp.len());
+        assert_eq!(directions.nrows(), count * m, "direction length");
+        let single_stage = cp.integrator.stage_count() == 1;
+        let first = if single_stage {
+            vec![None; chunk_bounds(directions.ncols()).len()]
+        } else {
+            let jk = joint_kernel_matrices(cp);
+            // The linearisation at the initial state with P0 = 0: its kernel matrices and J are those
+            // of any P0; the P0-dependent vectors (P, Dw, v, Dv, div, T) multiply zero blocks.
+            let lin = linearise_stage(cp, &jk, &cp.initial, false);
+            let rows = count * cp.dims.state_len();
+            chunk_bounds(directions.ncols())
+                .par_iter()
+                .map(|&(d0, d1)| {
+                    let tan = initial_tangent(cp, d0, d1, |dir, p| fill_direction(directions.as_ref(), m, count, dir, p));
+                    let mut out = Mat::zeros(rows, d1 - d0);
+                    let tan = MatRef::from_column_major_slice(&tan, rows, d1 - d0);
+                    let fields = tangent_rates(cp, &jk, &lin, tan, out.as_mut(), false);
+                    fields.map(|f| (out, f))
+                })
+                .collect()
+        };
+        TangentAlong { directions, first }
+    }
+
+    /// ∂k1/∂P0 · D at `flow`'s momenta: (N·m) × r, as [`position_jacobian_along`].
+    pub fn jacobian(&self, cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f64> {
+        let (m, count) = (cp.dims.m, cp.len());
+        propagate(cp, flow, self.directions.ncols(), |dir, p| fill_direction(self.directions.as_ref(), m, count, dir, p), Some(&self.first))
+    }
+}
+
+fn fill_direction(directions: MatRef<'_, f64>, m: usize, count: usize, dir: usize, p_rows: &mut [f64]) {
+    for (r, v) in directions.col(dir).iter().enumerate() {
+        p_rows[(r % m) * count + r / m] = *v;
+    }
+}
+
+/// Column chunks of `directions` tangent directions; depends on their count only, never on threads.
+fn chunk_bounds(directions: usize) -> Vec<(usize, usize)> {
+    let chunks = directions.div_ceil(CHUNK_COLUMNS).max(2);
+    (0..chunks).map(|c| (c * directions / chunks, (c + 1) * directions / chunks)).collect()
+}
+
+/// The initial tangent of directions d0..d1 (column-major, N·state_len rows component-major): zero k and J
+/// rows, the momentum rows that `init(dir, p_rows)` writes (row b·N + j).
+fn initial_tangent(cp: &ControlPoints, d0: usize, d1: usize, init: impl Fn(usize, &mut [f64])) -> Vec<f64> {
+    let dims = cp.dims;
+    let (m, count) = (dims.m, cp.len());
+    let rows = count * dims.state_len();
+    let p_start = (m + m * dims.n) * count;
+    let mut tan = vec![0.0; rows * (d1 - d0)];
+    for dir in d0..d1 {
+        let col = &mut tan[(dir - d0) * rows..(dir - d0 + 1) * rows];
+        init(dir, &mut col[p_start..p_start + m * count]);
+    }
+    tan
+}
+
+/// Propagates `directions` tangents (initial tangents from `init`, see [`initial_tangent`]) through
+/// the scheme and returns the positions of t = 1, rows i·m + a. With `first`, the first stage's
+/// P0-independent part comes from [`TangentAlong`]'s cache.
+fn propagate(
+    cp: &ControlPoints,
+    flow: &PrimalFlow,
+    directions: usize,
+    init: impl Fn(usize, &mut [f64]) + Sync,
+    first: Option<&[Option<(Mat<f64>, FieldTangents)>]>,
+) -> Mat<f64> {
     use rayon::prelude::*;
     let dims = cp.dims;
     let (m, count, len) = (dims.m, cp.len(), dims.state_len());
@@ -297,25 +424,28 @@ pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f
     let stage_count = flow.stage_states.len() / stage_len;
     let stages: Vec<StageLinearisation> =
         flow.stage_states.chunks_exact(stage_len).enumerate().map(|(k, y)| linearise_stage(cp, &jk, y, k + 1 == stage_count)).collect();
-    let directions = count * m;
     let rows = count * len;
-    let chunks = directions.div_ceil(CHUNK_COLUMNS).max(2);
-    let bounds: Vec<(usize, usize)> = (0..chunks).map(|c| (c * directions / chunks, (c + 1) * directions / chunks)).collect();
+    let bounds = chunk_bounds(directions);
     // Each chunk returns only the position rows it ends with (m·N × columns), not its whole state.
-    let run_chunk = |&(d0, d1): &(usize, usize)| -> Vec<f64> {
+    let run_chunk = |(chunk, &(d0, d1)): (usize, &(usize, usize))| -> Vec<f64> {
         let cols = d1 - d0;
-        let mut tan = vec![0.0; rows * cols];
-        // Initial tangent: δP_{j,b} = 1 for direction j·m + b.
-        for dir in d0..d1 {
-            let (j, b) = (dir / m, dir % m);
-            tan[(dir - d0) * rows + (m + m * dims.n + b) * count + j] = 1.0;
-        }
+        let cached = first.and_then(|f| f[chunk].as_ref());
+        let mut tan = initial_tangent(cp, d0, d1, &init);
         let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(tan.len())];
         let result: Result<(), ()> =
             cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
                 let y = MatRef::from_column_major_slice(y, rows, cols);
-                let out = MatMut::from_column_major_slice_mut(out, rows, cols);
-                tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
+                let mut out = MatMut::from_column_major_slice_mut(out, rows, cols);
+                match cached {
+                    Some((rates, (ddw, ddv))) if stage == 0 => {
+                        out.copy_from(rates);
+                        out.as_mut().subrows_mut((m + m * dims.n) * count, m * count).fill(0.0);
+                        momentum_rates(cp, &stages[0], y, ddw, ddv, out);
+                    }
+                    _ => {
+                        tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
+                    }
+                }
                 Ok(())
             });
         let _ = result;
@@ -326,7 +456,7 @@ pub fn position_jacobian_in_pool(cp: &ControlPoints, flow: &PrimalFlow) -> Mat<f
         }
         positions
     };
-    let results: Vec<Vec<f64>> = bounds.par_iter().map(run_chunk).collect();
+    let results: Vec<Vec<f64>> = bounds.par_iter().enumerate().map(run_chunk).collect();
     let mut jac = Mat::zeros(count * m, directions);
     for (&(d0, d1), tan) in bounds.iter().zip(&results) {
         for dir in d0..d1 {
@@ -383,6 +513,43 @@ mod tests {
                     }
                 }
                 assert!(worst < 1e-7, "{law:?} {method:?}: worst relative difference {worst:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn jacobian_along_directions_is_the_jacobian_times_them() {
+        let (cp, p0) = small_problem(MomentumLaw::WithDivergence, IntegratorMethod::Heun);
+        let flow = cp.integrate(&p0).unwrap();
+        let jac = position_jacobian(&cp, &flow, 2);
+        let dirs = Mat::from_fn(14, 5, |r, c| ((r * 7 + c * 3) % 11) as f64 / 11.0 - 0.5);
+        let along = super::super::with_threads(2, || position_jacobian_along(&cp, &flow, dirs.as_ref()));
+        let mut worst: f64 = 0.0;
+        for c in 0..5 {
+            for r in 0..14 {
+                let expected: f64 = (0..14).map(|k| jac[(r, k)] * dirs[(k, c)]).sum();
+                worst = worst.max((along[(r, c)] - expected).abs());
+            }
+        }
+        assert!(worst < 1e-12, "{worst:e}");
+    }
+
+    /// The first-stage cache gives the uncached values exactly, for every scheme (one stage:
+    /// nothing cached) and both momentum laws.
+    #[test]
+    fn cached_first_stage_gives_the_uncached_jacobian() {
+        for law in [MomentumLaw::WithDivergence, MomentumLaw::WithoutDivergence] {
+            for method in [IntegratorMethod::Euler, IntegratorMethod::Heun, IntegratorMethod::Rk4] {
+                let (mut cp, p0) = small_problem(law, method);
+                for steps in [1, 3] {
+                    cp.integrator.steps = steps;
+                    let flow = cp.integrate(&p0).unwrap();
+                    let dirs = Mat::from_fn(14, 9, |r, c| ((r * 5 + c * 7) % 13) as f64 / 13.0 - 0.4);
+                    let (plain, cached) = super::super::with_threads(2, || {
+                        (position_jacobian_along(&cp, &flow, dirs.as_ref()), TangentAlong::new(&cp, dirs.clone()).jacobian(&cp, &flow))
+                    });
+                    assert!(plain == cached, "{law:?} {method:?} × {steps}");
+                }
             }
         }
     }

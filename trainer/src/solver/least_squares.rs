@@ -26,6 +26,28 @@ impl QrLeastSquares {
         QrLeastSquares { qr: a, h, par }
     }
 
+    /// |R_jj|, j < cols.
+    pub fn r_diagonal(&self) -> Vec<f64> {
+        (0..self.qr.ncols().min(self.qr.nrows())).map(|j| self.qr[(j, j)].abs()).collect()
+    }
+
+    /// The first `cols` columns of Q: an orthonormal basis of A's columns (rows × cols).
+    pub fn thin_q(&self) -> Mat<f64> {
+        let (rows, cols) = (self.qr.nrows(), self.qr.ncols());
+        let mut q = Mat::from_fn(rows, cols, |i, j| if i == j { 1.0 } else { 0.0 });
+        let req = householder::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(rows, self.h.nrows(), cols);
+        let mut mem = MemBuffer::new(req);
+        householder::apply_block_householder_sequence_on_the_left_in_place_with_conj(
+            self.qr.as_ref(),
+            self.h.as_ref(),
+            Conj::No,
+            q.as_mut(),
+            self.par,
+            MemStack::new(&mut mem),
+        );
+        q
+    }
+
     /// x = R⁻¹ (Qᵀ b)[..cols]; non-finite entries when R is singular to working precision.
     pub fn solve(&self, b: &[f64]) -> Vec<f64> {
         let (rows, cols) = (self.qr.nrows(), self.qr.ncols());

@@ -7,11 +7,13 @@
 
 use super::regulariser::{linear_response, regulariser_matrix};
 use super::step::StepFactor;
+use super::subspace::{dominant_eigenspace, Declined, Eigenspace};
 use crate::data::Measurements;
-use crate::flow::tangent::position_jacobian_in_pool;
+use crate::flow::tangent::{position_jacobian_in_pool, TangentAlong};
 use crate::flow::ControlPoints;
 use cbd_protocol::{f64_le_bytes, F64Slice, Integrator, JointKernel, Model, MomentumLaw, NominalModel, Normalisation, TaskKernel};
-use faer::{Mat, Par};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
 
 use std::time::Instant;
 
@@ -33,6 +35,8 @@ pub struct CbdOptions {
     pub prediction_tolerance: f64,
     /// Threads for the tangent's column chunks and the factorisations (results do not depend on it).
     pub threads: usize,
+    /// Which momenta the solver searches over (see [`SolverMethod`]).
+    pub method: SolverMethod,
     /// Print one line per iteration to stderr.
     pub verbose: bool,
 }
@@ -54,11 +58,61 @@ impl CbdOptions {
             normalisation: Normalisation::IDENTITY,
             max_iterations: 30,
             relative_tolerance: 1e-5,
-            prediction_tolerance: 1e-9,
+            prediction_tolerance: 1e-10,
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
+            method: SolverMethod::Auto,
             verbose: false,
         }
     }
+}
+
+/// How the solver parametrises the N·m initial momenta.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolverMethod {
+    /// `Dense` up to `DENSE_MAX_UNKNOWNS` unknowns; above, `Eigenspace` when K_lin's dominant
+    /// eigenspace is small next to N·m (it is for smooth kernels: its size does not grow with N),
+    /// else `Dense`.
+    Auto,
+    /// All N·m momenta: exact Jacobians propagate N·m tangent directions, steps factor the
+    /// 2Nm × Nm stacked matrix. O(N³) per iteration.
+    Dense,
+    /// P0 = S c with S the r dominant eigenvectors of K_lin (`solver::subspace`): Jacobians
+    /// propagate r directions, steps factor an (Nm + r) × r matrix. O(N² r) per iteration.
+    Eigenspace,
+}
+
+/// `SolverMethod::Auto` solves problems up to this many unknowns (N·m) densely.
+pub const DENSE_MAX_UNKNOWNS: usize = 1024;
+/// First probe block of the eigenspace (grown while the eigenspace fills it, up to 5/8 of N·m).
+const FIRST_PROBES: usize = 1280;
+
+/// The eigenspace the solver searches, or None for all momenta.
+fn choose_basis(method: SolverMethod, k_reg: &Mat<f64>) -> Option<Eigenspace> {
+    let dim = k_reg.nrows();
+    match method {
+        SolverMethod::Dense => None,
+        // Forced: every probe the problem has, so the eigenspace is found whatever its size.
+        SolverMethod::Eigenspace => dominant_eigenspace(k_reg, dim, FIXED_SPLIT).ok(),
+        SolverMethod::Auto if dim <= DENSE_MAX_UNKNOWNS => None,
+        SolverMethod::Auto => {
+            let limit = dim * 5 / 8;
+            let mut probes = FIRST_PROBES.min(limit);
+            loop {
+                match dominant_eigenspace(k_reg, probes, FIXED_SPLIT) {
+                    Ok(e) => return Some(e),
+                    Err(Declined::Full) if probes < limit => probes = (2 * probes).min(limit),
+                    Err(_) => return None,
+                }
+            }
+        }
+    }
+}
+
+/// a · b on faer's fixed split.
+fn product(a: &Mat<f64>, b: &Mat<f64>) -> Mat<f64> {
+    let mut out = Mat::zeros(a.nrows(), b.ncols());
+    matmul(out.as_mut(), Accum::Replace, a.as_ref(), b.as_ref(), 1.0, FIXED_SPLIT);
+    out
 }
 
 #[derive(Debug, Clone, Copy, serde::Serialize)]
@@ -84,6 +138,12 @@ pub struct FitReport {
     pub seconds_solve: f64,
     /// Exact Jacobians formed by the tangent flow (the first, at P0 = 0, is in closed form).
     pub tangents: usize,
+    /// "dense" (all N·m momenta) or "eigenspace" (K_lin's dominant eigenspace).
+    pub method: String,
+    /// Unknowns of the search: N·m, or the eigenspace's dimension r.
+    pub unknowns: usize,
+    /// Finding the eigenspace (part of `seconds_solve`).
+    pub seconds_basis: f64,
     /// Largest |runtime − trainer| at the training points relative to the largest |position|.
     pub max_runtime_trainer_diff: f64,
 }
@@ -154,15 +214,14 @@ struct Evaluated {
 }
 
 fn quad_form(k: &Mat<f64>, p: &[f64]) -> f64 {
-    let mut s = 0.0;
-    for (i, pi) in p.iter().enumerate() {
-        let mut r = 0.0;
-        for (j, pj) in p.iter().enumerate() {
-            r += k[(i, j)] * pj;
+    // (K p)_i summed over j in order, column by column (contiguous).
+    let mut kp = vec![0.0; p.len()];
+    for (j, pj) in p.iter().enumerate() {
+        for (r, kij) in kp.iter_mut().zip(k.col(j).iter()) {
+            *r += kij * pj;
         }
-        s += pi * r;
     }
-    s
+    p.iter().zip(&kp).map(|(pi, r)| pi * r).sum()
 }
 
 /// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
@@ -204,14 +263,49 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let target: Vec<f64> =
         data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale)).collect();
     let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
-    let dim = cp.len() * m;
     let k_reg = regulariser_matrix(&cp);
     let sigma = opts.sigma;
     let (mut t_flow, mut t_tangent, mut t_solve) = (0.0, 0.0, 0.0);
+    let t0 = Instant::now();
+    // The search space: all momenta (p are the momenta), or P0 = S p in K_lin's dominant eigenspace
+    // (p are coordinates, the regulariser is Sᵀ K S).
+    let basis = choose_basis(opts.method, &k_reg);
+    let seconds_basis = t0.elapsed().as_secs_f64();
+    t_solve += seconds_basis;
+    let (k_reg, method) = match &basis {
+        Some(e) => (e.projected.clone(), "eigenspace"),
+        None => (k_reg, "dense"),
+    };
+    let dim = k_reg.nrows();
+    let momenta_of = |p: &[f64]| -> Vec<f64> {
+        match &basis {
+            None => p.to_vec(),
+            Some(e) => {
+                let s = &e.basis;
+                let mut out = vec![0.0; s.nrows()];
+                for (j, pj) in p.iter().enumerate() {
+                    for (o, v) in out.iter_mut().zip(s.col(j).iter()) {
+                        *o += v * pj;
+                    }
+                }
+                out
+            }
+        }
+    };
+    // Along the eigenspace, the first stage's P0-independent part is formed once (when the first
+    // exact Jacobian is needed) and kept.
+    let along: std::cell::OnceCell<TangentAlong> = std::cell::OnceCell::new();
+    let exact_jacobian = |flow: &crate::flow::PrimalFlow| match &basis {
+        None => position_jacobian_in_pool(&cp, flow),
+        Some(e) => along.get_or_init(|| TangentAlong::new(&cp, e.basis.clone())).jacobian(&cp, flow),
+    };
+    if opts.verbose {
+        eprintln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
+    }
 
     let evaluate = |p: &[f64], t_flow: &mut f64| -> Option<Evaluated> {
         let t0 = Instant::now();
-        let flow = cp.integrate(p).ok()?;
+        let flow = cp.integrate(&momenta_of(p)).ok()?;
         *t_flow += t0.elapsed().as_secs_f64();
         let k1 = flow.positions(cp.dims);
         let residual: Vec<f64> = k1.iter().zip(&target).map(|(k, y)| (k - y) / sigma).collect();
@@ -224,7 +318,10 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let mut current = evaluate(&p, &mut t_flow).ok_or(FitError::Diverged { iteration: 0, damping: 0.0 })?;
     // Warm start: at P0 = 0 the model is linear, so the first Gauss–Newton step is the
     // linearised (kernel) model's solution; its Jacobian is known in closed form.
-    let mut jac = linear_response(&cp);
+    let mut jac = match &basis {
+        None => linear_response(&cp),
+        Some(e) => product(&linear_response(&cp), &e.basis),
+    };
     // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
     // Jacobian stays exact everywhere and no tangent is ever needed.
     let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
@@ -288,7 +385,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
                 // damping, and no more chord steps (each failure costs a flow).
                 chords_pay = false;
                 let t0 = Instant::now();
-                jac = position_jacobian_in_pool(&cp, &current.flow);
+                jac = exact_jacobian(&current.flow);
                 t_tangent += t0.elapsed().as_secs_f64();
                 tangents += 1;
                 factor = None;
@@ -368,7 +465,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         }
         if !linear_scheme && !chord && iteration < opts.max_iterations {
             let t0 = Instant::now();
-            jac = position_jacobian_in_pool(&cp, &current.flow);
+            jac = exact_jacobian(&current.flow);
             t_tangent += t0.elapsed().as_secs_f64();
             tangents += 1;
             jacobian_is_current = true;
@@ -379,6 +476,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let k1 = current.flow.positions(cp.dims);
     let train_predictions: Vec<f64> =
         k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
+    let p = momenta_of(&p);
     let (points, momenta) = (f64_le_bytes(&data.joints), f64_le_bytes(&p));
     let model = Model {
         nominal: nominal.clone(),
@@ -414,7 +512,62 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             seconds_tangent: t_tangent,
             seconds_solve: t_solve,
             tangents,
+            method: method.into(),
+            unknowns: dim,
+            seconds_basis,
             max_runtime_trainer_diff: max_diff,
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::{configurations, rr, Sampling};
+
+    fn rr_points(per_axis: usize) -> (ControlPoints, Measurements) {
+        let data = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis }, 2));
+        let o = CbdOptions::paper_rr();
+        let cp =
+            ControlPoints::new(&rr::nominal(), &o.normalisation, data.joints.clone(), o.joint_kernel, o.task_kernel, o.law, o.integrator);
+        (cp, data)
+    }
+
+    /// With every eigenvector kept (S square and orthogonal) the eigenspace method's steps are the
+    /// dense method's, rotated: same momenta after each Gauss–Newton step, to rounding.
+    #[test]
+    fn eigenspace_steps_match_dense_steps_when_nothing_is_cut() {
+        let (cp, data) = rr_points(4);
+        let k = regulariser_matrix(&cp);
+        let e = choose_basis(SolverMethod::Eigenspace, &k).expect("eigenspace");
+        assert_eq!(e.values.len(), k.nrows(), "the test needs the whole space (no eigenvalue below the cutoff)");
+        for iterations in [1, 2] {
+            let mut opts = CbdOptions::paper_rr();
+            opts.sigma = 1e-3;
+            opts.max_iterations = iterations;
+            opts.method = SolverMethod::Dense;
+            let dense = fit_cbd(&rr::nominal(), &data, &opts).unwrap();
+            opts.method = SolverMethod::Eigenspace;
+            let sub = fit_cbd(&rr::nominal(), &data, &opts).unwrap();
+            assert_eq!((dense.report.method.as_str(), sub.report.method.as_str()), ("dense", "eigenspace"));
+            let scale = dense.momenta.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+            let worst = dense.momenta.iter().zip(&sub.momenta).fold(0.0f64, |w, (a, b)| w.max((a - b).abs()));
+            assert!(worst < 1e-9 * scale, "{iterations} iterations: {worst:e} (scale {scale:e})");
+        }
+    }
+
+    /// Auto: dense up to DENSE_MAX_UNKNOWNS unknowns; above, the eigenspace, whose size does not
+    /// grow with N on the RR benchmark (about 850 directions at N = 1024, see `solver::subspace`).
+    #[test]
+    fn automatic_choice_is_dense_for_small_and_eigenspace_for_large_problems() {
+        let (small, _) = rr_points(16);
+        assert!(small.len() * 2 <= DENSE_MAX_UNKNOWNS);
+        assert!(choose_basis(SolverMethod::Auto, &regulariser_matrix(&small)).is_none());
+        let (large, _) = rr_points(32);
+        let e = choose_basis(SolverMethod::Auto, &regulariser_matrix(&large)).expect("eigenspace at N = 1024");
+        let r = e.values.len();
+        assert!((700..1000).contains(&r), "eigenspace dimension {r}");
+        assert_eq!((e.basis.nrows(), e.basis.ncols()), (2048, r));
+        assert!(choose_basis(SolverMethod::Dense, &regulariser_matrix(&large)).is_none());
+    }
 }

@@ -7,5 +7,6 @@ pub mod least_squares;
 pub mod levenberg_marquardt;
 pub mod regulariser;
 pub mod step;
+pub mod subspace;
 
-pub use levenberg_marquardt::{fit_cbd, CbdFit, CbdOptions, FitError, FitReport, IterationLog};
+pub use levenberg_marquardt::{fit_cbd, CbdFit, CbdOptions, FitError, FitReport, IterationLog, SolverMethod, DENSE_MAX_UNKNOWNS};

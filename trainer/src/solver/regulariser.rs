@@ -2,7 +2,7 @@
 
 use crate::flow::ControlPoints;
 use cbd_protocol::MAX_JOINTS;
-use cbd_runtime::kernel::{joint_kernel, task_kernel};
+use cbd_runtime::kernel::{joint_kernel_from_features, read_features, task_kernel};
 use faer::Mat;
 
 /// Blocks (J_i J_jᵀ) K_V(x_i, x_j) and K_W(k0_i, k0_j) I of the initial state, combined with signs:
@@ -14,16 +14,19 @@ fn combined(cp: &ControlPoints, joint_sign: f64) -> Mat<f64> {
     let mut out = Mat::zeros(count * m, count * m);
     let mut g = [0.0; MAX_JOINTS];
     let mut gw = [0.0; 3];
-    for i in 0..count {
-        for j in 0..count {
-            let kv = joint_kernel(&cp.joint_kernel, &cp.points[i * n..(i + 1) * n], &cp.points[j * n..(j + 1) * n], &mut g);
+    let features = |i: usize| read_features(&cp.features, n, i);
+    // Column by column (contiguous); K_V from the feature table, bit-identical to `joint_kernel`.
+    for j in 0..count {
+        let fj = features(j);
+        for i in 0..count {
+            let kv = joint_kernel_from_features(&cp.joint_kernel, &features(i), &fj, &mut g);
             let mut diff = [0.0; 3];
             for c in 0..m {
                 diff[c] = s(i)[c] - s(j)[c];
             }
             let kw = task_kernel(&cp.task_kernel, &diff, m, &mut gw);
-            for a in 0..m {
-                for b in 0..m {
+            for b in 0..m {
+                for a in 0..m {
                     let jj: f64 = (0..n).map(|d| s(i)[m + a * n + d] * s(j)[m + b * n + d]).sum();
                     out[(i * m + a, j * m + b)] = joint_sign * kv * jj + if a == b { kw } else { 0.0 };
                 }

@@ -46,18 +46,18 @@ fn factor_metric(k: &Mat<f64>, shift: Option<&[f64]>, proximal: f64, par: Par) -
 
 /// λ D² = λ diag(JᵀJ/σ² + K) (Marquardt's scaling).
 fn marquardt_shift(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64) -> Vec<f64> {
-    let dim = jac.ncols();
-    (0..dim).map(|c| damping * ((0..dim).map(|r| (jac[(r, c)] / sigma).powi(2)).sum::<f64>() + k[(c, c)])).collect()
+    (0..jac.ncols()).map(|c| damping * (jac.col(c).iter().map(|v| (v / sigma).powi(2)).sum::<f64>() + k[(c, c)])).collect()
 }
 
 impl StepFactor {
-    /// Factors the step for Jacobian `jac` (internal units) and damping `damping` (0: Gauss–Newton).
+    /// Factors the step for Jacobian `jac` (internal units; outputs × parameters, at least as many
+    /// outputs as parameters is not required) and damping `damping` (0: Gauss–Newton).
     /// None when K + shifts cannot be factored.
     pub fn new(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64, proximal: f64, par: Par) -> Option<Self> {
         let shift = (damping > 0.0).then(|| marquardt_shift(jac, k, sigma, damping));
         let lt = factor_metric(k, shift.as_deref(), proximal, par)?;
-        let dim = jac.ncols();
-        let stacked = Mat::from_fn(2 * dim, dim, |r, c| if r < dim { jac[(r, c)] / sigma } else { lt[(r - dim, c)] });
+        let (outputs, dim) = (jac.nrows(), jac.ncols());
+        let stacked = Mat::from_fn(outputs + dim, dim, |r, c| if r < outputs { jac[(r, c)] / sigma } else { lt[(r - outputs, c)] });
         Some(StepFactor { damping, lt, qr: QrLeastSquares::factor(stacked, par) })
     }
 
