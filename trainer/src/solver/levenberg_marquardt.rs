@@ -1,12 +1,14 @@
 //! Levenberg–Marquardt on E(P0) = ½ P0ᵀ K_lin P0 + 1/(2σ²) Σ |k1(x_i) − y_i|² (energy 16).
 //!
 //! Undamped Gauss–Newton first (the regulariser keeps each step well posed; damping only after a
-//! failed step and never relaxed back to a level that failed), starting from the linearised
-//! model's solution; while steps shrink fast, chord steps reuse the last Jacobian's QR factors
-//! (a flow and two triangular applications instead of a tangent and a factorisation).
+//! failed step and not relaxed back to a level that failed until a step matches the model's
+//! promise), starting from the linearised model's solution; while steps shrink fast, chord steps
+//! reuse the last Jacobian's QR factors (a flow and two triangular applications instead of a
+//! tangent and a factorisation). For large N the momenta are searched in K_lin's dominant
+//! eigenspace (`SolverMethod`, `solver::subspace`), with damping that is a ball in momentum space.
 
 use super::regulariser::{linear_response, regulariser_matrix};
-use super::step::StepFactor;
+use super::step::{DampingScale, StepFactor};
 use super::subspace::{dominant_eigenspace, Declined, Eigenspace};
 use crate::data::Measurements;
 use crate::flow::tangent::{position_jacobian_in_pool, TangentAlong};
@@ -224,6 +226,19 @@ fn quad_form(k: &Mat<f64>, p: &[f64]) -> f64 {
     p.iter().zip(&kp).map(|(pi, r)| pi * r).sum()
 }
 
+/// The Gauss–Newton model of the energy after step `step` (to `trial`) with Jacobian `jac`:
+/// ½ |r + J δ/σ|² + ½ trialᵀ K trial.
+fn model_energy(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, residual: &[f64], step: &[f64], trial: &[f64]) -> f64 {
+    let mut r: Vec<f64> = residual.to_vec();
+    for (j, d) in step.iter().enumerate() {
+        let scale = d / sigma;
+        for (ri, jij) in r.iter_mut().zip(jac.col(j).iter()) {
+            *ri += jij * scale;
+        }
+    }
+    0.5 * r.iter().map(|v| v * v).sum::<f64>() + 0.5 * quad_form(k, trial)
+}
+
 /// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
 /// depend on how many threads the pool running it has (`Par::Seq` would round differently).
 const FIXED_SPLIT: Par = Par::Rayon(match std::num::NonZeroUsize::new(2) {
@@ -277,6 +292,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         None => (k_reg, "dense"),
     };
     let dim = k_reg.nrows();
+    let damping_scale = if basis.is_some() { DampingScale::Uniform } else { DampingScale::PerParameter };
     let momenta_of = |p: &[f64]| -> Vec<f64> {
         match &basis {
             None => p.to_vec(),
@@ -367,7 +383,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             let t0 = Instant::now();
             if factor.as_ref().is_none_or(|f| f.damping != damping) {
                 factor = Some(
-                    StepFactor::new(&jac, &k_reg, sigma, damping, PROXIMAL, FIXED_SPLIT)
+                    StepFactor::new(&jac, &k_reg, sigma, damping, damping_scale, PROXIMAL, FIXED_SPLIT)
                         .ok_or(FitError::Singular { iteration, damping })?,
                 );
             }
@@ -376,7 +392,9 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             if step.iter().all(|v| v.is_finite()) {
                 let trial: Vec<f64> = p.iter().zip(&step).map(|(v, d)| v + d).collect();
                 if let Some(e) = evaluate(&trial, &mut t_flow).filter(|e| e.energy < current.energy) {
-                    accepted = Some((trial, e));
+                    // The decrease the Gauss–Newton model promised, for the gain ratio below.
+                    let predicted = current.energy - model_energy(&jac, &k_reg, sigma, &current.residual, &step, &trial);
+                    accepted = Some((trial, e, predicted));
                     break;
                 }
             }
@@ -399,7 +417,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
                 break;
             }
         }
-        let Some((trial, e)) = accepted else {
+        let Some((trial, e, predicted)) = accepted else {
             if iteration == 1 {
                 return Err(FitError::Diverged { iteration, damping });
             }
@@ -409,6 +427,12 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         };
         let decrease = current.energy - e.energy;
         let relative = decrease / current.energy;
+        if decrease > 0.5 * predicted {
+            // The model was good at this damping: lower levels that failed earlier, elsewhere in
+            // the landscape, may be tried again (otherwise one early failure at a high level pins
+            // the damping there for the rest of the fit).
+            failed_damping = None;
+        }
         // Largest change of a training prediction, internal (normalised) length units.
         let moved = sigma * current.residual.iter().zip(&e.residual).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         p = trial;

@@ -44,17 +44,37 @@ fn factor_metric(k: &Mat<f64>, shift: Option<&[f64]>, proximal: f64, par: Par) -
     None
 }
 
-/// λ D² = λ diag(JᵀJ/σ² + K) (Marquardt's scaling).
-fn marquardt_shift(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64) -> Vec<f64> {
-    (0..jac.ncols()).map(|c| damping * (jac.col(c).iter().map(|v| (v / sigma).powi(2)).sum::<f64>() + k[(c, c)])).collect()
+/// How the damping term λ |D δ|² weighs the parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DampingScale {
+    /// D² = diag(JᵀJ/σ² + K) (Marquardt): each parameter by its own curvature.
+    PerParameter,
+    /// D² = mean of diag(JᵀJ/σ² + K) · I (Levenberg, scaled): a ball. For orthonormal coordinates
+    /// of the momenta (the eigenspace) this is the same ball in momentum space for every direction,
+    /// as `PerParameter` nearly is for the momenta themselves (their curvatures are alike), whereas
+    /// per-direction scaling would let the weakly regularised eigen-directions take long steps.
+    Uniform,
+}
+
+/// λ D² (see [`DampingScale`]).
+fn marquardt_shift(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64, scale: DampingScale) -> Vec<f64> {
+    let per: Vec<f64> =
+        (0..jac.ncols()).map(|c| damping * (jac.col(c).iter().map(|v| (v / sigma).powi(2)).sum::<f64>() + k[(c, c)])).collect();
+    match scale {
+        DampingScale::PerParameter => per,
+        DampingScale::Uniform => {
+            let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
+            vec![mean; per.len()]
+        }
+    }
 }
 
 impl StepFactor {
     /// Factors the step for Jacobian `jac` (internal units; outputs × parameters, at least as many
     /// outputs as parameters is not required) and damping `damping` (0: Gauss–Newton).
     /// None when K + shifts cannot be factored.
-    pub fn new(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64, proximal: f64, par: Par) -> Option<Self> {
-        let shift = (damping > 0.0).then(|| marquardt_shift(jac, k, sigma, damping));
+    pub fn new(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, damping: f64, scale: DampingScale, proximal: f64, par: Par) -> Option<Self> {
+        let shift = (damping > 0.0).then(|| marquardt_shift(jac, k, sigma, damping, scale));
         let lt = factor_metric(k, shift.as_deref(), proximal, par)?;
         let (outputs, dim) = (jac.nrows(), jac.ncols());
         let stacked = Mat::from_fn(outputs + dim, dim, |r, c| if r < outputs { jac[(r, c)] / sigma } else { lt[(r - outputs, c)] });
@@ -79,28 +99,36 @@ mod tests {
     use super::*;
 
     /// The step minimises the stated quadratic: its gradient there vanishes,
-    /// Jᵀ(J δ/σ + r)/σ + K (P + δ) + (μ' I + λ D²) δ = 0 (μ' = μ·mean diag K).
+    /// Jᵀ(J δ/σ + r)/σ + K (P + δ) + (μ' I + λ D²) δ = 0 (μ' = μ·mean diag K), for both damping
+    /// scales and for more outputs than parameters (the eigenspace's Jacobians).
     #[test]
     fn step_zeroes_the_gradient_of_the_damped_model() {
-        let dim = 12;
-        let jac = Mat::from_fn(dim, dim, |i, j| ((i * 5 + j * 3) % 7) as f64 * 0.1 + if i == j { 1.0 } else { 0.0 });
-        let k = Mat::from_fn(dim, dim, |i, j| (-((i as f64 - j as f64).powi(2)) / 8.0).exp());
-        let (sigma, damping, proximal) = (1e-2, 1e-3, 1e-6);
-        let residual: Vec<f64> = (0..dim).map(|i| (i as f64 * 0.7).cos()).collect();
-        let p: Vec<f64> = (0..dim).map(|i| (i as f64 * 0.3).sin()).collect();
-        let f = StepFactor::new(&jac, &k, sigma, damping, proximal, Par::Seq).unwrap();
-        let d = f.step(&k, &residual, &p);
-        let mean_diag = (0..dim).map(|i| k[(i, i)]).sum::<f64>() / dim as f64;
-        let shift = marquardt_shift(&jac, &k, sigma, damping);
-        let model_residual: Vec<f64> = (0..dim).map(|r| (0..dim).map(|c| jac[(r, c)] * d[c]).sum::<f64>() / sigma + residual[r]).collect();
-        let mut worst: f64 = 0.0;
-        for c in 0..dim {
-            let g = (0..dim).map(|r| jac[(r, c)] * model_residual[r]).sum::<f64>() / sigma
-                + (0..dim).map(|j| k[(c, j)] * (p[j] + d[j])).sum::<f64>()
-                + (proximal * mean_diag + shift[c]) * d[c];
-            worst = worst.max(g.abs());
+        for (outputs, dim) in [(12, 12), (20, 7)] {
+            for scale_kind in [DampingScale::PerParameter, DampingScale::Uniform] {
+                let jac = Mat::from_fn(outputs, dim, |i, j| ((i * 5 + j * 3) % 7) as f64 * 0.1 + if i == j { 1.0 } else { 0.0 });
+                let k = Mat::from_fn(dim, dim, |i, j| (-((i as f64 - j as f64).powi(2)) / 8.0).exp());
+                let (sigma, damping, proximal) = (1e-2, 1e-3, 1e-6);
+                let residual: Vec<f64> = (0..outputs).map(|i| (i as f64 * 0.7).cos()).collect();
+                let p: Vec<f64> = (0..dim).map(|i| (i as f64 * 0.3).sin()).collect();
+                let f = StepFactor::new(&jac, &k, sigma, damping, scale_kind, proximal, Par::Seq).unwrap();
+                let d = f.step(&k, &residual, &p);
+                let mean_diag = (0..dim).map(|i| k[(i, i)]).sum::<f64>() / dim as f64;
+                let shift = marquardt_shift(&jac, &k, sigma, damping, scale_kind);
+                if scale_kind == DampingScale::Uniform {
+                    assert!(shift.iter().all(|v| *v == shift[0]));
+                }
+                let model_residual: Vec<f64> =
+                    (0..outputs).map(|r| (0..dim).map(|c| jac[(r, c)] * d[c]).sum::<f64>() / sigma + residual[r]).collect();
+                let mut worst: f64 = 0.0;
+                for c in 0..dim {
+                    let g = (0..outputs).map(|r| jac[(r, c)] * model_residual[r]).sum::<f64>() / sigma
+                        + (0..dim).map(|j| k[(c, j)] * (p[j] + d[j])).sum::<f64>()
+                        + (proximal * mean_diag + shift[c]) * d[c];
+                    worst = worst.max(g.abs());
+                }
+                let scale = (0..outputs).map(|r| residual[r].abs()).fold(0.0, f64::max) / sigma;
+                assert!(worst < 1e-9 * scale, "{outputs}x{dim} {scale_kind:?}: gradient {worst:e} (scale {scale:e})");
+            }
         }
-        let scale = (0..dim).map(|r| residual[r].abs()).fold(0.0, f64::max) / sigma;
-        assert!(worst < 1e-9 * scale, "gradient {worst:e} (scale {scale:e})");
     }
 }
