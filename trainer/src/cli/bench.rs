@@ -299,7 +299,7 @@ fn markdown(r: &BenchReport) -> String {
     s += "momenta (\"dense\": N·m tangent directions per Jacobian, a 2Nm × Nm QR, O(N³)); above, when K_lin's dominant eigenspace is\n";
     s += "small next to N·m, P0 = S c with S its eigenvectors above 3e-14 of the largest eigenvalue (\"eigenspace\", from randomised\n";
     s += "subspace iteration; its size does not grow with N for smooth kernels: r tangent directions per Jacobian, an (Nm + r) × r QR,\n";
-    s += "O(N² r) per iteration, memory O(N² + N r)). One process per row (peak MiB = its VmHWM). Timings on 2 shared cores are noisy (±20 %).\n\n";
+    s += "O(N² r) per iteration, memory O(N² + N r)). One process per row (peak MiB = its VmHWM). Timings on 2 shared cores are noisy (±20 % when idle; see the load above).\n\n";
     s += "UR5: the example's 1000 training rows fitted as `cbd compare` fits them (GP-chosen kernels, Euler × 1: the\n";
     s += "linearised model, exact Jacobian in closed form), test error in mm on its 20 test rows; hyperparameter search not in fit s.\n";
     s += "Derivatives = tangent flow (exact Jacobians; the first is in closed form); solves = eigenspace (if tried), QR factorisations and solves.\n\n";
