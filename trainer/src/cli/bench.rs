@@ -71,6 +71,9 @@ pub struct EvalBench {
 #[derive(Debug, Serialize, Deserialize)]
 pub struct BenchReport {
     pub machine: String,
+    /// The 1-minute load average (/proc/loadavg) when the run started and when it ended: other
+    /// processes sharing the cores slow the timings.
+    pub load_average: [f64; 2],
     pub fit: Vec<FitBench>,
     pub eval: Vec<EvalBench>,
 }
@@ -93,6 +96,10 @@ fn machine() -> String {
         .unwrap_or_else(|| "unknown CPU".into());
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     format!("{cpu}, {cores} cores")
+}
+
+fn load_average() -> f64 {
+    std::fs::read_to_string("/proc/loadavg").ok().and_then(|t| t.split_whitespace().next().and_then(|v| v.parse().ok())).unwrap_or(f64::NAN)
 }
 
 fn per_axis(n: usize) -> Result<usize, String> {
@@ -214,7 +221,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         return Ok(());
     }
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-    let mut report = BenchReport { machine: machine(), fit: Vec::new(), eval: Vec::new() };
+    let mut report = BenchReport { machine: machine(), load_average: [load_average(), f64::NAN], fit: Vec::new(), eval: Vec::new() };
     for &n in &args.sizes {
         per_axis(n)?;
         eprintln!("fitting N = {n} …");
@@ -256,6 +263,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         );
         report.fit.push(fit);
     }
+    report.load_average[1] = load_average();
     if let Some(path) = &args.json {
         crate::cli::write_atomically(path, serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?.as_bytes())?;
     }
@@ -279,6 +287,10 @@ fn exponent(points: &[(f64, f64)]) -> f64 {
 fn markdown(r: &BenchReport) -> String {
     let mut s = String::from("## Trainer and runtime\n\n");
     s += &format!("Machine: {}. Command: `cargo run --release -p cbd-trainer --bin cbd -- bench --markdown BENCHMARKS.md`.\n", r.machine);
+    s += &format!(
+        "1-minute load average when the run started and ended: {:.2} and {:.2} (other work shares the cores: above about 1, timings stretch).\n",
+        r.load_average[0], r.load_average[1]
+    );
     s += "RR benchmark (DESIGN.md §4), default scheme (Euler × 2, σ = 1e-6), N grid measurements; test error on 1000 random configurations.\n";
     s +=
         "Solver: Gauss–Newton from the linearised model's solution (QR of the stacked [J/σ; Lᵀ], damping only after a failed step, chord\n";
@@ -287,7 +299,7 @@ fn markdown(r: &BenchReport) -> String {
     s += "momenta (\"dense\": N·m tangent directions per Jacobian, a 2Nm × Nm QR, O(N³)); above, when K_lin's dominant eigenspace is\n";
     s += "small next to N·m, P0 = S c with S its eigenvectors above 3e-14 of the largest eigenvalue (\"eigenspace\", from randomised\n";
     s += "subspace iteration; its size does not grow with N for smooth kernels: r tangent directions per Jacobian, an (Nm + r) × r QR,\n";
-    s += "O(N² r) per iteration, memory O(N² + N r)). One process per row (peak MiB = its VmHWM). Timings on 2 shared cores are noisy (±20 %).\n\n";
+    s += "O(N² r) per iteration, memory O(N² + N r)). One process per row (peak MiB = its VmHWM). Timings on 2 shared cores are noisy (±20 % when idle; see the load above).\n\n";
     s += "UR5: the example's 1000 training rows fitted as `cbd compare` fits them (GP-chosen kernels, Euler × 1: the\n";
     s += "linearised model, exact Jacobian in closed form), test error in mm on its 20 test rows; hyperparameter search not in fit s.\n";
     s += "Derivatives = tangent flow (exact Jacobians; the first is in closed form); solves = eigenspace (if tried), QR factorisations and solves.\n\n";
