@@ -25,10 +25,12 @@ pub struct BenchArgs {
     /// Internal: where the single-size run writes its blob.
     #[arg(long, hide = true)]
     pub blob_out: Option<PathBuf>,
-    /// The UR5 example (model file, train.csv, test.csv) fitted as `cbd compare` fits it; an empty
-    /// value skips it.
+    /// The UR5 example (model file, train.csv, test.csv) fitted as `cbd compare` fits it.
     #[arg(long, default_value = "examples/ur5")]
     pub ur5: PathBuf,
+    /// Skip the UR5 row.
+    #[arg(long)]
+    pub no_ur5: bool,
     /// Internal: fit the UR5 example in this process and print its JSON line.
     #[arg(long, hide = true)]
     pub single_ur5: bool,
@@ -248,7 +250,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         eprintln!("  evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.ns, e.ratio_to_nominal, e.ratio_to_krr);
         report.eval.push(e);
     }
-    if !args.ur5.as_os_str().is_empty() {
+    if !args.no_ur5 {
         eprintln!("fitting the UR5 example ({}) …", args.ur5.display());
         let out =
             std::process::Command::new(&exe).args(["bench", "--single-ur5", "--ur5"]).arg(&args.ur5).output().map_err(|e| e.to_string())?;
