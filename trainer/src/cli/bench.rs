@@ -60,6 +60,28 @@ pub struct FitBench {
     pub test_mean_error: f64,
 }
 
+impl FitBench {
+    /// The row of a fit of `n` measurements, measured in this process (peak memory so far).
+    fn of(case: &str, n: usize, r: &crate::solver::FitReport, hyperparameter_seconds: f64, test_mean_error: f64) -> FitBench {
+        FitBench {
+            case: case.into(),
+            n,
+            tangents: r.tangents,
+            method: r.method.clone(),
+            unknowns: r.unknowns,
+            seconds_basis: r.seconds_basis,
+            hyperparameter_seconds,
+            seconds: r.seconds,
+            iterations: r.iterations,
+            seconds_flow: r.seconds_flow,
+            seconds_tangent: r.seconds_tangent,
+            seconds_solve: r.seconds_solve,
+            peak_mib: peak_mib(),
+            test_mean_error,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EvalBench {
     pub n: usize,
@@ -122,23 +144,7 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
     let fit = fit_cbd(&rr::nominal(), &train, &opts).map_err(|e| e.to_string())?;
     std::fs::write(blob_out, &fit.blob).map_err(|e| format!("{}: {e}", blob_out.display()))?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
-    let r = &fit.report;
-    Ok(FitBench {
-        case: "rr".into(),
-        n,
-        tangents: r.tangents,
-        method: r.method.clone(),
-        unknowns: r.unknowns,
-        seconds_basis: r.seconds_basis,
-        hyperparameter_seconds: 0.0,
-        seconds: r.seconds,
-        iterations: r.iterations,
-        seconds_flow: r.seconds_flow,
-        seconds_tangent: r.seconds_tangent,
-        seconds_solve: r.seconds_solve,
-        peak_mib: peak_mib(),
-        test_mean_error: crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean,
-    })
+    Ok(FitBench::of("rr", n, &fit.report, 0.0, crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean))
 }
 
 /// Fits the UR5 example's training rows as `cbd compare` does (hyperparameters by the GP marginal
@@ -157,23 +163,8 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
     opts.integrator.steps = 1;
     let fit = fit_cbd(&model.nominal, &train, &opts).map_err(|e| e.to_string())?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
-    let r = &fit.report;
-    Ok(FitBench {
-        case: "ur5".into(),
-        n: train.len(),
-        tangents: r.tangents,
-        method: r.method.clone(),
-        unknowns: r.unknowns,
-        seconds_basis: r.seconds_basis,
-        hyperparameter_seconds,
-        seconds: r.seconds,
-        iterations: r.iterations,
-        seconds_flow: r.seconds_flow,
-        seconds_tangent: r.seconds_tangent,
-        seconds_solve: r.seconds_solve,
-        peak_mib: peak_mib(),
-        test_mean_error: crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, train.task_dim).mean,
-    })
+    let error = crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, train.task_dim).mean;
+    Ok(FitBench::of("ur5", train.len(), &fit.report, hyperparameter_seconds, error))
 }
 
 /// Median of `rounds` timings of `f` over all `queries`, in ns per query.
