@@ -82,6 +82,11 @@ table="$(
     echo "sp = thumbv7em-none-eabihf defaults (f64 in software); dp = \`-C target-cpu=cortex-m7\` (double-precision FPU, non-fused"
     echo "VMLA/VMLS only); f32 = sp flags with the runtime's \`f32\` feature (evaluation in f32 on the single-precision FPU; the"
     echo "nominal model and the query's kernel features in f64, rounded once). Produced by \`bash .ci/firmware-cost.sh\`."
+    echo "The f32 rows vary most (max/min up to 1.13 at N = 64): their fixed part, the nominal model's and kernel features' sin/cos"
+    echo "in software f64 (libm range reduction), depends on the angles; it is a constant ~8k instructions ± 4k, whatever N."
+    echo "\"4 effects\": the 6-joint blob with encoder scale, transmission, gravity compliance and link bending (nominal model"
+    echo "k_rigid(q + δ(q)) + b(q) with its Jacobian and Hessian); effect-free blobs take the rigid path unchanged. The effects code"
+    echo "is linked into every build (~24 kB of code)."
     echo
     echo "Accuracy of the demo blob on its 3000 random test configurations (\`cbd-fw-host accuracy\`, position error, length units):"
     echo "- $acc_f64"
