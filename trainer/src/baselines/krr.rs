@@ -3,8 +3,8 @@
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, NominalModel, MAX_JOINTS};
-use cbd_runtime::kernel::joint_kernel;
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kernel::{joint_features, joint_kernel, joint_kernel_from_features, read_features, write_features, FEATURES_PER_JOINT};
+use cbd_runtime::nominal::{forward_kinematics, Kinematics};
 use faer::{linalg::solvers::Solve, Mat, Side};
 
 /// A fitted residual regression: one scalar-kernel regression per task coordinate.
@@ -12,7 +12,9 @@ use faer::{linalg::solvers::Solve, Mat, Side};
 pub struct KernelRidge {
     pub kernel: JointKernel,
     pub ridge: f64,
-    points: Vec<f64>,
+    /// The training configurations' kernel features (`cbd_runtime::kernel::write_features`):
+    /// a prediction costs one `exp` per point, as the runtime's flow does.
+    features: Vec<f64>,
     n_joints: usize,
     task_dim: usize,
     /// N × m coefficients.
@@ -54,26 +56,78 @@ impl KernelRidge {
         let llt = k.llt(Side::Lower).map_err(|_| KrrError::NotPositiveDefinite { n: count, ridge })?;
         let sol = llt.solve(&rhs);
         let alpha = (0..count).flat_map(|i| (0..m).map(move |c| (i, c))).map(|(i, c)| sol[(i, c)]).collect();
-        Ok(KernelRidge { kernel, ridge, points: data.joints.clone(), n_joints: n, task_dim: m, alpha })
+        let mut features = vec![0.0; count * n * FEATURES_PER_JOINT];
+        write_features(&kernel, n, &data.joints, &mut features);
+        Ok(KernelRidge { kernel, ridge, features, n_joints: n, task_dim: m, alpha })
+    }
+
+    /// The corrected position at `q` and its Jacobian: k0(q) + Σ_i K(q, x_i) α_i and
+    /// Dk0(q) + Σ_i α_i ∇K(q, x_i)ᵀ.
+    pub fn evaluate(&self, nominal: &NominalModel, q: &[f64]) -> Kinematics {
+        let (n, m) = (self.n_joints, self.task_dim);
+        let mut out = forward_kinematics(nominal, q);
+        let mut fq = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
+        joint_features(&self.kernel, q, &mut fq);
+        let mut g = [0.0; MAX_JOINTS];
+        for (i, a) in self.alpha.chunks_exact(m).enumerate() {
+            let fx = read_features(&self.features, n, i);
+            let kv = joint_kernel_from_features(&self.kernel, &fq[..n], &fx[..n], &mut g);
+            for c in 0..m {
+                out.position[c] += kv * a[c];
+                for (jac, gd) in out.jacobian[c].iter_mut().zip(&g[..n]) {
+                    *jac += a[c] * gd;
+                }
+            }
+        }
+        out
     }
 
     /// Corrected positions at `joints` (row-major), nominal plus regressed residual.
     pub fn predict(&self, nominal: &NominalModel, joints: &[f64]) -> Vec<f64> {
-        let (n, m) = (self.n_joints, self.task_dim);
+        let m = self.task_dim;
+        joints.chunks_exact(self.n_joints).flat_map(|q| self.evaluate(nominal, q).position.into_iter().take(m)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::{configurations, rr, Sampling};
+
+    #[test]
+    fn fits_the_training_points_and_its_jacobian_matches_finite_differences() {
+        let real = rr::RealRr::default();
+        let train = real.measure(&configurations(Sampling::Grid { per_axis: 8 }, 2));
+        let mut kernel = crate::solver::CbdOptions::paper_rr().joint_kernel;
+        kernel.gamma = 1.0;
+        let nominal = rr::nominal();
+        let krr = KernelRidge::fit(&nominal, &train, kernel.clone(), 1e-10).unwrap();
+        // Interpolates its training data (ridge 1e-10).
+        let fitted = krr.predict(&nominal, &train.joints);
+        let worst = fitted.iter().zip(&train.positions).fold(0.0f64, |w, (a, b)| w.max((a - b).abs()));
+        assert!(worst < 1e-6, "{worst:e}");
+        // The prediction equals k0 + Σ K(q, x_i) α_i with the direct kernel.
+        let q = [0.37, -2.1];
+        let e = krr.evaluate(&nominal, &q);
         let mut g = [0.0; MAX_JOINTS];
-        let mut out = Vec::with_capacity(joints.len() / n * m);
-        for q in joints.chunks_exact(n) {
-            let k0 = forward_kinematics(nominal, q);
-            let mut y = [0.0; 3];
-            y[..m].copy_from_slice(&k0.position[..m]);
-            for (xi, a) in self.points.chunks_exact(n).zip(self.alpha.chunks_exact(m)) {
-                let kv = joint_kernel(&self.kernel, q, xi, &mut g);
-                for c in 0..m {
-                    y[c] += kv * a[c];
-                }
-            }
-            out.extend_from_slice(&y[..m]);
+        let mut direct = forward_kinematics(&nominal, &q).position;
+        for (i, a) in krr.alpha.chunks_exact(2).enumerate() {
+            let kv = joint_kernel(&kernel, &q, train.joints(i), &mut g);
+            direct[0] += kv * a[0];
+            direct[1] += kv * a[1];
         }
-        out
+        assert!((direct[0] - e.position[0]).abs() < 1e-12 && (direct[1] - e.position[1]).abs() < 1e-12);
+        // Jacobian against central differences.
+        let h = 1e-6;
+        for d in 0..2 {
+            let (mut qa, mut qb) = (q, q);
+            qa[d] += h;
+            qb[d] -= h;
+            let (a, b) = (krr.evaluate(&nominal, &qa).position, krr.evaluate(&nominal, &qb).position);
+            for c in 0..2 {
+                let fd = (a[c] - b[c]) / (2.0 * h);
+                assert!((fd - e.jacobian[c][d]).abs() < 1e-6 * (1.0 + fd.abs()), "row {c} joint {d}: {fd} vs {}", e.jacobian[c][d]);
+            }
+        }
     }
 }
