@@ -4,7 +4,7 @@
 //! the runtime evaluates. Also effects outside the diagnosis library (a localized bump, a dead
 //! zone, a thermal-like drift) for testing that they are reported as unexplained structure.
 //!
-//! Augmented kinematics (h4-common.md): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
+//! Augmented kinematics (as `cbd_protocol::effects` defines it): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
 
 use crate::nominal::{dh_frames, dot, norm, scale, sub};
 use cbd_protocol::{GravityModel, NominalModel};
