@@ -25,7 +25,9 @@ pub use validate::ModelError;
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
-pub const FORMAT_VERSION: u16 = 2;
+pub const FORMAT_VERSION: u16 = 3;
+/// The oldest format this build reads (format 2 lacks the Hamiltonian momentum laws).
+pub const OLDEST_FORMAT_VERSION: u16 = 2;
 /// Bytes before the payload: magic, version, payload length.
 pub const HEADER_LEN: usize = 10;
 /// Bytes after the payload: the checksum.
@@ -79,7 +81,7 @@ impl core::fmt::Display for DecodeError {
             }
             DecodeError::BadMagic => write!(f, "not a CbD model blob (bad magic)"),
             DecodeError::UnsupportedVersion { found, supported } => {
-                write!(f, "blob format version {found} is not supported (this build reads {supported})")
+                write!(f, "blob format version {found} is not supported (this build reads {OLDEST_FORMAT_VERSION} to {supported})")
             }
             DecodeError::ChecksumMismatch { stored, computed } => {
                 write!(f, "blob checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")
@@ -146,7 +148,7 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
         return Err(DecodeError::BadMagic);
     }
     let version = u16::from_le_bytes([blob[4], blob[5]]);
-    if version != FORMAT_VERSION {
+    if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION });
     }
     let payload_len = u32::from_le_bytes([blob[6], blob[7], blob[8], blob[9]]) as usize;
@@ -170,6 +172,10 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     let (model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| DecodeError::Payload)?;
     if !rest.is_empty() {
         return Err(DecodeError::Payload);
+    }
+    if model.momentum_law.first_format() > version {
+        // A format-2 blob cannot hold a later law: the bytes were not written by an encoder.
+        return Err(DecodeError::Invalid(ModelError::OutOfRange { field: "momentum_law (not in this blob's format version)" }));
     }
     model.validate().map_err(DecodeError::Invalid)?;
     Ok(model)

@@ -200,11 +200,54 @@ impl Integrator {
     }
 }
 
-/// How the momenta evolve (DESIGN.md §2): with or without the −(div v) P term.
+/// How the momenta drive the joint field and evolve (docs/DESIGN.md §2).
+///
+/// `WithDivergence` and `WithoutDivergence` (format 2) take v = +Σ_j K_V(x, x_j) J_jᵀ P_j, with or
+/// without the −(div v) P term in the momentum law. The `Hamiltonian` laws (format 3) take
+/// v = −Σ_j K_V(x, x_j) J_jᵀ P_j, the field that maximises the Hamiltonian Σ Pᵀ(w − J v) − ½|v|² − ½|w|²:
+/// then the flow's linearisation at P0 = 0 is k0 + K_lin P0 with the same K_lin = Dk0 K_V Dk0ᵀ + K_W
+/// as the regulariser, so energy (16) is exactly the negative log posterior of a Gaussian process
+/// with covariance K_lin, whose marginal likelihood chooses the hyperparameters. (With the `+`
+/// field the linear response is K_W − Dk0 K_V Dk0ᵀ: joint and task fields partly cancel.)
+/// New variants are appended, so format-2 blobs decode unchanged.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum MomentumLaw {
     WithDivergence,
     WithoutDivergence,
+    Hamiltonian,
+    HamiltonianWithoutDivergence,
+}
+
+impl MomentumLaw {
+    /// Whether the momentum law has the −(div v) P term.
+    pub const fn has_divergence(self) -> bool {
+        matches!(self, MomentumLaw::WithDivergence | MomentumLaw::Hamiltonian)
+    }
+    /// The sign s in v = s Σ_j K_V(x, x_j) J_jᵀ P_j.
+    pub const fn joint_field_sign(self) -> f64 {
+        match self {
+            MomentumLaw::WithDivergence | MomentumLaw::WithoutDivergence => 1.0,
+            MomentumLaw::Hamiltonian | MomentumLaw::HamiltonianWithoutDivergence => -1.0,
+        }
+    }
+    /// The oldest blob format that can hold this law.
+    pub const fn first_format(self) -> u16 {
+        match self {
+            MomentumLaw::WithDivergence | MomentumLaw::WithoutDivergence => 2,
+            MomentumLaw::Hamiltonian | MomentumLaw::HamiltonianWithoutDivergence => 3,
+        }
+    }
+}
+
+impl JointKernel {
+    /// The kernel the flow integrates with for `law`: γ carries the joint field's sign, so every
+    /// flow and tangent formula stays one expression (negation is exact: values are ±|γ| e^f, bit
+    /// for bit). Only the flow uses it; the regulariser and the blob keep γ > 0.
+    pub fn for_flow(&self, law: MomentumLaw) -> JointKernel {
+        let mut k = self.clone();
+        k.gamma *= law.joint_field_sign();
+        k
+    }
 }
 
 /// A borrowed array of little-endian `f64`, read in place (no alignment needed, no copy).

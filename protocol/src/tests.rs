@@ -57,7 +57,8 @@ fn every_single_bit_flip_is_rejected() {
             let err = decode(&bad).expect_err("a flipped bit must not load");
             let expected_kind = match byte {
                 0..=3 => matches!(err, DecodeError::BadMagic),
-                4..=5 => matches!(err, DecodeError::UnsupportedVersion { .. }),
+                // A flip to another readable version (3 → 2) is caught by the checksum.
+                4..=5 => matches!(err, DecodeError::UnsupportedVersion { .. } | DecodeError::ChecksumMismatch { .. }),
                 6..=9 => matches!(err, DecodeError::Truncated { .. } | DecodeError::TrailingBytes { .. }),
                 _ => matches!(err, DecodeError::ChecksumMismatch { .. }),
             };
@@ -250,4 +251,41 @@ fn a_blob_with_an_invalid_effect_does_not_decode() {
         decode(&blob),
         Err(DecodeError::Invalid(ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 }))
     );
+}
+
+/// A blob framed by hand with `version` in its header (encode always writes the current one).
+fn framed(model: &Model<'_>, version: u16) -> Vec<u8> {
+    let payload = postcard::to_allocvec(model).unwrap();
+    let mut blob = Vec::new();
+    blob.extend_from_slice(&MAGIC);
+    blob.extend_from_slice(&version.to_le_bytes());
+    blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    blob.extend_from_slice(&payload);
+    let crc = CRC32.checksum(&blob);
+    blob.extend_from_slice(&crc.to_le_bytes());
+    blob
+}
+
+#[test]
+fn format_2_blobs_still_load_and_cannot_hold_the_hamiltonian_laws() {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
+    let mut model = sample_model(&p, &m);
+    // The payload of a format-2 law is the same bytes in format 2 and 3.
+    assert_eq!(decode(&framed(&model, 2)), Ok(model.clone()));
+    assert_eq!(decode(&framed(&model, 3)), Ok(model.clone()));
+    for law in [MomentumLaw::Hamiltonian, MomentumLaw::HamiltonianWithoutDivergence] {
+        model.momentum_law = law;
+        assert_eq!(decode(&framed(&model, 3)), Ok(model.clone()));
+        assert!(matches!(decode(&framed(&model, 2)), Err(DecodeError::Invalid(ModelError::OutOfRange { .. }))), "{law:?}");
+    }
+    assert_eq!(decode(&framed(&model, 1)), Err(DecodeError::UnsupportedVersion { found: 1, supported: FORMAT_VERSION }));
+}
+
+#[test]
+fn the_flow_kernel_carries_the_laws_sign_exactly() {
+    let k = JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; 2]).unwrap() };
+    assert_eq!(k.for_flow(MomentumLaw::WithDivergence), k);
+    assert_eq!(k.for_flow(MomentumLaw::Hamiltonian).gamma.to_bits(), (-8.0f64).to_bits());
+    assert!(MomentumLaw::Hamiltonian.has_divergence() && !MomentumLaw::HamiltonianWithoutDivergence.has_divergence());
 }

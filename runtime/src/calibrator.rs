@@ -238,7 +238,8 @@ impl<'a> Calibrator<'a> {
         let state_len = n_points * dims.state_len();
         let (state, rest) = work.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
         initial_state(model, state)?;
-        let params = FlowParams { dims, joint_kernel: &model.joint_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
+        let flow_kernel = model.joint_kernel.for_flow(model.momentum_law);
+        let params = FlowParams { dims, joint_kernel: &flow_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
         let scratch = rest.get_mut(..scratch_len(state_len)).ok_or(Error::Internal)?;
         let features: &'f [Real] = features;
         integrate_control_points_with_features(&params, model.integrator, features, state, scratch, trajectory, |_, _| {})?;

@@ -273,10 +273,7 @@ pub fn divergence(dims: Dims, jf: &JointField) -> Real {
 /// Momentum law: dP = −Dw(k)ᵀ P − (div v)(x) P, or without the divergence term.
 pub fn momentum_rate(dims: Dims, law: MomentumLaw, p: &[Real], tf: &TaskField, jf: &JointField, dp: &mut [Real]) {
     let m = dims.m;
-    let div = match law {
-        MomentumLaw::WithDivergence => divergence(dims, jf),
-        MomentumLaw::WithoutDivergence => 0.0,
-    };
+    let div = if law.has_divergence() { divergence(dims, jf) } else { 0.0 };
     // For every a: − Σ_c Dw_ca P_c (c in order), then − div P_a.
     for r in dp.iter_mut().take(m) {
         *r = 0.0;

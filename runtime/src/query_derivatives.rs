@@ -73,7 +73,8 @@ pub fn write_kernel_rows<S: Shape>(
                 }
             }
         }
-        support = support.max(k);
+        // |K_V|: the flow's kernel carries the field's sign.
+        support = support.max(if k < 0.0 { -k } else { k });
     }
     support
 }
@@ -346,7 +347,8 @@ impl crate::Calibrator<'_> {
         let (rows, rest) = self.work.split_at_mut_checked(n_points * kernel_row_len(n)).ok_or(Error::Internal)?;
         let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
         joint_features(&self.model.joint_kernel, q, &mut fq);
-        let support = write_kernel_rows(shape, &self.model.joint_kernel, &fq, self.features, rows, exact_jacobian);
+        let flow_kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
+        let support = write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian);
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
         let k0 = crate::nominal::forward_kinematics(&self.model.nominal, q).normalised(norm);

@@ -66,7 +66,15 @@ fn expected_for_flip(blob: &[u8], byte: usize, bit: u32) -> DecodeError {
         4..=5 => {
             let mut v = [blob[4], blob[5]];
             v[byte - 4] ^= 1 << bit;
-            DecodeError::UnsupportedVersion { found: u16::from_le_bytes(v), supported: FORMAT_VERSION }
+            let found = u16::from_le_bytes(v);
+            if (cbd_protocol::OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&found) {
+                // Another version this build reads: the checksum catches the flip.
+                let mut flipped = blob.to_vec();
+                flipped[byte] ^= 1 << bit;
+                DecodeError::ChecksumMismatch { stored, computed: crc32(&flipped[..total - TRAILER_LEN]) }
+            } else {
+                DecodeError::UnsupportedVersion { found, supported: FORMAT_VERSION }
+            }
         }
         6..=9 => {
             let declared = payload_len ^ (1usize << (bit as usize + 8 * (byte - 6)));
@@ -135,10 +143,11 @@ fn every_bit_flip_is_rejected(blob: &[u8], stride: usize) {
     assert_eq!(damaged, blob);
     // Every class of field was exercised.
     assert_eq!(counts["BadMagic"], 32);
-    assert_eq!(counts["UnsupportedVersion"], 16);
+    // 16 version bits; the one flip that lands on format 2 (3 → 2, also read) fails the checksum.
+    assert_eq!(counts["UnsupportedVersion"], 15);
     assert_eq!(counts["Truncated"] + counts["TrailingBytes"], 32);
     assert!(counts["Truncated"] > 0 && counts["TrailingBytes"] > 0, "{counts:?}");
-    assert_eq!(counts["ChecksumMismatch"], 8 * (flipped_bytes - HEADER_LEN));
+    assert_eq!(counts["ChecksumMismatch"], 8 * (flipped_bytes - HEADER_LEN) + 1);
     if stride == 1 {
         assert_eq!(flipped_bytes, blob.len());
     }
@@ -201,12 +210,13 @@ fn wrong_version_or_magic_is_rejected_even_with_a_valid_checksum() {
         let mut b = blob.clone();
         b[4..6].copy_from_slice(&version.to_le_bytes());
         reseal(&mut b);
-        check_rejected(
-            &b,
-            &mut storage,
-            DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION },
-            &format!("version {version}"),
-        );
+        // An older version this build reads cannot hold the solver blob's (Hamiltonian) momentum law.
+        let expected = if (cbd_protocol::OLDEST_FORMAT_VERSION..FORMAT_VERSION).contains(&version) {
+            DecodeError::Invalid(cbd_protocol::ModelError::OutOfRange { field: "momentum_law (not in this blob's format version)" })
+        } else {
+            DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION }
+        };
+        check_rejected(&b, &mut storage, expected, &format!("version {version}"));
     }
     for i in 0..4 {
         for v in 0..=255u8 {

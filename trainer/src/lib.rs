@@ -3,6 +3,7 @@
 //! diagnosis → reports → CLI.
 
 pub mod baselines;
+pub mod calibrate;
 pub mod cli;
 pub mod data;
 pub mod diagnose;

@@ -123,8 +123,8 @@ fn an_effect_outside_the_library_is_unexplained_structure_absorbed_by_cbd() {
     let train = arm.measure(&configurations(Sampling::Grid { per_axis: 16 }, 2), 1e-5, 7);
     let test = arm.measure(&configurations(Sampling::Uniform { count: 500, seed: 9 }, 2), 1e-5, 8);
     let nominal = cbd_trainer::simulate::rr::nominal();
-    let search = cbd_trainer::kernels::hyperparameters::SearchOptions::default();
-    let fitter = cbd_trainer::cli::compare::cbd_fitter(&search, 1);
+    let settings = cbd_trainer::calibrate::Settings { steps: Some(1), ..Default::default() };
+    let fitter = cbd_trainer::cli::compare::cbd_fitter(&settings);
     let d = diagnose(&nominal, &train, Some(&test), Some(&fitter), &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", summary(&d));
     assert!(d.unexplained_structure, "{}", summary(&d));
@@ -146,8 +146,8 @@ fn cbd_runs_on_top_of_the_effects_found() {
     let train = arm.measure(&configurations(Sampling::Grid { per_axis: 16 }, 2), 1e-5, 7);
     let test = arm.measure(&configurations(Sampling::Uniform { count: 500, seed: 9 }, 2), 1e-5, 8);
     let nominal = cbd_trainer::simulate::rr::nominal();
-    let search = cbd_trainer::kernels::hyperparameters::SearchOptions::default();
-    let fitter = cbd_trainer::cli::compare::cbd_fitter(&search, 1);
+    let settings = cbd_trainer::calibrate::Settings { steps: Some(1), ..Default::default() };
+    let fitter = cbd_trainer::cli::compare::cbd_fitter(&settings);
     let d = diagnose(&nominal, &train, Some(&test), Some(&fitter), &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", summary(&d));
     assert!(

@@ -3,7 +3,6 @@
 
 use cbd_trainer::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use cbd_trainer::cli::compare::cbd_fitter;
-use cbd_trainer::kernels::hyperparameters::SearchOptions;
 use cbd_trainer::report::stats::ErrorStats;
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
 
@@ -13,8 +12,8 @@ fn dh_plus_cbd_reaches_the_noise_level_on_fresh_configurations() {
     let train = robot.measure(&random_configurations(400, 11), 12);
     let test = robot.measure(&random_configurations(200, 13), 14);
     let dh = calibrate_dh(&robot.nominal, &train, &DhCalibrationOptions::default()).expect("DH calibration");
-    let search = SearchOptions { max_evaluations: 80, ..SearchOptions::default() };
-    let fit = cbd_fitter(&search, 1);
+    let settings = cbd_trainer::calibrate::Settings { steps: Some(1), ..Default::default() };
+    let fit = cbd_fitter(&settings);
     let predict = fit(&dh.model, &train).expect("CbD fit");
     let stats = ErrorStats::of_positions(&predict(&test.joints), &test.positions, 3);
     // The measured positions themselves carry noise: E|ε| for a 3-D Gaussian with σ per

@@ -137,7 +137,8 @@ fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
         },
         task_kernel: TaskKernel { width: 1.0 },
         integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
-        momentum_law: MomentumLaw::WithDivergence,
+        // The trainer's default law (v = −K_V Jᵀ P, format 3), so the firmware check covers it.
+        momentum_law: MomentumLaw::Hamiltonian,
         sigma: 1.0,
         n_points: N as u32,
         points: F64Slice::from_le_bytes(&pb),

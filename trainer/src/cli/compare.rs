@@ -3,7 +3,7 @@
 
 use crate::baselines::compare::{compare_files, Predictor};
 use crate::data::Measurements;
-use crate::kernels::hyperparameters::{choose_hyperparameters, SearchOptions};
+use crate::kernels::hyperparameters::SearchOptions;
 use cbd_protocol::NominalModel;
 use std::path::PathBuf;
 
@@ -24,30 +24,28 @@ pub struct CompareArgs {
     /// Write a chart of every method's test-error distribution (PNG and SVG) into this directory.
     #[arg(long)]
     pub plots: Option<PathBuf>,
-    /// Integration steps of the CbD flow (Euler). One step is the linearised model, whose
-    /// Jacobian is exact in closed form (fast for N ≈ 1000); more steps need the tangent flow.
-    #[arg(long, default_value_t = 1)]
-    pub steps: u16,
+    /// CbD's hyperparameters and scheme, as in `cbd fit` (chosen by the pipeline when unset).
+    #[command(flatten)]
+    pub solver: crate::cli::fit::SolverArgs,
 }
 
-/// CbD fitted on `nominal` with hyperparameters chosen by the GP marginal likelihood on `data`.
-pub fn cbd_fitter(search: &SearchOptions, steps: u16) -> impl Fn(&NominalModel, &Measurements) -> Result<Predictor, String> + '_ {
+/// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
+/// gives (nominal, DH-calibrated, with effects): the blob `cbd fit` writes for the same data and flags.
+pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> Result<Predictor, String> + '_ {
     move |nominal: &NominalModel, data: &Measurements| -> Result<Predictor, String> {
-        let h = choose_hyperparameters(nominal, data, search).map_err(|e| e.to_string())?;
-        let mut opts = crate::kernels::cbd_options_from_gp(&h, data);
-        opts.integrator.steps = steps;
-        let fit = crate::solver::fit_cbd(nominal, data, &opts).map_err(|e| e.to_string())?;
-        let blob = fit.blob;
+        let calibration = crate::calibrate::calibrate(nominal, data, settings).map_err(|e| e.to_string())?;
+        crate::cli::fit::print_calibration(&calibration, !settings.verbose);
+        let blob = calibration.fit.blob;
         Ok(Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()])))
     }
 }
 
 pub fn run(args: CompareArgs) -> Result<(), String> {
-    if args.steps == 0 || args.steps > cbd_protocol::MAX_STEPS {
-        return Err(format!("--steps must be between 1 and {}, got {}", cbd_protocol::MAX_STEPS, args.steps));
-    }
+    let mut settings = args.solver.settings()?;
+    // The table is the output here; the fits' own progress lines would drown it.
+    settings.verbose = false;
     let search = SearchOptions::default();
-    let fitter = cbd_fitter(&search, args.steps);
+    let fitter = cbd_fitter(&settings);
     let (comparison, warnings) = compare_files(&args.model, &args.train, &args.test, &search, Some(&fitter)).map_err(|e| e.to_string())?;
     for w in warnings {
         eprintln!("warning: {w}");

@@ -4,7 +4,6 @@
 use crate::baselines::krr::KernelRidge;
 use crate::report::stats::ErrorStats;
 use crate::simulate::{configurations, rr, Sampling};
-use crate::solver::{fit_cbd, CbdOptions};
 
 use serde::Serialize;
 use std::path::PathBuf;
@@ -27,6 +26,10 @@ pub struct DemoArgs {
     /// Write figures (PNG and SVG) into this directory.
     #[arg(long)]
     pub plots: Option<PathBuf>,
+    /// `paper` (the paper's RR kernels, Euler × 2 unless --steps: the reproduction) or `evidence`
+    /// (CbD's own marginal likelihood and a cross-validated scheme, as `cbd fit` does).
+    #[arg(long, default_value = "paper")]
+    pub hyperparameters: String,
     #[command(flatten)]
     pub solver: crate::cli::fit::SolverArgs,
 }
@@ -71,8 +74,19 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
 
-    let opts: CbdOptions = args.solver.options(&nominal, &train)?;
-    let fit = fit_cbd(&nominal, &train, &opts).map_err(|e| e.to_string())?;
+    let mut settings = args.solver.settings()?;
+    settings.source = match args.hyperparameters.as_str() {
+        "paper" => crate::calibrate::HyperparameterSource::PaperRr,
+        "evidence" => crate::calibrate::HyperparameterSource::Evidence,
+        other => return Err(format!("--hyperparameters must be paper or evidence, got {other:?}")),
+    };
+    if settings.source == crate::calibrate::HyperparameterSource::PaperRr && settings.steps.is_none() {
+        // Two Euler steps: the reproduction's scheme (a genuine flow that generalises best there).
+        settings.steps = Some(2);
+    }
+    let calibration = crate::calibrate::calibrate(&nominal, &train, &settings).map_err(|e| e.to_string())?;
+    crate::cli::fit::print_calibration(&calibration, args.solver.quiet);
+    let (opts, fit) = (&calibration.options, &calibration.fit);
     crate::cli::write_atomically(&args.out, &fit.blob)?;
 
     // The controller's view: load the blob written to disk and evaluate it.

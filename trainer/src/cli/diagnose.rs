@@ -35,9 +35,12 @@ pub struct DiagnoseArgs {
     /// Smallest relative drop of the cross-validated RMS error for an effect to be kept.
     #[arg(long, default_value_t = 0.05)]
     pub margin: f64,
-    /// Skip the CbD rows of the table (two CbD fits; about a minute each on 1000 UR5 rows).
+    /// Skip the CbD rows of the table (two CbD fits).
     #[arg(long)]
     pub no_cbd: bool,
+    /// CbD's hyperparameters and scheme for the CbD rows, as in `cbd fit`.
+    #[command(flatten)]
+    pub solver: crate::cli::fit::SolverArgs,
 }
 
 pub fn run(args: DiagnoseArgs) -> Result<(), String> {
@@ -71,8 +74,9 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     options.structure.harmonics = args.harmonics;
     options.selection.folds = args.folds;
     options.selection.margin = args.margin;
-    let search = crate::kernels::hyperparameters::SearchOptions::default();
-    let fitter = crate::cli::compare::cbd_fitter(&search, 1);
+    let mut settings = args.solver.settings()?;
+    settings.verbose = false;
+    let fitter = crate::cli::compare::cbd_fitter(&settings);
     let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
     let d = diagnose(&nominal, &data, test.as_ref(), cbd, &options)?;
     let model_file = match &args.model.model {

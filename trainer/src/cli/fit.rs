@@ -1,7 +1,6 @@
 //! `cbd fit`: train a model blob from measured data.
 
 use crate::cli::{load_nominal, ModelArgs};
-use crate::solver::{fit_cbd, CbdOptions};
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -22,26 +21,32 @@ pub struct FitArgs {
     pub solver: SolverArgs,
 }
 
-/// Hyperparameters and scheme; anything left unset uses the defaults for the model.
+/// Hyperparameters and scheme; anything left unset is chosen by the pipeline (`crate::calibrate`):
+/// CbD's own evidence on the training rows, then the scheme by cross-validation. Every length is in
+/// the data's unit and means the same in `fit`, `compare`, `diagnose` and `demo`; a value given
+/// replaces that one hyperparameter of the search's result.
 #[derive(Debug, Clone, clap::Args)]
 pub struct SolverArgs {
-    /// Noise level σ of energy (16), in the data's length unit.
+    /// Measurement noise σ per coordinate, in the data's length unit.
     #[arg(long)]
     pub sigma: Option<f64>,
     /// Task-space kernel width a, in the data's length unit.
     #[arg(long)]
     pub task_width: Option<f64>,
-    /// Joint kernel b (periodic axes), shared by all joints.
+    /// Task-space field variance γ_W, in the data's length unit squared.
+    #[arg(long)]
+    pub task_gamma: Option<f64>,
+    /// Joint kernel b of every revolute joint (periodic kernel exp(b (cos Δ − 1))).
     #[arg(long)]
     pub joint_b: Option<f64>,
-    /// Joint kernel amplitude γ.
+    /// Joint-space field variance γ_V (rad² for revolute joints).
     #[arg(long)]
     pub gamma: Option<f64>,
     /// euler, heun or rk4 (default euler).
     #[arg(long)]
     pub integrator: Option<String>,
-    /// Integration steps; training optimises exactly this discrete flow (default: 2 for the
-    /// planar RR arm, 1 — the linearised model, fast for large N — for model files).
+    /// Integration steps; training optimises exactly this discrete flow (default: 1 or 2, chosen
+    /// by cross-validation on the training rows).
     #[arg(long)]
     pub steps: Option<u16>,
     #[arg(long, default_value_t = 30)]
@@ -69,16 +74,19 @@ pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod, String> {
 }
 
 impl SolverArgs {
-    /// Options for `nominal` and `data`: the paper's RR values for a planar 2-joint arm, otherwise
-    /// data-scaled defaults (task space normalised to unit RMS radius).
     /// Rejects out-of-range values before any work, naming the flag.
     pub fn validate(&self) -> Result<(), String> {
-        for (flag, value) in
-            [("--sigma", self.sigma), ("--task-width", self.task_width), ("--joint-b", self.joint_b), ("--gamma", self.gamma)]
-        {
+        for (flag, value) in [
+            ("--sigma", self.sigma),
+            ("--task-width", self.task_width),
+            ("--task-gamma", self.task_gamma),
+            ("--joint-b", self.joint_b),
+            ("--gamma", self.gamma),
+        ] {
             if let Some(v) = value {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(format!("{flag} must be a finite number > 0, got {v}"));
+                // Squares and products of two such values must stay finite (σ², γ |Dk0|², a²).
+                if !(v > 0.0 && v <= 1e100) {
+                    return Err(format!("{flag} must be a number in (0, 1e100], got {v}"));
                 }
             }
         }
@@ -99,59 +107,61 @@ impl SolverArgs {
         Ok(())
     }
 
-    pub fn options(&self, nominal: &cbd_protocol::NominalModel, data: &crate::data::Measurements) -> Result<CbdOptions, String> {
+    /// The pipeline's settings for these flags.
+    pub fn settings(&self) -> Result<crate::calibrate::Settings, String> {
         self.validate()?;
-        let mut opts = CbdOptions::paper_rr();
-        let n = nominal.n_joints();
-        if !(matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. }) && n == 2) {
-            // Kernel widths and σ by the marginal likelihood of the residual GP on the training
-            // rows (DESIGN.md §3), mapped onto the flow's linearisation.
-            let search = crate::kernels::hyperparameters::SearchOptions::default();
-            let h = crate::kernels::hyperparameters::choose_hyperparameters(nominal, data, &search).map_err(|e| e.to_string())?;
-            opts = crate::kernels::cbd_options_from_gp(&h, data);
-            opts.integrator.steps = 1;
-            if !self.quiet {
-                eprintln!(
-                    "hyperparameters (GP marginal likelihood {:.2} on {} rows): joint kernel {:?}, noise σ {:.4} (data units)",
-                    h.log_marginal_likelihood,
-                    h.rows_used,
-                    h.kernel.axes.iter().collect::<Vec<_>>(),
-                    h.noise_sigma_data_units()
-                );
-            }
-        }
-        let scale = opts.normalisation.task_scale;
-        if let Some(s) = self.sigma {
-            opts.sigma = s / scale;
-        }
-        if let Some(a) = self.task_width {
-            opts.task_kernel.width = a / scale;
-        }
-        if let Some(g) = self.gamma {
-            opts.joint_kernel.gamma = g;
-        }
-        if let Some(b) = self.joint_b {
-            for axis in opts.joint_kernel.axes.iter_mut() {
-                if let cbd_protocol::JointKernelAxis::Periodic { b: old } = axis {
-                    *old = b;
-                }
-            }
-        }
+        let mut s = crate::calibrate::Settings::default();
+        s.overrides = crate::calibrate::Overrides {
+            sigma: self.sigma,
+            task_width: self.task_width,
+            task_gamma: self.task_gamma,
+            joint_b: self.joint_b,
+            joint_gamma: self.gamma,
+        };
         if let Some(method) = &self.integrator {
-            opts.integrator.method = crate::cli::demo::parse_integrator(method)?;
+            s.integrator = Some(crate::cli::demo::parse_integrator(method)?);
         }
-        if let Some(steps) = self.steps {
-            opts.integrator.steps = steps;
-        }
-        opts.max_iterations = self.max_iterations;
+        s.steps = self.steps;
+        s.max_iterations = self.max_iterations;
         if let Some(solver) = &self.solver {
-            opts.method = parse_solver(solver)?;
+            s.solver = parse_solver(solver)?;
         }
-        opts.verbose = !self.quiet;
+        s.verbose = !self.quiet;
         if self.no_divergence {
-            opts.law = cbd_protocol::MomentumLaw::WithoutDivergence;
+            s.law = cbd_protocol::MomentumLaw::HamiltonianWithoutDivergence;
         }
-        Ok(opts)
+        Ok(s)
+    }
+}
+
+/// Prints what the pipeline chose (stderr) and its warnings.
+pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
+    if let Some(dh) = &c.dh {
+        eprintln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.iterations, dh.rank, dh.n_parameters, dh.final_rms);
+    }
+    if !quiet {
+        match &c.evidence {
+            Some(e) => eprintln!(
+                "hyperparameters (CbD evidence {:.2} on {} rows, {} evaluations, {:.2} s): {}",
+                e.log_evidence,
+                e.rows_used,
+                e.evaluations,
+                e.seconds,
+                c.describe_hyperparameters()
+            ),
+            None => eprintln!("hyperparameters: {}", c.describe_hyperparameters()),
+        }
+        let cv: Vec<String> =
+            c.scheme.cross_validation.iter().map(|(i, e)| format!("{} {e:.3e}", crate::calibrate::scheme::label(*i))).collect();
+        eprintln!(
+            "scheme: {} ({}{})",
+            c.scheme.label(),
+            c.scheme.chosen_by,
+            if cv.is_empty() { String::new() } else { format!(": held-out RMS {}", cv.join(", ")) }
+        );
+    }
+    for w in &c.warnings {
+        eprintln!("warning: {w}");
     }
 }
 
@@ -164,19 +174,11 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         eprintln!("warning: {w}");
     }
     let data = imported.measurements;
-    let nominal = if args.dh_first {
-        let options = crate::baselines::dh_calibration::DhCalibrationOptions::default();
-        let dh = crate::baselines::dh_calibration::calibrate_dh(&nominal, &data, &options).map_err(|e| e.to_string())?;
-        eprintln!(
-            "DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}",
-            dh.stats.iterations, dh.stats.rank, dh.stats.n_parameters, dh.stats.final_rms
-        );
-        dh.model
-    } else {
-        nominal
-    };
-    let opts = args.solver.options(&nominal, &data)?;
-    let fit = fit_cbd(&nominal, &data, &opts).map_err(|e| format!("{}: {e}", args.data.display()))?;
+    let mut settings = args.solver.settings()?;
+    settings.dh_first = args.dh_first;
+    let calibration = crate::calibrate::calibrate(&nominal, &data, &settings).map_err(|e| format!("{}: {e}", args.data.display()))?;
+    print_calibration(&calibration, args.solver.quiet);
+    let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;
     let r = &fit.report;
     let last = r.log.last().map(|l| l.train_rms).unwrap_or(f64::NAN);

@@ -33,6 +33,9 @@ pub struct DiagnoseOptions {
     /// unidentifiable and stay at their nominal values.
     pub identifiability_tolerance: f64,
     pub gauss_newton_iterations: usize,
+    /// Folds of the cross-validation that recommends CbD's base (nominal or nominal + effects);
+    /// 0 skips it.
+    pub recommendation_folds: usize,
 }
 
 impl Default for DiagnoseOptions {
@@ -44,6 +47,7 @@ impl Default for DiagnoseOptions {
             holdout_fraction: 0.2,
             identifiability_tolerance: 1e-5,
             gauss_newton_iterations: 10,
+            recommendation_folds: 3,
         }
     }
 }
@@ -109,6 +113,34 @@ pub struct Diagnosis {
     pub residual_after: Vec<f64>,
     /// Training rows actually used (after any held-out split).
     pub train: Measurements,
+    /// With CbD: which base CbD should deform, by k-fold cross-validation on the training rows.
+    pub recommendation: Option<Recommendation>,
+}
+
+/// The pipeline `diagnose` recommends: CbD on the nominal model or on nominal + effects, whichever
+/// predicts held-out training folds better (never the test rows).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recommendation {
+    /// Per candidate (table name): RMS position error on the held-out folds.
+    pub cross_validation: Vec<(String, f64)>,
+    pub folds: usize,
+    /// The candidate with the least error.
+    pub best: String,
+    /// Naming the effects made the final model worse out of sample.
+    pub effects_hurt: bool,
+}
+
+/// RMS held-out error of `fit` on `base` over `folds` interleaved folds of `train`.
+fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measurements, folds: usize) -> Result<f64, String> {
+    let (mut sse, mut count) = (0.0, 0usize);
+    for fold in 0..folds {
+        let (rest, held): (Vec<usize>, Vec<usize>) = (0..train.len()).partition(|i| i % folds != fold);
+        let (rest, held) = (train.subset(&rest), train.subset(&held));
+        let predict = fit(base, &rest)?;
+        sse += predict(&held.joints).iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        count += held.len();
+    }
+    Ok((sse / count.max(1) as f64).sqrt())
 }
 
 impl Diagnosis {
@@ -285,6 +317,22 @@ pub fn diagnose(
         let plain = fit(model, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
         push("nominal + CbD", plain(&test.joints));
     }
+    let recommendation = match cbd {
+        Some(fit) if !found.is_empty() && options.recommendation_folds >= 2 => {
+            let folds = options.recommendation_folds;
+            let with_effects =
+                cross_validated_rms(fit, &refined.model, &train, folds).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+            let plain = cross_validated_rms(fit, model, &train, folds).map_err(|e| format!("CbD on nominal: {e}"))?;
+            let effects_hurt = plain < with_effects;
+            Some(Recommendation {
+                cross_validation: vec![("nominal + effects + CbD".into(), with_effects), ("nominal + CbD".into(), plain)],
+                folds,
+                best: if effects_hurt { "nominal + CbD" } else { "nominal + effects + CbD" }.into(),
+                effects_hurt,
+            })
+        }
+        _ => None,
+    };
     Ok(Diagnosis {
         train_rows: train.len(),
         test_rows: test.len(),
@@ -302,5 +350,6 @@ pub fn diagnose(
         residual_before: r0,
         residual_after: r1,
         train,
+        recommendation,
     })
 }

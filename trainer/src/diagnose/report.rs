@@ -96,6 +96,18 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
         out +=
             &format!("  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max);
     }
+    if let Some(rec) = &d.recommendation {
+        let cv: Vec<String> = rec.cross_validation.iter().map(|(name, rms)| format!("{name} {rms:.4e}")).collect();
+        out += &format!(
+            "\nrecommended pipeline ({}-fold cross-validation on the training rows, RMS {unit}: {}): {}\n",
+            rec.folds,
+            cv.join(", "),
+            rec.best
+        );
+        if rec.effects_hurt {
+            out += "  => naming the effects makes the calibrated model worse out of sample: fit CbD on the nominal model (cbd fit without the written model)\n";
+        }
+    }
     out
 }
 
@@ -143,6 +155,10 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, unit: &str) -> Value {
         "selection": {"candidates": d.candidates, "margin": d.margin,
                       "best_refused": d.selection.best_refused.map(|(g, cv)| json!({"group": d.group_names[g], "cv_rms": cv})), "cv_rms_before": d.selection.cv_rms_before, "cv_rms_after": d.selection.cv_rms_after()},
         "held_out": held,
+        "recommendation": d.recommendation.as_ref().map(|r| json!({
+            "best": r.best, "effects_hurt": r.effects_hurt, "folds": r.folds,
+            "cross_validation": r.cross_validation.iter().map(|(n, e)| json!({"pipeline": n, "rms": e})).collect::<Vec<_>>(),
+        })),
     })
 }
 

@@ -16,6 +16,8 @@ pub struct ControlPoints {
     /// The configurations' joint-kernel features (`cbd_runtime::kernel::write_features`), as the
     /// runtime keeps them.
     pub features: Vec<f64>,
+    /// The joint kernel as the flow integrates it: γ carries the law's field sign
+    /// ([`JointKernel::for_flow`]).
     pub joint_kernel: JointKernel,
     pub task_kernel: TaskKernel,
     pub law: MomentumLaw,
@@ -53,6 +55,7 @@ impl ControlPoints {
         }
         let mut features = vec![0.0; cbd_runtime::kernel::features_len(points.len() / n, n)];
         cbd_runtime::kernel::write_features(&joint_kernel, n, &points, &mut features);
+        let joint_kernel = joint_kernel.for_flow(law);
         ControlPoints { dims, points, initial, features, joint_kernel, task_kernel, law, integrator }
     }
 

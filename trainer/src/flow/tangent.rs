@@ -9,7 +9,7 @@
 //! point i: c < m is k, then J row-major, then P), one column per direction.
 
 use super::primal::{ControlPoints, PrimalFlow};
-use cbd_protocol::{MomentumLaw, MAX_JOINTS};
+use cbd_protocol::MAX_JOINTS;
 use cbd_runtime::flow::Dims;
 use cbd_runtime::kernel::{joint_kernel_from_features, read_features};
 use faer::linalg::matmul::matmul;
@@ -132,7 +132,7 @@ fn linearise_stage(cp: &ControlPoints, jk: &JointKernelMatrices, state: &[f64], 
         }
     }
     let mut div: Vec<f64> = (0..count).map(|i| (0..n).map(|d| dv[d * n + d][i]).sum()).collect();
-    if cp.law == MomentumLaw::WithoutDivergence {
+    if !cp.law.has_divergence() {
         div.iter_mut().for_each(|x| *x = 0.0);
     }
     StageLinearisation { kw, g, h, p, jac, dw, v, dv, div, t }
@@ -288,7 +288,7 @@ fn momentum_rates(
     let count = cp.len();
     let blk = |c: usize| tan.subrows(c * count, count);
     let p_of = |a: usize| m + m * n + a;
-    let with_div = cp.law == MomentumLaw::WithDivergence;
+    let with_div = cp.law.has_divergence();
     for a in 0..m {
         let mut o = out.as_mut().subrows_mut(p_of(a) * count, count);
         for c in 0..m {
@@ -494,7 +494,12 @@ mod tests {
 
     #[test]
     fn tangent_matches_central_finite_differences() {
-        for law in [MomentumLaw::WithDivergence, MomentumLaw::WithoutDivergence] {
+        for law in [
+            MomentumLaw::WithDivergence,
+            MomentumLaw::WithoutDivergence,
+            MomentumLaw::Hamiltonian,
+            MomentumLaw::HamiltonianWithoutDivergence,
+        ] {
             for method in [IntegratorMethod::Euler, IntegratorMethod::Heun, IntegratorMethod::Rk4] {
                 let (cp, p0) = small_problem(law, method);
                 let flow = cp.integrate(&p0).unwrap();
@@ -538,7 +543,12 @@ mod tests {
     /// nothing cached) and both momentum laws.
     #[test]
     fn cached_first_stage_gives_the_uncached_jacobian() {
-        for law in [MomentumLaw::WithDivergence, MomentumLaw::WithoutDivergence] {
+        for law in [
+            MomentumLaw::WithDivergence,
+            MomentumLaw::WithoutDivergence,
+            MomentumLaw::Hamiltonian,
+            MomentumLaw::HamiltonianWithoutDivergence,
+        ] {
             for method in [IntegratorMethod::Euler, IntegratorMethod::Heun, IntegratorMethod::Rk4] {
                 let (mut cp, p0) = small_problem(law, method);
                 for steps in [1, 3] {

@@ -28,22 +28,5 @@ pub fn default_joint_kernel(nominal: &NominalModel) -> JointKernel {
     }
     JointKernel { gamma: 1.0, axes }
 }
+pub mod evidence;
 pub mod hyperparameters;
-
-/// CbD options from the Gaussian-process hyperparameters chosen for the residual (marginal
-/// likelihood, [`hyperparameters::choose_hyperparameters`]), never from test rows.
-///
-/// Around P0 = 0 the flow is linear; when the joint kernel's amplitude γ_V dominates K_W's unit
-/// amplitude, its prediction is the GP posterior mean with covariance γ_V Dk0 K̃_V Dk0ᵀ and noise
-/// σ². So the joint kernel takes the chosen widths, γ_V = 10⁶ (K_W's share 10⁻⁶), and σ keeps the
-/// chosen signal-to-noise ratio: σ² = γ_V σ_h² / γ_h.
-pub fn cbd_options_from_gp(h: &hyperparameters::Hyperparameters, data: &Measurements) -> crate::solver::CbdOptions {
-    let mut opts = crate::solver::CbdOptions::paper_rr();
-    opts.normalisation = normalisation_of(data);
-    let gamma_v = 1e6;
-    opts.joint_kernel = h.kernel.clone();
-    opts.joint_kernel.gamma = gamma_v;
-    opts.task_kernel.width = 1.0;
-    opts.sigma = (gamma_v / h.kernel.gamma).sqrt() * h.noise_sigma;
-    opts
-}

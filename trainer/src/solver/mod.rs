@@ -9,4 +9,6 @@ pub mod regulariser;
 pub mod step;
 pub mod subspace;
 
-pub use levenberg_marquardt::{fit_cbd, CbdFit, CbdOptions, FitError, FitReport, IterationLog, SolverMethod, DENSE_MAX_UNKNOWNS};
+pub use levenberg_marquardt::{
+    fit_cbd, CbdFit, CbdOptions, FitError, FitReport, IterationLog, SolverMethod, DENSE_MAX_UNKNOWNS, FIXED_SPLIT,
+};

@@ -36,12 +36,14 @@ fn combined(cp: &ControlPoints, joint_sign: f64) -> Mat<f64> {
     out
 }
 
-/// K_lin = Dk0 K_V Dk0ᵀ + K_W: energy (16)'s regulariser is ½ P0ᵀ K_lin P0.
+/// K_lin = Dk0 K_V Dk0ᵀ + K_W: energy (16)'s regulariser is ½ P0ᵀ K_lin P0 (`cp.joint_kernel`
+/// carries the field's sign s, so s · s K_V = K_V).
 pub fn regulariser_matrix(cp: &ControlPoints) -> Mat<f64> {
-    combined(cp, 1.0)
+    combined(cp, cp.law.joint_field_sign())
 }
 
-/// ∂k1/∂P0 at P0 = 0: K_W − Dk0 K_V Dk0ᵀ (the flow of DESIGN.md §2 moves k by w − J v).
+/// ∂k1/∂P0 at P0 = 0: K_W − s Dk0 K_V Dk0ᵀ (the flow moves k by w − J v, v = s K_V Jᵀ P): K_lin
+/// itself for the Hamiltonian laws (s = −1).
 pub fn linear_response(cp: &ControlPoints) -> Mat<f64> {
     combined(cp, -1.0)
 }
@@ -56,19 +58,27 @@ mod tests {
     fn linear_response_is_the_tangent_at_zero() {
         let nominal = crate::simulate::rr::nominal();
         let points = crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 9, seed: 5 }, 2);
-        let cp = ControlPoints::new(
-            &nominal,
-            &Normalisation::IDENTITY,
-            points,
-            JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; 2]).unwrap() },
-            TaskKernel { width: 1.0 },
-            MomentumLaw::WithDivergence,
-            Integrator { method: IntegratorMethod::Heun, steps: 4 },
-        );
-        let zero = vec![0.0; 18];
-        let jac = position_jacobian(&cp, &cp.integrate(&zero).unwrap(), 1);
-        let lin = linear_response(&cp);
-        let worst = (0..18).flat_map(|r| (0..18).map(move |c| (r, c))).fold(0.0f64, |w, (r, c)| w.max((jac[(r, c)] - lin[(r, c)]).abs()));
-        assert!(worst < 1e-12, "{worst:e}");
+        for law in [MomentumLaw::WithDivergence, MomentumLaw::Hamiltonian] {
+            let cp = ControlPoints::new(
+                &nominal,
+                &Normalisation::IDENTITY,
+                points.clone(),
+                JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; 2]).unwrap() },
+                TaskKernel { width: 1.0 },
+                law,
+                Integrator { method: IntegratorMethod::Heun, steps: 4 },
+            );
+            let zero = vec![0.0; 18];
+            let jac = position_jacobian(&cp, &cp.integrate(&zero).unwrap(), 1);
+            let lin = linear_response(&cp);
+            let reg = regulariser_matrix(&cp);
+            let worst =
+                (0..18).flat_map(|r| (0..18).map(move |c| (r, c))).fold(0.0f64, |w, (r, c)| w.max((jac[(r, c)] - lin[(r, c)]).abs()));
+            assert!(worst < 1e-12, "{law:?}: {worst:e}");
+            // The regulariser is K_lin whatever the sign; the Hamiltonian law's response is K_lin itself.
+            let gap = (0..18).flat_map(|r| (0..18).map(move |c| (r, c))).fold(0.0f64, |w, (r, c)| w.max((reg[(r, c)] - lin[(r, c)]).abs()));
+            let expect_equal = law == MomentumLaw::Hamiltonian;
+            assert_eq!(gap < 1e-12, expect_equal, "{law:?}: |K_lin − response| = {gap:e}");
+        }
     }
 }

@@ -1,0 +1,198 @@
+//! "Calibrate this data": the one pipeline `fit`, `compare`, `diagnose`, `bench` and `demo` call.
+//!
+//! 1. The starting model: the nominal one, or DH-calibrated first (`dh_first`).
+//! 2. Hyperparameters: CbD's own evidence on the training rows ([`crate::kernels::evidence`]),
+//!    or the paper's RR values; a hand-given value replaces that one hyperparameter after the search
+//!    (so `--sigma S`, S the chosen value as printed, gives the default blob back).
+//! 3. The scheme (Euler × 1 = the linearised model, Euler × 2): k-fold cross-validation on the
+//!    training rows ([`scheme`]) unless given.
+//! 4. The fit of the discrete flow, and a warning when it stalls.
+//!
+//! Every length a user gives or reads here is in the data's unit.
+
+pub mod scheme;
+pub mod settings;
+
+pub use settings::{HyperparameterSource, Overrides, Settings};
+
+use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
+use crate::data::Measurements;
+use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, Evidence};
+use crate::solver::{fit_cbd, CbdFit, CbdOptions};
+use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
+
+/// A calibrated model and how it was chosen.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The model CbD deforms: the nominal one, or the DH-calibrated chain.
+    pub base: NominalModel,
+    pub dh: Option<DhFitStats>,
+    pub hyperparameters: CbdHyperparameters,
+    /// The evidence search, when it ran.
+    pub evidence: Option<Evidence>,
+    pub scheme: scheme::SchemeChoice,
+    pub options: CbdOptions,
+    pub fit: CbdFit,
+    /// Stalled fits and the like: printed by the CLI, in the JSON.
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrateError(pub String);
+
+impl std::fmt::Display for CalibrateError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for CalibrateError {}
+
+fn err(e: impl std::fmt::Display) -> CalibrateError {
+    CalibrateError(e.to_string())
+}
+
+/// The paper's RR hyperparameters (docs/DESIGN.md §2) in data units: lengths in units of l1 = 1,
+/// task kernel with unit amplitude, σ = 1e-6.
+pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
+    CbdHyperparameters {
+        joint_axes: vec![JointKernelAxis::Periodic { b: 1.0186 }; 2],
+        joint_gamma: 8.0,
+        task_width: 1.0270,
+        task_gamma: 1.0,
+        sigma: 1e-6,
+    }
+}
+
+/// The fit's options for hyperparameters `h`, normalisation `norm` and scheme `integrator`.
+pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Integrator, settings: &Settings) -> CbdOptions {
+    let mut opts = CbdOptions::paper_rr();
+    opts.normalisation = norm.clone();
+    opts.joint_kernel = h.blob_joint_kernel(norm);
+    opts.task_kernel = TaskKernel { width: h.blob_task_width(norm) };
+    opts.sigma = h.blob_sigma();
+    opts.integrator = integrator;
+    opts.law = settings.law;
+    opts.max_iterations = settings.max_iterations;
+    opts.method = settings.solver;
+    opts.verbose = settings.verbose;
+    if let Some(t) = settings.threads {
+        opts.threads = t;
+    }
+    opts
+}
+
+/// Hyperparameters for `base` on `data`: the source's, then the hand-given values.
+pub fn choose_hyperparameters(
+    base: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> Result<(CbdHyperparameters, Option<Evidence>), CalibrateError> {
+    let (mut h, evidence) = match settings.source {
+        HyperparameterSource::PaperRr => (paper_rr_hyperparameters(), None),
+        HyperparameterSource::Evidence if settings.overrides.is_complete(base) => {
+            (settings.overrides.apply(base, paper_rr_hyperparameters_for(base)), None)
+        }
+        HyperparameterSource::Evidence => {
+            let e = choose_cbd_hyperparameters(base, data, norm, &settings.evidence).map_err(err)?;
+            (e.hyperparameters.clone(), Some(e))
+        }
+    };
+    h = settings.overrides.apply(base, h);
+    Ok((h, evidence))
+}
+
+/// A placeholder for joints the overrides cover completely (every field is replaced).
+fn paper_rr_hyperparameters_for(base: &NominalModel) -> CbdHyperparameters {
+    let mut h = paper_rr_hyperparameters();
+    h.joint_axes = (0..base.n_joints())
+        .map(|d| if base.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 1.0 } })
+        .collect();
+    h
+}
+
+/// The task-space normalisation for `settings`: the data's (RMS radius) or none (the paper's units).
+pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation {
+    match settings.source {
+        HyperparameterSource::PaperRr => Normalisation::IDENTITY,
+        HyperparameterSource::Evidence => crate::kernels::normalisation_of(data),
+    }
+}
+
+/// Calibrates `nominal` on `data` (training rows only).
+pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> Result<Calibration, CalibrateError> {
+    let (base, dh) = if settings.dh_first {
+        let fitted = calibrate_dh(nominal, data, &DhCalibrationOptions::default()).map_err(err)?;
+        (fitted.model, Some(fitted.stats))
+    } else {
+        (nominal.clone(), None)
+    };
+    let norm = normalisation(data, settings);
+    let (hyperparameters, evidence) = choose_hyperparameters(&base, data, &norm, settings)?;
+    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings).map_err(err)?;
+    let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
+    let fit = fit_cbd(&base, data, &options).map_err(err)?;
+    let warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
+    Ok(Calibration { base, dh, hyperparameters, evidence, scheme, options, fit, warnings })
+}
+
+/// A fit that stops at the iteration limit, or far above the noise it was told about, is a warning
+/// with its figures, never a silent result.
+fn stall_warnings(fit: &CbdFit, h: &CbdHyperparameters, task_dim: usize, max_iterations: usize) -> Vec<String> {
+    let r = &fit.report;
+    let train_rms = r.log.last().map_or(f64::NAN, |l| l.train_rms);
+    // The RMS of a position error (all coordinates) at the noise level is √m σ.
+    let expected = (task_dim as f64).sqrt() * h.sigma;
+    let mut out = Vec::new();
+    if !r.converged && r.iterations >= max_iterations {
+        out.push(format!(
+            "the fit stopped at the iteration limit ({max_iterations}) with training RMS error {train_rms:.3e} (noise level √m σ = {expected:.3e}); raise --max-iterations or check the hyperparameters"
+        ));
+    }
+    if !(train_rms <= 10.0 * expected) {
+        out.push(format!(
+            "the fit stalled: training RMS error {train_rms:.3e} is over 10 × the noise level √m σ = {expected:.3e} the hyperparameters assume"
+        ));
+    }
+    out
+}
+
+impl Calibration {
+    /// One line of the chosen hyperparameters, in the data's unit, each printed so that passing it
+    /// back by hand reproduces it exactly (shortest round-trip form).
+    pub fn describe_hyperparameters(&self) -> String {
+        describe(&self.hyperparameters)
+    }
+
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "hyperparameters": self.hyperparameters,
+            "evidence": self.evidence,
+            "scheme": self.scheme.to_json(),
+            "dh_first": self.dh.is_some(),
+            "fit": self.fit.report,
+            "warnings": self.warnings,
+        })
+    }
+}
+
+/// `--joint-b`/`--joint-widths`, `--gamma`, `--task-width`, `--task-gamma`, `--sigma` as one line.
+pub fn describe(h: &CbdHyperparameters) -> String {
+    let axes: Vec<String> = h
+        .joint_axes
+        .iter()
+        .map(|a| match a {
+            JointKernelAxis::Periodic { b } => format!("b={b}"),
+            JointKernelAxis::Gaussian { width } => format!("l={width}"),
+        })
+        .collect();
+    format!(
+        "joint kernel [{}] gamma {}; task kernel width {} gamma {}; sigma {}",
+        axes.join(" "),
+        h.joint_gamma,
+        h.task_width,
+        h.task_gamma,
+        h.sigma
+    )
+}

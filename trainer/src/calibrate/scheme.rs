@@ -1,0 +1,106 @@
+//! The flow's scheme chosen out of sample: k-fold cross-validation of the candidate schemes
+//! (Euler × 1, the linearised model, and Euler × 2) on the training rows, with the chosen
+//! hyperparameters held fixed.
+
+use super::{options_for, Settings};
+use crate::data::Measurements;
+use crate::kernels::evidence::CbdHyperparameters;
+use crate::solver::{fit_cbd, DENSE_MAX_UNKNOWNS};
+use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
+
+/// The scheme and how it was chosen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SchemeChoice {
+    pub integrator: Integrator,
+    /// "given", "cross-validation" or why cross-validation did not run.
+    pub chosen_by: String,
+    /// Per candidate: its RMS position error on the held-out folds (data units).
+    pub cross_validation: Vec<(Integrator, f64)>,
+}
+
+impl SchemeChoice {
+    pub fn label(&self) -> String {
+        label(self.integrator)
+    }
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "integrator": format!("{:?}", self.integrator.method).to_lowercase(),
+            "steps": self.integrator.steps,
+            "chosen_by": self.chosen_by,
+            "cross_validation": self.cross_validation.iter().map(|(i, e)| serde_json::json!({"scheme": label(*i), "rms": e})).collect::<Vec<_>>(),
+        })
+    }
+}
+
+pub fn label(i: Integrator) -> String {
+    format!("{} × {}", format!("{:?}", i.method).to_lowercase(), i.steps)
+}
+
+/// The scheme for `settings`: as given, or the candidate with the least cross-validated error.
+pub fn choose_scheme(
+    base: &NominalModel,
+    data: &Measurements,
+    h: &CbdHyperparameters,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> Result<SchemeChoice, String> {
+    let method = settings.integrator.unwrap_or(IntegratorMethod::Euler);
+    if let Some(steps) = settings.steps {
+        return Ok(SchemeChoice { integrator: Integrator { method, steps }, chosen_by: "given".into(), cross_validation: vec![] });
+    }
+    let candidates = [Integrator { method, steps: 1 }, Integrator { method, steps: 2 }];
+    let folds = settings.scheme_folds;
+    if folds < 2 || data.len() < 2 * folds {
+        return Ok(SchemeChoice {
+            integrator: candidates[0],
+            chosen_by: "too few rows to cross-validate".into(),
+            cross_validation: vec![],
+        });
+    }
+    if data.len() * data.task_dim > DENSE_MAX_UNKNOWNS {
+        return Ok(SchemeChoice {
+            integrator: candidates[0],
+            chosen_by: format!("N·m > {DENSE_MAX_UNKNOWNS}: cross-validation skipped (its fits would dominate); --steps chooses"),
+            cross_validation: vec![],
+        });
+    }
+    let mut quiet = settings.clone();
+    quiet.verbose = false;
+    let mut cross_validation = Vec::new();
+    for integrator in candidates {
+        let opts = options_for(h, norm, integrator, &quiet);
+        let (mut sse, mut count) = (0.0, 0usize);
+        for fold in 0..folds {
+            let (train, held): (Vec<usize>, Vec<usize>) = (0..data.len()).partition(|i| i % folds != fold);
+            let (train, held) = (data.subset(&train), data.subset(&held));
+            let predicted = fit_cbd(base, &train, &opts)
+                .map_err(|e| e.to_string())
+                .and_then(|fit| crate::predict::evaluate_blob(&fit.blob, &held.joints));
+            match predicted {
+                Ok(p) => {
+                    sse += p.iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+                    count += held.len();
+                }
+                Err(_) => {
+                    sse = f64::INFINITY;
+                    break;
+                }
+            }
+            // A candidate three times worse than the best so far on its first fold is out: its
+            // other folds would only cost fits (its figure is then that fold's).
+            let so_far = (sse / count.max(1) as f64).sqrt();
+            if cross_validation.iter().any(|&(_, best): &(Integrator, f64)| so_far > 3.0 * best) {
+                break;
+            }
+        }
+        let rms = if count > 0 { (sse / count as f64).sqrt() } else { f64::INFINITY };
+        cross_validation.push((integrator, rms));
+    }
+    // Fewest steps among the best: a tie goes to the cheaper runtime.
+    let best = cross_validation.iter().fold(None::<(Integrator, f64)>, |b, &(i, e)| match b {
+        Some((_, be)) if !(e < be) => b,
+        _ => Some((i, e)),
+    });
+    let integrator = best.map_or(candidates[0], |(i, _)| i);
+    Ok(SchemeChoice { integrator, chosen_by: format!("{folds}-fold cross-validation"), cross_validation })
+}

@@ -1,0 +1,104 @@
+//! What a user can set for a calibration; anything unset is chosen by the pipeline.
+
+use crate::kernels::evidence::{CbdHyperparameters, EvidenceOptions};
+use crate::solver::SolverMethod;
+use cbd_protocol::{IntegratorMethod, JointKernelAxis, MomentumLaw, NominalModel};
+
+/// Where the hyperparameters come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HyperparameterSource {
+    /// CbD's own evidence on the training rows (the default everywhere).
+    Evidence,
+    /// The paper's RR values (docs/DESIGN.md §2), task space not normalised: the demo's reproduction.
+    PaperRr,
+}
+
+/// Hand-given hyperparameters, data units; each replaces the chosen value of that one.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overrides {
+    /// σ, noise per coordinate (data length unit).
+    pub sigma: Option<f64>,
+    /// a, task kernel width (data length unit).
+    pub task_width: Option<f64>,
+    /// γ_W, task field variance (data length unit squared).
+    pub task_gamma: Option<f64>,
+    /// b of every periodic (revolute) joint axis.
+    pub joint_b: Option<f64>,
+    /// γ_V, joint field variance (rad²).
+    pub joint_gamma: Option<f64>,
+}
+
+impl Overrides {
+    /// Whether every hyperparameter of `base` is given (then no search runs).
+    pub fn is_complete(&self, base: &NominalModel) -> bool {
+        self.sigma.is_some()
+            && self.task_width.is_some()
+            && self.task_gamma.is_some()
+            && self.joint_gamma.is_some()
+            && self.joint_b.is_some()
+            && (0..base.n_joints()).all(|d| base.is_revolute(d))
+    }
+
+    pub fn apply(&self, base: &NominalModel, mut h: CbdHyperparameters) -> CbdHyperparameters {
+        if let Some(v) = self.sigma {
+            h.sigma = v;
+        }
+        if let Some(v) = self.task_width {
+            h.task_width = v;
+        }
+        if let Some(v) = self.task_gamma {
+            h.task_gamma = v;
+        }
+        if let Some(v) = self.joint_gamma {
+            h.joint_gamma = v;
+        }
+        if let Some(b) = self.joint_b {
+            for (d, axis) in h.joint_axes.iter_mut().enumerate() {
+                if base.is_revolute(d) {
+                    *axis = JointKernelAxis::Periodic { b };
+                }
+            }
+        }
+        h
+    }
+}
+
+/// Everything besides the data that defines a calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub source: HyperparameterSource,
+    pub overrides: Overrides,
+    pub evidence: EvidenceOptions,
+    /// Fixed scheme; `None` for either part: chosen by cross-validation (method Euler).
+    pub integrator: Option<IntegratorMethod>,
+    pub steps: Option<u16>,
+    /// Folds of the scheme's cross-validation.
+    pub scheme_folds: usize,
+    pub law: MomentumLaw,
+    /// Calibrate the DH parameters (plus base and tool) first and deform the calibrated chain.
+    pub dh_first: bool,
+    pub max_iterations: usize,
+    pub solver: SolverMethod,
+    /// Threads for the fit; `None`: the solver's default (results never depend on it).
+    pub threads: Option<usize>,
+    pub verbose: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            source: HyperparameterSource::Evidence,
+            overrides: Overrides::default(),
+            evidence: EvidenceOptions::default(),
+            integrator: None,
+            steps: None,
+            scheme_folds: 4,
+            law: MomentumLaw::Hamiltonian,
+            dh_first: false,
+            max_iterations: 30,
+            solver: SolverMethod::Auto,
+            threads: None,
+            verbose: false,
+        }
+    }
+}
