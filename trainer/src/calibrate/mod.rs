@@ -122,6 +122,11 @@ pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation 
 
 /// Calibrates `nominal` on `data` (training rows only).
 pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> Result<Calibration, CalibrateError> {
+    // The evidence needs three rows (a covariance and something to predict), the fit two.
+    let needed = if settings.source == HyperparameterSource::Evidence && !settings.overrides.is_complete(nominal) { 3 } else { 2 };
+    if data.len() < needed {
+        return Err(err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }));
+    }
     let (base, dh) = if settings.dh_first {
         let fitted = calibrate_dh(nominal, data, &DhCalibrationOptions::default()).map_err(err)?;
         (fitted.model, Some(fitted.stats))

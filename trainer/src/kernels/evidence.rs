@@ -23,9 +23,9 @@ use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation, MA
 use cbd_runtime::nominal::forward_kinematics;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
-use faer::linalg::matmul::matmul;
+use faer::linalg::cholesky::llt::inverse::{inverse as llt_inverse, inverse_scratch as llt_inverse_scratch};
 use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
-use faer::{Accum, Mat};
+use faer::Mat;
 use std::cell::RefCell;
 
 /// CbD's hyperparameters in the data's units (what `--sigma`, `--task-width`, … mean everywhere).
@@ -80,8 +80,8 @@ impl std::error::Error for EvidenceError {}
 pub struct EvidenceOptions {
     /// At most this many (N m) unknowns in the evidence: above, evenly spaced rows (a subset).
     pub max_unknowns: usize,
-    /// The starts run on at most this many unknowns (evenly spaced rows), the best two are then
-    /// refined on all of the evidence's rows.
+    /// The starts run on at most this many unknowns (evenly spaced rows), the best (and the runner-up
+    /// when it is another basin) are then refined on all of the evidence's rows.
     pub coarse_unknowns: usize,
     /// L-BFGS iterations per start.
     pub max_iterations: u64,
@@ -224,12 +224,11 @@ impl PairTable {
             return None;
         }
         // ∂ nlml / ∂θ = ½ tr(Q ∂K/∂θ), Q = K⁻¹ − α αᵀ; per pair S (joint part) and T (task part).
-        // K⁻¹ = L⁻ᵀ L⁻¹.
-        let mut linv = Mat::<f64>::identity(dim, dim);
-        solve_lower_triangular_in_place(lower, linv.as_mut(), par);
+        // K⁻¹ = L⁻ᵀ L⁻¹, lower triangle only (faer's triangular inverse and product: n³ flops).
         let mut inv = Mat::<f64>::zeros(dim, dim);
-        matmul(inv.as_mut(), Accum::Replace, linv.transpose(), linv.as_ref(), 1.0, par);
-        let q = |r: usize, c: usize| inv[(r, c)] - alpha[(r, 0)] * alpha[(c, 0)];
+        let mut mem = MemBuffer::new(llt_inverse_scratch::<f64>(dim, par));
+        llt_inverse(inv.as_mut(), lower, par, MemStack::new(&mut mem));
+        let q = |r: usize, c: usize| inv[(r.max(c), r.min(c))] - alpha[(r, 0)] * alpha[(c, 0)];
         let (gv, gw) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp());
         let inv_a2 = (-2.0 * theta.log_a).exp();
         let w: Vec<f64> = (0..n).map(|d| self.axis_weight(d, theta.log_widths[d])).collect();
@@ -479,7 +478,7 @@ pub fn choose_cbd_hyperparameters(
     (lower[n + 2], upper[n + 2]) = (ln(var_r * 1e-12), ln(var_r * 1e8));
     // σ from 1e-8 of the residual's spread (and 1e-12 of the workspace) to three times it.
     (lower[n + 3], upper[n + 3]) = ((0.5 * ln(var_r * 1e-16)).max(ln(1e-12)), 0.5 * ln(var_r * 10.0));
-    // Every start on a coarse subset of the rows (each evaluation there is cheap), then the two best
+    // Every start on a coarse subset of the rows (each evaluation there is cheap), then the best
     // refined on all the evidence rows.
     let evaluations = RefCell::new(0usize);
     let coarse_rows = evidence_rows(used.len(), m, options.coarse_unknowns);
@@ -491,8 +490,18 @@ pub fn choose_cbd_hyperparameters(
         .collect();
     found.sort_by(|a, b| a.0.total_cmp(&b.0));
     if coarse_table.is_some() {
-        found =
-            found.iter().take(2).filter_map(|(_, p)| minimise(&table, &lower, &upper, p, options.max_iterations, &evaluations)).collect();
+        // The runner-up is refined too when it lies in another basin (some log-parameter more than
+        // 1 apart): on a subset the order of distinct optima can change.
+        let distinct = |a: &[f64], b: &[f64]| a.iter().zip(b).any(|(x, y)| (x - y).abs() > 1.0);
+        let keep = match found.as_slice() {
+            [first, second, ..] if distinct(&first.1, &second.1) => 2,
+            _ => 1,
+        };
+        found = found
+            .iter()
+            .take(keep)
+            .filter_map(|(_, p)| minimise(&table, &lower, &upper, p, options.max_iterations, &evaluations))
+            .collect();
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
     let best = found.into_iter().next();
