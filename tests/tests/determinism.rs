@@ -201,3 +201,21 @@ fn concurrent_reader_never_sees_a_partial_file() {
         }
     });
 }
+
+/// The whole calibration pipeline (evidence search, scheme cross-validation, closed-form fit): the
+/// same bits on 1–3 threads and run to run.
+#[test]
+fn pipeline_blob_is_identical_across_thread_counts() {
+    let mut data = rr_data(8);
+    cbd_trainer::simulate::add_noise(&mut data.positions, 1e-4, 3);
+    let blob = |threads: usize| {
+        let settings = cbd_trainer::calibrate::Settings { threads: Some(threads), ..Default::default() };
+        let c = cbd_trainer::calibrate::calibrate(&rr::nominal(), &data, &settings).expect("calibrate");
+        assert!(c.evidence.is_some() && !c.scheme.cross_validation.is_empty());
+        c.fit.blob
+    };
+    let (one, two, three, two_again) = (blob(1), blob(2), blob(3), blob(2));
+    assert!(one == two, "1 vs 2 threads: {}", first_difference(&one, &two));
+    assert!(one == three, "1 vs 3 threads: {}", first_difference(&one, &three));
+    assert!(two == two_again, "run to run: {}", first_difference(&two, &two_again));
+}

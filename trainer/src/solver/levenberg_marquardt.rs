@@ -285,7 +285,13 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let t0 = Instant::now();
     // The search space: all momenta (p are the momenta), or P0 = S p in K_lin's dominant eigenspace
     // (p are coordinates, the regulariser is Sᵀ K S).
-    let basis = choose_basis(opts.method, &k_reg);
+    // One Euler step of a Hamiltonian law is solved in closed form, (K_lin + σ² I)⁻¹ r: one Cholesky
+    // of all N·m momenta, exact, where an eigenspace would drop the directions between σ² and its cutoff.
+    let closed_form = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler
+        && opts.integrator.steps == 1
+        && opts.law.joint_field_sign() < 0.0
+        && opts.method == SolverMethod::Auto;
+    let basis = if closed_form { None } else { choose_basis(opts.method, &k_reg) };
     let seconds_basis = t0.elapsed().as_secs_f64();
     t_solve += seconds_basis;
     let (k_reg, method) = match &basis {
