@@ -239,14 +239,7 @@ fn a_blob_with_an_invalid_effect_does_not_decode() {
     let m = le(&[0.0; 6]);
     let mut model = sample_model(&p, &m);
     model.nominal.effects_mut().list.push(Effect::GravityCompliance { joint: 2, compliance: 1e-3 }).unwrap();
-    let payload = postcard::to_allocvec(&model).unwrap();
-    let mut blob = Vec::new();
-    blob.extend_from_slice(&MAGIC);
-    blob.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-    blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-    blob.extend_from_slice(&payload);
-    let crc = CRC32.checksum(&blob);
-    blob.extend_from_slice(&crc.to_le_bytes());
+    let blob = framed(&model, FORMAT_VERSION);
     assert_eq!(
         decode(&blob),
         Err(DecodeError::Invalid(ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 }))

@@ -159,6 +159,9 @@ fn cbd_runs_on_top_of_the_effects_found() {
     let (effects, with_cbd, plain_cbd) = (mean(&d, "nominal + effects"), mean(&d, "nominal + effects + CbD"), mean(&d, "nominal + CbD"));
     assert!(with_cbd < 0.5 * effects, "{}", summary(&d));
     assert!(with_cbd <= plain_cbd, "{}", summary(&d));
+    // Cross-validation on the training rows alone agrees: CbD belongs on top of the effects.
+    let rec = d.recommendation.as_ref().expect("a recommendation when effects were found and CbD ran");
+    assert_eq!((rec.best.as_str(), rec.effects_hurt, rec.folds), ("nominal + effects + CbD", false, 3), "{rec:?}");
 }
 
 #[test]

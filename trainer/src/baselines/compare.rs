@@ -16,7 +16,9 @@ pub type Predictor = Box<dyn Fn(&[f64]) -> Vec<f64>>;
 
 /// Fits a nonparametric correction on top of a nominal model and returns its predictor.
 /// The hook through which CbD enters the comparison (see [`compare_peers`]).
-pub type CorrectionFitter<'a> = &'a dyn Fn(&NominalModel, &Measurements) -> Result<Predictor, String>;
+/// A fitted correction and one line saying what was chosen (hyperparameters, scheme, warnings).
+pub type FittedCorrection = (Predictor, String);
+pub type CorrectionFitter<'a> = &'a dyn Fn(&NominalModel, &Measurements) -> Result<FittedCorrection, String>;
 
 /// One method's row.
 #[derive(Debug, Clone, PartialEq)]
@@ -222,11 +224,11 @@ pub fn compare_peers(
     if let Some(fit) = cbd {
         let t = Instant::now();
         let fitted = fit(nominal, train);
-        push("cbd", fitted.map(|p| (p, String::new())), t.elapsed().as_secs_f64());
+        push("cbd", fitted, t.elapsed().as_secs_f64());
         if let Some(dh_model) = &dh_model {
             let t = Instant::now();
             let fitted = fit(dh_model, train);
-            push("dh+cbd", fitted.map(|p| (p, String::new())), dh_seconds + t.elapsed().as_secs_f64());
+            push("dh+cbd", fitted, dh_seconds + t.elapsed().as_secs_f64());
         }
     }
 
@@ -245,7 +247,7 @@ mod tests {
         let test = robot.measure(&random_configurations(100, 24), 25);
         let search = SearchOptions { max_evaluations: 100, ..SearchOptions::default() };
         // A stand-in correction for the hook: KRR again, to check the plumbing.
-        let hook = |model: &NominalModel, data: &Measurements| krr_on(model, data, &search).map(|(p, _)| p);
+        let hook = |model: &NominalModel, data: &Measurements| krr_on(model, data, &search).map(|(p, h)| (p, describe(&h)));
         let c = compare_peers(&robot.nominal, &train, &test, &search, Some(&hook));
         let names: Vec<&str> = c.rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(names, ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"]);

@@ -155,6 +155,13 @@ fn stall_warnings(fit: &CbdFit, h: &CbdHyperparameters, task_dim: usize, max_ite
             "the fit stopped at the iteration limit ({max_iterations}) with training RMS error {train_rms:.3e} (noise level √m σ = {expected:.3e}); raise --max-iterations or check the hyperparameters"
         ));
     }
+    if r.cancellation > 1e5 {
+        out.push(format!(
+            "the momenta cancel to 1 part in {:.1e} (nearly singular kernels): evaluate this model in f64; the runtime's f32 feature would lose about {:.0} of its 7 digits",
+            r.cancellation,
+            r.cancellation.log10()
+        ));
+    }
     if !(train_rms <= 10.0 * expected) {
         out.push(format!(
             "the fit stalled: training RMS error {train_rms:.3e} is over 10 × the noise level √m σ = {expected:.3e} the hyperparameters assume"

@@ -360,7 +360,7 @@ fn markdown(r: &BenchReport) -> String {
         "1-minute load average when the run started and ended: {:.2} and {:.2} (other work shares the cores: above about 1, timings stretch).\n",
         r.load_average[0], r.load_average[1]
     );
-    s += "RR benchmark (DESIGN.md §4), default scheme (Euler × 2, σ = 1e-6), N grid measurements; test error on 1000 random configurations.\n";
+    s += "RR benchmark (docs/DESIGN.md, the paper's arm) with the paper's kernels, σ = 1e-6 and Euler × 2 (`cbd demo --hyperparameters paper`: the\nnonlinear solver's scaling in N), N grid measurements; test error on 1000 random configurations.\n";
     s +=
         "Solver: Gauss–Newton from the linearised model's solution (QR of the stacked [J/σ; Lᵀ], damping only after a failed step, chord\n";
     s += "steps reusing a factorisation while they pay); stops when an exact step lowers the energy by < 1e-5 (relative) or moves no\n";

@@ -1,7 +1,7 @@
 //! `cbd compare`: every peer on the same data in one run — nominal, parametric DH calibration,
 //! kernel ridge (GP) regression of the residual, Calibration by Diffeomorphisms, and the hybrids.
 
-use crate::baselines::compare::{compare_files, Predictor};
+use crate::baselines::compare::{compare_files, FittedCorrection, Predictor};
 use crate::data::Measurements;
 use crate::kernels::hyperparameters::SearchOptions;
 use cbd_protocol::NominalModel;
@@ -31,12 +31,22 @@ pub struct CompareArgs {
 
 /// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
 /// gives (nominal, DH-calibrated, with effects): the blob `cbd fit` writes for the same data and flags.
-pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> Result<Predictor, String> + '_ {
-    move |nominal: &NominalModel, data: &Measurements| -> Result<Predictor, String> {
+pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> Result<FittedCorrection, String> + '_ {
+    move |nominal: &NominalModel, data: &Measurements| -> Result<FittedCorrection, String> {
         let calibration = crate::calibrate::calibrate(nominal, data, settings).map_err(|e| e.to_string())?;
         crate::cli::fit::print_calibration(&calibration, !settings.verbose);
+        let mut note = calibration.describe_hyperparameters();
+        if let Some(e) = &calibration.evidence {
+            note += &format!("; evidence {:.2} on {} rows ({:.2} s)", e.log_evidence, e.rows_used, e.seconds);
+        }
+        note += &format!("; {} ({})", calibration.scheme.label(), calibration.scheme.chosen_by);
+        for w in &calibration.warnings {
+            note += &format!("; warning: {w}");
+        }
         let blob = calibration.fit.blob;
-        Ok(Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()])))
+        let predictor: Predictor =
+            Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()]));
+        Ok((predictor, note))
     }
 }
 

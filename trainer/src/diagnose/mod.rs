@@ -136,7 +136,7 @@ fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measu
     for fold in 0..folds {
         let (rest, held): (Vec<usize>, Vec<usize>) = (0..train.len()).partition(|i| i % folds != fold);
         let (rest, held) = (train.subset(&rest), train.subset(&held));
-        let predict = fit(base, &rest)?;
+        let (predict, _) = fit(base, &rest)?;
         sse += predict(&held.joints).iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         count += held.len();
     }
@@ -308,13 +308,13 @@ pub fn diagnose(
     push("nominal + effects", predict(&refined.model, &test.joints));
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
-        let with_effects = fit(&refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+        let (with_effects, _) = fit(&refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
         push("nominal + effects + CbD", with_effects(&test.joints));
         if let Some(geo) = &geometric_only {
-            let with_geometry = fit(geo, &train).map_err(|e| format!("CbD on nominal + geometric: {e}"))?;
+            let (with_geometry, _) = fit(geo, &train).map_err(|e| format!("CbD on nominal + geometric: {e}"))?;
             push("nominal + geometric + CbD", with_geometry(&test.joints));
         }
-        let plain = fit(model, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
+        let (plain, _) = fit(model, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
         push("nominal + CbD", plain(&test.joints));
     }
     let recommendation = match cbd {

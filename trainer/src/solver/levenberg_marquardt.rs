@@ -149,6 +149,10 @@ pub struct FitReport {
     pub seconds_basis: f64,
     /// Largest |runtime − trainer| at the training points relative to the largest |position|.
     pub max_runtime_trainer_diff: f64,
+    /// How much the momenta cancel in the linear response: max_i Σ_j |K_ij P_j| / max_i |Σ_j K_ij P_j|
+    /// (K = K_lin; NaN in the eigenspace). Rounding in the runtime is amplified by about this much:
+    /// above ~1e5 the f32 runtime loses most of its 7 digits.
+    pub cancellation: f64,
 }
 
 /// A fitted model: the blob and what it took.
@@ -238,6 +242,24 @@ fn model_energy(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, residual: &[f64], step
         }
     }
     0.5 * r.iter().map(|v| v * v).sum::<f64>() + 0.5 * quad_form(k, trial)
+}
+
+/// max_i Σ_j |K_ij p_j| / max_i |Σ_j K_ij p_j| (see [`FitReport::cancellation`]).
+fn cancellation_of(k: &Mat<f64>, p: &[f64]) -> f64 {
+    let (mut sum, mut abs) = (vec![0.0; p.len()], vec![0.0; p.len()]);
+    for (j, pj) in p.iter().enumerate() {
+        for ((s, a), kij) in sum.iter_mut().zip(abs.iter_mut()).zip(k.col(j).iter()) {
+            *s += kij * pj;
+            *a += (kij * pj).abs();
+        }
+    }
+    let top = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let moved = top(&sum);
+    if moved > 0.0 {
+        top(&abs) / moved
+    } else {
+        1.0
+    }
 }
 
 /// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
@@ -361,14 +383,15 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let mut chords_pay = true;
     let mut log = Vec::new();
     let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / (r.len() / m) as f64).sqrt() * sigma * norm.task_scale;
-    log.push(IterationLog {
-        iteration: 0,
-        energy: current.energy,
-        regulariser: current.regulariser,
-        train_rms: rms(&current.residual),
+    let entry = |iteration: usize, e: &Evaluated, damping: f64| IterationLog {
+        iteration,
+        energy: e.energy,
+        regulariser: e.regulariser,
+        train_rms: rms(&e.residual),
         damping,
         seconds: start.elapsed().as_secs_f64(),
-    });
+    };
+    log.push(entry(0, &current, damping));
     // A bar on a terminal; plain lines when verbose output goes to a pipe or file.
     let progress = crate::report::progress::FitProgress::new(opts.max_iterations, !opts.verbose, "");
     progress.update(0, current.energy, rms(&current.residual));
@@ -402,14 +425,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             current = e;
             iterations = 1;
             first_iteration = 2;
-            log.push(IterationLog {
-                iteration: 1,
-                energy: current.energy,
-                regulariser: current.regulariser,
-                train_rms: rms(&current.residual),
-                damping,
-                seconds: start.elapsed().as_secs_f64(),
-            });
+            log.push(entry(1, &current, damping));
             progress.update(1, current.energy, rms(&current.residual));
             if print_lines {
                 eprintln!(
@@ -496,14 +512,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         p = trial;
         current = e;
         jacobian_is_current = linear_scheme;
-        log.push(IterationLog {
-            iteration,
-            energy: current.energy,
-            regulariser: current.regulariser,
-            train_rms: rms(&current.residual),
-            damping,
-            seconds: start.elapsed().as_secs_f64(),
-        });
+        log.push(entry(iteration, &current, damping));
         progress.update(iteration, current.energy, rms(&current.residual));
         if print_lines {
             eprintln!(
@@ -558,6 +567,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let k1 = current.flow.positions(cp.dims);
     let train_predictions: Vec<f64> =
         k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
+    let cancellation = if basis.is_none() { cancellation_of(&k_reg, &p) } else { f64::NAN };
     let p = momenta_of(&p);
     let (points, momenta) = (f64_le_bytes(&data.joints), f64_le_bytes(&p));
     let model = Model {
@@ -598,6 +608,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             unknowns: dim,
             seconds_basis,
             max_runtime_trainer_diff: max_diff,
+            cancellation,
         },
     })
 }
@@ -613,6 +624,16 @@ mod tests {
         let cp =
             ControlPoints::new(&rr::nominal(), &o.normalisation, data.joints.clone(), o.joint_kernel, o.task_kernel, o.law, o.integrator);
         (cp, data)
+    }
+
+    /// Momenta that nearly cancel: Σ|K P| / |Σ K P| is the amplification of rounding.
+    #[test]
+    fn cancellation_measures_how_much_the_momenta_cancel() {
+        let k = Mat::from_fn(2, 2, |_, _| 1.0);
+        assert_eq!(cancellation_of(&k, &[1.0, 2.0]), 1.0);
+        let c = cancellation_of(&k, &[1e6, -1e6 + 1.0]);
+        assert!((c - (2e6 - 1.0)).abs() < 1e-3, "{c}");
+        assert_eq!(cancellation_of(&k, &[0.0, 0.0]), 1.0);
     }
 
     /// With every eigenvector kept (S square and orthogonal) the eigenspace method's steps are the
