@@ -297,7 +297,8 @@ struct Objective<'a> {
     upper: Vec<f64>,
     wall: f64,
     cache: RefCell<Option<(Vec<f64>, f64, Vec<f64>)>>,
-    evaluations: RefCell<usize>,
+    /// Likelihood evaluations, counted across every run that shares it.
+    evaluations: &'a RefCell<usize>,
 }
 
 /// Value returned where K is not positive definite: finite, so that the line search backtracks.
@@ -370,7 +371,7 @@ fn minimise(
         upper: upper.to_vec(),
         wall: 10.0 * table.dim() as f64,
         cache: RefCell::new(None),
-        evaluations: RefCell::new(0),
+        evaluations,
     };
     let feasible = objective.both(&init).0 < INFEASIBLE;
     let mut param = init.clone();
@@ -387,7 +388,6 @@ fn minimise(
             }
         }
     }
-    *evaluations.borrow_mut() += *objective.evaluations.borrow();
     if !feasible {
         return None;
     }
@@ -417,13 +417,10 @@ pub fn choose_cbd_hyperparameters(
     let mean_jj = (0..count).map(|i| table.jj[(i * (i + 1) / 2 + i) * m * m..][..m * m].iter().step_by(m + 1).sum::<f64>()).sum::<f64>()
         / (count * m) as f64;
     let mut spread = [0.0; MAX_JOINTS];
-    {
-        let pairs = table.dist2.len() as f64;
-        for (at, f) in table.axis_terms.chunks_exact(n.max(1)).enumerate() {
-            let _ = at;
-            for d in 0..n {
-                spread[d] += -f[d] / pairs;
-            }
+    let pairs = table.dist2.len() as f64;
+    for f in table.axis_terms.chunks_exact(n.max(1)) {
+        for d in 0..n {
+            spread[d] += -f[d] / pairs;
         }
     }
     let total: f64 = spread[..n].iter().sum::<f64>().max(1e-12);
