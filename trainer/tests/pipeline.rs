@@ -47,8 +47,13 @@ fn printed(stderr: &str, key: &str) -> String {
 fn fit_and_compare_give_the_same_model_and_the_printed_sigma_gives_the_same_blob() {
     let dir = scratch("same-model");
     noisy_rr(&dir, 10);
-    let fit = cbd(&dir, &["fit", "--model", "rr.toml", "--data", "train.csv", "--out", "a.blob"]);
+    let fit = cbd(&dir, &["fit", "--model", "rr.toml", "--data", "train.csv", "--out", "a.blob", "--json", "fit.json"]);
     let stderr = String::from_utf8_lossy(&fit.stderr).into_owned();
+    // The JSON carries the same choice, in data units, with the evidence and the scheme.
+    let chosen = json(&dir.join("fit.json"));
+    assert_eq!(chosen["hyperparameters"]["sigma"].as_f64().unwrap().to_string(), printed(&stderr, "sigma "));
+    assert!(chosen["evidence"]["log_evidence"].as_f64().unwrap().is_finite());
+    assert_eq!(chosen["scheme"]["chosen_by"].as_str().unwrap(), "4-fold cross-validation");
     cbd(&dir, &["eval", "--model", "rr.toml", "--blob", "a.blob", "--data", "test.csv", "--json", "eval.json"]);
     cbd(&dir, &["compare", "--model", "rr.toml", "--train", "train.csv", "--test", "test.csv", "--json", "compare.json"]);
     let (eval, compare) = (json(&dir.join("eval.json")), json(&dir.join("compare.json")));

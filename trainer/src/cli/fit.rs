@@ -17,6 +17,10 @@ pub struct FitArgs {
     /// the diffeomorphic correction on top; the blob carries the calibrated chain.
     #[arg(long)]
     pub dh_first: bool,
+    /// Write what the pipeline chose and measured as JSON here: hyperparameters (data units), evidence,
+    /// scheme and its cross-validation, the fit's report, warnings.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
     #[command(flatten)]
     pub solver: SolverArgs,
 }
@@ -168,6 +172,9 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
 pub fn run(args: FitArgs) -> Result<(), String> {
     args.solver.validate()?;
     crate::cli::check_output_dir(&args.out)?;
+    if let Some(path) = &args.json {
+        crate::cli::check_output_dir(path)?;
+    }
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     for w in imported.warnings(&args.data) {
@@ -180,6 +187,10 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     print_calibration(&calibration, args.solver.quiet);
     let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&calibration.to_json()).map_err(|e| e.to_string())?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
     let r = &fit.report;
     let last = r.log.last().map(|l| l.train_rms).unwrap_or(f64::NAN);
     println!(
