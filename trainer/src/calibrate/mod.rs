@@ -157,7 +157,7 @@ fn stall_warnings(fit: &CbdFit, h: &CbdHyperparameters, task_dim: usize, max_ite
     }
     if r.cancellation > 1e5 {
         out.push(format!(
-            "the momenta cancel to 1 part in {:.1e} (nearly singular kernels): evaluate this model in f64; the runtime's f32 feature would lose about {:.0} of its 7 digits",
+            "the momenta cancel to 1 part in {:.1e} (nearly singular kernels): evaluate this model in f64: the runtime's f32 feature (about 7 significant digits) would lose about {:.0} digits to it",
             r.cancellation,
             r.cancellation.log10()
         ));
