@@ -91,9 +91,8 @@ pub fn choose_hyperparameters(
 ) -> Result<(CbdHyperparameters, Option<Evidence>), CalibrateError> {
     let (mut h, evidence) = match settings.source {
         HyperparameterSource::PaperRr => (paper_rr_hyperparameters(), None),
-        HyperparameterSource::Evidence if settings.overrides.is_complete(base) => {
-            (settings.overrides.apply(base, paper_rr_hyperparameters_for(base)), None)
-        }
+        // Every value is given: no search (the placeholder's fields are all replaced below).
+        HyperparameterSource::Evidence if settings.overrides.is_complete(base) => (placeholder_hyperparameters(base), None),
         HyperparameterSource::Evidence => {
             let e = choose_cbd_hyperparameters(base, data, norm, &settings.evidence).map_err(err)?;
             (e.hyperparameters.clone(), Some(e))
@@ -103,8 +102,8 @@ pub fn choose_hyperparameters(
     Ok((h, evidence))
 }
 
-/// A placeholder for joints the overrides cover completely (every field is replaced).
-fn paper_rr_hyperparameters_for(base: &NominalModel) -> CbdHyperparameters {
+/// One axis per joint of `base`, for overrides that replace every field.
+fn placeholder_hyperparameters(base: &NominalModel) -> CbdHyperparameters {
     let mut h = paper_rr_hyperparameters();
     h.joint_axes = (0..base.n_joints())
         .map(|d| if base.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 1.0 } })

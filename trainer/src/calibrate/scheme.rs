@@ -71,8 +71,7 @@ pub fn choose_scheme(
         let opts = options_for(h, norm, integrator, &quiet);
         let (mut sse, mut count) = (0.0, 0usize);
         for fold in 0..folds {
-            let (train, held): (Vec<usize>, Vec<usize>) = (0..data.len()).partition(|i| i % folds != fold);
-            let (train, held) = (data.subset(&train), data.subset(&held));
+            let (train, held) = data.fold(folds, fold);
             let predicted = fit_cbd(base, &train, &opts)
                 .map_err(|e| e.to_string())
                 .and_then(|fit| crate::predict::evaluate_blob(&fit.blob, &held.joints));

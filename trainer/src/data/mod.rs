@@ -32,6 +32,12 @@ impl Measurements {
     pub fn position(&self, i: usize) -> &[f64] {
         &self.positions[i * self.task_dim..(i + 1) * self.task_dim]
     }
+    /// Fold `fold` of `folds` interleaved folds (row i is held out when i mod folds = fold):
+    /// (the other rows, the held-out rows).
+    pub fn fold(&self, folds: usize, fold: usize) -> (Measurements, Measurements) {
+        let (rest, held): (Vec<usize>, Vec<usize>) = (0..self.len()).partition(|i| i % folds != fold);
+        (self.subset(&rest), self.subset(&held))
+    }
     /// The rows at `indices`, in that order.
     pub fn subset(&self, indices: &[usize]) -> Measurements {
         let mut out = Measurements::new(self.n_joints, self.task_dim);

@@ -134,8 +134,7 @@ pub struct Recommendation {
 fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measurements, folds: usize) -> Result<f64, String> {
     let (mut sse, mut count) = (0.0, 0usize);
     for fold in 0..folds {
-        let (rest, held): (Vec<usize>, Vec<usize>) = (0..train.len()).partition(|i| i % folds != fold);
-        let (rest, held) = (train.subset(&rest), train.subset(&held));
+        let (rest, held) = train.fold(folds, fold);
         let (predict, _) = fit(base, &rest)?;
         sse += predict(&held.joints).iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         count += held.len();

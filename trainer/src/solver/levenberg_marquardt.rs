@@ -304,15 +304,17 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let k_reg = regulariser_matrix(&cp);
     let sigma = opts.sigma;
     let (mut t_flow, mut t_tangent, mut t_solve) = (0.0, 0.0, 0.0);
+    // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
+    // Jacobian stays exact everywhere and no tangent is ever needed.
+    let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
+    // Hamiltonian laws: the response at P0 = 0 is K_lin itself (see the closed-form start below).
+    let response_is_k_lin = opts.law.joint_field_sign() < 0.0;
     let t0 = Instant::now();
     // The search space: all momenta (p are the momenta), or P0 = S p in K_lin's dominant eigenspace
     // (p are coordinates, the regulariser is Sᵀ K S).
     // One Euler step of a Hamiltonian law is solved in closed form, (K_lin + σ² I)⁻¹ r: one Cholesky
     // of all N·m momenta, exact, where an eigenspace would drop the directions between σ² and its cutoff.
-    let closed_form = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler
-        && opts.integrator.steps == 1
-        && opts.law.joint_field_sign() < 0.0
-        && opts.method == SolverMethod::Auto;
+    let closed_form = linear_scheme && response_is_k_lin && opts.method == SolverMethod::Auto;
     let basis = if closed_form { None } else { choose_basis(opts.method, &k_reg) };
     let seconds_basis = t0.elapsed().as_secs_f64();
     t_solve += seconds_basis;
@@ -367,9 +369,6 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         None => linear_response(&cp),
         Some(e) => product(&linear_response(&cp), &e.basis),
     };
-    // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
-    // Jacobian stays exact everywhere and no tangent is ever needed.
-    let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
     // Whether `jac` is the derivative at the current P0 (else it is an older one: a chord step).
     let mut jacobian_is_current = true;
     // The step's factorisation for the Jacobian in `jac` and damping λ, reused by chord steps.
@@ -408,7 +407,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     // Steps on the stacked least squares reach it only slowly when the evidence picks nearly
     // singular kernels (σ² far below the proximal term's scale).
     let mut first_iteration = 1;
-    if opts.law.joint_field_sign() < 0.0 {
+    if response_is_k_lin {
         let t0 = Instant::now();
         let r: Vec<f64> = current.residual.iter().map(|v| -v * sigma).collect();
         let p_lin = match &basis {
