@@ -57,12 +57,15 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         return Err("--write-model needs --model (the file the corrections are written into)".into());
     }
     for path in [&args.json, &args.write_model].into_iter().flatten() {
-        crate::cli::check_output_dir(path)?;
+        crate::cli::check_output(path)?;
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let read = |path: &PathBuf| -> Result<crate::data::Measurements, String> {
         let imported = crate::data::csv_import::read_measurements(path, &spec).map_err(|e| e.to_string())?;
         for w in imported.warnings(path) {
+            eprintln!("warning: {w}");
+        }
+        for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
             eprintln!("warning: {w}");
         }
         Ok(imported.measurements)
