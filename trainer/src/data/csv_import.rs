@@ -153,9 +153,10 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         if record.len() != header.len() {
             return Err(err(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
-        // The file's text of a field, parsed; finiteness is checked after conversion (below).
-        let raw_value = |idx: usize, name: &str| -> Result<(f64, String), ImportError> {
-            let text = record[idx].to_string();
+        // A field parsed as a number; finiteness is checked again after conversion (below). The
+        // field's text is only copied into an error message, never per value (10⁶-row files).
+        let raw_value = |idx: usize, name: &str| -> Result<f64, ImportError> {
+            let text = &record[idx];
             if text.is_empty() {
                 return Err(err(Some(line), Some(name), "missing value".into()));
             }
@@ -163,12 +164,12 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             if !v.is_finite() {
                 return Err(err(Some(line), Some(name), format!("not a finite number: '{text}'")));
             }
-            Ok((v, text))
+            Ok(v)
         };
         // A value converted to the model's unit must be finite and within MAX_MAGNITUDE *after*
         // the conversion (1e307 m is finite, 1e310 mm is not), so nothing non-finite gets past
         // the reader.
-        let bounded = |v: f64, text: &str, name: &str, unit: &str, model_unit: &str| -> Result<f64, ImportError> {
+        let bounded = |v: f64, idx: usize, name: &str, unit: &str, model_unit: &str| -> Result<f64, ImportError> {
             if v.abs() <= MAX_MAGNITUDE {
                 return Ok(v);
             }
@@ -176,7 +177,10 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             Err(err(
                 Some(line),
                 Some(name),
-                format!("'{text}' {unit} is {in_model}; values must stay within ±{MAX_MAGNITUDE:e} in the model's unit (wrong unit or column?)"),
+                format!(
+                    "'{}' {unit} is {in_model}; values must stay within ±{MAX_MAGNITUDE:e} in the model's unit (wrong unit or column?)",
+                    &record[idx]
+                ),
             ))
         };
         for d in 0..n {
@@ -185,8 +189,7 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
                 _ => (spec.length_unit.name(), spec.model_length_unit.name()),
             };
             let name = &spec.joint_columns[d];
-            let (raw, text) = raw_value(joint_idx[d], name)?;
-            let v = raw * joint_factor[d];
+            let v = raw_value(joint_idx[d], name)? * joint_factor[d];
             // The joint's range first: it names the real cause (a unit or column mistake).
             let [lo, hi] = spec.joint_limits[d];
             if v.is_finite() && !(lo..=hi).contains(&v) {
@@ -195,18 +198,19 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
                     Some(line),
                     Some(name),
                     format!(
-                        "{text} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
+                        "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
+                        &record[joint_idx[d]],
                         short(lo / f),
                         short(hi / f)
                     ),
                 ));
             }
-            q[d] = bounded(v, &text, name, unit, model_unit)?;
+            q[d] = bounded(v, joint_idx[d], name, unit, model_unit)?;
         }
         for c in 0..m {
             let name = &spec.position_columns[c];
-            let (raw, text) = raw_value(pos_idx[c], name)?;
-            y[c] = bounded(raw * len, &text, name, spec.length_unit.name(), spec.model_length_unit.name())?;
+            let v = raw_value(pos_idx[c], name)? * len;
+            y[c] = bounded(v, pos_idx[c], name, spec.length_unit.name(), spec.model_length_unit.name())?;
         }
         let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
         match seen.get(&key) {
