@@ -63,14 +63,14 @@ pub fn gigabytes(bytes: f64) -> String {
 }
 
 /// Refuses a fit of `rows` × `task_dim` that cannot fit in `available` bytes, naming the need,
-/// what is available and `--max-rows` with a value that fits.
-pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>) -> Result<(), String> {
+/// what is available, how many rows would fit and `remedy` (the caller's flag that lowers it).
+pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>, remedy: &str) -> Result<(), String> {
     let (Some(available), need) = (available, fit_bytes(rows, task_dim)) else { return Ok(()) };
     if need <= available {
         return Ok(());
     }
     Err(format!(
-        "fitting {rows} measurements of {task_dim} coordinates needs about {} ({FIT_MATRIX_COPIES} matrices of ({rows}·{task_dim})² values), more than the {} this process may use; `--max-rows {}` fits an evenly spaced subset that does",
+        "fitting {rows} measurements of {task_dim} coordinates needs about {} ({FIT_MATRIX_COPIES} matrices of ({rows}·{task_dim})² values), more than the {} this process may use; at most {} rows fit: {remedy}",
         gigabytes(need),
         gigabytes(available),
         max_fit_rows(available, task_dim)
@@ -85,12 +85,12 @@ mod tests {
     /// inside faer (exit 101).
     #[test]
     fn memory_needed_is_estimated_before_allocating() {
-        let e = check_fit(20_000, 3, Some(6e9)).unwrap_err();
+        let e = check_fit(20_000, 3, Some(6e9), "--max-rows").unwrap_err();
         assert!(e.contains("needs about 115.2 GB") && e.contains("6.0 GB") && e.contains("--max-rows"), "{e}");
         let k = max_fit_rows(6e9, 3);
-        assert!(check_fit(k, 3, Some(6e9)).is_ok() && check_fit(k + 1, 3, Some(6e9)).is_err(), "{k}");
-        assert!(check_fit(4096, 2, Some(6e9)).is_ok());
-        assert!(check_fit(1_000_000, 3, None).is_ok());
+        assert!(check_fit(k, 3, Some(6e9), "").is_ok() && check_fit(k + 1, 3, Some(6e9), "").is_err(), "{k}");
+        assert!(check_fit(4096, 2, Some(6e9), "").is_ok());
+        assert!(check_fit(1_000_000, 3, None, "").is_ok());
         // What this process may use is known on Linux and positive.
         assert!(available_bytes().is_some_and(|b| b > 0.0));
     }
