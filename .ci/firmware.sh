@@ -11,9 +11,12 @@
 # (-C target-cpu=cortex-m7), and an f32 build (the runtime's `f32` feature) against the host
 # runtime built with the same feature. Exits non-zero on any difference.
 #
-# Last, a "panic-never" build (examples/firmware, feature panic-never): its panic handler calls an
+# Each run also reports the query's stack high-water mark (painted stack) and checks it fits the RAM
+# memory.x leaves (sized to the STM32F767ZI: 512 KB); the figures go to $OUT/stack.txt.
+#
+# Last, "panic-never" builds, one per variant (sp, dp, f32; feature panic-never): the panic handler calls an
 # undefined symbol, so the firmware links only if the optimiser removed every panic path (runtime,
-# protocol decoding, printing). A reachable panic fails the check (CBD_FW_REQUIRE_PANIC_NEVER=0
+# protocol decoding, printing, stack painting). A reachable panic fails the check (CBD_FW_REQUIRE_PANIC_NEVER=0
 # reports it without failing); examples/firmware/find-panics.py then lists where the panics are.
 #
 # Sourced with FIRMWARE_LIB_ONLY=1 (by .ci/firmware-cost.sh) it only defines the helpers.
@@ -96,6 +99,21 @@ fw_run() {
     grep -qx done "$outfile" || { log "firmware did not finish ($cpu, $elf)"; tail -5 "$outfile" >&2; return 1; }
 }
 
+# fw_stack ELF RUNFILE: the query's stack high-water mark (the firmware's `stack BYTES` line,
+# measured by painting) against the RAM left for the stack in that ELF (from the end of the statics,
+# `__sheap`, to the top of RAM, `_stack_start`; memory.x gives the STM32F767ZI's 512 KB). Prints
+# "USED FREE" and fails when the query does not fit.
+fw_stack() {
+    local elf="$1" run="$2" used top bottom free
+    used="$(sed -n 's/^stack \([0-9]*\)$/\1/p' "$run")"
+    [ -n "$used" ] || { log "no stack line in $run"; return 1; }
+    top="$(nm "$elf" | awk '$3 == "_stack_start" {print $1}')"
+    bottom="$(nm "$elf" | awk '$3 == "__sheap" {print $1}')"
+    free=$(( 0x$top - 0x$bottom ))
+    echo "$used $free"
+    [ "$used" -le "$free" ]
+}
+
 if [ "${FIRMWARE_LIB_ONLY:-0}" = 1 ]; then
     return 0 2>/dev/null || exit 0
 fi
@@ -132,6 +150,13 @@ for name in rr rr256 six six-effects; do
             run="$OUT/fw-$name-$variant-$cpu.txt"
             if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >"$OUT/diff-$name-$variant-$cpu.txt"; then
                 summary+=("PASS  $name blob  ${variant} build on $cpu: $values values bit-identical to the host's ($errors evaluation errors)")
+                if stack="$(fw_stack "$elf" "$run")"; then
+                    summary+=("PASS  $name blob  ${variant} build on $cpu: a query's stack ${stack% *} bytes, ${stack#* } bytes free for it")
+                    echo "$name $variant $cpu $stack" >>"$OUT/stack.txt"
+                else
+                    summary+=("FAIL  $name blob  ${variant} build on $cpu: the query's stack does not fit the RAM left (${stack:-no figure})")
+                    failures=$((failures + 1))
+                fi
             else
                 summary+=("FAIL  $name blob  ${variant} build on $cpu: see $OUT/diff-$name-$variant-$cpu.txt")
                 failures=$((failures + 1))
@@ -140,36 +165,45 @@ for name in rr rr256 six six-effects; do
     done
 done
 
-# Panic-free at link level?
-log "building the panic-never firmware (rr blob)"
-pn_dir="$FW_DIR/target/panic-never"
+# Panic-free at link level, for every build (sp, dp, f32): the variants compile different code
+# (software f64, the M7's FPU, the f32 feature), so one panic-free build proves nothing of the others.
 rr_storage="$("$HOST" info "$OUT/blobs/rr.blob" | awk '{print $4}')"
-if (cd "$FW_DIR" && CARGO_TARGET_DIR="$pn_dir" RUSTFLAGS="-C link-arg=-Tlink.x" CBD_BLOB="$OUT/blobs/rr.blob" \
-    CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features panic-never) >"$OUT/panic-never.log" 2>&1; then
-    cp "$pn_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/rr-panic-never.elf"
-    run="$OUT/fw-rr-panic-never-m7.txt"
-    if fw_run "$OUT/elf/rr-panic-never.elf" m7 "$run" && diff <(grep '^q' "$run") "$OUT/host-rr.txt" >/dev/null; then
-        summary+=("PASS  panic-never build links (no reachable panic in runtime, decoder or printing) and is bit-identical on m7")
+for variant in sp dp f32; do
+    log "building the panic-never firmware (rr blob, $variant)"
+    pn_dir="$FW_DIR/target/panic-never-$variant"
+    flags="-C link-arg=-Tlink.x" features="panic-never" cpu=m4 host="$OUT/host-rr.txt"
+    case "$variant" in
+        dp) flags="$flags -C target-cpu=cortex-m7"; cpu=m7 ;;
+        f32) features="panic-never,f32"; host="$OUT/host-rr-f32.txt" ;;
+    esac
+    pn_log="$OUT/panic-never-$variant.log"
+    if (cd "$FW_DIR" && CARGO_TARGET_DIR="$pn_dir" RUSTFLAGS="$flags" CBD_BLOB="$OUT/blobs/rr.blob" \
+        CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features "$features") >"$pn_log" 2>&1; then
+        cp "$pn_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/rr-panic-never-$variant.elf"
+        run="$OUT/fw-rr-panic-never-$variant-$cpu.txt"
+        if fw_run "$OUT/elf/rr-panic-never-$variant.elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >/dev/null; then
+            summary+=("PASS  panic-never $variant build links (no reachable panic in runtime, decoder or printing) and is bit-identical on $cpu")
+        else
+            summary+=("FAIL  panic-never $variant build linked but its output differs (see $run)")
+            failures=$((failures + 1))
+        fi
+    elif grep -q 'undefined symbol: cbd_firmware_panic_is_reachable' "$pn_log"; then
+        # Where are the panics? (same code and flags, with the ordinary panic handler)
+        if command -v llvm-objdump >/dev/null 2>&1 && command -v llvm-nm >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; then
+            python3 "$FW_DIR/find-panics.py" "$OUT/elf/rr-$variant.elf" >"$OUT/panic-sites-$variant.txt" 2>&1 || true
+            log "panic sites: $OUT/panic-sites-$variant.txt"
+        fi
+        if [ "${CBD_FW_REQUIRE_PANIC_NEVER:-1}" = 1 ]; then
+            summary+=("FAIL  panic-never $variant build: a panic is reachable (see $pn_log)")
+            failures=$((failures + 1))
+        else
+            summary+=("INFO  panic-never $variant build: a panic is reachable (see $OUT/panic-sites-$variant.txt)")
+        fi
     else
-        summary+=("FAIL  panic-never build linked but its output differs (see $run)")
+        summary+=("FAIL  panic-never $variant build failed to compile (see $pn_log)")
         failures=$((failures + 1))
     fi
-elif grep -q 'undefined symbol: cbd_firmware_panic_is_reachable' "$OUT/panic-never.log"; then
-    # Where are the panics? (same code and flags, with the ordinary panic handler)
-    if command -v llvm-objdump >/dev/null 2>&1 && command -v llvm-nm >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; then
-        python3 "$FW_DIR/find-panics.py" "$OUT/elf/rr-sp.elf" >"$OUT/panic-sites.txt" 2>&1 || true
-        log "panic sites: $OUT/panic-sites.txt"
-    fi
-    if [ "${CBD_FW_REQUIRE_PANIC_NEVER:-1}" = 1 ]; then
-        summary+=("FAIL  panic-never build: a panic is reachable (see $OUT/panic-never.log)")
-        failures=$((failures + 1))
-    else
-        summary+=("INFO  panic-never build: a panic is reachable (see $OUT/panic-sites.txt)")
-    fi
-else
-    summary+=("FAIL  panic-never build failed to compile (see $OUT/panic-never.log)")
-    failures=$((failures + 1))
-fi
+done
 
 echo "== firmware check (host vs QEMU, bits; f32 builds against the host's f32 build) =="
 printf '%s\n' "${summary[@]}"

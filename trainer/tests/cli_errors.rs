@@ -573,3 +573,154 @@ fn cli_fit_with_each_solver() {
     }
     assert_eq!(std::fs::read(dir.join("auto.blob")).unwrap(), std::fs::read(dir.join("dense.blob")).unwrap());
 }
+
+// ---------------------------------------------------------------- issue 17: reliability II
+
+/// Item 2/3: positions of 1e308 were imported and `eval` printed `inf`/`NaN` statistics with exit 0.
+/// Now the importer refuses them, naming the file, line and column.
+#[test]
+fn eval_refuses_non_finite_statistics() {
+    let dir = scratch("eval-nonfinite");
+    let (g4, blob, _) = rr_fixture();
+    let mut text = std::fs::read_to_string(g4).unwrap();
+    text.push_str("0.5,0.5,1e308,1e308\n");
+    let f = write(&dir, "huge.csv", text);
+    let out = cbd(&dir, &["eval", "--blob", blob.to_str().unwrap(), "--data", &f, "--json", "e.json"]);
+    fails_with(&out, &["huge.csv:18", "column 'x'", "'1e308'"]);
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("inf"));
+    assert!(!dir.join("e.json").exists());
+}
+
+/// Item 9: `--extrapolation-threshold nan` was accepted (and silently disabled the warning).
+#[test]
+fn eval_extrapolation_threshold_nan_is_refused() {
+    let dir = scratch("eval-threshold");
+    let (g4, blob, _) = rr_fixture();
+    for bad in ["nan", "-0.5", "2", "inf"] {
+        let flag = format!("--extrapolation-threshold={bad}");
+        let out = cbd(&dir, &["eval", "--blob", blob.to_str().unwrap(), "--data", g4.to_str().unwrap(), &flag]);
+        fails_with(&out, &["--extrapolation-threshold"]);
+    }
+}
+
+/// Item 9: an output that cannot be written was discovered only after the whole fit. /proc refuses
+/// new files even to root, so the check must fail before the fit prints its hyperparameters.
+#[test]
+fn fit_unwritable_output_is_found_before_the_fit() {
+    let dir = scratch("fit-unwritable");
+    let (g4, _, _) = rr_fixture();
+    let out = cbd(&dir, &["fit", "--data", g4.to_str().unwrap(), "--out", "/proc/cbd-test.blob", "--max-iterations", "1"]);
+    let err = fails_with(&out, &["/proc/cbd-test.blob", "not writable"]);
+    assert!(!err.contains("hyperparameters"), "the fit ran before the output was checked:\n{err}");
+}
+
+/// Item 4: the atomic rename replaced whatever was at `--out` — a symlink, a FIFO, a device node —
+/// with a regular file. Each is now refused with exit 1 and left as it was.
+#[test]
+fn out_refuses_symlink_fifo_and_device() {
+    let dir = scratch("out-special");
+    let (g4, _, _) = rr_fixture();
+    let g4 = g4.to_str().unwrap();
+    let fit_to = |out: &str| cbd(&dir, &["fit", "--data", g4, "--out", out, "--max-iterations", "1", "--quiet"]);
+    std::fs::write(dir.join("target.blob"), b"keep").unwrap();
+    std::os::unix::fs::symlink("target.blob", dir.join("link.blob")).unwrap();
+    fails_with(&fit_to("link.blob"), &["link.blob", "symbolic link"]);
+    assert!(std::fs::symlink_metadata(dir.join("link.blob")).unwrap().file_type().is_symlink());
+    assert_eq!(std::fs::read(dir.join("target.blob")).unwrap(), b"keep");
+    assert!(Command::new("mkfifo").arg(dir.join("pipe")).status().unwrap().success());
+    fails_with(&fit_to("pipe"), &["pipe", "FIFO"]);
+    std::fs::create_dir(dir.join("d.blob")).unwrap();
+    fails_with(&fit_to("d.blob"), &["d.blob", "directory"]);
+    // A device node of our own (a copy of /dev/null's numbers) where we may create one (root):
+    // never the machine's /dev, which a regression would replace.
+    if Command::new("mknod").arg(dir.join("null")).args(["c", "1", "3"]).status().map(|s| s.success()).unwrap_or(false) {
+        fails_with(&fit_to("null"), &["null", "device node"]);
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::symlink_metadata(dir.join("null")).unwrap().file_type().is_char_device());
+    }
+    // The same rule for every command's outputs.
+    fails_with(&cbd(&dir, &["simulate", "--grid", "3", "--out", "link.blob"]), &["link.blob", "symbolic link"]);
+}
+
+/// Item 4: `--out -` writes the blob to standard output (and the summary to stderr).
+#[test]
+fn fit_out_dash_writes_the_blob_to_stdout() {
+    let dir = scratch("out-stdout");
+    let (g4, _, _) = rr_fixture();
+    let out = cbd(&dir, &["fit", "--data", g4.to_str().unwrap(), "--out", "-", "--max-iterations", "1", "--quiet"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    cbd_protocol::decode(&out.stdout).expect("stdout is exactly the blob");
+    assert!(stderr(&out).contains("fitted"));
+    assert!(!dir.join("-").exists());
+}
+
+const PLANAR_RR_MODEL: &str = "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = LENGTHS\n[measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\nangle_unit = \"rad\"\nlength_unit = \"m\"\n";
+
+/// Item 6: absurd nominal models (lengths [0, 0]; a length of −1e30) were fitted with exit 0 and
+/// no warning; now they are warned about before the fit.
+#[test]
+fn fit_absurd_nominal_models_warn() {
+    let dir = scratch("absurd-nominal");
+    let (g4, _, _) = rr_fixture();
+    for (lengths, needle) in [("[0, 0]", "barely moves"), ("[-1e30, 0.5]", "wrong unit, DH table or columns?")] {
+        let model = write(&dir, "m.toml", PLANAR_RR_MODEL.replace("LENGTHS", lengths));
+        let out = cbd(&dir, &["fit", "--model", &model, "--data", g4.to_str().unwrap(), "--out", "a.blob", "--max-iterations", "1", "--quiet"]);
+        let err = stderr(&out);
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(err.contains(&format!("warning: {}: the nominal model", g4.display())) && err.contains(needle), "{lengths}:\n{err}");
+    }
+}
+
+/// Item 7: lengths of 1e300 and `encoder_scale = 1e300` ended in "the flow diverged … kernels too
+/// wide or σ too small"; now the model file is refused, naming the field.
+#[test]
+fn fit_absurd_model_values_name_the_field_not_the_flow() {
+    let dir = scratch("absurd-values");
+    let (g4, _, _) = rr_fixture();
+    let g4 = g4.to_str().unwrap();
+    let model = write(&dir, "m.toml", PLANAR_RR_MODEL.replace("LENGTHS", "[1e300, 0.5]"));
+    let err = fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4, "--out", "a.blob", "--quiet"]), &["m.toml", "lengths[1] = 1e300"]);
+    assert!(!err.contains("diverged"), "{err}");
+    let scaled = format!("{}\n[[effects]]\ntype = \"encoder_scale\"\njoint = 1\nscale = 1e300\n", PLANAR_RR_MODEL.replace("LENGTHS", "[1, 0.5]"));
+    let model = write(&dir, "s.toml", scaled);
+    let err = fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4, "--out", "a.blob", "--quiet"]), &["s.toml", "scale = 1e300"]);
+    assert!(!err.contains("diverged"), "{err}");
+    let err = fails_with(&cbd(&dir, &["fit", "--data", g4, "--out", "a.blob", "--sigma", "1e300", "--quiet"]), &["--sigma"]);
+    assert!(!err.contains("diverged"), "{err}");
+}
+
+/// Item 8: `--blob /dev/zero` read until the memory ran out; an oversized URDF was parsed whole.
+#[test]
+fn blob_and_urdf_reads_are_capped() {
+    let dir = scratch("capped-reads");
+    let (g4, _, _) = rr_fixture();
+    let out = cbd(&dir, &["eval", "--blob", "/dev/zero", "--data", g4.to_str().unwrap()]);
+    fails_with(&out, &["/dev/zero", "larger than 64 MiB"]);
+    let big = std::fs::File::create(dir.join("big.urdf")).unwrap();
+    big.set_len(9 << 20).unwrap();
+    let model = write(&dir, "u.toml", "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"big.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n");
+    fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4.to_str().unwrap(), "--out", "a.blob"]), &["big.urdf", "larger than 8 MiB"]);
+}
+
+/// Item 5: nothing checked the size up front: `simulate --grid 100000` and a huge `--count`
+/// aborted (exit 134), a 20k-row fit under a 6 GB limit panicked inside faer (exit 101). Each is
+/// now refused with exit 1, the figure and the flag that lowers it.
+#[test]
+fn too_large_for_memory_is_refused_up_front() {
+    let dir = scratch("memory");
+    fails_with(&cbd(&dir, &["simulate", "--grid", "100000", "--out", "g.csv"]), &["--grid 100000", "GB", "lower --grid"]);
+    fails_with(
+        &cbd(&dir, &["simulate", "--sampling", "uniform", "--count", "100000000000", "--out", "u.csv"]),
+        &["--count 100000000000", "lower --count"],
+    );
+    let out = cbd(&dir, &["simulate", "--sampling", "uniform", "--count", "20000", "--out", "big.csv"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    // The fit under a 6 GB address-space limit (`ulimit -v`, KiB).
+    let out = Command::new("sh")
+        .args(["-c", &format!("ulimit -v 6000000 && exec {CBD} fit --data big.csv --out big.blob --quiet")])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    fails_with(&out, &["big.csv", "20000 measurements", "--max-rows"]);
+    assert!(!dir.join("big.blob").exists());
+}

@@ -55,6 +55,61 @@ fn ticks() -> u64 {
     }
 }
 
+/// Stack use of a query, measured by painting: before each evaluation the stack below the current
+/// stack pointer is filled with a pattern (down to `STACK_WINDOW` bytes or the end of `.bss`,
+/// whichever is nearer); after it, the lowest word that no longer holds the pattern is the deepest
+/// the evaluation reached. Its distance from the stack pointer before the call is the query's
+/// high-water mark (bytes), printed as `stack BYTES` after the `t…` lines.
+mod stack_paint {
+    const PATTERN: u32 = 0xC5C5_C5C5;
+    /// Bytes painted below the stack pointer: far more than a query needs (the measured figures
+    /// are in BENCHMARKS.md); a query reaching the window's end is reported as its full size.
+    const STACK_WINDOW: usize = 32 * 1024;
+    /// Bytes left unpainted right below the stack pointer, for `paint`'s own frame.
+    const MARGIN: usize = 256;
+
+    extern "C" {
+        /// cortex-m-rt: the first address after `.bss`/`.uninit` (the start of the heap, unused here).
+        static mut __sheap: u32;
+    }
+
+    /// A painted window `[low, high)` and the stack pointer it was painted under.
+    pub struct Painted {
+        sp: usize,
+        low: usize,
+        high: usize,
+    }
+
+    /// Paints the window below the current stack pointer (word-aligned).
+    #[inline(never)]
+    pub fn paint() -> Painted {
+        let sp = cortex_m::register::msp::read() as usize;
+        let high = sp.saturating_sub(MARGIN) & !3;
+        // Only the symbol's address is taken (no read), which needs no `unsafe`.
+        let heap_start = core::ptr::addr_of!(__sheap) as usize;
+        let low = high.saturating_sub(STACK_WINDOW).max((heap_start + 3) & !3);
+        let mut a = low;
+        while a < high {
+            // SAFETY: [low, high) is free stack below the live frames and above `.bss`.
+            unsafe { core::ptr::write_volatile(a as *mut u32, PATTERN) };
+            a += 4;
+        }
+        Painted { sp, low, high }
+    }
+
+    /// Bytes of stack used below the painted stack pointer since `paint` (the distance to the
+    /// lowest word no longer holding the pattern).
+    #[inline(never)]
+    pub fn used_since(p: &Painted) -> usize {
+        let mut a = p.low;
+        // SAFETY: reads of the painted window, word by word.
+        while a < p.high && unsafe { core::ptr::read_volatile(a as *const u32) } == PATTERN {
+            a += 4;
+        }
+        p.sp.saturating_sub(a)
+    }
+}
+
 /// A line buffer that never panics (overflow is reported as a fmt error).
 struct Line {
     buf: [u8; 1024],
@@ -103,14 +158,17 @@ fn run(out: &mut hio::HostStream) -> Result<(), ()> {
     let mut q = [0.0; MAX_JOINTS];
     let q = q.get_mut(..n).ok_or(())?;
     let mut costs = [0u32; shared::COUNT];
+    let mut stack = 0usize;
     for (i, cost) in costs.iter_mut().enumerate() {
         shared::config(i, q);
+        let painted = stack_paint::paint();
         let start = ticks();
         #[cfg(not(feature = "transported"))]
         let result = black_box(cal.evaluate(black_box(q)));
         #[cfg(feature = "transported")]
         let result = black_box(cal.evaluate_transported(black_box(q)));
         let end = ticks();
+        stack = stack.max(stack_paint::used_since(&painted));
         *cost = (end - start) as u32;
         match result {
             Ok(e) => {
@@ -132,6 +190,8 @@ fn run(out: &mut hio::HostStream) -> Result<(), ()> {
         writeln!(line, "t{i:03} {cost}").map_err(|_| ())?;
         line.flush(out)?;
     }
+    writeln!(line, "stack {stack}").map_err(|_| ())?;
+    line.flush(out)?;
     writeln!(line, "done").map_err(|_| ())?;
     line.flush(out)
 }

@@ -10,8 +10,8 @@ use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
-    /// Measurement counts for the RR benchmark (perfect squares: a √N × √N grid).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![64usize, 256, 1024, 4096])]
+    /// Measurement counts for the RR benchmark, comma-separated (perfect squares: a √N × √N grid).
+    #[arg(long, value_delimiter = ',', default_value = "64,256,1024,4096")]
     pub sizes: Vec<usize>,
     /// Write the results as JSON here.
     #[arg(long)]
@@ -31,8 +31,8 @@ pub struct BenchArgs {
     /// Skip the UR5 row.
     #[arg(long)]
     pub no_ur5: bool,
-    /// Noisy RR sizes (σ = 1e-4) for CbD's pipeline against kernel ridge, each with its own evidence.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![256usize, 4096])]
+    /// Noisy RR sizes (σ = 1e-4), comma-separated, for CbD's pipeline against kernel ridge, each with its own evidence.
+    #[arg(long, value_delimiter = ',', default_value = "256,4096")]
     pub evidence_sizes: Vec<usize>,
     /// Internal: fit the UR5 example in this process and print its JSON line.
     #[arg(long, hide = true)]

@@ -51,6 +51,9 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
 }
 
 pub fn run(args: CompareArgs) -> Result<(), String> {
+    if let Some(path) = &args.json {
+        crate::cli::check_output(path)?;
+    }
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.
     settings.verbose = false;

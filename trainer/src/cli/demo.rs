@@ -73,7 +73,7 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     if args.test_points == 0 {
         return Err("--test-points must be at least 1".into());
     }
-    crate::cli::check_output_dir(&args.out)?;
+    crate::cli::check_output(&args.out)?;
     let nominal = rr::nominal();
     let real = rr::RealRr::default();
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));

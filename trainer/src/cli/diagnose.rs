@@ -57,7 +57,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         return Err("--write-model needs --model (the file the corrections are written into)".into());
     }
     for path in [&args.json, &args.write_model].into_iter().flatten() {
-        crate::cli::check_output_dir(path)?;
+        crate::cli::check_output(path)?;
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let read = |path: &PathBuf| -> Result<crate::data::Measurements, String> {
@@ -65,9 +65,17 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         for w in imported.warnings(path) {
             eprintln!("warning: {w}");
         }
+        for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
+            eprintln!("warning: {w}");
+        }
         Ok(imported.measurements)
     };
     let data = read(&args.data)?;
+    if !args.no_cbd {
+        // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
+        crate::cli::memory::check_fit(data.len(), data.task_dim, crate::cli::memory::available_bytes(), "--no-cbd skips the CbD rows")
+            .map_err(|e| format!("{}: {e}", args.data.display()))?;
+    }
     let test = args.test.as_ref().map(read).transpose()?;
     let mut options = DiagnoseOptions::default();
     options.library.harmonics = args.harmonics;

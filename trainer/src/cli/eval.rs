@@ -26,13 +26,18 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> Result<(), String> {
+    // Kernel support max K_V(q, x_j)/γ lies in [0, 1]; NaN would silently disable the warning.
+    let t = args.extrapolation_threshold;
+    if !(0.0..=1.0).contains(&t) {
+        return Err(format!("--extrapolation-threshold must be a number in [0, 1], got {t}"));
+    }
     if let Some(path) = &args.json {
-        crate::cli::check_output_dir(path)?;
+        crate::cli::check_output(path)?;
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     let (data, lines) = (imported.measurements, imported.lines);
-    let blob = std::fs::read(&args.blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     if model.nominal != nominal {
         eprintln!(
@@ -59,15 +64,15 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     let mut far = 0;
     for i in 0..data.len() {
         let line = lines.get(i).copied().unwrap_or(0);
-        let e = cal.evaluate(data.joints(i)).map_err(|e| format!("{}:{line}: {e}", args.data.display()))?;
+        let e = cal.evaluate(data.joints(i)).map_err(|e| evaluation_error(e, &args.blob, &args.data, line))?;
         if e.is_extrapolating(args.extrapolation_threshold) {
             far += 1;
         }
         predicted.extend(e.position().iter());
         nominal_pred.extend_from_slice(&cbd_runtime::nominal::forward_kinematics(&nominal, data.joints(i)).position[..m]);
     }
-    let before = ErrorStats::of_positions(&nominal_pred, &data.positions, m);
-    let after = ErrorStats::of_positions(&predicted, &data.positions, m);
+    let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
+    let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;
     println!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
     for (name, s) in [("nominal", before), ("calibrated", after)] {
         println!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
@@ -96,4 +101,69 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// Error statistics of one model, refused (not printed as inf/NaN, not written as JSON null) when
+/// any row's error is not finite; the message names the first such row's line.
+fn finite_statistics(
+    model: &str,
+    predicted: &[f64],
+    measured: &[f64],
+    dim: usize,
+    lines: &[u64],
+    data: &std::path::Path,
+) -> Result<ErrorStats, String> {
+    let errors = crate::report::stats::position_errors(predicted, measured, dim);
+    if let Some(row) = errors.iter().position(|e| !e.is_finite()) {
+        let line = lines.get(row).copied().unwrap_or(0);
+        return Err(format!(
+            "{}:{line}: the {model} position error is not finite ({}): the positions or the model's values are too large to compare",
+            data.display(),
+            errors[row]
+        ));
+    }
+    // Each error is below √(f64::MAX) here, so their mean cannot overflow for any real row count.
+    Ok(ErrorStats::of_errors(&errors))
+}
+
+/// Who is to blame when the runtime fails on a row: the query (wrong joint count, non-finite) is
+/// the data's fault; anything else — the flow diverging, a non-finite result — comes from the
+/// blob's own values (kernel widths, momenta), since the importer only lets finite, bounded joint
+/// values through.
+fn evaluation_error(e: cbd_runtime::Error, blob: &std::path::Path, data: &std::path::Path, line: u64) -> String {
+    use cbd_runtime::Error;
+    match e {
+        Error::QueryDimension { .. } | Error::NonFiniteQuery { .. } => format!("{}:{line}: {e}", data.display()),
+        _ => format!(
+            "{}: the model fails at the configuration of {}:{line}: {e} (the blob's own values, e.g. its kernel widths, are out of range)",
+            blob.display(),
+            data.display()
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// Issue 17 item 3: inf/NaN statistics were printed (and written as JSON null) with exit 0.
+    #[test]
+    fn eval_refuses_non_finite_statistics() {
+        let lines = [2, 3];
+        let e = finite_statistics("nominal", &[0.0, 0.0, 0.0, 0.0], &[1.0, 0.0, 1e300, 1e300], 2, &lines, Path::new("t.csv")).unwrap_err();
+        assert!(e.starts_with("t.csv:3: the nominal position error is not finite"), "{e}");
+        let s = finite_statistics("nominal", &[0.0, 0.0], &[3.0, 4.0], 2, &lines, Path::new("t.csv")).unwrap();
+        assert_eq!(s.mean, 5.0);
+    }
+
+    /// Issue 17 item 7: a blob whose kernel width makes the flow non-finite was blamed on the
+    /// data file's line; the blob is named first.
+    #[test]
+    fn a_failing_blob_is_blamed_not_the_data_line() {
+        let e = evaluation_error(cbd_runtime::Error::NonFiniteResult, Path::new("a.blob"), Path::new("test.csv"), 2);
+        assert!(e.starts_with("a.blob: the model fails at the configuration of test.csv:2"), "{e}");
+        let e = evaluation_error(cbd_runtime::Error::NonFiniteQuery { index: 0 }, Path::new("a.blob"), Path::new("test.csv"), 2);
+        assert!(e.starts_with("test.csv:2: "), "{e}");
+    }
 }

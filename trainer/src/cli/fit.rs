@@ -10,13 +10,17 @@ pub struct FitArgs {
     /// Training measurements (CSV).
     #[arg(long)]
     pub data: PathBuf,
-    /// Output blob.
+    /// Output blob: a new path or a regular file (replaced atomically); `-` writes it to standard output.
     #[arg(long)]
     pub out: PathBuf,
     /// First calibrate the DH parameters (plus base and tool) by Levenberg–Marquardt, then fit
     /// the diffeomorphic correction on top; the blob carries the calibrated chain.
     #[arg(long)]
     pub dh_first: bool,
+    /// Fit at most this many measurements, evenly spaced through the file (a fit needs memory
+    /// growing as the square of the rows; the error for too many names a value that fits).
+    #[arg(long)]
+    pub max_rows: Option<usize>,
     /// Write what the pipeline chose and measured as JSON here: hyperparameters (data units), evidence,
     /// scheme and its cross-validation, the fit's report, warnings.
     #[arg(long)]
@@ -169,18 +173,38 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
     }
 }
 
+/// At most `max_rows` of `data`'s rows, evenly spaced (all of them without a limit).
+fn evenly_spaced_rows(data: crate::data::Measurements, max_rows: Option<usize>) -> crate::data::Measurements {
+    match max_rows {
+        Some(k) if k < data.len() => {
+            let n = data.len();
+            let rows: Vec<usize> = (0..k).map(|i| i * n / k).collect();
+            data.subset(&rows)
+        }
+        _ => data,
+    }
+}
+
 pub fn run(args: FitArgs) -> Result<(), String> {
     args.solver.validate()?;
-    crate::cli::check_output_dir(&args.out)?;
+    if args.max_rows.is_some_and(|k| k < 2) {
+        return Err("--max-rows must be at least 2".into());
+    }
+    crate::cli::check_output(&args.out)?;
     if let Some(path) = &args.json {
-        crate::cli::check_output_dir(path)?;
+        crate::cli::check_output(path)?;
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     for w in imported.warnings(&args.data) {
         eprintln!("warning: {w}");
     }
-    let data = imported.measurements;
+    for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data)? {
+        eprintln!("warning: {w}");
+    }
+    let data = evenly_spaced_rows(imported.measurements, args.max_rows);
+    crate::cli::memory::check_fit(data.len(), data.task_dim, crate::cli::memory::available_bytes(), "--max-rows N fits an evenly spaced subset of N rows")
+        .map_err(|e| format!("{}: {e}", args.data.display()))?;
     let mut settings = args.solver.settings()?;
     settings.dh_first = args.dh_first;
     let calibration = crate::calibrate::calibrate(&nominal, &data, &settings).map_err(|e| format!("{}: {e}", args.data.display()))?;
@@ -193,7 +217,7 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     }
     let r = &fit.report;
     let last = r.log.last().map(|l| l.train_rms).unwrap_or(f64::NAN);
-    println!(
+    let summary = format!(
         "fitted {} measurements in {:.2} s: {} iterations ({}), training RMS error {:.3e}; blob {} bytes written to {}",
         data.len(),
         r.seconds,
@@ -203,5 +227,11 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         fit.blob.len(),
         args.out.display()
     );
+    // With `--out -` standard output carries the blob; the summary must not corrupt it.
+    if crate::cli::is_stdout(&args.out) {
+        eprintln!("{summary}");
+    } else {
+        println!("{summary}");
+    }
     Ok(())
 }

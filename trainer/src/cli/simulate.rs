@@ -40,6 +40,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<(), String> {
+    crate::cli::check_output(&args.out)?;
     if let Some(noise) = args.noise {
         if !(noise >= 0.0 && noise.is_finite()) {
             return Err(format!("--noise must be a finite non-negative number, got {noise}"));
@@ -51,6 +52,7 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
     if args.sampling == "uniform" && args.count == 0 {
         return Err("--count must be at least 1".into());
     }
+    check_simulation_memory(&args, crate::cli::memory::available_bytes())?;
     match args.robot.as_str() {
         "rr" => {}
         "six" => return simulate_six(&args),
@@ -115,4 +117,28 @@ fn effect_arm(rigid: cbd_protocol::NominalModel, specs: &[String]) -> Result<cra
         arm = arm.with(crate::simulate::effects::parse_effect(spec, n)?);
     }
     Ok(arm)
+}
+
+/// Refuses a simulation whose rows cannot be held in `available` bytes (a `--grid 100000` of the
+/// RR arm is 10¹⁰ rows), naming the rows, the figure and the flag that sets them.
+fn check_simulation_memory(args: &SimulateArgs, available: Option<f64>) -> Result<(), String> {
+    if args.robot == "six" && args.sampling != "uniform" {
+        return Ok(()); // refused below: the six-joint arm is sampled uniformly only
+    }
+    let (joints, coordinates) = if args.robot == "six" { (6, 3) } else { (2, 2) };
+    let (rows, flag) = if args.sampling == "grid" {
+        ((args.grid as f64).powi(joints as i32), format!("--grid {}", args.grid))
+    } else {
+        (args.count as f64, format!("--count {}", args.count))
+    };
+    let need = crate::cli::memory::simulate_bytes(rows, joints + coordinates);
+    match available {
+        Some(available) if need > available => Err(format!(
+            "{flag} makes {rows:e} rows, about {} to simulate and write, more than the {} this process may use; lower {}",
+            crate::cli::memory::gigabytes(need),
+            crate::cli::memory::gigabytes(available),
+            flag.split(' ').next().unwrap_or("it")
+        )),
+        _ => Ok(()),
+    }
 }

@@ -59,10 +59,15 @@ fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, S
     Ok((value - 1) as u8)
 }
 
+/// Finite and within the importer's magnitude bound (squares must stay finite downstream).
 fn check_finite(entry: usize, values: &[(&str, f64)]) -> Result<(), String> {
+    use crate::data::csv_import::MAX_MAGNITUDE;
     match values.iter().find(|(_, v)| !v.is_finite()) {
         Some((name, v)) => Err(format!("[[effects]] entry {entry}: {name} = {v} is not finite")),
-        None => Ok(()),
+        None => match values.iter().find(|(_, v)| v.abs() > MAX_MAGNITUDE) {
+            Some((name, v)) => Err(format!("[[effects]] entry {entry}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e}")),
+            None => Ok(()),
+        },
     }
 }
 
@@ -108,6 +113,11 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
         let effect = match *raw {
             RawEffect::EncoderScale { joint, scale } => {
                 check_finite(entry, &[("scale", scale)])?;
+                // δ = scale·q: a relative error of 100 % or more is not an encoder's scale error
+                // (it reverses or doubles every angle) but a wrong value or unit.
+                if scale.abs() >= 1.0 {
+                    return Err(format!("[[effects]] entry {entry}: scale = {scale:e}: an encoder scale error must lie within (-1, 1)"));
+                }
                 Effect::EncoderScale { joint: check_index(entry, "joint", joint, n)?, scale }
             }
             RawEffect::Transmission { joint, harmonic, cos, sin } => {

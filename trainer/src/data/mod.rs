@@ -48,6 +48,50 @@ impl Measurements {
     }
 }
 
+/// Largest blob read: a blob of the largest model the trainer fits (N = 4096 points, 6 joints,
+/// 3-D task) is under 1 MiB; 64 MiB leaves room and stops `--blob /dev/zero` at once.
+pub const MAX_BLOB_BYTES: u64 = 64 << 20;
+
+/// Largest model file (TOML) read.
+pub const MAX_MODEL_FILE_BYTES: u64 = 1 << 20;
+
+/// Largest URDF read: real arm descriptions are tens of kilobytes (meshes are separate files);
+/// the parser holds about 60 times the file in memory (a 34 MB URDF took 2.2 GB).
+pub const MAX_URDF_BYTES: u64 = 8 << 20;
+
+/// Reads at most `cap` bytes of `path`; a longer file (or an endless one such as `/dev/zero`) is an
+/// error naming the path, what it is and the cap, before the memory runs out.
+pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut bytes = Vec::new();
+    file.take(cap + 1).read_to_end(&mut bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    if bytes.len() as u64 > cap {
+        return Err(format!("{}: larger than {} MiB, the most a {what} may be", path.display(), cap >> 20));
+    }
+    Ok(bytes)
+}
+
 pub mod csv_import;
 pub mod effects_section;
 pub mod model_file;
+pub mod nominal_check;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 17 item 8: `--blob /dev/zero` read until the memory ran out.
+    #[test]
+    fn blob_and_urdf_reads_are_capped() {
+        let e = read_capped(std::path::Path::new("/dev/zero"), MAX_BLOB_BYTES, "blob").unwrap_err();
+        assert!(e.starts_with("/dev/zero: larger than 64 MiB, the most a blob may be"), "{e}");
+        let dir = std::env::temp_dir().join(format!("cbd-read-capped-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("a.bin");
+        std::fs::write(&f, vec![7u8; 1025]).unwrap();
+        assert_eq!(read_capped(&f, 1025, "blob").unwrap().len(), 1025);
+        assert!(read_capped(&f, 1024, "URDF").unwrap_err().contains("the most a URDF may be"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

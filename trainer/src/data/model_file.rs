@@ -39,7 +39,7 @@
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
-use super::csv_import::{default_joint_limits, ColumnSpec};
+use super::csv_import::{default_joint_limits, ColumnSpec, MAX_MAGNITUDE};
 use super::effects_section::{self, RawEffect, RawGravity};
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::Pose;
@@ -314,7 +314,9 @@ struct RawPlanar {
 /// Reads and checks a model file (see the module documentation for the format).
 pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
+    let io = |message: String| ImportError::Io { file: path.to_path_buf(), message };
+    let bytes = super::read_capped(path, super::MAX_MODEL_FILE_BYTES, "model file").map_err(|e| io(strip_path(&e, path)))?;
+    let text = String::from_utf8(bytes).map_err(|e| io(format!("not UTF-8 text: {e}")))?;
     parse_model_file(&text, path)
 }
 
@@ -339,6 +341,12 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
                 if !v.is_finite() {
                     return Err(model_err(format!("[chain] joint {}: {name} is not finite", i + 1)));
                 }
+                if v.abs() > MAX_MAGNITUDE {
+                    return Err(model_err(format!(
+                        "[chain] joint {}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)",
+                        i + 1
+                    )));
+                }
             }
             let kind = match j.kind.unwrap_or(RawKind::Revolute) {
                 RawKind::Revolute => JointKind::Revolute,
@@ -359,7 +367,10 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         )
     } else if let Some(u) = raw.urdf {
         let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
-        let robot = urdf_rs::read_file(&urdf_path).map_err(|e| ImportError::Urdf { file: urdf_path.clone(), message: e.to_string() })?;
+        let urdf_err = |message: String| ImportError::Urdf { file: urdf_path.clone(), message };
+        let bytes = super::read_capped(&urdf_path, super::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(strip_path(&e, &urdf_path)))?;
+        let text = String::from_utf8(bytes).map_err(|e| urdf_err(format!("not UTF-8 text: {e}")))?;
+        let robot = urdf_rs::read_from_string(&text).map_err(|e| urdf_err(e.to_string()))?;
         let scale = LengthUnit::M.factor_to(raw.length_unit);
         let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale)
             .map_err(|message| ImportError::Urdf { file: urdf_path.clone(), message })?;
@@ -368,6 +379,9 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         let lengths = raw.planar.expect("one section").lengths;
         if lengths.is_empty() || lengths.len() > MAX_JOINTS || lengths.iter().any(|l| !l.is_finite()) {
             return Err(model_err(format!("[planar] needs 1 to {MAX_JOINTS} finite lengths")));
+        }
+        if let Some((i, l)) = lengths.iter().enumerate().find(|(_, l)| l.abs() > MAX_MAGNITUDE) {
+            return Err(model_err(format!("[planar] lengths[{}] = {l:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)", i + 1)));
         }
         let n = lengths.len();
         (NominalModel::planar(&lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect())
@@ -401,6 +415,12 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
 }
 
 /// A TOML basic string.
+/// A [`super::read_capped`] message without its leading "path: " (the error type adds it).
+fn strip_path(message: &str, path: &Path) -> String {
+    let prefix = format!("{}: ", path.display());
+    message.strip_prefix(&prefix).unwrap_or(message).to_string()
+}
+
 fn quoted(s: &str) -> String {
     let mut out = String::from("\"");
     for c in s.chars() {
@@ -519,6 +539,9 @@ fn transform(raw: Option<&RawTransform>, deg: f64) -> Result<Transform, String> 
     };
     if translation.iter().chain(rotation.iter().flatten()).any(|v| !v.is_finite()) {
         return Err("non-finite value".into());
+    }
+    if let Some(v) = translation.iter().find(|v| v.abs() > MAX_MAGNITUDE) {
+        return Err(format!("translation {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)"));
     }
     Ok(Pose { r: rotation, t: translation }.to_transform())
 }
@@ -679,6 +702,28 @@ compliance = 0.5
             let e = parse_model_file(&text, Path::new("fx.toml")).unwrap_err().to_string();
             assert!(e.contains(needle) && e.contains("fx.toml"), "{needle}: {e}");
         }
+    }
+
+    /// Issue 17 item 7: lengths of 1e300 and `encoder_scale = 1e300` were accepted and the fit
+    /// later failed with "the flow diverged … kernels too wide or σ too small". Now the model file
+    /// is refused, naming the field.
+    #[test]
+    fn absurd_lengths_and_encoder_scale_name_the_field() {
+        let bad = SMALL.replace("{ a = 0.3,", "{ a = 1e300,");
+        let e = parse_model_file(&bad, Path::new("x.toml")).unwrap_err().to_string();
+        assert!(e.contains("x.toml: [chain] joint 2: a = 1e300 is beyond"), "{e}");
+        let bad = SMALL.replace("translation = [1, 2, 3]", "translation = [1, 2e300, 3]");
+        let e = parse_model_file(&bad, Path::new("x.toml")).unwrap_err().to_string();
+        assert!(e.contains("[chain.base]") && e.contains("2e300"), "{e}");
+        let planar = "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = [1.0, 1e300]\n";
+        let e = parse_model_file(planar, Path::new("p.toml")).unwrap_err().to_string();
+        assert!(e.contains("p.toml: [planar] lengths[2] = 1e300 is beyond"), "{e}");
+        let text = format!("{SMALL}{}", EFFECTS.replacen("scale = 1e-4", "scale = 1e300", 1));
+        let e = parse_model_file(&text, Path::new("fx.toml")).unwrap_err().to_string();
+        assert!(e.contains("fx.toml: [[effects]] entry 2: scale = 1e300"), "{e}");
+        let text = format!("{SMALL}{}", EFFECTS.replacen("compliance = 0.5", "compliance = 1e200", 1));
+        let e = parse_model_file(&text, Path::new("fx.toml")).unwrap_err().to_string();
+        assert!(e.contains("entry 3: compliance = 1e200 is beyond"), "{e}");
     }
 
     #[test]

@@ -37,16 +37,22 @@ fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) ->
     if !robot.links.iter().any(|l| l.name == tip_link) {
         return Err(format!("URDF robot '{}' has no link named '{tip_link}' (tip_link)", robot.name));
     }
+    // Each link's parent joint, looked up in O(1): the walk stays linear in the chain's length
+    // (a search per link made a 200k-link chain quadratic).
+    // (The first joint naming a child wins, as the linear search did.)
+    let mut parent_joint: std::collections::HashMap<&str, &urdf_rs::Joint> = std::collections::HashMap::new();
+    for j in &robot.joints {
+        parent_joint.entry(j.child.link.as_str()).or_insert(j);
+    }
     let mut path = Vec::new();
-    let mut link = tip_link.to_string();
+    let mut link = tip_link;
     while link != base_link {
-        let joint = robot
-            .joints
-            .iter()
-            .find(|j| j.child.link == link)
+        let joint = parent_joint
+            .get(link)
+            .copied()
             .ok_or_else(|| format!("URDF: link '{tip_link}' is not a descendant of '{base_link}' (no joint has child '{link}')"))?;
         path.push(joint);
-        link = joint.parent.link.clone();
+        link = joint.parent.link.as_str();
         if path.len() > robot.joints.len() {
             return Err("URDF: the joint tree has a cycle".into());
         }
@@ -220,6 +226,31 @@ mod tests {
     use super::*;
     use cbd_protocol::NominalModel;
     use cbd_runtime::nominal::forward_kinematics;
+
+    /// Issue 17 item 8: a 200k-deep URDF did not finish in 120 s (a search through all joints
+    /// for every link on the path). The walk is now linear.
+    #[test]
+    fn deep_urdf_chain_is_walked_in_linear_time() {
+        let template = urdf_rs::read_from_string(TEST_URDF).unwrap();
+        let (link, joint) = (template.links[0].clone(), template.joints.iter().find(|j| j.name == "to_tool").unwrap().clone());
+        let depth = 200_000;
+        let mut robot = template.clone();
+        robot.links = (0..=depth).map(|k| urdf_rs::Link { name: format!("l{k}"), ..link.clone() }).collect();
+        robot.joints = (0..depth)
+            .map(|k| {
+                let mut j = joint.clone();
+                j.name = format!("j{k}");
+                j.parent.link = format!("l{k}");
+                j.child.link = format!("l{}", k + 1);
+                j
+            })
+            .collect();
+        let start = std::time::Instant::now();
+        let path = joint_path(&robot, "l0", &format!("l{depth}")).unwrap();
+        assert_eq!(path.len(), depth);
+        assert_eq!(path[0].name, "j0");
+        assert!(start.elapsed().as_secs_f64() < 5.0, "{:?}", start.elapsed());
+    }
 
     #[test]
     fn urdf_chain_converts_to_an_exact_dh_chain() {

@@ -1,0 +1,89 @@
+//! Sanity of the nominal model against the measurements, before any fit: a nominal model whose
+//! positions are not finite is an error naming the row; one that barely moves, or whose positions
+//! are far outside the measured ones (a DH length of −1e30, planar lengths [0, 0], a unit mistake),
+//! is fitted anyway but with a warning saying so — CbD only corrects small deformations.
+
+use super::csv_import::{bounding_box_diagonal, MAX_MAGNITUDE};
+use super::Measurements;
+use cbd_protocol::NominalModel;
+use std::path::Path;
+
+/// The nominal model's RMS distance from the measurements above this many times the
+/// measurements' own size is not a calibration error but a wrong model, unit or column.
+const FAR_FACTOR: f64 = 10.0;
+
+/// A nominal model whose positions span less than this fraction of the measurements' extent
+/// does not move with its joints (zero link lengths).
+const STILL_FRACTION: f64 = 1e-6;
+
+/// Warnings about `nominal` on `data` (rows at file `lines` of `file`), or an error when the
+/// nominal positions are not finite or beyond [`MAX_MAGNITUDE`].
+pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u64], file: &Path) -> Result<Vec<String>, String> {
+    let m = data.task_dim;
+    let mut predicted = Measurements::new(data.n_joints, m);
+    let mut squared = 0.0;
+    for i in 0..data.len() {
+        let p = &cbd_runtime::nominal::forward_kinematics(nominal, data.joints(i)).position[..m];
+        if let Some(v) = p.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
+            let line = lines.get(i).copied().unwrap_or(0);
+            return Err(format!(
+                "{}:{line}: the nominal model's position at this configuration is {v:e} (beyond ±{MAX_MAGNITUDE:e}): its lengths or effects are out of range",
+                file.display()
+            ));
+        }
+        squared += p.iter().zip(data.position(i)).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+        predicted.push(data.joints(i), p);
+    }
+    let rms = (squared / data.len().max(1) as f64).sqrt();
+    let measured_extent = bounding_box_diagonal(data);
+    let measured_size = data.positions.iter().fold(measured_extent, |s, v| s.max(v.abs()));
+    let nominal_extent = bounding_box_diagonal(&predicted);
+    let mut warnings = Vec::new();
+    if data.len() > 1 && measured_extent > 0.0 && nominal_extent <= STILL_FRACTION * measured_extent {
+        warnings.push(format!(
+            "{}: the nominal model barely moves: its positions span {nominal_extent:.3e} over these configurations, the measurements {measured_extent:.3e} (zero link lengths?); CbD corrects small deformations, not a missing model",
+            file.display()
+        ));
+    }
+    if rms > FAR_FACTOR * measured_size {
+        warnings.push(format!(
+            "{}: the nominal model is {rms:.3e} from the measurements (RMS), more than {FAR_FACTOR} times their size {measured_size:.3e}: wrong unit, DH table or columns?",
+            file.display()
+        ));
+    }
+    Ok(warnings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rr_data() -> (Measurements, Vec<u64>) {
+        let real = NominalModel::planar(&[1.0, 0.5]).unwrap();
+        let mut data = Measurements::new(2, 2);
+        for i in 0..16 {
+            let q = [0.4 * i as f64 - 3.0, 0.3 * i as f64 - 2.0];
+            data.push(&q, &cbd_runtime::nominal::forward_kinematics(&real, &q).position[..2]);
+        }
+        (data, (2..18).collect())
+    }
+
+    /// Issue 17 item 6: absurd nominal models (a length of −1e30; lengths [0, 0]) were fitted with
+    /// exit 0 and no warning.
+    #[test]
+    fn absurd_nominal_models_are_warned_about() {
+        let (data, lines) = rr_data();
+        let file = Path::new("t.csv");
+        let sound = NominalModel::planar(&[1.05, 0.48]).unwrap();
+        assert!(nominal_warnings(&sound, &data, &lines, file).unwrap().is_empty());
+        let still = NominalModel::planar(&[0.0, 0.0]).unwrap();
+        let w = nominal_warnings(&still, &data, &lines, file).unwrap();
+        assert!(w.iter().any(|w| w.contains("barely moves")), "{w:?}");
+        let huge = NominalModel::planar(&[-1e30, 0.5]).unwrap();
+        let w = nominal_warnings(&huge, &data, &lines, file).unwrap();
+        assert!(w.iter().any(|w| w.starts_with("t.csv: the nominal model is 1.") && w.contains("wrong unit")), "{w:?}");
+        let beyond = NominalModel::planar(&[1e150, 0.5]).unwrap();
+        let e = nominal_warnings(&beyond, &data, &lines, file).unwrap_err();
+        assert!(e.starts_with("t.csv:2: the nominal model's position"), "{e}");
+    }
+}

@@ -1,0 +1,45 @@
+//! The documentation says what the build does: messages quoted in docs/EXIT_CODES.md, the
+//! README's demo scheme, and `--help` texts whose shown form is the accepted form (issue 17 item 11).
+
+use std::path::PathBuf;
+use std::process::Command;
+
+const CBD: &str = env!("CARGO_BIN_EXE_cbd");
+
+fn repo_file(name: &str) -> String {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join(name);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// EXIT_CODES.md once said "this build reads 1" when the build read 2 (now 2 to 3).
+#[test]
+fn exit_codes_version_message_is_what_this_build_prints() {
+    let found = cbd_protocol::FORMAT_VERSION + 1;
+    let message = cbd_protocol::DecodeError::UnsupportedVersion { found, supported: cbd_protocol::FORMAT_VERSION }.to_string();
+    let reads = &message[message.find("(this build reads").expect("message names what the build reads")..];
+    let docs = repo_file("docs/EXIT_CODES.md");
+    assert!(docs.contains(reads), "docs/EXIT_CODES.md does not quote {reads:?}");
+}
+
+/// The README once said the demo fits Heun × 5; `cbd demo --hyperparameters paper` fits Euler × 2.
+#[test]
+fn readme_demo_scheme_is_what_demo_fits() {
+    let readme = repo_file("README.md");
+    assert!(!readme.contains("Heun × 5"), "README still says Heun × 5");
+    let source = repo_file("trainer/src/cli/demo.rs");
+    assert!(source.contains("settings.steps = Some(2)"), "the paper reproduction's step count changed: update the README");
+    assert!(readme.contains("`--hyperparameters paper` reproduces the paper's kernels"));
+    assert!(readme.contains("with Euler × 2."));
+}
+
+/// `cbd bench --help` showed `--sizes`' default space-separated ("64 256 1024 4096"), a form the
+/// flag rejects: the help must show the comma-separated form it accepts.
+#[test]
+fn bench_help_shows_sizes_as_accepted() {
+    let out = Command::new(CBD).args(["bench", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(help.contains("[default: 64,256,1024,4096]"), "{help}");
+    assert!(help.contains("[default: 256,4096]"), "{help}");
+    assert!(!help.contains("64 256"), "{help}");
+}
