@@ -12,6 +12,12 @@
 #![cfg_attr(not(test), no_std)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
+// A host build with the workspace's default profiles (panic = "unwind": `cargo build --workspace`,
+// `cargo clippy --workspace`) links std for its unwinding runtime and panic handler only (the code
+// stays no_std); the library's profile `ffi` and every thumb build are panic = "abort" and link no std.
+#[cfg(all(not(test), panic = "unwind"))]
+extern crate std;
+
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
@@ -195,7 +201,7 @@ pub unsafe extern "C" fn cbd_load(
     if blob.is_null() || storage.is_null() {
         return CBD_ERR_NULL_POINTER;
     }
-    if storage as usize % CBD_STORAGE_ALIGN != 0 {
+    if !(storage as usize).is_multiple_of(CBD_STORAGE_ALIGN) {
         return CBD_ERR_MISALIGNED;
     }
     let Some(values_bytes) = storage_bytes.checked_sub(HEAD) else { return CBD_ERR_STORAGE_TOO_SMALL };
@@ -356,7 +362,7 @@ pub extern "C" fn cbd_status_name(status: i32) -> *const c_char {
     name.as_ptr().cast()
 }
 
-#[cfg(all(not(test), not(feature = "panic-never")))]
+#[cfg(all(not(test), not(panic = "unwind"), not(feature = "panic-never")))]
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
     // Built with panic = "abort": no unwinding; a panic (a bug: none is reachable in the thumb
@@ -376,7 +382,7 @@ fn panic(_: &core::panic::PanicInfo) -> ! {
     }
 }
 
-#[cfg(all(not(test), feature = "panic-never"))]
+#[cfg(all(not(test), not(panic = "unwind"), feature = "panic-never"))]
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
     extern "Rust" {
