@@ -104,6 +104,37 @@ fn gravity_compliance_of_one_joint_of_the_six_joint_arm() {
     assert!(!d.unexplained_structure, "{}", summary(&d));
 }
 
+/// Issue 14: every effect kept is significant (|estimate| ≥ 3 SE for a one-parameter group) and
+/// nothing stands in for what is not there — compliance on joint 2 and a first harmonic on joint 4,
+/// exactly those two, over five arms, seeds and noise draws.
+#[test]
+fn six_joint_compliance_and_harmonic_are_named_and_nothing_else() {
+    for seed in 1..=5u64 {
+        let (nominal, arm) = six_arm(20 + seed);
+        let arm = arm.with(InjectedEffect::GravityCompliance { joint: 1, compliance: 3e-7 }).with(InjectedEffect::Transmission {
+            joint: 3,
+            harmonic: 1,
+            cos: 0.0015,
+            sin: -0.001,
+        });
+        let (train, test) = (six_data(&arm, 400, 10 * seed), six_data(&arm, 300, 10 * seed + 1));
+        let d = diagnose(&nominal, &train, Some(&test), None, &DiagnoseOptions::default()).unwrap();
+        eprintln!("seed {seed}: {}; dropped {:?}", summary(&d), d.dropped.iter().map(|x| (&x.name, x.p_value, x.cv_gain)).collect::<Vec<_>>());
+        let mut named: Vec<(GroupKind, Option<usize>)> = d.physical_effects().iter().map(|f| (f.kind, f.joint)).collect();
+        named.sort_by_key(|(k, j)| (format!("{k:?}"), *j));
+        let mut expected = vec![(GroupKind::GravityCompliance, Some(1)), (GroupKind::Transmission { harmonic: 1 }, Some(3))];
+        expected.sort_by_key(|(k, j)| (format!("{k:?}"), *j));
+        assert_eq!(named, expected, "seed {seed}: {} dropped {:?}", summary(&d), d.dropped);
+        for f in d.physical_effects() {
+            if let [p] = f.parameters.as_slice() {
+                assert!(p.value.abs() >= 3.0 * p.std_error, "seed {seed}: {} = {} ± {}", p.name, p.value, p.std_error);
+            }
+        }
+        let c = &d.physical_effects().iter().find(|f| f.kind == GroupKind::GravityCompliance).unwrap().parameters[0];
+        assert!((c.value - 3e-7).abs() < 0.05 * 3e-7, "seed {seed}: {} = {} ± {}", c.name, c.value, c.std_error);
+    }
+}
+
 #[test]
 fn no_extra_effect_is_reported_when_there_is_none() {
     let (nominal, arm) = six_arm(8);

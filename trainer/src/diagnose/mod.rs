@@ -3,7 +3,8 @@
 //!
 //! Stages (one file each): residual structure tests (`structure`, `f_test`) → library Jacobians
 //! (`library`, `kinematics`) → cross-validated forward selection (`selection`) → Gauss–Newton
-//! refinement with uncertainties (`refine`) → held-out comparison and report (`report`).
+//! refinement with uncertainties (`refine`), dropping what is not significant or does not earn its
+//! place → held-out comparison and report (`report`).
 
 pub mod f_test;
 pub mod kinematics;
@@ -103,6 +104,8 @@ pub struct Diagnosis {
     /// The selection's margin (relative CV drop a group needed).
     pub margin: f64,
     pub found: Vec<FoundEffect>,
+    /// Effects the selection chose that refinement showed not significant or not earning their place.
+    pub dropped: Vec<DroppedEffect>,
     /// The model with the found effects (geometric corrections in the chain, effects listed).
     pub model_after: NominalModel,
     /// Structure still significant after the effects: CbD is what absorbs it.
@@ -151,6 +154,55 @@ impl Diagnosis {
     pub fn row(&self, name: &str) -> Option<&TableRow> {
         self.table.iter().find(|r| r.name == name)
     }
+}
+
+/// Why an effect the selection chose was dropped after refinement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DropReason {
+    Kept,
+    /// Its estimate is within 3 standard errors of zero (Wald p > 0.0027).
+    NotSignificant,
+    /// Added last, it lowers the cross-validated error by less than the margin.
+    NoCrossValidatedGain,
+}
+
+/// An effect dropped after refinement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DroppedEffect {
+    pub group: usize,
+    pub name: String,
+    pub reason: DropReason,
+    /// Wald test of all its parameters being zero.
+    pub p_value: f64,
+    /// Relative drop of the cross-validated RMS when it is added last.
+    pub cv_gain: f64,
+}
+
+/// Smallest Wald p-value an effect may have: 3 standard errors (two-sided normal tail).
+pub const SIGNIFICANCE: f64 = 0.0027;
+
+/// Whether group `g` (among the refined `chosen_cols`) is significant and earns its place.
+fn judge(
+    g: usize,
+    group_cols: &[Vec<usize>],
+    chosen_cols: &[usize],
+    refined: &refine::Refined,
+    problem: &LinearProblem,
+    margin: f64,
+) -> DroppedEffect {
+    let positions: Vec<usize> = group_cols[g].iter().filter_map(|c| chosen_cols.iter().position(|k| k == c)).collect();
+    let p_value = refined.wald_p_value(&positions);
+    let without: Vec<usize> = chosen_cols.iter().copied().filter(|c| !group_cols[g].contains(c)).collect();
+    let (cv_with, cv_without) = (problem.cv_rms(chosen_cols), problem.cv_rms(&without));
+    let cv_gain = 1.0 - cv_with / cv_without.max(f64::MIN_POSITIVE);
+    let reason = if !(p_value <= SIGNIFICANCE) {
+        DropReason::NotSignificant
+    } else if cv_gain < margin {
+        DropReason::NoCrossValidatedGain
+    } else {
+        DropReason::Kept
+    };
+    DroppedEffect { group: g, name: String::new(), reason, p_value, cv_gain }
 }
 
 /// Splits `data` into (fit, held-out) rows by a seeded permutation.
@@ -245,18 +297,38 @@ pub fn diagnose(
     // 4. Selection, judged out of sample.
     let problem = LinearProblem::new(&jac, &r0, m, options.selection.folds, options.selection.seed);
     let selection = forward_select(&problem, &group_cols, &options.selection);
-    let chosen_cols: Vec<usize> = selection.selected.iter().flat_map(|&g| group_cols[g].clone()).collect();
-    let (start, full_sse) = problem.fit(&chosen_cols);
-    let chosen_params: Vec<Param> = chosen_cols.iter().map(|&k| params[k]).collect();
-    let refined = refine::refine(model, &train, &chosen_params, &start, options.gauss_newton_iterations)?;
+    // 5. Refinement on the nonlinear model; then every effect must be significant and earn its
+    // place, or it is dropped (the weakest first) and the rest refined again.
+    let mut kept = selection.selected.clone();
+    let mut dropped = Vec::new();
+    let (chosen_cols, start, full_sse, chosen_params, refined) = loop {
+        let chosen_cols: Vec<usize> = kept.iter().flat_map(|&g| group_cols[g].clone()).collect();
+        let (start, full_sse) = problem.fit(&chosen_cols);
+        let chosen_params: Vec<Param> = chosen_cols.iter().map(|&k| params[k]).collect();
+        let refined = refine::refine(model, &train, &chosen_params, &start, options.gauss_newton_iterations)?;
+        let weakest = kept
+            .iter()
+            .filter(|&&g| groups[g].kind != GroupKind::Geometric)
+            .map(|&g| judge(g, &group_cols, &chosen_cols, &refined, &problem, options.selection.margin))
+            .filter(|d| d.reason != DropReason::Kept)
+            .max_by(|a, b| a.p_value.total_cmp(&b.p_value));
+        match weakest {
+            Some(mut d) => {
+                kept.retain(|&g| g != d.group);
+                d.name = groups[d.group].name.clone();
+                dropped.push(d);
+            }
+            None => break (chosen_cols, start, full_sse, chosen_params, refined),
+        }
+    };
     let base_sse = problem.base_sse().max(f64::MIN_POSITIVE);
-    let found: Vec<FoundEffect> = selection
-        .selected
+    let step_of = |g: usize| selection.steps.iter().find(|s| s.group == g).expect("a kept group was selected");
+    let found: Vec<FoundEffect> = kept
         .iter()
-        .zip(&selection.steps)
         .enumerate()
-        .map(|(order, (&g, step))| {
-            let earlier: Vec<usize> = selection.selected[..order].iter().flat_map(|&e| group_cols[e].clone()).collect();
+        .map(|(order, &g)| {
+            let step = step_of(g);
+            let earlier: Vec<usize> = kept[..order].iter().flat_map(|&e| group_cols[e].clone()).collect();
             let with: Vec<usize> = earlier.iter().chain(&group_cols[g]).copied().collect();
             let gain = problem.fit(&earlier).1 - problem.fit(&with).1;
             let without: Vec<usize> = chosen_cols.iter().copied().filter(|c| !group_cols[g].contains(c)).collect();
@@ -288,7 +360,7 @@ pub fn diagnose(
     let r1 = residual(&refined.model, &train);
     let structure_after = structure_tests(&refined.model, &train, &r1, &options.structure);
     let unexplained_structure = structure_after.iter().any(|t| t.significant);
-    // 5. Held-out table.
+    // 7. Held-out table.
     let mut table = Vec::new();
     let mut push = |name: &str, predicted: Vec<f64>| {
         let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
@@ -343,6 +415,7 @@ pub fn diagnose(
         margin: options.selection.margin,
         group_names: groups.iter().map(|g| g.name.clone()).collect(),
         found,
+        dropped,
         model_after: refined.model,
         unexplained_structure,
         table,

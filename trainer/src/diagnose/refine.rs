@@ -14,6 +14,10 @@ pub struct Refined {
     pub values: Vec<f64>,
     /// One standard deviation of each value.
     pub std_errors: Vec<f64>,
+    /// Covariance of the values, σ̂² (JᵀJ)⁺ (p × p, row-major).
+    pub covariance: Vec<f64>,
+    /// Residual degrees of freedom: observations − parameters.
+    pub dof: f64,
     pub sse: f64,
     pub iterations: usize,
 }
@@ -23,7 +27,7 @@ fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
 }
 
 /// Scaled normal equations through the eigendecomposition: the step (pseudo-inverse,
-/// directions below 1e-12 λ_max dropped) and the diagonal of (JᵀJ)⁺.
+/// directions below 1e-12 λ_max dropped) and (JᵀJ)⁺ (p × p, row-major).
 fn normal_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let p = jac.ncols();
     let scale: Vec<f64> =
@@ -32,8 +36,8 @@ fn normal_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let g = js.transpose() * &js;
     let rv = Mat::from_fn(r.len(), 1, |i, _| r[i]);
     let b = js.transpose() * &rv;
-    let (mut step, mut var) = (vec![0.0; p], vec![0.0; p]);
-    let Ok(evd) = g.self_adjoint_eigen(Side::Lower) else { return (step, vec![f64::NAN; p]) };
+    let (mut step, mut var) = (vec![0.0; p], vec![0.0; p * p]);
+    let Ok(evd) = g.self_adjoint_eigen(Side::Lower) else { return (step, vec![f64::NAN; p * p]) };
     let lmax = (0..p).map(|k| evd.S()[k]).fold(0.0, f64::max);
     for k in 0..p {
         let l = evd.S()[k];
@@ -44,10 +48,14 @@ fn normal_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
         let c = (0..p).map(|i| u[(i, k)] * b[(i, 0)]).sum::<f64>() / l;
         for i in 0..p {
             step[i] += c * u[(i, k)];
-            var[i] += u[(i, k)] * u[(i, k)] / l;
+            for j in 0..p {
+                var[i * p + j] += u[(i, k)] * u[(j, k)] / l;
+            }
         }
     }
-    (step.iter().zip(&scale).map(|(s, c)| s / c).collect(), var.iter().zip(&scale).map(|(v, c)| v / (c * c)).collect())
+    let step = step.iter().zip(&scale).map(|(s, c)| s / c).collect();
+    let covariance = (0..p * p).map(|ij| var[ij] / (scale[ij / p] * scale[ij % p])).collect();
+    (step, covariance)
 }
 
 /// Refines `start` values of `params` on `base` (parameters are changes to `base`).
@@ -81,8 +89,38 @@ pub fn refine(base: &NominalModel, data: &Measurements, params: &[Param], start:
     }
     let jac = jacobian(&model, data, params);
     let (_, var) = normal_solve(&jac, &r);
-    let dof = (r.len() as f64 - params.len() as f64).max(1.0);
+    let p = params.len();
+    let dof = (r.len() as f64 - p as f64).max(1.0);
     let sigma2 = sse / dof;
-    let std_errors = var.iter().map(|v| (sigma2 * v).sqrt()).collect();
-    Ok(Refined { model, values, std_errors, sse, iterations })
+    let covariance: Vec<f64> = var.iter().map(|v| sigma2 * v).collect();
+    let std_errors = (0..p).map(|k| covariance[k * p + k].sqrt()).collect();
+    Ok(Refined { model, values, std_errors, covariance, dof, sse, iterations })
+}
+
+impl Refined {
+    /// Wald test that the values at `positions` are all zero: F = vᵀ C⁻¹ v / k with (k, dof)
+    /// degrees of freedom (C the positions' covariance block, pseudo-inverse); its tail
+    /// probability. For one parameter F = (v / SE)², so p ≤ 0.0027 is |v| ≥ 3 SE.
+    pub fn wald_p_value(&self, positions: &[usize]) -> f64 {
+        let (p, k) = (self.values.len(), positions.len());
+        if k == 0 {
+            return 1.0;
+        }
+        let block = Mat::from_fn(k, k, |i, j| self.covariance[positions[i] * p + positions[j]]);
+        let Ok(evd) = block.self_adjoint_eigen(Side::Lower) else { return 1.0 };
+        let lmax = (0..k).map(|i| evd.S()[i]).fold(0.0, f64::max);
+        let (mut w, mut rank) = (0.0, 0usize);
+        for i in 0..k {
+            let l = evd.S()[i];
+            if l > 1e-12 * lmax && l > 0.0 {
+                let c: f64 = (0..k).map(|j| evd.U()[(j, i)] * self.values[positions[j]]).sum();
+                w += c * c / l;
+                rank += 1;
+            }
+        }
+        if rank == 0 || !w.is_finite() {
+            return 1.0;
+        }
+        super::f_test::f_tail(w / rank as f64, rank as f64, self.dof)
+    }
 }

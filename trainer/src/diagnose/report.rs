@@ -1,7 +1,7 @@
 //! The diagnosis as text (stdout) and JSON (`--json`), and the residual figure (`--plots`).
 
 use super::library::{is_angle, GroupKind, Param};
-use super::{Diagnosis, FoundEffect};
+use super::{Diagnosis, DropReason, FoundEffect};
 use crate::report::plots::EffectCurve;
 use cbd_protocol::NominalModel;
 use serde_json::{json, Value};
@@ -85,6 +85,10 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
             100.0 * d.margin
         );
     }
+    if !d.dropped.is_empty() {
+        let list: Vec<String> = d.dropped.iter().map(dropped_text).collect();
+        out += &format!("  dropped after refinement: {}\n", list.join("; "));
+    }
     out += "\nstructure left after the effects:\n";
     out += &list(&d.structure_after);
     if d.unexplained_structure {
@@ -109,6 +113,18 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
         }
     }
     out
+}
+
+/// `name (not significant: p = …)` or `name (lowers the CV RMS by only …)`.
+fn dropped_text(d: &super::DroppedEffect) -> String {
+    match d.reason {
+        DropReason::NotSignificant => {
+            format!("{} (within 3 standard errors of zero: p = {:.2e} > {})", d.name, d.p_value, super::SIGNIFICANCE)
+        }
+        DropReason::NoCrossValidatedGain | DropReason::Kept => {
+            format!("{} (added last it lowers the cross-validated RMS by {:.1} %)", d.name, 100.0 * d.cv_gain)
+        }
+    }
 }
 
 fn effect_json(model: &NominalModel, f: &FoundEffect, unit: &str) -> Value {
@@ -149,6 +165,11 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, unit: &str) -> Value {
         "held_out_source": d.held_out,
         "found": d.found.iter().map(|f| effect_json(model, f, unit)).collect::<Vec<_>>(),
         "physical_effects": d.physical_effects().len(),
+        "dropped": d.dropped.iter().map(|x| json!({
+            "name": x.name,
+            "reason": match x.reason { DropReason::NotSignificant => "not significant", _ => "no cross-validated gain" },
+            "p_value": x.p_value, "cv_gain": x.cv_gain,
+        })).collect::<Vec<_>>(),
         "unexplained_structure": d.unexplained_structure,
         "structure_before": tests(&d.structure_before),
         "structure_after": tests(&d.structure_after),

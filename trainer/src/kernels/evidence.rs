@@ -367,14 +367,7 @@ fn minimise(
     evaluations: &RefCell<usize>,
 ) -> Option<(f64, Vec<f64>)> {
     let clamp = |p: &[f64]| -> Vec<f64> { p.iter().zip(lower.iter().zip(upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect() };
-    let objective = Objective {
-        table,
-        lower: lower.to_vec(),
-        upper: upper.to_vec(),
-        wall: 10.0,
-        cache: RefCell::new(None),
-        evaluations,
-    };
+    let objective = Objective { table, lower: lower.to_vec(), upper: upper.to_vec(), wall: 10.0, cache: RefCell::new(None), evaluations };
     let mut init = clamp(init);
     // A start where K is not positive definite to working precision (a σ that was fine on fewer
     // rows) moves up in σ until it is.
@@ -392,10 +385,7 @@ fn minimise(
         let condition = ArmijoCondition::new(1e-4).ok()?;
         // Backtrack by 1/5 (argmin's default 0.9 spends many evaluations on a first step of |g|).
         let linesearch = BacktrackingLineSearch::new(condition).rho(0.2).ok()?;
-        let solver = LBFGS::new(linesearch, 8)
-            .with_tolerance_grad(TOLERANCE)
-            .and_then(|s| s.with_tolerance_cost(TOLERANCE))
-            .ok()?;
+        let solver = LBFGS::new(linesearch, 8).with_tolerance_grad(TOLERANCE).and_then(|s| s.with_tolerance_cost(TOLERANCE)).ok()?;
         // A failed line search still leaves the start usable.
         if let Ok(result) = Executor::new(&objective, solver).configure(|s| s.param(init.clone()).max_iters(max_iterations)).run() {
             if let Some(p) = result.state().get_best_param() {
@@ -498,8 +488,7 @@ pub fn choose_cbd_hyperparameters(
     let coarse_table = (coarse_rows.len() < used.len()).then(|| PairTable::new(nominal, &used.subset(&coarse_rows), norm));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {
-        let mut found: Vec<_> =
-            from.iter().filter_map(|(_, p)| minimise(table, &lower, &upper, p, iterations, &evaluations)).collect();
+        let mut found: Vec<_> = from.iter().filter_map(|(_, p)| minimise(table, &lower, &upper, p, iterations, &evaluations)).collect();
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found
     };
