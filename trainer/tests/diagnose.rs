@@ -119,7 +119,11 @@ fn six_joint_compliance_and_harmonic_are_named_and_nothing_else() {
         });
         let (train, test) = (six_data(&arm, 400, 10 * seed), six_data(&arm, 300, 10 * seed + 1));
         let d = diagnose(&nominal, &train, Some(&test), None, &DiagnoseOptions::default()).unwrap();
-        eprintln!("seed {seed}: {}; dropped {:?}", summary(&d), d.dropped.iter().map(|x| (&x.name, x.p_value, x.cv_gain)).collect::<Vec<_>>());
+        eprintln!(
+            "seed {seed}: {}; dropped {:?}",
+            summary(&d),
+            d.dropped.iter().map(|x| (&x.name, x.p_value, x.cv_gain)).collect::<Vec<_>>()
+        );
         let mut named: Vec<(GroupKind, Option<usize>)> = d.physical_effects().iter().map(|f| (f.kind, f.joint)).collect();
         named.sort_by_key(|(k, j)| (format!("{k:?}"), *j));
         let mut expected = vec![(GroupKind::GravityCompliance, Some(1)), (GroupKind::Transmission { harmonic: 1 }, Some(3))];

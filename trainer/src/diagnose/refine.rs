@@ -124,3 +124,36 @@ impl Refined {
         super::f_test::f_tail(w / rank as f64, rank as f64, self.dof)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn refined(values: Vec<f64>, covariance: Vec<f64>, dof: f64) -> Refined {
+        let p = values.len();
+        let std_errors = (0..p).map(|k| covariance[k * p + k].sqrt()).collect();
+        Refined { model: NominalModel::planar(&[1.0]).unwrap(), values, std_errors, covariance, dof, sse: 0.0, iterations: 0 }
+    }
+
+    #[test]
+    fn wald_test_of_one_parameter_is_the_normal_tail_of_its_z_score() {
+        // Many degrees of freedom: F(1, ∞) = z², P(|Z| ≥ 3) = 0.0026998, P(|Z| ≥ 1) = 0.3173.
+        let three = refined(vec![3.0, 5.0], vec![1.0, 0.0, 0.0, 4.0], 1e7);
+        assert!((three.wald_p_value(&[0]) - 0.0026998).abs() < 1e-5, "{}", three.wald_p_value(&[0]));
+        let one = refined(vec![2.0], vec![4.0], 1e7);
+        assert!((one.wald_p_value(&[0]) - 0.3173).abs() < 1e-3, "{}", one.wald_p_value(&[0]));
+    }
+
+    #[test]
+    fn wald_test_of_a_group_uses_the_covariance_block() {
+        // Two parameters, each 2 SE from zero. Independent: χ²₂ = 8, P = e^{−4} = 0.0183 (the
+        // F(2, ∞) tail). Strongly anticorrelated estimates (ρ = −0.99) know their sum 10× better
+        // than each: both positive is then jointly far more significant than each alone.
+        let independent = refined(vec![2.0, 2.0], vec![1.0, 0.0, 0.0, 1.0], 1e7);
+        assert!((independent.wald_p_value(&[0, 1]) - (-4.0f64).exp()).abs() < 1e-4, "{}", independent.wald_p_value(&[0, 1]));
+        let correlated = refined(vec![2.0, 2.0], vec![1.0, -0.99, -0.99, 1.0], 1e7);
+        assert!(correlated.wald_p_value(&[0, 1]) < 1e-10, "{}", correlated.wald_p_value(&[0, 1]));
+        // No parameters: nothing to test.
+        assert_eq!(independent.wald_p_value(&[]), 1.0);
+    }
+}
