@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Fuzz smoke test: runs every cargo-fuzz target in fuzz/ for a few seconds from the committed seed
-# corpus. Skips (exit 0) when cargo-fuzz or a nightly toolchain is missing; fails on a crash, a
-# leak, a timeout or a build error of the fuzz crate.
+# Fuzz smoke test: runs every cargo-fuzz target in fuzz/ for a minute from the committed seed
+# corpus. Installs a nightly toolchain and cargo-fuzz when missing (a fresh CI machine has
+# neither); fails on a crash, a leak, a timeout, a build error of the fuzz crate, or a target
+# that did not run.
 #
-#   FUZZ_SECONDS=5 (per target)   FUZZ_TARGETS="blob_eval csv_import"
+#   FUZZ_SECONDS=60 (per target)   FUZZ_TARGETS="blob_eval csv_import model_urdf"
 #
 # The committed corpus is only read: libFuzzer writes the inputs it finds into a scratch directory
 # (the first corpus argument), so CI never grows fuzz/corpus/. Crash reproducers land in
@@ -13,16 +14,16 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
 
-seconds="${FUZZ_SECONDS:-5}"
-targets="${FUZZ_TARGETS:-blob_eval csv_import}"
+seconds="${FUZZ_SECONDS:-60}"
+targets="${FUZZ_TARGETS:-blob_eval csv_import model_urdf}"
 
-if ! command -v cargo >/dev/null 2>&1 || ! cargo +nightly --version >/dev/null 2>&1; then
-    echo "fuzz-smoke: skipped — no nightly toolchain (rustup toolchain install nightly)"
-    exit 0
+if ! cargo +nightly --version >/dev/null 2>&1; then
+    echo "fuzz-smoke: installing a nightly toolchain"
+    rustup toolchain install nightly --profile minimal
 fi
 if ! cargo fuzz --version >/dev/null 2>&1; then
-    echo "fuzz-smoke: skipped — cargo-fuzz is not installed (cargo install cargo-fuzz)"
-    exit 0
+    echo "fuzz-smoke: installing cargo-fuzz"
+    cargo install cargo-fuzz --locked
 fi
 
 cd fuzz
@@ -45,5 +46,13 @@ for t in $targets; do
         echo "fuzz-smoke: $t FAILED (exit $status); reproducer in fuzz/artifacts/$t/"
         exit 1
     fi
+    # A target that ran no inputs did not test anything: fail rather than pass silently.
+    runs="$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -n 1)"
+    if [ -z "$runs" ] || [ "$runs" -eq 0 ]; then
+        tail -n 30 "$log"
+        echo "fuzz-smoke: $t executed no inputs"
+        exit 1
+    fi
+    echo "fuzz-smoke: $t executed $runs inputs in ${seconds} s"
 done
 echo "fuzz-smoke: all targets ran ${seconds} s without a crash"
