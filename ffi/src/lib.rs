@@ -19,11 +19,11 @@
 extern crate std;
 
 #[cfg(test)]
-mod tests;
-#[cfg(test)]
 #[path = "../../examples/firmware/src/shared.rs"]
 #[allow(dead_code)]
 mod shared;
+#[cfg(test)]
+mod tests;
 
 use cbd_runtime::protocol::{decode, DecodeError, FORMAT_VERSION, MAX_JOINTS, MAX_TASK_DIM, OLDEST_FORMAT_VERSION};
 use cbd_runtime::real::Real;

@@ -23,7 +23,11 @@ fn header_is_current() {
     }
     let current = std::fs::read_to_string(&path).unwrap_or_default();
     if current != generated {
-        let line = current.lines().zip(generated.lines()).position(|(a, b)| a != b).unwrap_or(current.lines().count().min(generated.lines().count()));
+        let line = current
+            .lines()
+            .zip(generated.lines())
+            .position(|(a, b)| a != b)
+            .unwrap_or(current.lines().count().min(generated.lines().count()));
         panic!(
             "ffi/include/cbd.h is out of date (first difference at line {}); regenerate it with\n    CBD_FFI_WRITE_HEADER=1 cargo test -p cbd-ffi header\nand commit it",
             line + 1
@@ -123,7 +127,10 @@ fn error_paths_return_status_codes() {
         let (mut pos, mut jac) = ([0.0; 3], [0.0; 21]);
         let q = [0.1, 0.2];
         assert_eq!(cbd_evaluate(h, q.as_ptr(), 2, pos.as_mut_ptr(), 3, jac.as_mut_ptr(), 21, null), CBD_ERR_BAD_HANDLE);
-        assert_eq!(cbd_evaluate(core::ptr::null_mut(), q.as_ptr(), 2, pos.as_mut_ptr(), 3, jac.as_mut_ptr(), 21, null), CBD_ERR_NULL_POINTER);
+        assert_eq!(
+            cbd_evaluate(core::ptr::null_mut(), q.as_ptr(), 2, pos.as_mut_ptr(), 3, jac.as_mut_ptr(), 21, null),
+            CBD_ERR_NULL_POINTER
+        );
         assert_eq!(cbd_task_dim(core::ptr::null()), 0);
         // Evaluation errors.
         let (s, h) = load(&blob, &mut storage, bytes);

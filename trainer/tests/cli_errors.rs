@@ -664,7 +664,8 @@ fn fit_absurd_nominal_models_warn() {
     let (g4, _, _) = rr_fixture();
     for (lengths, needle) in [("[0, 0]", "barely moves"), ("[-1e30, 0.5]", "wrong unit, DH table or columns?")] {
         let model = write(&dir, "m.toml", PLANAR_RR_MODEL.replace("LENGTHS", lengths));
-        let out = cbd(&dir, &["fit", "--model", &model, "--data", g4.to_str().unwrap(), "--out", "a.blob", "--max-iterations", "1", "--quiet"]);
+        let out =
+            cbd(&dir, &["fit", "--model", &model, "--data", g4.to_str().unwrap(), "--out", "a.blob", "--max-iterations", "1", "--quiet"]);
         let err = stderr(&out);
         assert!(!err.contains("panicked"), "{err}");
         assert!(err.contains(&format!("warning: {}: the nominal model", g4.display())) && err.contains(needle), "{lengths}:\n{err}");
@@ -679,9 +680,11 @@ fn fit_absurd_model_values_name_the_field_not_the_flow() {
     let (g4, _, _) = rr_fixture();
     let g4 = g4.to_str().unwrap();
     let model = write(&dir, "m.toml", PLANAR_RR_MODEL.replace("LENGTHS", "[1e300, 0.5]"));
-    let err = fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4, "--out", "a.blob", "--quiet"]), &["m.toml", "lengths[1] = 1e300"]);
+    let err =
+        fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4, "--out", "a.blob", "--quiet"]), &["m.toml", "lengths[1] = 1e300"]);
     assert!(!err.contains("diverged"), "{err}");
-    let scaled = format!("{}\n[[effects]]\ntype = \"encoder_scale\"\njoint = 1\nscale = 1e300\n", PLANAR_RR_MODEL.replace("LENGTHS", "[1, 0.5]"));
+    let scaled =
+        format!("{}\n[[effects]]\ntype = \"encoder_scale\"\njoint = 1\nscale = 1e300\n", PLANAR_RR_MODEL.replace("LENGTHS", "[1, 0.5]"));
     let model = write(&dir, "s.toml", scaled);
     let err = fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4, "--out", "a.blob", "--quiet"]), &["s.toml", "scale = 1e300"]);
     assert!(!err.contains("diverged"), "{err}");
@@ -698,8 +701,15 @@ fn blob_and_urdf_reads_are_capped() {
     fails_with(&out, &["/dev/zero", "larger than 64 MiB"]);
     let big = std::fs::File::create(dir.join("big.urdf")).unwrap();
     big.set_len(9 << 20).unwrap();
-    let model = write(&dir, "u.toml", "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"big.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n");
-    fails_with(&cbd(&dir, &["fit", "--model", &model, "--data", g4.to_str().unwrap(), "--out", "a.blob"]), &["big.urdf", "larger than 8 MiB"]);
+    let model = write(
+        &dir,
+        "u.toml",
+        "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"big.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n",
+    );
+    fails_with(
+        &cbd(&dir, &["fit", "--model", &model, "--data", g4.to_str().unwrap(), "--out", "a.blob"]),
+        &["big.urdf", "larger than 8 MiB"],
+    );
 }
 
 /// Item 5: nothing checked the size up front: `simulate --grid 100000` and a huge `--count`

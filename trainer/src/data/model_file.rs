@@ -342,10 +342,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
                     return Err(model_err(format!("[chain] joint {}: {name} is not finite", i + 1)));
                 }
                 if v.abs() > MAX_MAGNITUDE {
-                    return Err(model_err(format!(
-                        "[chain] joint {}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)",
-                        i + 1
-                    )));
+                    return Err(model_err(format!("[chain] joint {}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)", i + 1)));
                 }
             }
             let kind = match j.kind.unwrap_or(RawKind::Revolute) {
