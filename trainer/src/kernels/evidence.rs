@@ -307,7 +307,7 @@ struct Objective<'a> {
 /// Where L-BFGS stops: a change of the objective, or a gradient, below 1e-4 nats per unknown. Near
 /// the optimum of nearly singular kernels the evaluation's own rounding is about that large (on the
 /// noisy RR grid, N m = 512: ±1 nat between evaluations at the same θ to 3 digits), and a tighter
-/// tolerance only chases it (measured: same choice, 30 % more evaluations).
+/// tolerance only chases it (measured at 1e-6: 27 % more evaluations, test error within 0.4 %).
 const TOLERANCE: f64 = 1e-4;
 
 /// Value returned where K is not positive definite: finite, so that the line search backtracks.
