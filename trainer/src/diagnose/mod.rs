@@ -159,7 +159,6 @@ impl Diagnosis {
 /// Why an effect the selection chose was dropped after refinement.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum DropReason {
-    Kept,
     /// Its estimate is within 3 standard errors of zero (Wald p > 0.0027).
     NotSignificant,
     /// Added last, it lowers the cross-validated error by less than the margin.
@@ -181,28 +180,30 @@ pub struct DroppedEffect {
 /// Smallest Wald p-value an effect may have: 3 standard errors (two-sided normal tail).
 pub const SIGNIFICANCE: f64 = 0.0027;
 
-/// Whether group `g` (among the refined `chosen_cols`) is significant and earns its place.
+/// Group `g` (among the refined `chosen_cols`, whose cross-validated RMS is `cv_with`) when it is
+/// not significant or does not earn its place; `None` when it stays.
 fn judge(
     g: usize,
     group_cols: &[Vec<usize>],
     chosen_cols: &[usize],
     refined: &refine::Refined,
     problem: &LinearProblem,
+    cv_with: f64,
     margin: f64,
-) -> DroppedEffect {
+) -> Option<DroppedEffect> {
     let positions: Vec<usize> = group_cols[g].iter().filter_map(|c| chosen_cols.iter().position(|k| k == c)).collect();
     let p_value = refined.wald_p_value(&positions);
     let without: Vec<usize> = chosen_cols.iter().copied().filter(|c| !group_cols[g].contains(c)).collect();
-    let (cv_with, cv_without) = (problem.cv_rms(chosen_cols), problem.cv_rms(&without));
-    let cv_gain = 1.0 - cv_with / cv_without.max(f64::MIN_POSITIVE);
+    let cv_gain = 1.0 - cv_with / problem.cv_rms(&without).max(f64::MIN_POSITIVE);
+    // Written so that a NaN p-value (a singular covariance block) is not significant.
     let reason = if !(p_value <= SIGNIFICANCE) {
         DropReason::NotSignificant
     } else if cv_gain < margin {
         DropReason::NoCrossValidatedGain
     } else {
-        DropReason::Kept
+        return None;
     };
-    DroppedEffect { group: g, name: String::new(), reason, p_value, cv_gain }
+    Some(DroppedEffect { group: g, name: String::new(), reason, p_value, cv_gain })
 }
 
 /// Splits `data` into (fit, held-out) rows by a seeded permutation.
@@ -306,11 +307,11 @@ pub fn diagnose(
         let (start, full_sse) = problem.fit(&chosen_cols);
         let chosen_params: Vec<Param> = chosen_cols.iter().map(|&k| params[k]).collect();
         let refined = refine::refine(model, &train, &chosen_params, &start, options.gauss_newton_iterations)?;
+        let cv_with = problem.cv_rms(&chosen_cols);
         let weakest = kept
             .iter()
             .filter(|&&g| groups[g].kind != GroupKind::Geometric)
-            .map(|&g| judge(g, &group_cols, &chosen_cols, &refined, &problem, options.selection.margin))
-            .filter(|d| d.reason != DropReason::Kept)
+            .filter_map(|&g| judge(g, &group_cols, &chosen_cols, &refined, &problem, cv_with, options.selection.margin))
             .max_by(|a, b| a.p_value.total_cmp(&b.p_value));
         match weakest {
             Some(mut d) => {

@@ -121,7 +121,7 @@ fn dropped_text(d: &super::DroppedEffect) -> String {
         DropReason::NotSignificant => {
             format!("{} (within 3 standard errors of zero: p = {:.2e} > {})", d.name, d.p_value, super::SIGNIFICANCE)
         }
-        DropReason::NoCrossValidatedGain | DropReason::Kept => {
+        DropReason::NoCrossValidatedGain => {
             format!("{} (added last it lowers the cross-validated RMS by {:.1} %)", d.name, 100.0 * d.cv_gain)
         }
     }
