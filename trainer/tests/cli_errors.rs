@@ -733,4 +733,16 @@ fn too_large_for_memory_is_refused_up_front() {
         .unwrap();
     fails_with(&out, &["big.csv", "20000 measurements", "--max-rows"]);
     assert!(!dir.join("big.blob").exists());
+    // `compare` fits CbD and the hybrids on every training row: refused the same way, before any fit.
+    std::fs::write(
+        dir.join("rr.toml"),
+        "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = [1.0, 0.5]\n[measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\n",
+    )
+    .unwrap();
+    let out = Command::new("sh")
+        .args(["-c", &format!("ulimit -v 6000000 && exec {CBD} compare --model rr.toml --train big.csv --test big.csv")])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    fails_with(&out, &["big.csv", "20000 measurements", "fewer training rows"]);
 }

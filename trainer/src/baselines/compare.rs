@@ -111,6 +111,25 @@ pub fn compare_files(
     search: &SearchOptions,
     cbd: Option<CorrectionFitter>,
 ) -> Result<(Comparison, Vec<String>), crate::data::model_file::ImportError> {
+    let inputs = read_compare_files(model_file, train_csv, test_csv)?;
+    Ok((compare_peers(&inputs.nominal, &inputs.train.measurements, &inputs.test.measurements, search, cbd), inputs.warnings))
+}
+
+/// What `compare_files` reads: the model file's nominal model, both measurement files (with their
+/// line numbers) and the import warnings.
+pub struct CompareInputs {
+    pub nominal: NominalModel,
+    pub train: crate::data::csv_import::ImportedMeasurements,
+    pub test: crate::data::csv_import::ImportedMeasurements,
+    pub warnings: Vec<String>,
+}
+
+/// Reads a comparison's model file and measurement files (no fitting yet).
+pub fn read_compare_files(
+    model_file: impl AsRef<std::path::Path>,
+    train_csv: impl AsRef<std::path::Path>,
+    test_csv: impl AsRef<std::path::Path>,
+) -> Result<CompareInputs, crate::data::model_file::ImportError> {
     use crate::data::csv_import::read_measurements;
     let model = crate::data::model_file::load_model_file(model_file)?;
     let spec = model.column_spec()?;
@@ -118,7 +137,7 @@ pub fn compare_files(
     let test = read_measurements(test_csv.as_ref(), &spec)?;
     let mut warnings = train.warnings(train_csv.as_ref());
     warnings.extend(test.warnings(test_csv.as_ref()));
-    Ok((compare_peers(&model.nominal, &train.measurements, &test.measurements, search, cbd), warnings))
+    Ok(CompareInputs { nominal: model.nominal, train, test, warnings })
 }
 
 fn nominal_predictor(model: NominalModel) -> Predictor {

@@ -1,7 +1,7 @@
 //! `cbd compare`: every peer on the same data in one run — nominal, parametric DH calibration,
 //! kernel ridge (GP) regression of the residual, Calibration by Diffeomorphisms, and the hybrids.
 
-use crate::baselines::compare::{compare_files, FittedCorrection, Predictor};
+use crate::baselines::compare::{compare_peers, read_compare_files, FittedCorrection, Predictor};
 use crate::data::Measurements;
 use crate::kernels::hyperparameters::SearchOptions;
 use cbd_protocol::NominalModel;
@@ -59,10 +59,24 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     settings.verbose = false;
     let search = SearchOptions::default();
     let fitter = cbd_fitter(&settings);
-    let (comparison, warnings) = compare_files(&args.model, &args.train, &args.test, &search, Some(&fitter)).map_err(|e| e.to_string())?;
+    let inputs = read_compare_files(&args.model, &args.train, &args.test).map_err(|e| e.to_string())?;
+    let mut warnings = inputs.warnings;
+    for (path, imported) in [(&args.train, &inputs.train), (&args.test, &inputs.test)] {
+        warnings.extend(crate::data::nominal_check::nominal_warnings(&inputs.nominal, &imported.measurements, &imported.lines, path)?);
+    }
     for w in warnings {
         eprintln!("warning: {w}");
     }
+    // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
+    let train = &inputs.train.measurements;
+    crate::cli::memory::check_fit(
+        train.len(),
+        train.task_dim,
+        crate::cli::memory::available_bytes(),
+        "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
+    )
+    .map_err(|e| format!("{}: {e}", args.train.display()))?;
+    let comparison = compare_peers(&inputs.nominal, train, &inputs.test.measurements, &search, Some(&fitter));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     println!("{}", comparison.table(unit));
     for r in &comparison.rows {
