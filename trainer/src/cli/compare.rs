@@ -69,13 +69,7 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     }
     // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
     let train = &inputs.train.measurements;
-    crate::cli::memory::check_fit(
-        train.len(),
-        train.task_dim,
-        crate::cli::memory::available_bytes(),
-        "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
-    )
-    .map_err(|e| format!("{}: {e}", args.train.display()))?;
+    crate::cli::memory::check_fit_of(&args.train, train, "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)")?;
     let comparison = compare_peers(&inputs.nominal, train, &inputs.test.measurements, &search, Some(&fitter));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     println!("{}", comparison.table(unit));

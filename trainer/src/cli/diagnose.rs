@@ -73,8 +73,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     let data = read(&args.data)?;
     if !args.no_cbd {
         // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
-        crate::cli::memory::check_fit(data.len(), data.task_dim, crate::cli::memory::available_bytes(), "--no-cbd skips the CbD rows")
-            .map_err(|e| format!("{}: {e}", args.data.display()))?;
+        crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?;
     }
     let test = args.test.as_ref().map(read).transpose()?;
     let mut options = DiagnoseOptions::default();

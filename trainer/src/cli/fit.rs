@@ -203,13 +203,7 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         eprintln!("warning: {w}");
     }
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);
-    crate::cli::memory::check_fit(
-        data.len(),
-        data.task_dim,
-        crate::cli::memory::available_bytes(),
-        "--max-rows N fits an evenly spaced subset of N rows",
-    )
-    .map_err(|e| format!("{}: {e}", args.data.display()))?;
+    crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?;
     let mut settings = args.solver.settings()?;
     settings.dh_first = args.dh_first;
     let calibration = crate::calibrate::calibrate(&nominal, &data, &settings).map_err(|e| format!("{}: {e}", args.data.display()))?;

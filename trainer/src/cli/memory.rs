@@ -77,6 +77,12 @@ pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>, remedy: &
     ))
 }
 
+/// `check_fit` for all rows of `data`, read from `file`, against what this process may use; the
+/// error names the file.
+pub fn check_fit_of(file: &std::path::Path, data: &crate::data::Measurements, remedy: &str) -> Result<(), String> {
+    check_fit(data.len(), data.task_dim, available_bytes(), remedy).map_err(|e| format!("{}: {e}", file.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
