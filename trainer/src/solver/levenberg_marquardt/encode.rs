@@ -1,0 +1,38 @@
+//! The fitted momenta as a blob, checked against the runtime before it is handed out.
+
+use super::{CbdOptions, FitError};
+use crate::data::Measurements;
+use cbd_protocol::{f64_le_bytes, F64Slice, Model, NominalModel};
+
+/// The blob for `momenta` (all N·m, internal units) and the largest |runtime − trainer| at the
+/// training points relative to the largest |position|.
+pub(super) fn encode_checked(
+    nominal: &NominalModel,
+    data: &Measurements,
+    opts: &CbdOptions,
+    momenta: &[f64],
+    train_predictions: &[f64],
+) -> Result<(Vec<u8>, f64), FitError> {
+    let (points, momenta) = (f64_le_bytes(&data.joints), f64_le_bytes(momenta));
+    let model = Model {
+        nominal: nominal.clone(),
+        normalisation: opts.normalisation.clone(),
+        joint_kernel: opts.joint_kernel.clone(),
+        task_kernel: opts.task_kernel,
+        integrator: opts.integrator,
+        momentum_law: opts.law,
+        sigma: opts.sigma,
+        n_points: data.len() as u32,
+        points: F64Slice::from_le_bytes(&points),
+        momenta: F64Slice::from_le_bytes(&momenta),
+    };
+    let blob = cbd_protocol::encode_to_vec(&model).map_err(|e| FitError::Encode(e.to_string()))?;
+    // Never hand out a blob the runtime does not reproduce.
+    let runtime = crate::predict::evaluate_blob(&blob, &data.joints).map_err(FitError::RuntimeMismatch)?;
+    let scale = train_predictions.iter().fold(0.0f64, |s, v| s.max(v.abs())).max(f64::MIN_POSITIVE);
+    let max_diff = runtime.iter().zip(train_predictions).fold(0.0f64, |s, (a, b)| s.max((a - b).abs())) / scale;
+    if !(max_diff <= 1e-12) {
+        return Err(FitError::RuntimeMismatch(format!("largest relative difference at the training points is {max_diff:e} (limit 1e-12)")));
+    }
+    Ok((blob, max_diff))
+}

@@ -1,0 +1,271 @@
+//! Levenberg–Marquardt on E(P0) = ½ P0ᵀ K_lin P0 + 1/(2σ²) Σ |k1(x_i) − y_i|² (energy 16).
+//!
+//! Undamped Gauss–Newton first (the regulariser keeps each step well posed; damping only after a
+//! failed step and not relaxed back to a level that failed until a step matches the model's
+//! promise), starting from the linearised model's solution; while steps shrink fast, chord steps
+//! reuse the last Jacobian's QR factors (a flow and two triangular applications instead of a
+//! tangent and a factorisation). For large N the momenta are searched in K_lin's dominant
+//! eigenspace (`SolverMethod`, `solver::subspace`), with damping that is a ball in momentum space.
+
+mod encode;
+mod iterate;
+mod problem;
+mod search_space;
+
+use super::regulariser::regulariser_matrix;
+use crate::data::Measurements;
+use crate::flow::ControlPoints;
+use cbd_protocol::{Integrator, JointKernel, MomentumLaw, NominalModel, Normalisation, TaskKernel};
+use faer::Par;
+use problem::{cancellation_of, Problem};
+use search_space::SearchSpace;
+
+use std::time::Instant;
+
+/// Everything that defines a CbD fit besides the data.
+#[derive(Debug, Clone)]
+pub struct CbdOptions {
+    pub joint_kernel: JointKernel,
+    pub task_kernel: TaskKernel,
+    /// Noise level σ in internal units.
+    pub sigma: f64,
+    pub integrator: Integrator,
+    pub law: MomentumLaw,
+    pub normalisation: Normalisation,
+    pub max_iterations: usize,
+    /// Stop when an accepted step lowers the energy by less than this fraction.
+    pub relative_tolerance: f64,
+    /// Or when an exact Gauss–Newton step moves no training prediction by more than this, in
+    /// internal units (normalised: the workspace's scale is about 1).
+    pub prediction_tolerance: f64,
+    /// Threads for the tangent's column chunks and the factorisations (results do not depend on it).
+    pub threads: usize,
+    /// Which momenta the solver searches over (see [`SolverMethod`]).
+    pub method: SolverMethod,
+    /// Print one line per iteration to stderr.
+    pub verbose: bool,
+}
+
+impl CbdOptions {
+    /// The paper's RR kernels (DESIGN.md §2) with our default scheme (Euler × 2) and σ = 1e-6.
+    pub fn paper_rr() -> Self {
+        CbdOptions {
+            joint_kernel: JointKernel {
+                gamma: 8.0,
+                axes: heapless::Vec::from_slice(&[cbd_protocol::JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("2 axes"),
+            },
+            task_kernel: TaskKernel { width: 1.0270 },
+            sigma: 1e-6,
+            // Two Euler steps: a genuine (transported) flow that generalises best on the RR
+            // benchmark; more stages add nonlinearity that the ill-conditioned momenta amplify.
+            integrator: Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 2 },
+            // v = −K_V Jᵀ P: the linearisation is the GP with covariance K_lin (see MomentumLaw).
+            law: MomentumLaw::Hamiltonian,
+            normalisation: Normalisation::IDENTITY,
+            max_iterations: 30,
+            relative_tolerance: 1e-5,
+            prediction_tolerance: 1e-10,
+            threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
+            method: SolverMethod::Auto,
+            verbose: false,
+        }
+    }
+}
+
+/// How the solver parametrises the N·m initial momenta.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolverMethod {
+    /// `Dense` up to `DENSE_MAX_UNKNOWNS` unknowns; above, `Eigenspace` when K_lin's dominant
+    /// eigenspace is small next to N·m (it is for smooth kernels: its size does not grow with N),
+    /// else `Dense`.
+    Auto,
+    /// All N·m momenta: exact Jacobians propagate N·m tangent directions, steps factor the
+    /// 2Nm × Nm stacked matrix. O(N³) per iteration.
+    Dense,
+    /// P0 = S c with S the r dominant eigenvectors of K_lin (`solver::subspace`): Jacobians
+    /// propagate r directions, steps factor an (Nm + r) × r matrix. O(N² r) per iteration.
+    Eigenspace,
+}
+
+/// `SolverMethod::Auto` solves problems up to this many unknowns (N·m) densely.
+pub const DENSE_MAX_UNKNOWNS: usize = 1024;
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct IterationLog {
+    pub iteration: usize,
+    pub energy: f64,
+    pub regulariser: f64,
+    /// RMS training error, user units.
+    pub train_rms: f64,
+    pub damping: f64,
+    pub seconds: f64,
+}
+
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FitReport {
+    pub iterations: usize,
+    pub converged: bool,
+    pub stop_reason: String,
+    pub log: Vec<IterationLog>,
+    pub seconds: f64,
+    pub seconds_flow: f64,
+    pub seconds_tangent: f64,
+    pub seconds_solve: f64,
+    /// Exact Jacobians formed by the tangent flow (the first, at P0 = 0, is in closed form).
+    pub tangents: usize,
+    /// "dense" (all N·m momenta) or "eigenspace" (K_lin's dominant eigenspace).
+    pub method: String,
+    /// Unknowns of the search: N·m, or the eigenspace's dimension r.
+    pub unknowns: usize,
+    /// Finding the eigenspace (part of `seconds_solve`).
+    pub seconds_basis: f64,
+    /// Largest |runtime − trainer| at the training points relative to the largest |position|.
+    pub max_runtime_trainer_diff: f64,
+    /// How much the momenta cancel in the linear response: max_i Σ_j |K_ij P_j| / max_i |Σ_j K_ij P_j|
+    /// (K = K_lin; NaN in the eigenspace). Rounding in the runtime is amplified by about this much:
+    /// above ~1e5 the f32 runtime loses most of its 7 digits.
+    pub cancellation: f64,
+}
+
+/// A fitted model: the blob and what it took.
+#[derive(Debug, Clone)]
+pub struct CbdFit {
+    pub blob: Vec<u8>,
+    /// N × m optimal initial momenta, internal units.
+    pub momenta: Vec<f64>,
+    /// k1 at the training points according to the trainer, user units.
+    pub train_predictions: Vec<f64>,
+    pub report: FitReport,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum FitError {
+    TooFewMeasurements {
+        got: usize,
+        needed: usize,
+    },
+    DimensionMismatch {
+        what: &'static str,
+        expected: usize,
+        found: usize,
+    },
+    /// The flow produced non-finite values even with the smallest step LM tried.
+    Diverged {
+        iteration: usize,
+        damping: f64,
+    },
+    /// The damped normal equations could not be factored.
+    Singular {
+        iteration: usize,
+        damping: f64,
+    },
+    Encode(String),
+    /// The runtime could not load the blob or does not reproduce the training predictions.
+    RuntimeMismatch(String),
+}
+
+impl std::fmt::Display for FitError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FitError::TooFewMeasurements { got, needed } => write!(f, "too few measurements: {got}, need at least {needed}"),
+            FitError::DimensionMismatch { what, expected, found } => write!(f, "{what}: expected {expected}, found {found}"),
+            FitError::Diverged { iteration, damping } => write!(
+                f,
+                "the flow diverged at iteration {iteration} even with damping {damping:.1e}: the kernels are too wide or σ too small for these data"
+            ),
+            FitError::Singular { iteration, damping } => {
+                write!(f, "the normal equations are singular at iteration {iteration} (damping {damping:.1e})")
+            }
+            FitError::Encode(e) => write!(f, "could not encode the model: {e}"),
+            FitError::RuntimeMismatch(e) => write!(f, "the runtime does not reproduce the fit: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for FitError {}
+
+/// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
+/// depend on how many threads the pool running it has (`Par::Seq` would round differently).
+pub const FIXED_SPLIT: Par = Par::Rayon(match std::num::NonZeroUsize::new(2) {
+    Some(n) => n,
+    None => unreachable!(),
+});
+/// Fits the initial momenta to `data` (user units) on top of `nominal`, on `opts.threads` threads.
+pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
+    super::allocator::keep_freed_memory();
+    crate::flow::with_threads(opts.threads, || fit_in_pool(nominal, data, opts))
+}
+
+fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
+    let start = Instant::now();
+    check_shapes(nominal, data)?;
+    let m = nominal.task_dim();
+    let norm = &opts.normalisation;
+    let target: Vec<f64> =
+        data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale)).collect();
+    let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
+    // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
+    // Jacobian stays exact everywhere and no tangent is ever needed.
+    let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
+    // One Euler step of a Hamiltonian law is solved in closed form, (K_lin + σ² I)⁻¹ r: one Cholesky
+    // of all N·m momenta, exact, where an eigenspace would drop the directions between σ² and its cutoff.
+    let closed_form = linear_scheme && opts.law.joint_field_sign() < 0.0 && opts.method == SolverMethod::Auto;
+    let t0 = Instant::now();
+    let space = SearchSpace::new(opts.method, regulariser_matrix(&cp), closed_form);
+    let seconds_basis = t0.elapsed().as_secs_f64();
+    let (method, dim) = (space.method(), space.dim());
+    if opts.verbose {
+        eprintln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
+    }
+    let problem = Problem::new(&cp, target, opts.sigma, space);
+    problem.timers.solve.set(seconds_basis);
+    let mut recorder = iterate::Recorder::new(opts, start);
+    let outcome = iterate::minimise(&problem, opts, linear_scheme, &mut recorder)?;
+    recorder.finish(&outcome.stop_reason);
+
+    let k1 = outcome.current.flow.positions(cp.dims);
+    let train_predictions: Vec<f64> =
+        k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
+    let cancellation = if problem.space.basis.is_none() { cancellation_of(&problem.space.k_reg, &outcome.p) } else { f64::NAN };
+    let momenta = problem.space.momenta_of(&outcome.p);
+    let (blob, max_runtime_trainer_diff) = encode::encode_checked(nominal, data, opts, &momenta, &train_predictions)?;
+    let timers = &problem.timers;
+    Ok(CbdFit {
+        blob,
+        momenta,
+        train_predictions,
+        report: FitReport {
+            iterations: outcome.iterations,
+            converged: outcome.converged,
+            stop_reason: outcome.stop_reason,
+            log: recorder.log,
+            seconds: start.elapsed().as_secs_f64(),
+            seconds_flow: timers.flow.get(),
+            seconds_tangent: timers.tangent.get(),
+            seconds_solve: timers.solve.get(),
+            tangents: timers.tangents.get(),
+            method: method.into(),
+            unknowns: dim,
+            seconds_basis,
+            max_runtime_trainer_diff,
+            cancellation,
+        },
+    })
+}
+
+/// The data's shape against the nominal model's, and enough rows to fit.
+fn check_shapes(nominal: &NominalModel, data: &Measurements) -> Result<(), FitError> {
+    let (n, m) = (nominal.n_joints(), nominal.task_dim());
+    if data.n_joints != n {
+        return Err(FitError::DimensionMismatch { what: "joints per measurement", expected: n, found: data.n_joints });
+    }
+    if data.task_dim != m {
+        return Err(FitError::DimensionMismatch { what: "position coordinates per measurement", expected: m, found: data.task_dim });
+    }
+    if data.len() < 2 {
+        return Err(FitError::TooFewMeasurements { got: data.len(), needed: 2 });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
