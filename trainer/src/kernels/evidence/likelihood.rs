@@ -1,0 +1,21 @@
+//! The evidence: negative log marginal likelihood of the linearised model and its gradient.
+
+use super::table::{PairTable, Theta};
+
+impl PairTable {
+    /// Negative log marginal likelihood (normalised units) and its gradient with respect to θ's
+    /// packed form; `None` when K is not positive definite.
+    pub(crate) fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)> {
+        let theta = Theta::unpack(packed, self.n);
+        let dim = self.dim();
+        let f = self.factor(&theta)?;
+        let logdet: f64 = 2.0 * (0..dim).map(|i| f.l[(i, i)].ln()).sum::<f64>();
+        let value = 0.5 * f.quad + 0.5 * logdet + 0.5 * dim as f64 * (2.0 * std::f64::consts::PI).ln();
+        if !value.is_finite() {
+            return None;
+        }
+        // ∂ nlml / ∂θ = ½ tr(Q ∂K/∂θ), Q = K⁻¹ − α αᵀ.
+        let grad = self.half_trace_gradient(&theta, &f, |r, c| f.inv_at(r, c) - f.alpha[(r, 0)] * f.alpha[(c, 0)]);
+        Some((value, grad))
+    }
+}

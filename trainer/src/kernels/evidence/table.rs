@@ -1,0 +1,218 @@
+//! The kernel matrix of CbD's linearised model, tabulated per pair of rows so that each θ costs one
+//! or two `exp` per pair, its factorisation, and the gradient of any criterion of the form ½ tr(Q dK).
+
+use crate::data::Measurements;
+use cbd_protocol::{NominalModel, Normalisation};
+use cbd_runtime::nominal::forward_kinematics;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::cholesky::llt::inverse::{inverse as llt_inverse, inverse_scratch as llt_inverse_scratch};
+use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::Mat;
+
+/// Per pair of rows (lower triangle, i ≥ j, row-major): the joint kernel's per-axis exponent terms,
+/// J_i J_jᵀ and |k0_i − k0_j|², normalised units. Each likelihood evaluation then costs one or two
+/// `exp` per pair.
+pub(crate) struct PairTable {
+    pub(super) n: usize,
+    pub(super) m: usize,
+    pub(super) count: usize,
+    pub(super) periodic: Vec<bool>,
+    /// Per pair, per axis: cos Δ − 1 (periodic) or −Δ²/2 (Gaussian).
+    pub(super) axis_terms: Vec<f64>,
+    /// Per pair: J_i J_jᵀ, m × m row-major.
+    pub(super) jj: Vec<f64>,
+    pub(super) dist2: Vec<f64>,
+    /// N m residual (y − k0)/scale, row-major.
+    pub(super) residual: Vec<f64>,
+}
+
+impl PairTable {
+    pub(crate) fn new(nominal: &NominalModel, data: &Measurements, norm: &Normalisation) -> Self {
+        let (n, m, count) = (data.n_joints, data.task_dim, data.len());
+        let periodic: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
+        let kin: Vec<_> = (0..count).map(|i| forward_kinematics(nominal, data.joints(i)).normalised(norm)).collect();
+        let residual: Vec<f64> = (0..count)
+            .flat_map(|i| {
+                let (y, k) = (data.position(i), &kin[i]);
+                (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale - k.position[c])
+            })
+            .collect();
+        let pairs = count * (count + 1) / 2;
+        let (mut axis_terms, mut jj, mut dist2) =
+            (Vec::with_capacity(pairs * n), Vec::with_capacity(pairs * m * m), Vec::with_capacity(pairs));
+        for i in 0..count {
+            let xi = data.joints(i);
+            for j in 0..=i {
+                let xj = data.joints(j);
+                for d in 0..n {
+                    let delta = xi[d] - xj[d];
+                    axis_terms.push(if periodic[d] { delta.cos() - 1.0 } else { -0.5 * delta * delta });
+                }
+                for a in 0..m {
+                    for b in 0..m {
+                        jj.push((0..n).map(|d| kin[i].jacobian[a][d] * kin[j].jacobian[b][d]).sum());
+                    }
+                }
+                dist2.push((0..m).map(|c| (kin[i].position[c] - kin[j].position[c]).powi(2)).sum());
+            }
+        }
+        PairTable { n, m, count, periodic, axis_terms, jj, dist2, residual }
+    }
+
+    pub(super) fn dim(&self) -> usize {
+        self.count * self.m
+    }
+
+    /// Exponent weight of axis d: b_d, or 1/ℓ_d² (the terms hold −Δ²/2).
+    fn axis_weight(&self, d: usize, log_width: f64) -> f64 {
+        if self.periodic[d] {
+            log_width.exp()
+        } else {
+            (-2.0 * log_width).exp()
+        }
+    }
+
+    /// K_lin + σ² I for θ (normalised units), and per pair the unit kernels K̃_V, K̃_W.
+    pub(super) fn covariance(&self, theta: &Theta) -> (Mat<f64>, Vec<f64>, Vec<f64>) {
+        let (n, m) = (self.n, self.m);
+        let w: Vec<f64> = (0..n).map(|d| self.axis_weight(d, theta.log_widths[d])).collect();
+        let (gv, gw, sigma2) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp(), (2.0 * theta.log_sigma).exp());
+        let inv_2a2 = 0.5 * (-2.0 * theta.log_a).exp();
+        let dim = self.dim();
+        let mut k = Mat::<f64>::zeros(dim, dim);
+        let pairs = self.dist2.len();
+        let (mut kv_all, mut kw_all) = (Vec::with_capacity(pairs), Vec::with_capacity(pairs));
+        let mut at = 0;
+        for i in 0..self.count {
+            for j in 0..=i {
+                let f = &self.axis_terms[at * n..(at + 1) * n];
+                let kv = f.iter().zip(&w).map(|(t, w)| t * w).sum::<f64>().exp();
+                let kw = (-self.dist2[at] * inv_2a2).exp();
+                let jj = &self.jj[at * m * m..(at + 1) * m * m];
+                for a in 0..m {
+                    for b in 0..m {
+                        let v = gv * kv * jj[a * m + b] + if a == b { gw * kw } else { 0.0 };
+                        k[(i * m + a, j * m + b)] = v;
+                        k[(j * m + b, i * m + a)] = v;
+                    }
+                }
+                kv_all.push(kv);
+                kw_all.push(kw);
+                at += 1;
+            }
+        }
+        for r in 0..dim {
+            k[(r, r)] += sigma2;
+        }
+        (k, kv_all, kw_all)
+    }
+
+    /// K = K_lin + σ² I at θ factored: L, α = K⁻¹ r and K⁻¹ (lower triangle), on the solver's fixed
+    /// split (the result never depends on the thread count). None when K is not positive definite.
+    pub(super) fn factor(&self, theta: &Theta) -> Option<Factored> {
+        let dim = self.dim();
+        let (k, kv, kw) = self.covariance(theta);
+        let par = crate::solver::FIXED_SPLIT;
+        let mut l = k;
+        let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(dim, par, Default::default()));
+        cholesky_in_place(l.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default()).ok()?;
+        let lower = l.as_ref();
+        let mut alpha = Mat::from_fn(dim, 1, |i, _| self.residual[i]);
+        solve_lower_triangular_in_place(lower, alpha.as_mut(), par);
+        // rᵀ K⁻¹ r = |L⁻¹ r|², before the second solve.
+        let quad: f64 = (0..dim).map(|i| alpha[(i, 0)] * alpha[(i, 0)]).sum();
+        solve_upper_triangular_in_place(lower.transpose(), alpha.as_mut(), par);
+        // K⁻¹ = L⁻ᵀ L⁻¹, lower triangle only (faer's triangular inverse and product: n³ flops).
+        let mut inv = Mat::<f64>::zeros(dim, dim);
+        let mut mem = MemBuffer::new(llt_inverse_scratch::<f64>(dim, par));
+        llt_inverse(inv.as_mut(), lower, par, MemStack::new(&mut mem));
+        Some(Factored { l, alpha, quad, inv, kv, kw })
+    }
+
+    /// ½ tr(Q ∂K/∂θ) for every θ component, Q symmetric (given by its entries), accumulated over
+    /// the pairs: the gradient of any criterion whose differential is ½ tr(Q dK).
+    pub(super) fn half_trace_gradient(&self, theta: &Theta, f: &Factored, q: impl Fn(usize, usize) -> f64) -> Vec<f64> {
+        let (n, m, dim) = (self.n, self.m, self.dim());
+        let (gv, gw) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp());
+        let inv_a2 = (-2.0 * theta.log_a).exp();
+        let w: Vec<f64> = (0..n).map(|d| self.axis_weight(d, theta.log_widths[d])).collect();
+        let mut grad = vec![0.0; n + 4];
+        let mut at = 0;
+        for i in 0..self.count {
+            for j in 0..=i {
+                // ½ tr(Q ∂K) over both (i, j) and (j, i) blocks: ½ (2 · lower + diagonal).
+                let weight = if i == j { 0.5 } else { 1.0 };
+                let jj = &self.jj[at * m * m..(at + 1) * m * m];
+                let mut s = 0.0;
+                let mut t = 0.0;
+                for a in 0..m {
+                    for b in 0..m {
+                        s += q(i * m + a, j * m + b) * jj[a * m + b];
+                    }
+                    t += q(i * m + a, j * m + a);
+                }
+                let s = weight * s * gv * f.kv[at];
+                let t = weight * t * gw * f.kw[at];
+                let terms = &self.axis_terms[at * n..(at + 1) * n];
+                for d in 0..n {
+                    // Periodic: ∂(b f)/∂ log b = b f; Gaussian: ∂(f/ℓ²)/∂ log ℓ = −2 f/ℓ².
+                    let dexp = if self.periodic[d] { w[d] * terms[d] } else { -2.0 * w[d] * terms[d] };
+                    grad[d] += s * dexp;
+                }
+                grad[n] += s;
+                grad[n + 1] += t * self.dist2[at] * inv_a2;
+                grad[n + 2] += t;
+                at += 1;
+            }
+        }
+        let sigma2 = (2.0 * theta.log_sigma).exp();
+        // ½ tr(Q ∂K/∂ log σ), ∂K/∂ log σ = 2σ² I.
+        grad[n + 3] = sigma2 * (0..dim).map(|i| q(i, i)).sum::<f64>();
+        grad
+    }
+}
+
+/// K = K_lin + σ² I at one θ, factored.
+pub(super) struct Factored {
+    /// Cholesky factor, lower triangle.
+    pub l: Mat<f64>,
+    /// K⁻¹ r.
+    pub alpha: Mat<f64>,
+    /// rᵀ K⁻¹ r.
+    pub quad: f64,
+    /// K⁻¹, lower triangle.
+    pub inv: Mat<f64>,
+    /// Per pair, the unit kernels K̃_V and K̃_W.
+    pub kv: Vec<f64>,
+    pub kw: Vec<f64>,
+}
+
+impl Factored {
+    /// (K⁻¹)_rc from the lower triangle.
+    pub fn inv_at(&self, r: usize, c: usize) -> f64 {
+        self.inv[(r.max(c), r.min(c))]
+    }
+}
+
+
+/// θ in log form, normalised units.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Theta {
+    pub(super) log_widths: Vec<f64>,
+    pub(super) log_gamma_v: f64,
+    pub(super) log_a: f64,
+    pub(super) log_gamma_w: f64,
+    pub(super) log_sigma: f64,
+}
+
+impl Theta {
+    pub(super) fn pack(&self) -> Vec<f64> {
+        let mut v = self.log_widths.clone();
+        v.extend([self.log_gamma_v, self.log_a, self.log_gamma_w, self.log_sigma]);
+        v
+    }
+    pub(super) fn unpack(p: &[f64], n: usize) -> Self {
+        Theta { log_widths: p[..n].to_vec(), log_gamma_v: p[n], log_a: p[n + 1], log_gamma_w: p[n + 2], log_sigma: p[n + 3] }
+    }
+}
