@@ -522,6 +522,50 @@ mod tests {
         }
     }
 
+    /// The evidence's kind of kernels: one nearly flat periodic axis, a wide task kernel, a
+    /// normalised task space, momenta of the size a noise-free fit gives. Euler × 2, Hamiltonian.
+    #[test]
+    fn tangent_matches_finite_differences_for_wide_kernels_and_normalised_task_space() {
+        let nominal = crate::simulate::rr::nominal();
+        let points: Vec<f64> = crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 9, seed: 5 }, 2);
+        let mut norm = Normalisation::IDENTITY;
+        norm.task_scale = 1.18;
+        norm.task_offset[0] = 0.3;
+        norm.task_offset[1] = -0.2;
+        for (b, width, scale) in [([0.0045, 0.106], 2.16, 1.0), ([0.0045, 0.106], 2.16, 30.0), ([1.0186, 1.0186], 3.0, 10.0)] {
+            let cp = ControlPoints::new(
+                &nominal,
+                &norm,
+                points.clone(),
+                JointKernel {
+                    gamma: 0.26,
+                    axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: b[0] }, JointKernelAxis::Periodic { b: b[1] }])
+                        .unwrap(),
+                },
+                TaskKernel { width },
+                MomentumLaw::Hamiltonian,
+                Integrator { method: IntegratorMethod::Euler, steps: 2 },
+            );
+            let p0: Vec<f64> = (0..18).map(|k| scale * 0.02 * ((k * 37 % 11) as f64 - 5.0)).collect();
+            let flow = cp.integrate(&p0).unwrap();
+            let jac = position_jacobian(&cp, &flow, 2);
+            let h = 1e-6;
+            let mut worst: f64 = 0.0;
+            for dir in 0..p0.len() {
+                let (mut pa, mut pb) = (p0.clone(), p0.clone());
+                pa[dir] += h;
+                pb[dir] -= h;
+                let ya = cp.integrate(&pa).unwrap().positions(cp.dims);
+                let yb = cp.integrate(&pb).unwrap().positions(cp.dims);
+                for r in 0..ya.len() {
+                    let fd = (ya[r] - yb[r]) / (2.0 * h);
+                    worst = worst.max((fd - jac[(r, dir)]).abs() / (1.0 + fd.abs()));
+                }
+            }
+            assert!(worst < 1e-6, "b {b:?} width {width} momenta ×{scale}: worst relative difference {worst:e}");
+        }
+    }
+
     #[test]
     fn jacobian_along_directions_is_the_jacobian_times_them() {
         let (cp, p0) = small_problem(MomentumLaw::WithDivergence, IntegratorMethod::Heun);

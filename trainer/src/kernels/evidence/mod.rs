@@ -15,8 +15,6 @@
 //! gradient, from several starts, inside bounds (a quadratic wall outside the box, then clamped).
 //! Only the rows given are used: pass training rows, never test rows.
 
-
-mod leave_one_out;
 mod likelihood;
 mod search;
 mod table;
@@ -25,10 +23,9 @@ pub(crate) use table::PairTable;
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation, MAX_JOINTS};
-use search::{minimise, Criterion};
+use search::minimise;
 use std::cell::RefCell;
 use table::Theta;
-
 
 /// CbD's hyperparameters in the data's units (what `--sigma`, `--task-width`, … mean everywhere).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -107,7 +104,6 @@ pub fn evidence_rows(count: usize, task_dim: usize, max_unknowns: usize) -> Vec<
         (0..count).collect()
     }
 }
-
 
 /// Chooses CbD's hyperparameters for `nominal` on `data` (training rows only), with the task space
 /// normalised by `norm` (the fit's normalisation).
@@ -196,7 +192,7 @@ pub fn choose_cbd_hyperparameters(
     let coarse_table = (coarse_rows.len() < used.len()).then(|| PairTable::new(nominal, &used.subset(&coarse_rows), norm));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {
-        let mut found: Vec<_> = from.iter().filter_map(|(_, p)| minimise(table, Criterion::Evidence, &lower, &upper, p, iterations, &evaluations)).collect();
+        let mut found: Vec<_> = from.iter().filter_map(|(_, p)| minimise(table, &lower, &upper, p, iterations, &evaluations)).collect();
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found
     };

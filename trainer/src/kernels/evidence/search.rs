@@ -1,4 +1,4 @@
-//! L-BFGS (argmin) on a selection criterion over θ in log space, inside bounds.
+//! L-BFGS (argmin) on the negative log evidence over θ in log space, inside bounds.
 
 use super::table::PairTable;
 use argmin::core::{CostFunction, Executor, Gradient, State};
@@ -6,39 +6,10 @@ use argmin::solver::linesearch::{condition::ArmijoCondition, BacktrackingLineSea
 use argmin::solver::quasinewton::LBFGS;
 use std::cell::RefCell;
 
-/// What the search minimises.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Criterion {
-    /// Negative log marginal likelihood per unknown.
-    Evidence,
-    /// ln of the mean squared leave-one-row-out error.
-    LeaveOneOut,
-}
-
-impl Criterion {
-    /// The criterion's value and gradient at θ (already clamped into the box).
-    fn value_and_gradient(self, table: &PairTable, p: &[f64]) -> Option<(f64, Vec<f64>)> {
-        match self {
-            Criterion::Evidence => {
-                // Per unknown: a first L-BFGS step of −g is then of order one in log space, and the
-                // tolerances scale with the evaluation's own rounding (which grows with N m).
-                let per_unknown = 1.0 / table.dim() as f64;
-                table.nlml_and_gradient(p).map(|(v, g)| (v * per_unknown, g.iter().map(|x| x * per_unknown).collect()))
-            }
-            Criterion::LeaveOneOut => {
-                // In log form: scale-free, so the same tolerances apply (relative changes of 1e-4).
-                let (v, g) = table.loo_and_gradient(p)?;
-                (v > 0.0).then(|| (v.ln(), g.iter().map(|x| x / v).collect()))
-            }
-        }
-    }
-}
-
 /// The objective argmin sees: nlml plus a quadratic wall outside the bounds; value and gradient
 /// computed together and cached (L-BFGS asks for both at the same point).
 struct Objective<'a> {
     table: &'a PairTable,
-    criterion: Criterion,
     lower: Vec<f64>,
     upper: Vec<f64>,
     wall: f64,
@@ -65,8 +36,11 @@ impl Objective<'_> {
         }
         *self.evaluations.borrow_mut() += 1;
         let clamped: Vec<f64> = p.iter().zip(self.lower.iter().zip(&self.upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect();
-        let (mut v, mut g) = match self.criterion.value_and_gradient(self.table, &clamped) {
-            Some((v, g)) => (v, g),
+        // Per unknown: a first L-BFGS step of −g is then of order one in log space, and the
+        // tolerances scale with the evaluation's own rounding (which grows with N m).
+        let per_unknown = 1.0 / self.table.dim() as f64;
+        let (mut v, mut g) = match self.table.nlml_and_gradient(&clamped) {
+            Some((v, g)) => (v * per_unknown, g.iter().map(|x| x * per_unknown).collect()),
             None => (INFEASIBLE, vec![0.0; p.len()]),
         };
         for (k, x) in p.iter().enumerate() {
@@ -97,12 +71,9 @@ impl Gradient for &Objective<'_> {
     }
 }
 
-/// L-BFGS on `criterion` from `init` (clamped into the box): the best (value, θ) found — the
-/// evidence's value as the whole negative log likelihood, leave-one-out's as ln MSE — None if
-/// `init` is infeasible.
+/// L-BFGS from `init` (clamped into the box): the best (nlml, θ) found, None if `init` is infeasible.
 pub(super) fn minimise(
     table: &PairTable,
-    criterion: Criterion,
     lower: &[f64],
     upper: &[f64],
     init: &[f64],
@@ -110,7 +81,7 @@ pub(super) fn minimise(
     evaluations: &RefCell<usize>,
 ) -> Option<(f64, Vec<f64>)> {
     let clamp = |p: &[f64]| -> Vec<f64> { p.iter().zip(lower.iter().zip(upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect() };
-    let objective = Objective { table, criterion, lower: lower.to_vec(), upper: upper.to_vec(), wall: 10.0, cache: RefCell::new(None), evaluations };
+    let objective = Objective { table, lower: lower.to_vec(), upper: upper.to_vec(), wall: 10.0, cache: RefCell::new(None), evaluations };
     let mut init = clamp(init);
     // A start where K is not positive definite to working precision (a σ that was fine on fewer
     // rows) moves up in σ until it is.
@@ -141,9 +112,5 @@ pub(super) fn minimise(
     }
     // The last point L-BFGS evaluated is usually the best one: the cache answers.
     let value = objective.both(&param).0;
-    let total = match criterion {
-        Criterion::Evidence => value * table.dim() as f64,
-        Criterion::LeaveOneOut => value,
-    };
-    (value < INFEASIBLE).then_some((total, param))
+    (value < INFEASIBLE).then_some((value * table.dim() as f64, param))
 }

@@ -195,7 +195,6 @@ impl Factored {
     }
 }
 
-
 /// θ in log form, normalised units.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct Theta {
