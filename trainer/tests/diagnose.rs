@@ -231,9 +231,10 @@ fn the_command_line_finds_an_effect_injected_by_cbd_simulate() {
     let found = json["found"].as_array().unwrap();
     let t = found.iter().find(|f| f["type"] == "transmission").unwrap_or_else(|| panic!("{json}"));
     assert_eq!((t["joint"].as_u64(), t["harmonic"].as_u64()), (Some(2), Some(2)));
-    // Reported in degrees: 0.002 rad = 0.1146°.
+    // Reported in the data's unit (no model file: radians).
+    assert_eq!(json["angle_unit"], "rad", "{json}");
     let cos = t["parameters"][0]["value"].as_f64().unwrap();
-    assert!((cos - 0.002f64.to_degrees()).abs() < 0.005, "{t}");
+    assert!((cos - 0.002).abs() < 1e-4, "{t}");
     let held = &json["held_out"];
     assert!(held["nominal + effects"]["mean"].as_f64().unwrap() < 0.2 * held["nominal + geometric"]["mean"].as_f64().unwrap(), "{held}");
     assert!(dir.join("residual_vs_joint.png").exists());

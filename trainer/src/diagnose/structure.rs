@@ -42,7 +42,7 @@ pub struct StructureTest {
 
 /// Runs every test on residual `r` (rows × m, row-major) of `model` on `data`.
 pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], options: &StructureOptions) -> Vec<StructureTest> {
-    let (n, m, rows) = (model.n_joints(), model.task_dim(), data.len());
+    let (n, m, rows) = (model.n_joints(), data.task_dim, data.len());
     let obs = rows * m;
     let null = Mat::from_fn(obs, m, |i, c| if i % m == c { 1.0 } else { 0.0 });
     let rigid = kinematics::rigid(model);
@@ -72,7 +72,7 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
         out.push(("gravity torque", Some(j), nested_f_test(&null, &to_mat(&cols), r)));
     }
     // Task position, normalised: (k − mean) / rms.
-    let predicted: Vec<f64> = (0..rows).flat_map(|i| kinematics::position(model, data.joints(i))).collect();
+    let predicted: Vec<f64> = (0..rows).flat_map(|i| kinematics::position(model, data.joints(i), m)).collect();
     let norm = crate::kernels::normalisation_of(&Measurements {
         n_joints: n,
         task_dim: m,
