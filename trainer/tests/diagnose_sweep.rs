@@ -175,3 +175,10 @@ fn six_joint_geometry_only_invents_nothing() {
         }
     }
 }
+
+#[test]
+fn a_dead_zone_is_unexplained_structure_and_nothing_is_invented() {
+    // Joint 2 stands still within ±4 mrad of zero: a step of 8 mrad across q2 = 0, which
+    // harmonics and an encoder scale fit only in part.
+    outside_the_library(InjectedEffect::DeadZone { joint: 1, width: 4e-3 });
+}

@@ -166,6 +166,9 @@ pub enum DropReason {
     NotSignificant,
     /// Added last, it lowers the cross-validated error by less than the margin.
     NoCrossValidatedGain,
+    /// A function of its joint's angle alone, and that joint's deflection still has structure
+    /// after it (the joint-shape test): the library fits part of a shape it does not have.
+    ShapeOutsideLibrary,
 }
 
 /// An effect dropped after refinement.
@@ -207,6 +210,33 @@ fn judge(
         return None;
     };
     Some(DroppedEffect { group: g, name: String::new(), reason, p_value, cv_gain })
+}
+
+/// The first kept effect that is a function of one joint's angle alone (encoder scale,
+/// transmission) on a joint whose deflection the joint-shape test still finds structured after
+/// the refined effects: what the library names there is part of a shape it does not have.
+fn shape_outside_library(
+    train: &Measurements,
+    refined: &refine::Refined,
+    kept: &[usize],
+    groups: &[Group],
+    options: &StructureOptions,
+) -> Option<DroppedEffect> {
+    let of_one_angle = |g: &usize| matches!(groups[*g].kind, GroupKind::EncoderScale | GroupKind::Transmission { .. });
+    if !kept.iter().any(of_one_angle) {
+        return None;
+    }
+    let tests = structure_tests(&refined.model, train, &residual(&refined.model, train), options);
+    kept.iter().filter(|g| of_one_angle(g)).find_map(|&g| {
+        let shape = tests.iter().find(|t| t.family == "joint shape" && t.joint == groups[g].joint && t.significant)?;
+        Some(DroppedEffect {
+            group: g,
+            name: String::new(),
+            reason: DropReason::ShapeOutsideLibrary,
+            p_value: shape.test.p_value,
+            cv_gain: f64::NAN,
+        })
+    })
 }
 
 /// Splits `data` into (fit, held-out) rows by a seeded permutation.
@@ -321,7 +351,8 @@ pub fn diagnose(
             .iter()
             .filter(|&&g| groups[g].kind != GroupKind::Geometric)
             .filter_map(|&g| judge(g, &group_cols, &chosen_cols, &refined, &problem, cv_with, options.selection.margin))
-            .max_by(|a, b| a.p_value.total_cmp(&b.p_value));
+            .max_by(|a, b| a.p_value.total_cmp(&b.p_value))
+            .or_else(|| shape_outside_library(&train, &refined, &kept, &groups, &options.structure));
         match weakest {
             Some(mut d) => {
                 kept.retain(|&g| g != d.group);

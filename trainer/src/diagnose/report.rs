@@ -148,6 +148,9 @@ fn dropped_text(d: &super::DroppedEffect) -> String {
         DropReason::NoCrossValidatedGain => {
             format!("{} (added last it lowers the cross-validated RMS by {:.1} %)", d.name, 100.0 * d.cv_gain)
         }
+        DropReason::ShapeOutsideLibrary => {
+            format!("{} (its joint's deflection keeps a shape the library does not have: joint shape test p = {:.1e})", d.name, d.p_value)
+        }
     }
 }
 
@@ -192,7 +195,11 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
         "physical_effects": d.physical_effects().len(),
         "dropped": d.dropped.iter().map(|x| json!({
             "name": x.name,
-            "reason": match x.reason { DropReason::NotSignificant => "not significant", _ => "no cross-validated gain" },
+            "reason": match x.reason {
+                DropReason::NotSignificant => "not significant",
+                DropReason::NoCrossValidatedGain => "no cross-validated gain",
+                DropReason::ShapeOutsideLibrary => "shape outside the library",
+            },
             "p_value": x.p_value, "cv_gain": x.cv_gain,
         })).collect::<Vec<_>>(),
         "unexplained_structure": d.unexplained_structure,
