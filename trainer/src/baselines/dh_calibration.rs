@@ -380,6 +380,10 @@ pub fn calibrate_dh(
                 step_s[i] += c * vectors[(i, k)];
             }
         }
+        // Rounding in the eigenvectors must not move what stays out of the plane.
+        for &k in &out_of_plane {
+            step_s[k] = 0.0;
+        }
         iterations += 1;
         let step_norm = step_s.iter().map(|v| v * v).sum::<f64>().sqrt();
         let p_norm = p.iter().zip(&colnorm).map(|(v, c)| (v * c).powi(2)).sum::<f64>().sqrt();
@@ -596,5 +600,7 @@ mod jacobian_tests {
         let predicted = crate::nominal::planar::positions(&fit.model, &test.joints, 2);
         let worst = predicted.iter().zip(&test.positions).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(worst < 1e-9, "{worst}");
+        // Out of the plane nothing moved: the result is exactly a planar chain in a moved frame.
+        assert!(crate::nominal::planar::as_planar_in_frame(&fit.model).is_some(), "{:?}", fit.model);
     }
 }
