@@ -149,7 +149,7 @@ fn nominal_predictor(model: NominalModel, m: usize) -> Predictor {
 /// the data moved into that frame and the predictions back. (Lifting the data to 3-D instead
 /// would hand the correction a noise-free coordinate, which drives its noise estimate to zero.)
 pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -> Result<FittedCorrection, String> {
-    use crate::nominal::planar::{as_planar_in_frame, lift};
+    use crate::nominal::planar::as_planar_in_frame;
     let (m, full) = (data.task_dim, base.task_dim());
     if m == full {
         return fit(base, data);
@@ -166,9 +166,7 @@ pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -
         });
         return Ok((back, note));
     }
-    let (predict, note) = fit(base, &lift(data, base))?;
-    let project: Predictor = Box::new(move |joints: &[f64]| predict(joints).chunks_exact(full).flat_map(|p| p[..m].to_vec()).collect());
-    Ok((project, note))
+    Err(format!("a model of {full} task coordinates for data of {m} that is not a planar arm's DH form"))
 }
 
 fn krr_on(model: &NominalModel, train: &Measurements, search: &SearchOptions) -> Result<(Predictor, Hyperparameters), String> {

@@ -4,7 +4,6 @@
 //! and reads its first two task coordinates: the planar task space of the data.
 
 use crate::baselines::dh_calibration::parameter_names;
-use crate::data::Measurements;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform};
 use cbd_runtime::nominal::forward_kinematics;
 
@@ -48,23 +47,6 @@ pub fn in_plane_parameters(n: usize) -> Vec<usize> {
 /// The first `m` coordinates of `model`'s tool position at every row of `joints` (row-major).
 pub fn positions(model: &NominalModel, joints: &[f64], m: usize) -> Vec<f64> {
     joints.chunks_exact(model.n_joints()).flat_map(|q| forward_kinematics(model, q).position.into_iter().take(m)).collect()
-}
-
-/// `data` with the task coordinates `model` has beyond the data's (z of a planar arm's DH form)
-/// filled with the model's own prediction, for code that needs the model's task dimension (the
-/// CbD pipeline). Those coordinates carry no measurement: their residual is zero.
-pub fn lift(data: &Measurements, model: &NominalModel) -> Measurements {
-    let (m, full) = (data.task_dim, model.task_dim());
-    if m >= full {
-        return data.clone();
-    }
-    let mut out = Measurements::new(data.n_joints, full);
-    for i in 0..data.len() {
-        let k = forward_kinematics(model, data.joints(i)).position;
-        let y: Vec<f64> = data.position(i).iter().copied().chain(k[m..full].iter().copied()).collect();
-        out.push(data.joints(i), &y);
-    }
-    out
 }
 
 /// A planar arm's DH form seen as a `PlanarChain` in a moved frame: the chain turns at
