@@ -29,11 +29,21 @@ pub struct DhCalibrationOptions {
     /// the others at the nominal model are redundant and kept at their nominal values
     /// (greedy column-pivoted Gram–Schmidt). 0 disables.
     pub redundancy_tolerance: f64,
+    /// Fit a planar arm as its DH form (the result is then a 3-D DH chain read in its first two
+    /// coordinates, which only callers that read it so — compare, diagnose — can use); when
+    /// false a planar arm is refused as before.
+    pub planar_as_dh: bool,
 }
 
 impl Default for DhCalibrationOptions {
     fn default() -> Self {
-        DhCalibrationOptions { max_iterations: 200, rank_tolerance: 1e-14, cost_tolerance: 1e-15, redundancy_tolerance: 1e-9 }
+        DhCalibrationOptions {
+            max_iterations: 200,
+            rank_tolerance: 1e-14,
+            cost_tolerance: 1e-15,
+            redundancy_tolerance: 1e-9,
+            planar_as_dh: false,
+        }
     }
 }
 
@@ -128,12 +138,14 @@ pub fn apply_parameters(nominal: &DhChain, p: &[f64]) -> DhChain {
     c
 }
 
+/// k − y over the data's `m = data.task_dim` coordinates (2 for a planar arm's DH form).
 fn residuals(chain: &DhChain, data: &Measurements, out: &mut [f64]) {
     let model = NominalModel::DhChain(chain.clone());
+    let m = data.task_dim;
     for i in 0..data.len() {
         let k = forward_kinematics(&model, data.joints(i));
-        for c in 0..3 {
-            out[3 * i + c] = k.position[c] - data.position(i)[c];
+        for c in 0..m {
+            out[m * i + c] = k.position[c] - data.position(i)[c];
         }
     }
 }
@@ -164,17 +176,17 @@ fn redundant_parameters(jac: &Mat<f64>, colnorm: &[f64], tol: f64) -> Vec<usize>
 }
 
 /// ∂k/∂(DH rows, base translation, tool translation) at the chain's current parameters, into
-/// `jac` (3 rows per measurement); the base-rotation columns are left for the caller.
+/// `jac` (`data.task_dim` rows per measurement); the base-rotation columns are left for the caller.
 fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut Mat<f64>) {
     use crate::nominal::{cross, dh_frames, sub};
     use cbd_protocol::DhConvention;
-    let n = chain.joints.len();
+    let (n, m) = (chain.joints.len(), data.task_dim);
     for row in 0..data.len() {
         let frames = dh_frames(chain, data.joints(row));
         let p = frames[n + 1].t;
         let mut put = |col: usize, v: [f64; 3]| {
-            for c in 0..3 {
-                jac[(3 * row + c, col)] = v[c];
+            for c in 0..m {
+                jac[(m * row + c, col)] = v[c];
             }
         };
         for i in 1..=n {
@@ -208,29 +220,45 @@ fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut Mat<f64>) {
     }
 }
 
-fn rms(r: &[f64]) -> f64 {
-    let n = r.len() / 3;
+fn rms(r: &[f64], m: usize) -> f64 {
+    let n = r.len() / m;
     (r.iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64).sqrt()
 }
 
 /// Fits all DH parameters plus base and tool to `data` (positions in the model's length unit).
+/// A planar arm is fitted as its DH form (`nominal::planar::as_dh`) on its two task coordinates,
+/// over the parameters that move the tool in the plane (link lengths, joint offsets, base x, y
+/// and yaw) when `options.planar_as_dh`; the returned model is then that DH form, read in its
+/// first two coordinates.
 pub fn calibrate_dh(
     nominal: &NominalModel,
     data: &Measurements,
     options: &DhCalibrationOptions,
 ) -> Result<DhCalibration, DhCalibrationError> {
-    let NominalModel::DhChain(chain0) = nominal else { return Err(DhCalibrationError::NotADhChain) };
+    if !options.planar_as_dh && !matches!(nominal, NominalModel::DhChain(_)) {
+        return Err(DhCalibrationError::NotADhChain);
+    }
+    let dh_form = crate::nominal::planar::as_dh(nominal);
+    let NominalModel::DhChain(chain0) = &dh_form else { return Err(DhCalibrationError::NotADhChain) };
     let n = chain0.joints.len();
     let np = parameter_count(n);
-    let rows = 3 * data.len();
-    if data.len() < 2 || data.task_dim != 3 {
+    let m = nominal.task_dim();
+    let rows = m * data.len();
+    if data.len() < 2 || data.task_dim != m {
         return Err(DhCalibrationError::TooFewMeasurements { rows: data.len() });
     }
+    // Out of the plane's parameters never change (first-order blind in the plane's coordinates).
+    let out_of_plane: Vec<usize> = if m < 3 {
+        let inside = crate::nominal::planar::in_plane_parameters(n);
+        (0..np).filter(|k| !inside.contains(k)).collect()
+    } else {
+        Vec::new()
+    };
     let names = parameter_names(n);
     let mut p = vec![0.0; np];
     let mut r = vec![0.0; rows];
     residuals(chain0, data, &mut r);
-    let initial_rms = rms(&r);
+    let initial_rms = rms(&r, m);
     let mut cost = 0.5 * r.iter().map(|v| v * v).sum::<f64>();
     let mut mu = -1.0;
     let mut nu = 2.0;
@@ -276,6 +304,11 @@ pub fn calibrate_dh(
                     jac[(i, k)] = (rp[i] - rm[i]) / (2.0 * h);
                 }
             }
+            for &k in &out_of_plane {
+                for i in 0..rows {
+                    jac[(i, k)] = 0.0;
+                }
+            }
             for k in 0..np {
                 colnorm[k] = (0..rows).map(|i| jac[(i, k)] * jac[(i, k)]).sum::<f64>().sqrt();
             }
@@ -287,7 +320,9 @@ pub fn calibrate_dh(
             }
             if frozen.is_none() {
                 let f = if options.redundancy_tolerance > 0.0 {
-                    redundant_parameters(&jac, &colnorm, options.redundancy_tolerance)
+                    let mut f = redundant_parameters(&jac, &colnorm, options.redundancy_tolerance);
+                    f.retain(|k| !out_of_plane.contains(k));
+                    f
                 } else {
                     Vec::new()
                 };
@@ -314,7 +349,13 @@ pub fn calibrate_dh(
             let lmax = values.iter().cloned().fold(0.0, f64::max);
             let cut = options.rank_tolerance * lmax;
             rank = values.iter().filter(|&&l| l > cut).count();
-            null_dirs = (0..np).filter(|&k| values[k] <= cut).map(|k| (0..np).map(|i| vectors[(i, k)]).collect()).collect();
+            // Directions of the out-of-plane parameters alone are not news: only those that move an
+            // in-plane parameter are reported.
+            null_dirs = (0..np)
+                .filter(|&k| values[k] <= cut)
+                .map(|k| (0..np).map(|i| vectors[(i, k)]).collect::<Vec<f64>>())
+                .filter(|v| v.iter().enumerate().any(|(i, w)| w.abs() > 0.3 && !out_of_plane.contains(&i)))
+                .collect();
             if mu < 0.0 {
                 mu = 1e-3 * lmax;
             }
@@ -338,6 +379,10 @@ pub fn calibrate_dh(
             for i in 0..np {
                 step_s[i] += c * vectors[(i, k)];
             }
+        }
+        // Rounding in the eigenvectors must not move what stays out of the plane.
+        for &k in &out_of_plane {
+            step_s[k] = 0.0;
         }
         iterations += 1;
         let step_norm = step_s.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -401,8 +446,8 @@ pub fn calibrate_dh(
         stats: DhFitStats {
             iterations,
             initial_rms,
-            final_rms: rms(&r),
-            n_parameters: np,
+            final_rms: rms(&r, m),
+            n_parameters: np - out_of_plane.len(),
             rank,
             unidentifiable,
             parameter_changes: p,
@@ -527,5 +572,35 @@ mod jacobian_tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_planar_arm_is_calibrated_as_its_dh_form_in_its_plane() {
+        use crate::simulate::rr::planar_arm;
+        use rand::{Rng, SeedableRng};
+        use rand_chacha::ChaCha8Rng;
+        let nominal = NominalModel::planar(&[1.0, 0.5, 0.3]).unwrap();
+        let truth = planar_arm(&[1.03, 0.48, 0.31], [0.04, -0.03], 0.02, &[0.01, -0.015, 0.02]);
+        let measure = |seed: u64| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let mut m = Measurements::new(3, 2);
+            for _ in 0..60 {
+                let q: Vec<f64> = (0..3).map(|_| rng.gen_range(-3.0..3.0)).collect();
+                m.push(&q, &forward_kinematics(&truth, &q).position[..2]);
+            }
+            m
+        };
+        let (train, test) = (measure(1), measure(2));
+        // Refused unless asked for (the result is a 3-D chain read in two coordinates).
+        assert_eq!(calibrate_dh(&nominal, &train, &DhCalibrationOptions::default()).unwrap_err(), DhCalibrationError::NotADhChain);
+        let fit = calibrate_dh(&nominal, &train, &DhCalibrationOptions { planar_as_dh: true, ..Default::default() }).unwrap();
+        // In-plane parameters: 3 lengths, 3 offsets, base x, y, yaw; yaw and the first offset are one.
+        assert_eq!((fit.stats.n_parameters, fit.stats.rank), (9, 8), "{:?}", fit.stats);
+        assert!(fit.stats.initial_rms > 0.01 && fit.stats.final_rms < 1e-10, "{:?}", fit.stats);
+        let predicted = crate::nominal::planar::positions(&fit.model, &test.joints, 2);
+        let worst = predicted.iter().zip(&test.positions).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-9, "{worst}");
+        // Out of the plane nothing moved: the result is exactly a planar chain in a moved frame.
+        assert!(crate::nominal::planar::as_planar_in_frame(&fit.model).is_some(), "{:?}", fit.model);
     }
 }

@@ -2,6 +2,7 @@
 //! selected out of sample, reported with the error before and after on held-out rows.
 
 use crate::cli::{load_nominal, ModelArgs};
+use crate::data::model_file::AngleUnit;
 use crate::diagnose::{diagnose, report, DiagnoseOptions};
 use std::path::PathBuf;
 
@@ -91,9 +92,11 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         None => None,
     };
     let unit = model_file.as_ref().map(|m| m.length_unit.name()).unwrap_or("length units");
-    println!("{}", report::text(&d, &nominal, unit));
+    // The file's units; without a model file, the data's (joint angles in radians).
+    let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
+    println!("{}", report::text(&d, &d.model_start, &units));
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&report::to_json(&d, &nominal, unit)).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&report::to_json(&d, &d.model_start, &units)).map_err(|e| e.to_string())?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
@@ -101,11 +104,20 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
             Some(m) => m.joint_names.iter().map(|n| format!("{n} (rad)")).collect(),
             None => (1..=nominal.n_joints()).map(|j| format!("q{j} (rad)")).collect(),
         };
-        let files = report::plots(dir, &d, &nominal, &names, unit)?;
+        let files = report::plots(dir, &d, &d.model_start, &names, unit)?;
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
-        file.nominal = d.model_after.clone();
+        // A planar model file holds link lengths only (as does the blob's planar chain).
+        let planar = matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. });
+        file.nominal =
+            if !planar { Some(d.model_after.clone()) } else { crate::nominal::planar::as_planar(&d.model_after) }.ok_or_else(|| {
+                format!(
+                    "--write-model {}: the diagnosis corrects the planar arm's base or joint offsets, which a [planar] model file \
+                 (link lengths only) cannot hold; the corrections are in the report and --json",
+                    path.display()
+                )
+            })?;
         let found: Vec<&str> = d.found.iter().map(|f| f.name.as_str()).collect();
         let header = format!(
             "{} with the corrections `cbd diagnose` found on {} ({} rows): {}.\nFit the nonparametric correction on top: cbd fit --model {} ...",
@@ -131,11 +143,11 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
 
 /// Largest position difference between two nominal models over the rows of `data`.
 fn max_position_gap(a: &cbd_protocol::NominalModel, b: &cbd_protocol::NominalModel, data: &crate::data::Measurements) -> f64 {
-    let m = a.task_dim();
+    let m = data.task_dim;
     (0..data.len())
         .map(|i| {
             let (pa, pb) =
-                (crate::diagnose::kinematics::position(a, data.joints(i)), crate::diagnose::kinematics::position(b, data.joints(i)));
+                (crate::diagnose::kinematics::position(a, data.joints(i), m), crate::diagnose::kinematics::position(b, data.joints(i), m));
             pa.iter().zip(&pb).take(m).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
         })
         .fold(0.0, f64::max)

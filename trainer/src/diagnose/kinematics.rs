@@ -14,9 +14,9 @@ pub enum Response {
     Task([f64; 3]),
 }
 
-/// k0_aug(q), the first `task_dim` coordinates.
-pub fn position(model: &NominalModel, q: &[f64]) -> Vec<f64> {
-    forward_kinematics(model, q).position[..model.task_dim()].to_vec()
+/// k0_aug(q), the first `m` coordinates (the data's: 2 for a planar arm's DH form).
+pub fn position(model: &NominalModel, q: &[f64], m: usize) -> Vec<f64> {
+    forward_kinematics(model, q).position[..m].to_vec()
 }
 
 /// The model without its effects (same geometry and gravity model).

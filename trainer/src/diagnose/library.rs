@@ -116,14 +116,20 @@ fn geometric_count(model: &NominalModel) -> usize {
     }
 }
 
-/// Every candidate group for `model` (geometric parameters not yet pruned to an identifiable set).
-pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions) -> Vec<Group> {
+/// Every candidate group for `model` whose data has `m` task coordinates (geometric parameters
+/// not yet pruned to an identifiable set). A DH chain read in two coordinates (a planar arm's DH
+/// form) has the in-plane geometric parameters only.
+pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions, m: usize) -> Vec<Group> {
     let n = model.n_joints();
+    let geometric = match model {
+        NominalModel::DhChain(_) if m < model.task_dim() => crate::nominal::planar::in_plane_parameters(n),
+        _ => (0..geometric_count(model)).collect(),
+    };
     let mut groups = vec![Group {
         name: "geometric".into(),
         kind: GroupKind::Geometric,
         joint: None,
-        params: (0..geometric_count(model)).map(Param::Geometric).collect(),
+        params: geometric.into_iter().map(Param::Geometric).collect(),
     }];
     for j in 0..n {
         let revolute = model.is_revolute(j);
@@ -235,10 +241,10 @@ pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<N
     Ok(out)
 }
 
-/// Predicted positions of `model` at every row of `data` (row-major).
-pub fn predict(model: &NominalModel, joints: &[f64]) -> Vec<f64> {
+/// Predicted positions (first `m` coordinates) of `model` at every row of `joints` (row-major).
+pub fn predict(model: &NominalModel, joints: &[f64], m: usize) -> Vec<f64> {
     let n = model.n_joints();
-    joints.chunks_exact(n).flat_map(|q| kinematics::position(model, q)).collect()
+    joints.chunks_exact(n).flat_map(|q| kinematics::position(model, q, m)).collect()
 }
 
 /// Step of the central difference for geometric parameter `p`: 1e-6 rad, or 1e-6 of the
@@ -254,10 +260,10 @@ fn fd_step(model: &NominalModel, p: &Param, length_scale: f64) -> f64 {
 /// The Jacobian ∂k(q_i)/∂θ of every `params` at `model` over `data`: (N·m) × params.len(),
 /// rows ordered (row i, coordinate c) → m·i + c.
 pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> Mat<f64> {
-    let (n, m, rows) = (model.n_joints(), model.task_dim(), data.len());
+    let (n, m, rows) = (model.n_joints(), data.task_dim, data.len());
     let mut jac = Mat::<f64>::zeros(m * rows, params.len());
     // Size of the workspace (for the difference step of lengths): the model's own positions.
-    let length_scale = predict(model, &data.joints).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
+    let length_scale = predict(model, &data.joints, m).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
     // Geometric columns: central differences of the whole augmented model.
     for (col, p) in params.iter().enumerate() {
         if let Param::Geometric(_) = p {
@@ -265,7 +271,7 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
             let plus = apply(model, &[*p], &[h]).expect("geometric change adds no effect");
             let minus = apply(model, &[*p], &[-h]).expect("geometric change adds no effect");
             for i in 0..rows {
-                let (a, b) = (kinematics::position(&plus, data.joints(i)), kinematics::position(&minus, data.joints(i)));
+                let (a, b) = (kinematics::position(&plus, data.joints(i), m), kinematics::position(&minus, data.joints(i), m));
                 for c in 0..m {
                     jac[(m * i + c, col)] = (a[c] - b[c]) / (2.0 * h);
                 }
@@ -343,7 +349,7 @@ mod tests {
     #[test]
     fn geometric_and_effect_columns_match_finite_differences() {
         let model = crate::simulate::rr::nominal();
-        let groups = candidate_groups(&model, &LibraryOptions { harmonics: 2 });
+        let groups = candidate_groups(&model, &LibraryOptions { harmonics: 2 }, 2);
         let params: Vec<Param> = groups.iter().flat_map(|g| g.params.clone()).collect();
         let mut data = Measurements::new(2, 2);
         for q in [[0.3, 1.2], [-2.0, 0.4], [2.5, -1.1]] {
@@ -353,7 +359,7 @@ mod tests {
         for (col, p) in params.iter().enumerate() {
             let h = 1e-6;
             let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (predict(&plus, &data.joints), predict(&minus, &data.joints));
+            let (a, b) = (predict(&plus, &data.joints, 2), predict(&minus, &data.joints, 2));
             for r in 0..a.len() {
                 let fd = (a[r] - b[r]) / (2.0 * h);
                 assert!(

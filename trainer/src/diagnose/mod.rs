@@ -14,7 +14,7 @@ pub mod report;
 pub mod selection;
 pub mod structure;
 
-use crate::baselines::compare::CorrectionFitter;
+use crate::baselines::compare::{fit_on, CorrectionFitter};
 use crate::data::Measurements;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
@@ -73,8 +73,8 @@ pub struct FoundEffect {
     /// Share of the training residual sum of squares of the starting model that this group
     /// explains when added in selection order (SSE before it minus SSE after, over the start's).
     pub share: f64,
-    /// What this group alone explains of what all the other selected groups leave (drop-one:
-    /// SSE without it minus SSE with all, over SSE without it).
+    /// What the report calls "explains": the drop in residual variance when this group is added
+    /// last (SSE without it minus SSE with all, over SSE without it).
     pub partial_share: f64,
     /// Cross-validated RMS position error after this group was added (selection order).
     pub cv_rms: f64,
@@ -116,6 +116,9 @@ pub struct Diagnosis {
     pub residual_after: Vec<f64>,
     /// Training rows actually used (after any held-out split).
     pub train: Measurements,
+    /// The model the library's parameters change: the given model, or a planar arm's DH form
+    /// (`nominal::planar::as_dh`, read in the data's two coordinates).
+    pub model_start: NominalModel,
     /// With CbD: which base CbD should deform, by k-fold cross-validation on the training rows.
     pub recommendation: Option<Recommendation>,
 }
@@ -138,7 +141,7 @@ fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measu
     let (mut sse, mut count) = (0.0, 0usize);
     for fold in 0..folds {
         let (rest, held) = train.fold(folds, fold);
-        let (predict, _) = fit(base, &rest)?;
+        let (predict, _) = fit_on(fit, base, &rest)?;
         sse += predict(&held.joints).iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         count += held.len();
     }
@@ -163,6 +166,9 @@ pub enum DropReason {
     NotSignificant,
     /// Added last, it lowers the cross-validated error by less than the margin.
     NoCrossValidatedGain,
+    /// A function of its joint's angle alone, and that joint's deflection still has structure
+    /// after it (the joint-shape test): the library fits part of a shape it does not have.
+    ShapeOutsideLibrary,
 }
 
 /// An effect dropped after refinement.
@@ -206,6 +212,33 @@ fn judge(
     Some(DroppedEffect { group: g, name: String::new(), reason, p_value, cv_gain })
 }
 
+/// The first kept effect that is a function of one joint's angle alone (encoder scale,
+/// transmission) on a joint whose deflection the joint-shape test still finds structured after
+/// the refined effects: what the library names there is part of a shape it does not have.
+fn shape_outside_library(
+    train: &Measurements,
+    refined: &refine::Refined,
+    kept: &[usize],
+    groups: &[Group],
+    options: &StructureOptions,
+) -> Option<DroppedEffect> {
+    let of_one_angle = |g: &usize| matches!(groups[*g].kind, GroupKind::EncoderScale | GroupKind::Transmission { .. });
+    if !kept.iter().any(of_one_angle) {
+        return None;
+    }
+    let tests = structure_tests(&refined.model, train, &residual(&refined.model, train), options);
+    kept.iter().filter(|g| of_one_angle(g)).find_map(|&g| {
+        let shape = tests.iter().find(|t| t.family == "joint shape" && t.joint == groups[g].joint && t.significant)?;
+        Some(DroppedEffect {
+            group: g,
+            name: String::new(),
+            reason: DropReason::ShapeOutsideLibrary,
+            p_value: shape.test.p_value,
+            cv_gain: f64::NAN,
+        })
+    })
+}
+
 /// Splits `data` into (fit, held-out) rows by a seeded permutation.
 pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurements, Measurements) {
     use rand::seq::SliceRandom;
@@ -221,7 +254,7 @@ pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurem
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    predict(model, &data.joints).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
+    predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// Columns of each group that enter the selection: geometric pruned to an identifiable set,
@@ -262,9 +295,10 @@ fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol
 
 /// Diagnoses `model` (nominal plus any effects it already declares) on `data`. Held-out rows:
 /// `test` when given, otherwise a split of `data`. `cbd` fits the nonparametric correction for
-/// the table's CbD rows (skipped when `None`).
+/// the table's CbD rows (skipped when `None`). A planar arm is diagnosed as its DH form, so that
+/// its geometric group holds base translation and rotation, joint offsets and link lengths.
 pub fn diagnose(
-    model: &NominalModel,
+    given: &NominalModel,
     data: &Measurements,
     test: Option<&Measurements>,
     cbd: Option<CorrectionFitter>,
@@ -280,12 +314,17 @@ pub fn diagnose(
     if train.len() < 10 {
         return Err(format!("diagnose needs at least 10 training rows, got {}", train.len()));
     }
-    let m = model.task_dim();
+    let m = given.task_dim();
+    if train.task_dim != m || test.task_dim != m {
+        return Err(format!("the model has {m} task coordinates, the data {} (test {})", train.task_dim, test.task_dim));
+    }
+    let dh_form = crate::nominal::planar::as_dh(given);
+    let model = &dh_form;
     // 1. Residuals of the current model and 2. their structure.
     let r0 = residual(model, &train);
     let structure_before = structure_tests(model, &train, &r0, &options.structure);
     // 3. The library's columns at the current model.
-    let groups = candidate_groups(model, &options.library);
+    let groups = candidate_groups(model, &options.library, m);
     let params: Vec<Param> = groups.iter().flat_map(|g| g.params.clone()).collect();
     let mut offsets = Vec::with_capacity(groups.len());
     let mut at = 0;
@@ -312,7 +351,8 @@ pub fn diagnose(
             .iter()
             .filter(|&&g| groups[g].kind != GroupKind::Geometric)
             .filter_map(|&g| judge(g, &group_cols, &chosen_cols, &refined, &problem, cv_with, options.selection.margin))
-            .max_by(|a, b| a.p_value.total_cmp(&b.p_value));
+            .max_by(|a, b| a.p_value.total_cmp(&b.p_value))
+            .or_else(|| shape_outside_library(&train, &refined, &kept, &groups, &options.structure));
         match weakest {
             Some(mut d) => {
                 kept.retain(|&g| g != d.group);
@@ -367,26 +407,25 @@ pub fn diagnose(
         let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
         table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
     };
-    push("nominal", predict(model, &test.joints));
-    // What the geometric corrections alone give (refitted alone), beside the full set.
-    let mut geometric_only = None;
-    if found.iter().any(|f| f.kind == GroupKind::Geometric) && found.len() > 1 {
+    // Rows in the order the corrections build up: nominal → + geometric (refitted alone: what
+    // geometric calibration gives) → + effects → + effects + CbD; and CbD alone on the nominal.
+    push("nominal", predict(model, &test.joints, m));
+    let geometric_only = if !found.iter().any(|f| f.kind == GroupKind::Geometric) {
+        model.clone()
+    } else if found.len() == 1 {
+        refined.model.clone()
+    } else {
         let gp: Vec<Param> = chosen_params.iter().copied().filter(|p| matches!(p, Param::Geometric(_))).collect();
         let gs: Vec<f64> = chosen_params.iter().zip(&start).filter(|(p, _)| matches!(p, Param::Geometric(_))).map(|(_, v)| *v).collect();
-        let geo = refine::refine(model, &train, &gp, &gs, options.gauss_newton_iterations)?;
-        push("nominal + geometric", predict(&geo.model, &test.joints));
-        geometric_only = Some(geo.model);
-    }
-    push("nominal + effects", predict(&refined.model, &test.joints));
+        refine::refine(model, &train, &gp, &gs, options.gauss_newton_iterations)?.model
+    };
+    push("nominal + geometric", predict(&geometric_only, &test.joints, m));
+    push("nominal + effects", predict(&refined.model, &test.joints, m));
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
-        let (with_effects, _) = fit(&refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+        let (with_effects, _) = fit_on(fit, &refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
         push("nominal + effects + CbD", with_effects(&test.joints));
-        if let Some(geo) = &geometric_only {
-            let (with_geometry, _) = fit(geo, &train).map_err(|e| format!("CbD on nominal + geometric: {e}"))?;
-            push("nominal + geometric + CbD", with_geometry(&test.joints));
-        }
-        let (plain, _) = fit(model, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
+        let (plain, _) = fit(given, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
         push("nominal + CbD", plain(&test.joints));
     }
     let recommendation = match cbd {
@@ -394,7 +433,7 @@ pub fn diagnose(
             let folds = options.recommendation_folds;
             let with_effects =
                 cross_validated_rms(fit, &refined.model, &train, folds).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
-            let plain = cross_validated_rms(fit, model, &train, folds).map_err(|e| format!("CbD on nominal: {e}"))?;
+            let plain = cross_validated_rms(fit, given, &train, folds).map_err(|e| format!("CbD on nominal: {e}"))?;
             let effects_hurt = plain < with_effects;
             Some(Recommendation {
                 cross_validation: vec![("nominal + effects + CbD".into(), with_effects), ("nominal + CbD".into(), plain)],
@@ -423,6 +462,7 @@ pub fn diagnose(
         residual_before: r0,
         residual_after: r1,
         train,
+        model_start: dh_form.clone(),
         recommendation,
     })
 }

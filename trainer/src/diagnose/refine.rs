@@ -23,7 +23,7 @@ pub struct Refined {
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    predict(model, &data.joints).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
+    predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// Scaled normal equations through the eigendecomposition: the step (pseudo-inverse,

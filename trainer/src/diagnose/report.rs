@@ -2,33 +2,60 @@
 
 use super::library::{is_angle, GroupKind, Param};
 use super::{Diagnosis, DropReason, FoundEffect};
+use crate::data::model_file::AngleUnit;
 use crate::report::plots::EffectCurve;
 use cbd_protocol::NominalModel;
 use serde_json::{json, Value};
 
-/// Unit of a parameter, as printed: angles in degrees, lengths in the model's unit.
-fn unit_of(model: &NominalModel, p: &Param, length: &str) -> String {
+/// The units the report speaks: the model file's (the data's, without a model file).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Units<'a> {
+    pub length: &'a str,
+    pub angle: AngleUnit,
+}
+
+/// Unit of a parameter, as printed: angles in the file's angle unit, lengths in its length unit.
+fn unit_of(model: &NominalModel, p: &Param, units: &Units) -> String {
+    let (length, angle) = (units.length, units.angle.name());
     match p {
-        _ if is_angle(model, p) => "deg".into(),
+        _ if is_angle(model, p) => angle.into(),
         Param::Geometric(_) => length.into(),
         Param::EncoderScale { .. } => "(ratio)".into(),
         Param::GravityCompliance { joint } if !model.is_revolute(*joint) => format!("{length}/(mass·{length})"),
-        Param::GravityCompliance { .. } => format!("rad/(mass·{length})"),
+        Param::GravityCompliance { .. } => format!("{angle}/(mass·{length})"),
         Param::LinkBending { .. } => length.into(),
         _ => String::new(),
     }
 }
 
-fn shown(model: &NominalModel, p: &Param, v: f64) -> f64 {
-    if is_angle(model, p) {
-        v.to_degrees()
+/// A value (or standard error) in the file's units: what is an angle, or an angle per torque
+/// (a revolute joint's compliance), converted from radians.
+fn shown(model: &NominalModel, p: &Param, v: f64, units: &Units) -> f64 {
+    let per_angle = match p {
+        Param::GravityCompliance { joint } => model.is_revolute(*joint),
+        _ => is_angle(model, p),
+    };
+    if per_angle {
+        v / units.angle.radians()
     } else {
         v
     }
 }
 
+/// A share as a percentage with three significant figures (a small true share is not 0.00 %).
+fn percent(share: f64) -> String {
+    let p = 100.0 * share;
+    if p >= 10.0 || p == 0.0 {
+        format!("{p:.1} %")
+    } else {
+        let decimals = (2 - p.log10().floor() as i32).clamp(1, 9) as usize;
+        format!("{p:.decimals$} %")
+    }
+}
+
 /// The stdout report.
-pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
+pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
+    let unit = units.length;
     let mut out = format!(
         "diagnosis on {} training rows; held-out rows: {} ({})\n\nstructure in the residual of the current model (significant, strongest first):\n",
         d.train_rows, d.test_rows, d.held_out
@@ -40,7 +67,7 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
         }
         s.iter()
             .map(|t| {
-                format!("  {:<24} explains {:>6.2} %  F = {:.3e}  p = {:.1e}\n", t.name, 100.0 * t.test.explained, t.test.f, t.test.p_value)
+                format!("  {:<24} explains {:>9}  F = {:.3e}  p = {:.1e}\n", t.name, percent(t.test.explained), t.test.f, t.test.p_value)
             })
             .collect()
     };
@@ -50,14 +77,11 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
     if d.found.is_empty() {
         out += "  no effect lowers the cross-validated error by the required margin: none found\n";
     }
+    if !d.found.is_empty() {
+        out += "  (explains: the drop in residual variance when the effect is added last, on the training rows)\n";
+    }
     for f in &d.found {
-        out += &format!(
-            "  {:<32} explains {:>6.2} % of the residual ({:>6.2} % of what the others leave); CV RMS after {:.4e}\n",
-            f.name,
-            100.0 * f.share,
-            100.0 * f.partial_share,
-            f.cv_rms
-        );
+        out += &format!("  {:<32} explains {:>9}; CV RMS after {:.4e}\n", f.name, percent(f.partial_share), f.cv_rms);
         if f.kind == GroupKind::Geometric && f.parameters.len() > 8 {
             out += &format!("      {} identifiable DH/base/tool parameters (see --json); largest changes:\n", f.parameters.len());
         }
@@ -70,9 +94,9 @@ pub fn text(d: &Diagnosis, model: &NominalModel, unit: &str) -> String {
             out += &format!(
                 "      {:<22} {:>+12.5e} ± {:.1e} {}\n",
                 p.name,
-                shown(model, &p.param, p.value),
-                shown(model, &p.param, p.std_error),
-                unit_of(model, &p.param, unit)
+                shown(model, &p.param, p.value, units),
+                shown(model, &p.param, p.std_error, units),
+                unit_of(model, &p.param, units)
             );
         }
     }
@@ -124,28 +148,31 @@ fn dropped_text(d: &super::DroppedEffect) -> String {
         DropReason::NoCrossValidatedGain => {
             format!("{} (added last it lowers the cross-validated RMS by {:.1} %)", d.name, 100.0 * d.cv_gain)
         }
+        DropReason::ShapeOutsideLibrary => {
+            format!("{} (its joint's deflection keeps a shape the library does not have: joint shape test p = {:.1e})", d.name, d.p_value)
+        }
     }
 }
 
-fn effect_json(model: &NominalModel, f: &FoundEffect, unit: &str) -> Value {
+fn effect_json(model: &NominalModel, f: &FoundEffect, units: &Units) -> Value {
     json!({
         "name": f.name,
         "type": f.kind.type_name(),
         "joint": f.joint.map(|j| j + 1),
         "harmonic": match f.kind { GroupKind::Transmission { harmonic } => Some(harmonic), _ => None },
-        "share": f.share,
-        "partial_share": f.partial_share,
+        "explains": f.partial_share,
+        "share_in_selection_order": f.share,
         "cv_rms_after": f.cv_rms,
         "parameters": f.parameters.iter().map(|p| json!({
-            "name": p.name, "value": shown(model, &p.param, p.value), "std_error": shown(model, &p.param, p.std_error),
-            "unit": unit_of(model, &p.param, unit),
+            "name": p.name, "value": shown(model, &p.param, p.value, units), "std_error": shown(model, &p.param, p.std_error, units),
+            "unit": unit_of(model, &p.param, units),
         })).collect::<Vec<_>>(),
     })
 }
 
 /// The `--json` shape: `{found: [...], structure_before/after: [...], unexplained_structure,
 /// selection: {...}, held_out: {name: {mean, median, p99, max}}, ...}`.
-pub fn to_json(d: &Diagnosis, model: &NominalModel, unit: &str) -> Value {
+pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
     let tests = |t: &[super::structure::StructureTest]| -> Vec<Value> {
         t.iter()
             .map(|t| {
@@ -159,15 +186,20 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, unit: &str) -> Value {
         held.insert(r.name.clone(), json!({"mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max}));
     }
     json!({
-        "unit": unit,
+        "unit": units.length,
+        "angle_unit": units.angle.name(),
         "train_rows": d.train_rows,
         "test_rows": d.test_rows,
         "held_out_source": d.held_out,
-        "found": d.found.iter().map(|f| effect_json(model, f, unit)).collect::<Vec<_>>(),
+        "found": d.found.iter().map(|f| effect_json(model, f, units)).collect::<Vec<_>>(),
         "physical_effects": d.physical_effects().len(),
         "dropped": d.dropped.iter().map(|x| json!({
             "name": x.name,
-            "reason": match x.reason { DropReason::NotSignificant => "not significant", _ => "no cross-validated gain" },
+            "reason": match x.reason {
+                DropReason::NotSignificant => "not significant",
+                DropReason::NoCrossValidatedGain => "no cross-validated gain",
+                DropReason::ShapeOutsideLibrary => "shape outside the library",
+            },
             "p_value": x.p_value, "cv_gain": x.cv_gain,
         })).collect::<Vec<_>>(),
         "unexplained_structure": d.unexplained_structure,
@@ -195,12 +227,12 @@ pub fn plots(
 ) -> Result<Vec<std::path::PathBuf>, String> {
     use super::library::{apply, predict};
     let n = model_start.n_joints();
-    let m = model_start.task_dim();
+    let m = d.train.task_dim;
     // The model with only the geometric part of the found corrections.
     let (gp, gv): (Vec<Param>, Vec<f64>) =
         d.found.iter().filter(|f| f.kind == GroupKind::Geometric).flat_map(|f| f.parameters.iter().map(|p| (p.param, p.value))).unzip();
     let geometric = apply(model_start, &gp, &gv)?;
-    let before = predict(&geometric, &d.train.joints);
+    let before = predict(&geometric, &d.train.joints, m);
     let residual: Vec<f64> = before
         .chunks_exact(m)
         .zip(d.train.positions.chunks_exact(m))
@@ -215,7 +247,7 @@ pub fn plots(
         // |Δk| of this effect alone at each row, averaged in bins of q_j.
         let (p, v): (Vec<Param>, Vec<f64>) = f.parameters.iter().map(|p| (p.param, p.value)).unzip();
         let alone = apply(&geometric, &p, &v)?;
-        let with = predict(&alone, &d.train.joints);
+        let with = predict(&alone, &d.train.joints, m);
         let bins = 48;
         let qs: Vec<f64> = d.train.joints.chunks_exact(n).map(|q| q[j]).collect();
         let (lo, hi) = qs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));

@@ -3,6 +3,9 @@
 //!   joint harmonics:  cos/sin(h q_j), h = 1..H, per task coordinate and through the joint's
 //!                     Jacobian (J_j cos(h q_j), J_j sin(h q_j));
 //!   gravity torque:   τ_j(q) per coordinate and J_j τ_j(q) (compliance of joint j);
+//!   joint shape:      J_j · 1[q_j in bin b], b = 1..B over the data's range of q_j: any deflection
+//!                     of joint j that is a function of q_j alone (a dead zone, a step), whether
+//!                     the library has its shape or not;
 //!   task position:    a quadratic polynomial of the (normalised) predicted position per coordinate.
 //! A test is significant when its p-value is below α / (number of tests) (Bonferroni) and its
 //! regressors explain at least `min_share` of the residual sum of squares.
@@ -21,11 +24,13 @@ pub struct StructureOptions {
     pub alpha: f64,
     /// Smallest share of the residual sum of squares worth reporting.
     pub min_share: f64,
+    /// Bins of the joint-shape test.
+    pub shape_bins: usize,
 }
 
 impl Default for StructureOptions {
     fn default() -> Self {
-        StructureOptions { harmonics: 3, alpha: 0.01, min_share: 0.01 }
+        StructureOptions { harmonics: 3, alpha: 0.01, min_share: 0.01, shape_bins: 16 }
     }
 }
 
@@ -42,7 +47,7 @@ pub struct StructureTest {
 
 /// Runs every test on residual `r` (rows × m, row-major) of `model` on `data`.
 pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], options: &StructureOptions) -> Vec<StructureTest> {
-    let (n, m, rows) = (model.n_joints(), model.task_dim(), data.len());
+    let (n, m, rows) = (model.n_joints(), data.task_dim, data.len());
     let obs = rows * m;
     let null = Mat::from_fn(obs, m, |i, c| if i % m == c { 1.0 } else { 0.0 });
     let rigid = kinematics::rigid(model);
@@ -70,9 +75,18 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
         let mut cols = Vec::new();
         per_joint(j, &|i| tau[i][j], &mut cols);
         out.push(("gravity torque", Some(j), nested_f_test(&null, &to_mat(&cols), r)));
+        // Through the joint only: a deflection of joint j, piecewise constant in q_j.
+        let bins = options.shape_bins.max(2);
+        let (lo, hi) = (0..rows).map(|i| data.joints(i)[j]).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        let bin = |i: usize| (((data.joints(i)[j] - lo) / (hi - lo).max(f64::MIN_POSITIVE) * bins as f64) as usize).min(bins - 1);
+        let mut cols: Vec<Vec<f64>> = Vec::new();
+        for b in 0..bins {
+            cols.push((0..obs).map(|o| if bin(o / m) == b { jac[o / m][(o % m) * n + j] } else { 0.0 }).collect());
+        }
+        out.push(("joint shape", Some(j), nested_f_test(&null, &to_mat(&cols), r)));
     }
     // Task position, normalised: (k − mean) / rms.
-    let predicted: Vec<f64> = (0..rows).flat_map(|i| kinematics::position(model, data.joints(i))).collect();
+    let predicted: Vec<f64> = (0..rows).flat_map(|i| kinematics::position(model, data.joints(i), m)).collect();
     let norm = crate::kernels::normalisation_of(&Measurements {
         n_joints: n,
         task_dim: m,

@@ -200,6 +200,18 @@ impl EffectArm {
         super::add_noise(&mut positions, noise, seed);
         crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), joints: joints.to_vec(), positions }
     }
+
+    /// [`measure`](Self::measure) in the plane: the first two coordinates, for a planar arm whose
+    /// rigid geometry is a DH form (base offset, joint offsets: `rr::planar_arm`).
+    pub fn measure_planar(&self, joints: &[f64], noise: f64, seed: u64) -> crate::data::Measurements {
+        let n = self.rigid.n_joints();
+        let full = self.rigid.task_dim();
+        let mut positions: Vec<f64> =
+            joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i).into_iter().take(2).collect::<Vec<_>>()).collect();
+        super::add_noise(&mut positions, noise, seed);
+        debug_assert!(full >= 2);
+        crate::data::Measurements { n_joints: n, task_dim: 2, joints: joints.to_vec(), positions }
+    }
 }
 
 /// Parses `type:key=value,...`, e.g. `transmission:joint=2,harmonic=2,cos=0.001,sin=0`

@@ -9,6 +9,22 @@ pub fn nominal() -> NominalModel {
     NominalModel::planar(&[1.0, 0.5]).expect("two links fit")
 }
 
+/// A planar arm as a DH chain (`nominal::planar::as_dh`) with link `lengths`, its base moved by
+/// (x, y) and turned by `base_yaw` (rad) in the plane, and joint offsets `offsets` (rad): the
+/// rigid geometry of a real planar arm, which a `PlanarChain` (link lengths only) cannot hold.
+/// Gravity along −y, unit masses.
+pub fn planar_arm(lengths: &[f64], base: [f64; 2], base_yaw: f64, offsets: &[f64]) -> NominalModel {
+    let mut model = crate::nominal::planar::as_dh(&NominalModel::planar(lengths).expect("at most MAX_JOINTS links"));
+    if let NominalModel::DhChain(c) = &mut model {
+        let pose = crate::nominal::Pose { t: [base[0], base[1], 0.0], ..crate::nominal::Pose::axis_angle([0.0, 0.0, 1.0], base_yaw) };
+        c.base = pose.to_transform();
+        for (j, o) in c.joints.iter_mut().zip(offsets) {
+            j.theta_offset = *o;
+        }
+    }
+    model
+}
+
 /// The simulated real arm. Gravity acts along −y.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RealRr {
