@@ -15,10 +15,12 @@
 extern crate std;
 
 mod effects;
+mod limits;
 mod model;
 mod validate;
 
 pub use effects::*;
+pub use limits::*;
 pub use model::*;
 pub use validate::ModelError;
 
