@@ -22,7 +22,13 @@ struct Residuals<'a> {
 impl Figure for Residuals<'_> {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
         let nj = self.joint_names.len();
-        let root = root.titled("Residual against each joint, with the effects found", (FONT, 28)).map_err(pe)?;
+        // The title promises curves only when there are some to draw.
+        let title = if self.effects.is_empty() {
+            "Residual against each joint"
+        } else {
+            "Residual against each joint, and the part of it each effect found explains"
+        };
+        let root = root.titled(title, (FONT, 28)).map_err(pe)?;
         let rows = nj.div_ceil(2);
         let cols = if nj == 1 { 1 } else { 2 };
         let areas = root.split_evenly((rows, cols));
