@@ -17,6 +17,7 @@ extern crate std;
 mod effects;
 mod limits;
 mod model;
+pub mod paper_rr;
 mod validate;
 
 pub use effects::*;
