@@ -8,7 +8,7 @@
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
 
-use crate::model::MAX_JOINTS;
+use crate::limits::MAX_JOINTS;
 
 /// Most effects one model may carry.
 pub const MAX_EFFECTS: usize = 48;

@@ -15,10 +15,13 @@
 extern crate std;
 
 mod effects;
+mod limits;
 mod model;
+pub mod paper_rr;
 mod validate;
 
 pub use effects::*;
+pub use limits::*;
 pub use model::*;
 pub use validate::ModelError;
 

@@ -4,13 +4,7 @@ use heapless::Vec as HVec;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::effects::Effects;
-
-/// Most joints a model may have.
-pub const MAX_JOINTS: usize = 7;
-/// Largest task-space dimension (3-D position).
-pub const MAX_TASK_DIM: usize = 3;
-/// Most integration steps a model may ask for.
-pub const MAX_STEPS: u16 = 64;
+use crate::limits::{MAX_JOINTS, MAX_TASK_DIM};
 
 /// A calibrated model: nominal kinematics, kernels, integrator, control points and momenta.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -8,10 +8,10 @@ fn le(values: &[f64]) -> Vec<u8> {
 
 fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a> {
     Model {
-        nominal: NominalModel::planar(&[1.0, 0.5]).unwrap(),
+        nominal: NominalModel::planar(&crate::paper_rr::LENGTHS).unwrap(),
         normalisation: Normalisation::IDENTITY,
-        joint_kernel: JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
-        task_kernel: TaskKernel { width: 1.027 },
+        joint_kernel: crate::paper_rr::joint_kernel(),
+        task_kernel: crate::paper_rr::task_kernel(),
         integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
         momentum_law: MomentumLaw::WithDivergence,
         sigma: 1e-3,

@@ -1,6 +1,7 @@
 //! Consistency checks run on every encode and decode.
 
 use crate::effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
+use crate::limits::MAX_STEPS;
 use crate::model::*;
 
 /// What is wrong with a model, naming the field.

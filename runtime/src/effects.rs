@@ -22,8 +22,8 @@
 //! Everything is f64 through `libm`, with no fused multiply-add: host and firmware agree bit for
 //! bit. Out-of-range joint or link indices (rejected by validation) are ignored, never a panic.
 
-use crate::nominal::{dh_walk, forward_kinematics, Kinematics};
-use crate::query_derivatives::{nominal_hessian, NominalHessian};
+use crate::rigid::{dh_walk, Kinematics};
+use crate::rigid_derivatives::NominalHessian;
 use cbd_protocol::{DhChain, Effect, Effects, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 type V3 = [f64; 3];
@@ -445,14 +445,14 @@ fn without_effects(model: &NominalModel) -> NominalModel {
 }
 
 /// k_rigid(q) and Dk_rigid(q): the chain alone, its effects ignored (evaluated by the effect-free
-/// code path of [`forward_kinematics`], so that the rigid part is the same arithmetic either way).
+/// code path, [`crate::rigid::kinematics`], so that the rigid part is the same arithmetic either way).
 pub fn rigid_kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
-    forward_kinematics(&without_effects(model), q)
+    crate::rigid::kinematics(&without_effects(model), q)
 }
 
-/// D²k_rigid(q): the chain alone (the effect-free code path of [`nominal_hessian`]).
+/// D²k_rigid(q): the chain alone (the effect-free code path, [`crate::rigid_derivatives::hessian`]).
 pub fn rigid_hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
-    nominal_hessian(&without_effects(model), q)
+    crate::rigid_derivatives::hessian(&without_effects(model), q)
 }
 
 /// s = q + δ(q) (first `n` entries).
@@ -465,7 +465,7 @@ fn deflected(q: &[f64], t: &EffectTerms, n: usize) -> [f64; NJ] {
 }
 
 /// k0_aug(q) = k_rigid(q + δ(q)) + b(q) and Dk0_aug = Dk_rigid(s)(I + Dδ) + Db, model units.
-/// (Out of line: the effect-free path of [`forward_kinematics`] keeps its code and cost.)
+/// (Out of line: the effect-free path of `nominal::forward_kinematics` keeps its code and cost.)
 #[inline(never)]
 #[cold]
 pub fn kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
@@ -473,7 +473,7 @@ pub fn kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
     let m = model.task_dim();
     let t = effect_terms(model, &model.effects().list, q, Order::First);
     let s = deflected(q, &t, n);
-    let rigid = forward_kinematics(&without_effects(model), s.get(..n).unwrap_or(&[]));
+    let rigid = crate::rigid::kinematics(&without_effects(model), s.get(..n).unwrap_or(&[]));
     let mut out = rigid;
     for (a, ((p, b), (row, rigid_row))) in
         out.position.iter_mut().zip(t.b.iter()).zip(out.jacobian.iter_mut().zip(rigid.jacobian.iter())).enumerate()
@@ -505,8 +505,8 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
     let s = deflected(q, &t, n);
     let s = s.get(..n).unwrap_or(&[]);
     let rigid = without_effects(model);
-    let jac = forward_kinematics(&rigid, s).jacobian;
-    let h = nominal_hessian(&rigid, s);
+    let jac = crate::rigid::kinematics(&rigid, s).jacobian;
+    let h = crate::rigid_derivatives::hessian(&rigid, s);
     let mut out = [[[0.0; NJ]; NJ]; MT];
     for (((out_a, h_a), jac_a), d2b_a) in out.iter_mut().zip(h.iter()).zip(jac.iter()).zip(t.d2_b.iter()).take(m) {
         // right[i][d] = Σ_j H[a][i][j] A[j][d] = H[a][i][d] + Σ_j H[a][i][j] Dδ[j][d]

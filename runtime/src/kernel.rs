@@ -1,4 +1,4 @@
-//! The two reproducing kernels: K_V on joint space, K_W on task space (DESIGN.md §2).
+//! The two reproducing kernels: K_V on joint space, K_W on task space (docs/DESIGN.md §1).
 
 use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, JointKernelAxis, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};

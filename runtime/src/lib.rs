@@ -18,6 +18,8 @@ pub mod kernel;
 pub mod nominal;
 pub mod query_derivatives;
 pub mod real;
+pub mod rigid;
+pub mod rigid_derivatives;
 
 pub use calibrator::{
     initial_state, integrate_control_points, integrate_control_points_with_features, integrate_points, storage_len, Calibrator, Evaluation,

@@ -18,10 +18,9 @@ use crate::flow::{
 };
 use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
 use crate::real::Real;
-use cbd_protocol::{DhChain, JointKernel, JointKind, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use cbd_protocol::{JointKernel, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
-/// Second derivatives of the nominal model: `h[a][e][d] = ∂²k0_a / ∂x_e ∂x_d`, model units.
-pub type NominalHessian = [[[f64; NJ]; NJ]; MT];
+pub use crate::rigid_derivatives::NominalHessian;
 
 /// `∂_d Dv(ξ)[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V(ξ, x_j)`, indexed `[d][f][e]`.
 pub type JointHessian = [[[Real; NJ]; NJ]; NJ];
@@ -126,60 +125,7 @@ pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
     if !model.effects().is_empty() {
         return crate::effects::hessian(model, x);
     }
-    let mut h = [[[0.0; NJ]; NJ]; MT];
-    match model {
-        // ∂²y/∂x_e∂x_d = Σ_{k ≥ max(d, e)} −l_k (cos θ_k, sin θ_k)
-        NominalModel::PlanarChain { lengths, .. } => {
-            let mut theta = 0.0;
-            for (k, (l, xk)) in lengths.iter().zip(x).enumerate() {
-                theta += xk;
-                let term = [-l * libm::cos(theta), -l * libm::sin(theta)];
-                for (h_a, t) in h.iter_mut().zip(term.iter()) {
-                    for row in h_a.iter_mut().take(k + 1) {
-                        for v in row.iter_mut().take(k + 1) {
-                            *v += t;
-                        }
-                    }
-                }
-            }
-        }
-        NominalModel::DhChain(chain) => dh_hessian(chain, x, &mut h),
-    }
-    h
-}
-
-fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-// Column j of Dk0 is z_j × (p − o_j) (revolute) or z_j (prismatic). Its derivative with respect
-// to joint i: the axes and origins of joints after i turn with joint i, and p moves with every joint.
-fn dh_hessian(chain: &DhChain, x: &[f64], h: &mut NominalHessian) {
-    let (axes, origins, p) = crate::nominal::dh_frames(chain, x);
-    let n = chain.joints.len().min(x.len());
-    for (j, (joint_j, (z_j, o_j))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {
-        for (i, (joint_i, (z_i, o_i))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {
-            let value = match (joint_j.kind, joint_i.kind) {
-                // i ≤ j: z_j and (p − o_j) both rotate about z_i; i > j: only p moves.
-                (JointKind::Revolute, JointKind::Revolute) if i <= j => cross(z_i, &cross(z_j, &sub(&p, o_j))),
-                (JointKind::Revolute, JointKind::Revolute) => cross(z_j, &cross(z_i, &sub(&p, o_i))),
-                // A prismatic joint before j translates p and o_j alike.
-                (JointKind::Revolute, JointKind::Prismatic) if i < j => [0.0; 3],
-                (JointKind::Revolute, JointKind::Prismatic) => cross(z_j, z_i),
-                (JointKind::Prismatic, JointKind::Revolute) if i < j => cross(z_i, z_j),
-                (JointKind::Prismatic, _) => [0.0; 3],
-            };
-            for (h_a, v) in h.iter_mut().zip(value.iter()) {
-                if let Some(slot) = h_a.get_mut(i).and_then(|row| row.get_mut(j)) {
-                    *slot = *v;
-                }
-            }
-        }
-    }
+    crate::rigid_derivatives::hessian(model, x)
 }
 
 /// The rates of one direction's tangent (δk, δJ) given the stage's fields:

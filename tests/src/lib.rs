@@ -12,13 +12,10 @@ pub fn reference_blob() -> Vec<u8> {
     };
     let (x, p) = (f64_le_bytes(&flat("X")), f64_le_bytes(&flat("P0")));
     let model = Model {
-        nominal: NominalModel::planar(&[1.0, 0.5]).expect("two links"),
+        nominal: NominalModel::planar(&cbd_protocol::paper_rr::LENGTHS).expect("two links"),
         normalisation: Normalisation::IDENTITY,
-        joint_kernel: JointKernel {
-            gamma: 8.0,
-            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("two axes"),
-        },
-        task_kernel: TaskKernel { width: 1.027 },
+        joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
+        task_kernel: cbd_protocol::paper_rr::task_kernel(),
         integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
         momentum_law: MomentumLaw::WithDivergence,
         sigma: 1e-4,

@@ -25,10 +25,10 @@ fn flat(v: &Value) -> Vec<f64> {
 
 fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, method: IntegratorMethod, steps: u16) -> Model<'a> {
     Model {
-        nominal: NominalModel::planar(&[1.0, 0.5]).unwrap(),
+        nominal: NominalModel::planar(&cbd_protocol::paper_rr::LENGTHS).unwrap(),
         normalisation: Normalisation::IDENTITY,
-        joint_kernel: JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
-        task_kernel: TaskKernel { width: 1.0270 },
+        joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
+        task_kernel: cbd_protocol::paper_rr::task_kernel(),
         integrator: Integrator { method, steps },
         momentum_law: MomentumLaw::WithDivergence,
         sigma: 1.0,

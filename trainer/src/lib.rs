@@ -8,6 +8,7 @@ pub mod cli;
 pub mod data;
 pub mod diagnose;
 pub mod flow;
+pub mod io;
 pub mod kernels;
 pub mod nominal;
 pub mod predict;

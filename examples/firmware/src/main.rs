@@ -2,7 +2,7 @@
 //! evaluates `shared::COUNT` fixed joint configurations and prints every value's bits through
 //! semihosting, in the format of `cbd-fw-host eval` (lines `q…`). Lines `t… TICKS` and
 //! `load TICKS` give SysTick ticks per evaluation and for loading; run under
-//! `qemu-system-arm -icount shift=0` a tick is 40 guest instructions (DESIGN.md §6).
+//! `qemu-system-arm -icount shift=0` a tick is 40 guest instructions (see .ci/firmware.sh).
 //!
 //! Build: `CBD_BLOB=path/to.blob CBD_STORAGE_LEN=… cargo build --release` in this directory;
 //! `cargo run --release` runs it on QEMU's Cortex-M7 board.

@@ -12,13 +12,10 @@ const RR_REFERENCE: &str = include_str!("../../../tests/data/rr_flow_reference.j
 /// The paper's RR arm settings, exactly as `tests/tests/reference_flow.rs` builds them.
 fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: Integrator) -> Model<'a> {
     Model {
-        nominal: NominalModel::planar(&[1.0, 0.5]).expect("2 joints"),
+        nominal: NominalModel::planar(&cbd_protocol::paper_rr::LENGTHS).expect("2 joints"),
         normalisation: Normalisation::IDENTITY,
-        joint_kernel: JointKernel {
-            gamma: 8.0,
-            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("2 axes"),
-        },
-        task_kernel: TaskKernel { width: 1.0270 },
+        joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
+        task_kernel: cbd_protocol::paper_rr::task_kernel(),
         integrator,
         momentum_law: MomentumLaw::WithDivergence,
         sigma: 1.0,

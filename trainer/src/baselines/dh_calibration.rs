@@ -5,17 +5,18 @@
 //!
 //! Residual: k(p; x_i) − y_i for every measured coordinate. The Jacobian is by central differences
 //! (each length parameter enters the position affinely, so for them it is exact to rounding).
-//! Columns are scaled to unit norm; the damped normal equations are solved through the
-//! eigendecomposition of JᵀJ (faer), and directions whose eigenvalue is below
-//! `rank_tolerance × λ_max` are dropped: unidentifiable combinations (e.g. d₂ + d₃ + d₄ for
+//! Columns are scaled to unit norm; the damped steps come from the SVD of the scaled Jacobian
+//! (`solver::least_squares::TruncatedSvd`, never JᵀJ itself), and directions whose eigenvalue of
+//! the scaled JᵀJ (σ²) is below `rank_tolerance × λ_max` are dropped: unidentifiable combinations (e.g. d₂ + d₃ + d₄ for
 //! parallel axes, base yaw vs θ₁ offset) stay at their nominal values (the minimum-norm change
 //! in scaled parameters) and are reported by name.
 
 use crate::data::Measurements;
 use crate::nominal::Pose;
+use crate::solver::least_squares::TruncatedSvd;
 use cbd_protocol::{DhChain, NominalModel};
 use cbd_runtime::nominal::forward_kinematics;
-use faer::{Mat, Side};
+use faer::Mat;
 
 /// Settings of the fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -79,7 +80,7 @@ pub enum DhCalibrationError {
     NotADhChain,
     /// Fewer measured coordinates than parameters would be meaningless.
     TooFewMeasurements { rows: usize },
-    /// The eigendecomposition failed (non-finite data?).
+    /// The SVD of the Jacobian failed (non-finite data?).
     Numerical(String),
 }
 
@@ -285,8 +286,7 @@ pub fn calibrate_dh(
         }
     };
     let mut colnorm = vec![1.0; np];
-    let mut eig: Option<(Vec<f64>, Mat<f64>)> = None;
-    let mut g = vec![0.0; np];
+    let mut svd: Option<TruncatedSvd> = None;
     while iterations < options.max_iterations {
         if recompute {
             // Analytic columns for the DH rows, base translation and tool; central differences
@@ -335,52 +335,27 @@ pub fn calibrate_dh(
                 }
                 colnorm[k] = 1.0;
             }
-            // Scaled normal equations A = D⁻¹ JᵀJ D⁻¹, gradient g = D⁻¹ Jᵀ r.
-            let jtj = jac.transpose() * &jac;
-            let a = Mat::from_fn(np, np, |i, j| jtj[(i, j)] / (colnorm[i] * colnorm[j]));
-            let rcol = Mat::from_fn(rows, 1, |i, _| r[i]);
-            let jtr = jac.transpose() * &rcol;
-            for k in 0..np {
-                g[k] = jtr[(k, 0)] / colnorm[k];
-            }
-            let evd = a.self_adjoint_eigen(Side::Lower).map_err(|e| DhCalibrationError::Numerical(format!("{e:?}")))?;
-            let values: Vec<f64> = (0..np).map(|k| evd.S()[k]).collect();
-            let vectors = evd.U().to_owned();
-            let lmax = values.iter().cloned().fold(0.0, f64::max);
-            let cut = options.rank_tolerance * lmax;
-            rank = values.iter().filter(|&&l| l > cut).count();
+            // The scaled Jacobian J D⁻¹ = U Σ Vᵀ: λ_k = σ_k² are the eigenvalues of D⁻¹ JᵀJ D⁻¹.
+            let factored = TruncatedSvd::with_scales(jac.as_ref(), colnorm.clone()).map_err(DhCalibrationError::Numerical)?;
+            rank = (0..np).filter(|&k| factored.keeps(k, options.rank_tolerance)).count();
             // Directions of the out-of-plane parameters alone are not news: only those that move an
             // in-plane parameter are reported.
             null_dirs = (0..np)
-                .filter(|&k| values[k] <= cut)
-                .map(|k| (0..np).map(|i| vectors[(i, k)]).collect::<Vec<f64>>())
+                .filter(|&k| !factored.keeps(k, options.rank_tolerance))
+                .map(|k| factored.direction(k))
                 .filter(|v| v.iter().enumerate().any(|(i, w)| w.abs() > 0.3 && !out_of_plane.contains(&i)))
                 .collect();
             if mu < 0.0 {
-                mu = 1e-3 * lmax;
+                mu = 1e-3 * factored.eigenvalues().first().copied().unwrap_or(0.0);
             }
-            eig = Some((values, vectors));
+            svd = Some(factored);
             recompute = false;
         }
-        let (values, vectors) = eig.as_ref().expect("computed");
-        let lmax = values.iter().cloned().fold(0.0, f64::max);
-        let cut = options.rank_tolerance * lmax;
-        // Step in scaled parameters: −Σ_k v_k (v_kᵀ g) / (λ_k + μ) over identifiable directions.
-        let mut step_s = vec![0.0; np];
-        let mut predicted = 0.0;
-        for k in 0..np {
-            if values[k] <= cut {
-                continue;
-            }
-            let vg: f64 = (0..np).map(|i| vectors[(i, k)] * g[i]).sum();
-            let c = -vg / (values[k] + mu);
-            // Predicted decrease of the linear model: −(c vg + ½ λ c²).
-            predicted -= c * vg + 0.5 * values[k] * c * c;
-            for i in 0..np {
-                step_s[i] += c * vectors[(i, k)];
-            }
-        }
-        // Rounding in the eigenvectors must not move what stays out of the plane.
+        let factored = svd.as_ref().expect("computed");
+        let lmax = factored.eigenvalues().first().copied().unwrap_or(0.0);
+        // Step in scaled parameters over the identifiable directions, and the decrease the linear model predicts.
+        let (mut step_s, predicted) = factored.damped_step(&r, mu, options.rank_tolerance);
+        // Rounding in the singular vectors must not move what stays out of the plane.
         for &k in &out_of_plane {
             step_s[k] = 0.0;
         }

@@ -60,15 +60,6 @@ pub struct DemoReport {
     pub fit: crate::solver::FitReport,
 }
 
-pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod, String> {
-    match name.to_ascii_lowercase().as_str() {
-        "euler" => Ok(cbd_protocol::IntegratorMethod::Euler),
-        "heun" => Ok(cbd_protocol::IntegratorMethod::Heun),
-        "rk4" => Ok(cbd_protocol::IntegratorMethod::Rk4),
-        other => Err(format!("unknown integrator `{other}` (expected euler, heun or rk4)")),
-    }
-}
-
 pub fn run(args: DemoArgs) -> Result<(), String> {
     if args.test_points == 0 {
         return Err("--test-points must be at least 1".into());

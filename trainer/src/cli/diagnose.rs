@@ -100,11 +100,18 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
-        let names: Vec<String> = match &model_file {
-            Some(m) => m.joint_names.iter().map(|n| format!("{n} (rad)")).collect(),
-            None => (1..=nominal.n_joints()).map(|j| format!("q{j} (rad)")).collect(),
-        };
-        let files = report::plots(dir, &d, &d.model_start, &names, unit)?;
+        // Joint axes in the file's units: its angle unit for revolute joints, its length unit otherwise.
+        let (names, scales): (Vec<String>, Vec<f64>) = (0..nominal.n_joints())
+            .map(|j| {
+                let name = model_file.as_ref().and_then(|m| m.joint_names.get(j).cloned()).unwrap_or_else(|| format!("q{}", j + 1));
+                match (&model_file, nominal.is_revolute(j)) {
+                    (Some(m), true) => (format!("{name} ({})", m.angle_unit.name()), 1.0 / m.angle_unit.radians()),
+                    (None, true) => (format!("{name} (rad)"), 1.0),
+                    (_, false) => (format!("{name} ({unit})"), 1.0),
+                }
+            })
+            .unzip();
+        let files = report::plots(dir, &d, &d.model_start, &names, &scales, unit)?;
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {

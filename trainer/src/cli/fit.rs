@@ -104,7 +104,7 @@ impl SolverArgs {
             }
         }
         if let Some(method) = &self.integrator {
-            crate::cli::demo::parse_integrator(method)?;
+            parse_integrator(method)?;
         }
         if let Some(solver) = &self.solver {
             parse_solver(solver)?;
@@ -127,7 +127,7 @@ impl SolverArgs {
             joint_gamma: self.gamma,
         };
         if let Some(method) = &self.integrator {
-            s.integrator = Some(crate::cli::demo::parse_integrator(method)?);
+            s.integrator = Some(parse_integrator(method)?);
         }
         s.steps = self.steps;
         s.max_iterations = self.max_iterations;
@@ -182,6 +182,16 @@ fn evenly_spaced_rows(data: crate::data::Measurements, max_rows: Option<usize>) 
             data.subset(&rows)
         }
         _ => data,
+    }
+}
+
+/// The integrator a command-line name stands for.
+pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod, String> {
+    match name.to_ascii_lowercase().as_str() {
+        "euler" => Ok(cbd_protocol::IntegratorMethod::Euler),
+        "heun" => Ok(cbd_protocol::IntegratorMethod::Heun),
+        "rk4" => Ok(cbd_protocol::IntegratorMethod::Rk4),
+        other => Err(format!("unknown integrator `{other}` (expected euler, heun or rk4)")),
     }
 }
 

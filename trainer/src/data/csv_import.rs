@@ -1,7 +1,8 @@
 //! Measurement import from CSV: named joint and position columns, unit conversion, and errors
 //! that name the file, the line and the column.
 
-use super::model_file::{AngleUnit, ImportError, LengthUnit};
+use super::import_error::ImportError;
+use super::units::{AngleUnit, LengthUnit};
 use super::Measurements;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;

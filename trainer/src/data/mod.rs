@@ -74,8 +74,10 @@ pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> Result<Vec<u
 
 pub mod csv_import;
 pub mod effects_section;
+pub mod import_error;
 pub mod model_file;
 pub mod nominal_check;
+pub mod units;
 
 #[cfg(test)]
 mod tests {

@@ -45,103 +45,10 @@ use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::Pose;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
 use serde::Deserialize;
-use std::fmt;
 use std::path::{Path, PathBuf};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LengthUnit {
-    Mm,
-    M,
-}
-
-impl LengthUnit {
-    /// Metres per unit.
-    pub fn metres(self) -> f64 {
-        match self {
-            LengthUnit::Mm => 1e-3,
-            LengthUnit::M => 1.0,
-        }
-    }
-    /// Factor converting a value in `self` into `to`.
-    pub fn factor_to(self, to: LengthUnit) -> f64 {
-        match (self, to) {
-            (a, b) if a == b => 1.0,
-            (LengthUnit::M, LengthUnit::Mm) => 1000.0,
-            _ => 1e-3,
-        }
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            LengthUnit::Mm => "mm",
-            LengthUnit::M => "m",
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum AngleUnit {
-    Deg,
-    Rad,
-}
-
-impl AngleUnit {
-    /// Radians per unit.
-    pub fn radians(self) -> f64 {
-        match self {
-            AngleUnit::Deg => std::f64::consts::PI / 180.0,
-            AngleUnit::Rad => 1.0,
-        }
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            AngleUnit::Deg => "deg",
-            AngleUnit::Rad => "rad",
-        }
-    }
-}
-
-/// Any failure to read a model file or a measurement file. Display gives the file, and for CSV
-/// data the line and column.
-#[derive(Debug, Clone, PartialEq)]
-pub enum ImportError {
-    /// The file could not be read.
-    Io { file: PathBuf, message: String },
-    /// The model file is not valid TOML for the schema (unknown field, wrong type, …); the
-    /// message comes from the TOML parser and names the field and position.
-    Toml { file: PathBuf, message: String },
-    /// The model file parses but describes no valid model.
-    Model { file: PathBuf, message: String },
-    /// A URDF file could not be read or converted.
-    Urdf { file: PathBuf, message: String },
-    /// A problem in a CSV file. `line` is 1-based (the header is line 1); `column` is the
-    /// column's name where one applies.
-    Csv { file: PathBuf, line: Option<u64>, column: Option<String>, message: String },
-}
-
-impl fmt::Display for ImportError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            ImportError::Io { file, message } => write!(f, "{}: {message}", file.display()),
-            ImportError::Toml { file, message } => write!(f, "{}: {}", file.display(), message.trim_end()),
-            ImportError::Model { file, message } => write!(f, "{}: {message}", file.display()),
-            ImportError::Urdf { file, message } => write!(f, "{}: URDF: {message}", file.display()),
-            ImportError::Csv { file, line, column, message } => {
-                write!(f, "{}", file.display())?;
-                if let Some(l) = line {
-                    write!(f, ":{l}")?;
-                }
-                if let Some(c) = column {
-                    write!(f, ": column '{c}'")?;
-                }
-                write!(f, ": {message}")
-            }
-        }
-    }
-}
-
-impl std::error::Error for ImportError {}
+pub use super::import_error::ImportError;
+pub use super::units::{AngleUnit, LengthUnit};
 
 /// A loaded model file.
 #[derive(Debug, Clone, PartialEq)]

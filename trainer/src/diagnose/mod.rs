@@ -108,6 +108,9 @@ pub struct Diagnosis {
     pub dropped: Vec<DroppedEffect>,
     /// The model with the found effects (geometric corrections in the chain, effects listed).
     pub model_after: NominalModel,
+    /// The geometric corrections refitted alone: the held-out "nominal + geometric" row's model
+    /// (the start when none were found, `model_after` when nothing else was).
+    pub model_geometric: NominalModel,
     /// Structure still significant after the effects: CbD is what absorbs it.
     pub unexplained_structure: bool,
     pub table: Vec<TableRow>,
@@ -457,6 +460,7 @@ pub fn diagnose(
         found,
         dropped,
         model_after: refined.model,
+        model_geometric: geometric_only,
         unexplained_structure,
         table,
         residual_before: r0,

@@ -4,6 +4,7 @@
 
 use super::library::{apply, jacobian, predict, Param};
 use crate::data::Measurements;
+use crate::solver::least_squares::TruncatedSvd;
 use cbd_protocol::NominalModel;
 use faer::{Mat, Side};
 
@@ -26,36 +27,15 @@ fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
     predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
-/// Scaled normal equations through the eigendecomposition: the step (pseudo-inverse,
-/// directions below 1e-12 λ_max dropped) and (JᵀJ)⁺ (p × p, row-major).
-fn normal_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
+/// The Gauss–Newton step (truncated least squares, directions with σ² below 1e-12 σ_max² of the
+/// unit-scaled Jacobian dropped) and (JᵀJ)⁺ (p × p, row-major).
+fn gauss_newton_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    const TOLERANCE: f64 = 1e-12;
     let p = jac.ncols();
-    let scale: Vec<f64> =
-        (0..p).map(|k| (0..jac.nrows()).map(|i| jac[(i, k)].powi(2)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE)).collect();
-    let js = Mat::from_fn(jac.nrows(), p, |i, k| jac[(i, k)] / scale[k]);
-    let g = js.transpose() * &js;
-    let rv = Mat::from_fn(r.len(), 1, |i, _| r[i]);
-    let b = js.transpose() * &rv;
-    let (mut step, mut var) = (vec![0.0; p], vec![0.0; p * p]);
-    let Ok(evd) = g.self_adjoint_eigen(Side::Lower) else { return (step, vec![f64::NAN; p * p]) };
-    let lmax = (0..p).map(|k| evd.S()[k]).fold(0.0, f64::max);
-    for k in 0..p {
-        let l = evd.S()[k];
-        if l <= 1e-12 * lmax || l <= 0.0 {
-            continue;
-        }
-        let u = evd.U();
-        let c = (0..p).map(|i| u[(i, k)] * b[(i, 0)]).sum::<f64>() / l;
-        for i in 0..p {
-            step[i] += c * u[(i, k)];
-            for j in 0..p {
-                var[i * p + j] += u[(i, k)] * u[(j, k)] / l;
-            }
-        }
+    match TruncatedSvd::unit_columns(jac.as_ref()) {
+        Ok(svd) => (svd.solve(r, TOLERANCE), svd.gram_pseudo_inverse(TOLERANCE)),
+        Err(_) => (vec![0.0; p], vec![f64::NAN; p * p]),
     }
-    let step = step.iter().zip(&scale).map(|(s, c)| s / c).collect();
-    let covariance = (0..p * p).map(|ij| var[ij] / (scale[ij / p] * scale[ij % p])).collect();
-    (step, covariance)
 }
 
 /// Refines `start` values of `params` on `base` (parameters are changes to `base`).
@@ -68,7 +48,7 @@ pub fn refine(base: &NominalModel, data: &Measurements, params: &[Param], start:
     while iterations < max_iterations && !params.is_empty() {
         iterations += 1;
         let jac = jacobian(&model, data, params);
-        let (step, _) = normal_solve(&jac, &r);
+        let (step, _) = gauss_newton_solve(&jac, &r);
         let mut t = 1.0;
         let mut improved = false;
         while t > 1e-4 {
@@ -88,7 +68,7 @@ pub fn refine(base: &NominalModel, data: &Measurements, params: &[Param], start:
         }
     }
     let jac = jacobian(&model, data, params);
-    let (_, var) = normal_solve(&jac, &r);
+    let (_, var) = gauss_newton_solve(&jac, &r);
     let p = params.len();
     let dof = (r.len() as f64 - p as f64).max(1.0);
     let sigma2 = sse / dof;

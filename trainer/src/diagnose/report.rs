@@ -215,47 +215,63 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
     })
 }
 
-/// `residual_vs_joint` figure: the norm of the residual left by the geometric corrections (the
-/// training residual of the final model plus the physical effects' own contribution) against
-/// each joint, with each joint effect's contribution (mean over the rows) drawn as a curve.
+/// `residual_vs_joint` figure: the norm of the training residual the geometric corrections leave
+/// (the same model as the held-out "nominal + geometric" row) against each joint, in the file's
+/// units (`joint_scale[j]` converts joint j from the model's radians or length unit), and over it
+/// each joint effect's curve: the part of the residual that effect explains, i.e. its
+/// displacement less what the geometric corrections absorb of it, as a norm averaged in bins of q_j.
 pub fn plots(
     dir: &std::path::Path,
     d: &Diagnosis,
     model_start: &NominalModel,
     joint_names: &[String],
+    joint_scale: &[f64],
     unit: &str,
 ) -> Result<Vec<std::path::PathBuf>, String> {
-    use super::library::{apply, predict};
+    use super::library::{apply, jacobian, predict};
+    use crate::solver::least_squares::TruncatedSvd;
     let n = model_start.n_joints();
     let m = d.train.task_dim;
-    // The model with only the geometric part of the found corrections.
-    let (gp, gv): (Vec<Param>, Vec<f64>) =
-        d.found.iter().filter(|f| f.kind == GroupKind::Geometric).flat_map(|f| f.parameters.iter().map(|p| (p.param, p.value))).unzip();
-    let geometric = apply(model_start, &gp, &gv)?;
+    let gp: Vec<Param> =
+        d.found.iter().filter(|f| f.kind == GroupKind::Geometric).flat_map(|f| f.parameters.iter().map(|p| p.param)).collect();
+    // The geometric corrections alone, as in the held-out "nominal + geometric" row.
+    let geometric = d.model_geometric.clone();
     let before = predict(&geometric, &d.train.joints, m);
     let residual: Vec<f64> = before
         .chunks_exact(m)
         .zip(d.train.positions.chunks_exact(m))
         .map(|(k, y)| k.iter().zip(y).map(|(a, b)| (b - a).powi(2)).sum::<f64>().sqrt())
         .collect();
+    // What the geometric parameters can absorb: their Jacobian at the geometric model.
+    let absorb = if gp.is_empty() {
+        None
+    } else {
+        let jac = jacobian(&geometric, &d.train, &gp);
+        let svd = TruncatedSvd::unit_columns(jac.as_ref())?;
+        Some((jac, svd))
+    };
+    let scale_of = |j: usize| joint_scale.get(j).copied().unwrap_or(1.0);
+    let joints: Vec<f64> = d.train.joints.chunks_exact(n).flat_map(|q| q.iter().enumerate().map(|(j, v)| v * scale_of(j))).collect();
     let mut curves: Vec<EffectCurve> = Vec::new();
     for f in d.physical_effects() {
-        let Some(j) = f.joint else { continue };
-        if !matches!(f.kind, GroupKind::Transmission { .. } | GroupKind::EncoderScale) {
-            continue;
-        }
-        // |Δk| of this effect alone at each row, averaged in bins of q_j.
+        let Some(j) = f.joint.filter(|&j| j < n) else { continue };
+        // This effect's displacement at each row, less its least-squares fit by the geometric columns.
         let (p, v): (Vec<Param>, Vec<f64>) = f.parameters.iter().map(|p| (p.param, p.value)).unzip();
-        let alone = apply(&geometric, &p, &v)?;
-        let with = predict(&alone, &d.train.joints, m);
+        let with = predict(&apply(&geometric, &p, &v)?, &d.train.joints, m);
+        let mut shift: Vec<f64> = with.iter().zip(&before).map(|(a, b)| a - b).collect();
+        if let Some((jac, svd)) = &absorb {
+            let c = svd.solve(&shift, 1e-12);
+            for (i, s) in shift.iter_mut().enumerate() {
+                *s -= (0..c.len()).map(|k| jac[(i, k)] * c[k]).sum::<f64>();
+            }
+        }
         let bins = 48;
-        let qs: Vec<f64> = d.train.joints.chunks_exact(n).map(|q| q[j]).collect();
+        let qs: Vec<f64> = joints.chunks_exact(n).map(|q| q[j]).collect();
         let (lo, hi) = qs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
         let mut sum = vec![(0.0, 0usize); bins];
         for (i, q) in qs.iter().enumerate() {
             let b = (((q - lo) / (hi - lo).max(1e-12)) * bins as f64).min(bins as f64 - 1.0) as usize;
-            let dist = (0..m).map(|c| (with[m * i + c] - before[m * i + c]).powi(2)).sum::<f64>().sqrt();
-            sum[b].0 += dist;
+            sum[b].0 += shift[m * i..m * (i + 1)].iter().map(|s| s * s).sum::<f64>().sqrt();
             sum[b].1 += 1;
         }
         let curve = sum
@@ -269,9 +285,9 @@ pub fn plots(
     crate::report::plots::residual_vs_joint(
         dir,
         joint_names,
-        &d.train.joints,
+        &joints,
         &residual,
-        &format!("residual norm after geometric corrections ({unit})"),
+        &format!("residual norm after the geometric corrections ({unit})"),
         &curves,
     )
 }

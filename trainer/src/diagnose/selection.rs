@@ -3,11 +3,12 @@
 //! A group is kept only if it lowers the cross-validated RMS by a clear margin and lowers BIC,
 //! so that an absent effect is not reported.
 //!
-//! Cheap CV: per fold k the Gram matrix G_k = A_kᵀA_k, b_k = A_kᵀr_k and r_kᵀr_k of its rows are
-//! formed once; training on the other folds uses G − G_k, and the held-out SSE is
-//! r_kᵀr_k − 2θᵀb_k + θᵀG_kθ, so no candidate set ever touches the rows again.
+//! Cheap CV without the normal equations: per fold the training rows are QR-factored once,
+//! A_train = Q R, so a candidate set S is fitted on R's columns S and Qᵀr (P rows, not the
+//! training rows: the same least-squares problem); the held-out SSE is summed on the held rows.
 
-use faer::{Mat, Side};
+use crate::solver::least_squares::{column_norm, QrLeastSquares, TruncatedSvd};
+use faer::{Mat, Par};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -29,112 +30,95 @@ impl Default for SelectionOptions {
     }
 }
 
-struct Moments {
-    g: Mat<f64>,
-    b: Vec<f64>,
-    rr: f64,
+/// A least-squares problem min |A_S θ − r| compressed by QR to P rows: R (A = Q R) and Qᵀr.
+struct Compressed {
+    r_factor: Mat<f64>,
+    qt_r: Vec<f64>,
 }
 
-/// The stacked linear problem and its per-fold moments (columns scaled to unit norm).
+/// Truncation of the selection's solves: directions with σ² below 1e-12 σ_max² are dropped.
+const TOLERANCE: f64 = 1e-12;
+
+/// The stacked linear problem and its per-fold QR factors (columns scaled to unit norm).
 pub struct LinearProblem {
     /// Column norms (θ = θ_scaled / scale).
     pub scale: Vec<f64>,
     /// Measurement rows and scalar observations (rows × task_dim).
     pub rows: usize,
     pub observations: usize,
-    folds: Vec<Moments>,
-    total: Moments,
+    /// A with unit-norm columns (observations × P).
+    a: Mat<f64>,
+    r: Vec<f64>,
+    /// Per fold: its held-out observations and its training rows, compressed.
+    folds: Vec<(Vec<usize>, Compressed)>,
+    total: Compressed,
 }
 
-fn moments(a: &Mat<f64>, r: &[f64], obs: &[usize], scale: &[f64]) -> Moments {
-    let p = a.ncols();
-    let sub = Mat::from_fn(obs.len(), p, |i, k| a[(obs[i], k)] / scale[k]);
-    let rs = Mat::from_fn(obs.len(), 1, |i, _| r[obs[i]]);
-    let g = sub.transpose() * &sub;
-    let b = sub.transpose() * &rs;
-    Moments { g, b: (0..p).map(|k| b[(k, 0)]).collect(), rr: obs.iter().map(|&i| r[i] * r[i]).sum() }
+fn compress(a: &Mat<f64>, r: &[f64], obs: &[usize]) -> Compressed {
+    let sub = Mat::from_fn(obs.len(), a.ncols(), |i, k| a[(obs[i], k)]);
+    let rs: Vec<f64> = obs.iter().map(|&i| r[i]).collect();
+    let qr = QrLeastSquares::factor(sub, Par::Seq);
+    Compressed { r_factor: qr.r_factor(), qt_r: qr.project(&rs) }
 }
 
-/// Least-squares solution restricted to `cols` for Gram `g` and right side `b`: the
-/// pseudo-inverse through the eigendecomposition, directions below 1e-12 λ_max dropped.
-fn solve(g: &Mat<f64>, b: &[f64], cols: &[usize]) -> Vec<f64> {
+/// Least-squares solution restricted to `cols` (scaled parameters): truncated SVD of R's columns.
+fn solve(c: &Compressed, cols: &[usize]) -> Vec<f64> {
     let p = cols.len();
     if p == 0 {
         return Vec::new();
     }
-    let sub = Mat::from_fn(p, p, |i, j| g[(cols[i], cols[j])]);
-    let Ok(evd) = sub.self_adjoint_eigen(Side::Lower) else { return vec![0.0; p] };
-    let values: Vec<f64> = (0..p).map(|k| evd.S()[k]).collect();
-    let u = evd.U();
-    let lmax = values.iter().cloned().fold(0.0, f64::max);
-    let mut theta = vec![0.0; p];
-    for (k, &l) in values.iter().enumerate() {
-        if l <= 1e-12 * lmax || l <= 0.0 {
-            continue;
-        }
-        let c = (0..p).map(|i| u[(i, k)] * b[cols[i]]).sum::<f64>() / l;
-        for (i, t) in theta.iter_mut().enumerate() {
-            *t += c * u[(i, k)];
-        }
+    let sub = Mat::from_fn(c.r_factor.nrows(), p, |i, j| c.r_factor[(i, cols[j])]);
+    match TruncatedSvd::with_scales(sub.as_ref(), vec![1.0; p]) {
+        Ok(svd) => svd.solve(&c.qt_r, TOLERANCE),
+        Err(_) => vec![0.0; p],
     }
-    theta
-}
-
-/// Residual sum of squares of θ on moments `m` (restricted to `cols`).
-fn sse(m: &Moments, cols: &[usize], theta: &[f64]) -> f64 {
-    let mut s = m.rr;
-    for (i, &ci) in cols.iter().enumerate() {
-        s -= 2.0 * theta[i] * m.b[ci];
-        for (j, &cj) in cols.iter().enumerate() {
-            s += theta[i] * m.g[(ci, cj)] * theta[j];
-        }
-    }
-    s.max(0.0)
 }
 
 impl LinearProblem {
+    /// Residual sum of squares of θ (scaled, on `cols`) over the observations `obs`.
+    fn sse(&self, obs: impl Iterator<Item = usize>, cols: &[usize], theta: &[f64]) -> f64 {
+        obs.map(|i| {
+            let fitted: f64 = cols.iter().zip(theta).map(|(&c, t)| self.a[(i, c)] * t).sum();
+            (self.r[i] - fitted).powi(2)
+        })
+        .sum()
+    }
+
     /// `a`: (rows·m) × P Jacobian, `r`: residual y − k (rows·m), rows assigned to `folds`
     /// folds by a permutation drawn from `seed`.
     pub fn new(a: &Mat<f64>, r: &[f64], task_dim: usize, folds: usize, seed: u64) -> LinearProblem {
         let rows = r.len() / task_dim;
-        let scale: Vec<f64> =
-            (0..a.ncols()).map(|k| (0..a.nrows()).map(|i| a[(i, k)].powi(2)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE)).collect();
+        let scale: Vec<f64> = (0..a.ncols()).map(|k| column_norm(a.as_ref(), k).max(f64::MIN_POSITIVE)).collect();
+        let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, k| a[(i, k)] / scale[k]);
         let mut order: Vec<usize> = (0..rows).collect();
         order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
         let folds = folds.clamp(2, rows.max(2));
-        let fold_moments = (0..folds)
+        let mut fold_of = vec![0; rows];
+        for (pos, &i) in order.iter().enumerate() {
+            fold_of[i] = pos % folds;
+        }
+        let fold_problems = (0..folds)
             .map(|f| {
-                let obs: Vec<usize> = order
-                    .iter()
-                    .enumerate()
-                    .filter(|(pos, _)| pos % folds == f)
-                    .flat_map(|(_, &i)| (0..task_dim).map(move |c| task_dim * i + c))
-                    .collect();
-                moments(a, r, &obs, &scale)
+                let held: Vec<usize> = (0..r.len()).filter(|&o| fold_of[o / task_dim] == f).collect();
+                let train: Vec<usize> = (0..r.len()).filter(|&o| fold_of[o / task_dim] != f).collect();
+                (held, compress(&scaled, r, &train))
             })
             .collect();
         let all: Vec<usize> = (0..r.len()).collect();
-        let total = moments(a, r, &all, &scale);
-        LinearProblem { scale, rows, observations: r.len(), folds: fold_moments, total }
+        let total = compress(&scaled, r, &all);
+        LinearProblem { scale, rows, observations: r.len(), a: scaled, r: r.to_vec(), folds: fold_problems, total }
     }
 
     /// Cross-validated RMS position error (per measurement row) of the columns `cols`.
     pub fn cv_rms(&self, cols: &[usize]) -> f64 {
-        let p = self.scale.len();
-        let mut total = 0.0;
-        for held in &self.folds {
-            let g = Mat::from_fn(p, p, |i, j| self.total.g[(i, j)] - held.g[(i, j)]);
-            let b: Vec<f64> = self.total.b.iter().zip(&held.b).map(|(t, h)| t - h).collect();
-            let theta = solve(&g, &b, cols);
-            total += sse(held, cols, &theta);
-        }
+        let total: f64 = self.folds.iter().map(|(held, train)| self.sse(held.iter().copied(), cols, &solve(train, cols))).sum();
         (total / self.rows as f64).sqrt()
     }
 
     /// Fit on all rows: parameter values (unscaled) and the residual sum of squares.
     pub fn fit(&self, cols: &[usize]) -> (Vec<f64>, f64) {
-        let theta = solve(&self.total.g, &self.total.b, cols);
-        let s = sse(&self.total, cols, &theta);
+        let theta = solve(&self.total, cols);
+        let s = self.sse(0..self.observations, cols, &theta);
         (theta.iter().zip(cols).map(|(t, &c)| t / self.scale[c]).collect(), s)
     }
 
@@ -147,7 +131,7 @@ impl LinearProblem {
 
     /// Residual sum of squares before any column.
     pub fn base_sse(&self) -> f64 {
-        self.total.rr
+        self.r.iter().map(|v| v * v).sum()
     }
 }
 

@@ -483,8 +483,8 @@ mod tests {
             &nominal,
             &Normalisation::IDENTITY,
             points,
-            JointKernel { gamma: 8.0, axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0186 }; 2]).unwrap() },
-            TaskKernel { width: 1.027 },
+            cbd_protocol::paper_rr::joint_kernel(),
+            cbd_protocol::paper_rr::task_kernel(),
             law,
             Integrator { method, steps: 3 },
         );

@@ -372,7 +372,7 @@ pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &s
         None => Vec::new(),
     };
     let page = render_report(&json, &json_path.display().to_string(), &figures, &unit)?;
-    crate::cli::write_atomically(out, page.as_bytes())?;
+    crate::io::write_atomically(out, page.as_bytes())?;
     Ok(figures.len())
 }
 

@@ -11,6 +11,24 @@ pub fn position_errors(predicted: &[f64], measured: &[f64], dim: usize) -> Vec<f
         .collect()
 }
 
+/// The p-quantile of sorted values, interpolated linearly between order statistics (NaN when empty).
+pub fn quantile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let pos = p * (sorted.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
+}
+
+/// Median of the finite values (NaN when there are none).
+pub fn median(values: &[f64]) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(|a, b| a.total_cmp(b));
+    quantile(&v, 0.5)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ErrorStats {
     pub mean: f64,
@@ -32,13 +50,7 @@ impl ErrorStats {
         }
         let mut sorted = errors.to_vec();
         sorted.sort_by(|a, b| a.total_cmp(b));
-        let q = |p: f64| {
-            // Linear interpolation between order statistics.
-            let pos = p * (sorted.len() - 1) as f64;
-            let lo = pos.floor() as usize;
-            let hi = pos.ceil() as usize;
-            sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
-        };
+        let q = |p: f64| quantile(&sorted, p);
         ErrorStats { mean: errors.iter().sum::<f64>() / errors.len() as f64, median: q(0.5), p99: q(0.99), max: sorted[sorted.len() - 1] }
     }
 }

@@ -1,4 +1,4 @@
-//! The paper's planar RR benchmark (DESIGN.md §4): nominal l1 = 1, l2 = 0.5, and a simulated
+//! The paper's planar RR benchmark (its §4; docs/DESIGN.md §6): nominal l1 = 1, l2 = 0.5, and a simulated
 //! "real" arm with link-length errors, a base offset and static gravity effects on the links.
 
 use crate::data::Measurements;

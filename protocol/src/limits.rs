@@ -1,0 +1,9 @@
+//! The sizes a model may have (the fixed capacities of the runtime's stack arrays), shared by the
+//! model and its effects.
+
+/// Most joints a model may have.
+pub const MAX_JOINTS: usize = 7;
+/// Largest task-space dimension (3-D position).
+pub const MAX_TASK_DIM: usize = 3;
+/// Most integration steps a model may ask for.
+pub const MAX_STEPS: u16 = 64;

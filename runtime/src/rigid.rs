@@ -1,0 +1,171 @@
+//! k0 and Dk0 of the rigid chain alone (planar chain or DH table, effects aside): the one DH frame
+//! walk. `nominal::forward_kinematics` dispatches here for effect-free models, and the effects
+//! build on it.
+
+use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel, Normalisation, Transform, MAX_JOINTS, MAX_TASK_DIM};
+
+/// Position (first `task_dim` entries) and Jacobian (row-major, `task_dim × n_joints`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Kinematics {
+    pub position: [f64; MAX_TASK_DIM],
+    pub jacobian: [[f64; MAX_JOINTS]; MAX_TASK_DIM],
+}
+
+impl Kinematics {
+    const ZERO: Kinematics = Kinematics { position: [0.0; MAX_TASK_DIM], jacobian: [[0.0; MAX_JOINTS]; MAX_TASK_DIM] };
+
+    /// Maps user units to internal ones: (y − offset)/scale, J/scale.
+    pub fn normalised(mut self, norm: &Normalisation) -> Kinematics {
+        let inv = 1.0 / norm.task_scale;
+        for ((p, o), row) in self.position.iter_mut().zip(norm.task_offset.iter()).zip(self.jacobian.iter_mut()) {
+            *p = (*p - o) * inv;
+            for j in row.iter_mut() {
+                *j *= inv;
+            }
+        }
+        self
+    }
+}
+
+/// k0(x) and Dk0(x) of the chain, ignoring any effects the model carries.
+#[inline]
+pub fn kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
+    match model {
+        NominalModel::PlanarChain { lengths, .. } => planar_chain(lengths, x),
+        NominalModel::DhChain(chain) => dh_chain(chain, x),
+    }
+}
+
+// y = Σ_k l_k (cos θ_k, sin θ_k), θ_k = x_1 + … + x_k.
+fn planar_chain(lengths: &[f64], x: &[f64]) -> Kinematics {
+    let mut out = Kinematics::ZERO;
+    let mut theta = 0.0;
+    let [jac_x, jac_y, _] = &mut out.jacobian;
+    for (k, (l, xk)) in lengths.iter().zip(x).enumerate() {
+        theta += xk;
+        let (s, c) = (libm::sin(theta), libm::cos(theta));
+        out.position[0] += l * c;
+        out.position[1] += l * s;
+        // Link k moves with every joint d ≤ k.
+        for (jx, jy) in jac_x.iter_mut().zip(jac_y.iter_mut()).take(k + 1) {
+            *jx -= l * s;
+            *jy += l * c;
+        }
+    }
+    out
+}
+
+/// A rigid transform as a 3×4 row-major matrix [R | t].
+type Frame = [[f64; 4]; 3];
+
+fn frame_of(t: &Transform) -> Frame {
+    let r = &t.rotation;
+    [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]]
+}
+
+fn compose(a: &Frame, b: &Frame) -> Frame {
+    let mut out = [[0.0; 4]; 3];
+    // out_ij = [j = 3] a_i3 + Σ_k a_ik b_kj, summed over k in order for every j.
+    for (out_i, a_i) in out.iter_mut().zip(a.iter()) {
+        *out_i = [0.0, 0.0, 0.0, a_i[3]];
+        for (a_ik, b_k) in a_i.iter().take(3).zip(b.iter()) {
+            for (s, b_kj) in out_i.iter_mut().zip(b_k.iter()) {
+                *s += a_ik * b_kj;
+            }
+        }
+    }
+    out
+}
+
+fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
+    let (s, c) = (libm::sin(theta), libm::cos(theta));
+    [[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, d]]
+}
+
+fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
+    let (s, c) = (libm::sin(alpha), libm::cos(alpha));
+    [[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]]
+}
+
+/// Per joint of a DH chain at joints `x`, in the base frame: its axis z_i, a point o_i on it, and
+/// `ends[i]`, the origin of the frame after the joint's full transform (the distal end of link i).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct DhWalk {
+    pub axes: [[f64; 3]; MAX_JOINTS],
+    pub origins: [[f64; 3]; MAX_JOINTS],
+    pub ends: [[f64; 3]; MAX_JOINTS],
+    /// The base origin (start of link 0).
+    pub start: [f64; 3],
+    /// The tool point.
+    pub tool: [f64; 3],
+}
+
+/// The one DH frame walk: forward kinematics, its Hessian and the effects all use it. Callers
+/// that do not read `ends` pay nothing for it (dead stores to a local are removed).
+#[inline(always)]
+pub(crate) fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
+    let mut frame = frame_of(&chain.base);
+    let mut out = DhWalk {
+        axes: [[0.0; 3]; MAX_JOINTS],
+        origins: [[0.0; 3]; MAX_JOINTS],
+        ends: [[0.0; 3]; MAX_JOINTS],
+        start: [frame[0][3], frame[1][3], frame[2][3]],
+        tool: [0.0; 3],
+    };
+    let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut());
+    for ((joint, x_i), ((axis, origin), end)) in chain.joints.iter().zip(x).zip(slots) {
+        let (theta, d) = match joint.kind {
+            JointKind::Revolute => (x_i + joint.theta_offset, joint.d),
+            JointKind::Prismatic => (joint.theta_offset, x_i + joint.d),
+        };
+        match chain.convention {
+            // T_i = Rz(θ) Tz(d) Tx(a) Rx(α): joint i moves about z of frame i−1.
+            DhConvention::Standard => {
+                *axis = [frame[0][2], frame[1][2], frame[2][2]];
+                *origin = [frame[0][3], frame[1][3], frame[2][3]];
+                frame = compose(&frame, &rot_z_trans_z(theta, d));
+                frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
+            }
+            // T_i = Rx(α) Tx(a) Rz(θ) Tz(d): joint i moves about z of frame i.
+            DhConvention::Modified => {
+                frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
+                *axis = [frame[0][2], frame[1][2], frame[2][2]];
+                *origin = [frame[0][3], frame[1][3], frame[2][3]];
+                frame = compose(&frame, &rot_z_trans_z(theta, d));
+            }
+        }
+        *end = [frame[0][3], frame[1][3], frame[2][3]];
+    }
+    frame = compose(&frame, &frame_of(&chain.tool));
+    out.tool = [frame[0][3], frame[1][3], frame[2][3]];
+    out
+}
+
+/// Joint axes z_i, points o_i on them and the tool point p, in the base frame, at joints `x`.
+pub fn dh_frames(chain: &DhChain, x: &[f64]) -> ([[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS], [f64; 3]) {
+    let walk = dh_walk(chain, x);
+    (walk.axes, walk.origins, walk.tool)
+}
+
+fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
+    let (axes, origins, p) = dh_frames(chain, x);
+    let mut out = Kinematics::ZERO;
+    out.position = p;
+    let n = chain.joints.len().min(x.len());
+    for (i, ((z, o), joint)) in axes.iter().zip(origins.iter()).zip(chain.joints.iter()).take(n).enumerate() {
+        let z = *z;
+        let col = match joint.kind {
+            JointKind::Revolute => {
+                let r = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+                [z[1] * r[2] - z[2] * r[1], z[2] * r[0] - z[0] * r[2], z[0] * r[1] - z[1] * r[0]]
+            }
+            JointKind::Prismatic => z,
+        };
+        for (row, v) in out.jacobian.iter_mut().zip(col) {
+            if let Some(slot) = row.get_mut(i) {
+                *slot = v;
+            }
+        }
+    }
+    out
+}
