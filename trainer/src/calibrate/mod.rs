@@ -52,13 +52,13 @@ fn err(e: impl std::fmt::Display) -> CalibrateError {
     CalibrateError(e.to_string())
 }
 
-/// The paper's RR hyperparameters (docs/DESIGN.md §2) in data units: lengths in units of l1 = 1,
+/// The paper's RR hyperparameters (docs/DESIGN.md §6) in data units: lengths in units of l1 = 1,
 /// task kernel with unit amplitude, σ = 1e-6.
 pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
     CbdHyperparameters {
-        joint_axes: vec![JointKernelAxis::Periodic { b: 1.0186 }; 2],
-        joint_gamma: 8.0,
-        task_width: 1.0270,
+        joint_axes: cbd_protocol::paper_rr::joint_kernel().axes.to_vec(),
+        joint_gamma: cbd_protocol::paper_rr::JOINT_GAMMA,
+        task_width: cbd_protocol::paper_rr::TASK_WIDTH,
         task_gamma: 1.0,
         sigma: 1e-6,
     }

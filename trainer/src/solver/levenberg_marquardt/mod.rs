@@ -47,14 +47,11 @@ pub struct CbdOptions {
 }
 
 impl CbdOptions {
-    /// The paper's RR kernels (DESIGN.md §2) with our default scheme (Euler × 2) and σ = 1e-6.
+    /// The paper's RR kernels (docs/DESIGN.md §6) with our default scheme (Euler × 2) and σ = 1e-6.
     pub fn paper_rr() -> Self {
         CbdOptions {
-            joint_kernel: JointKernel {
-                gamma: 8.0,
-                axes: heapless::Vec::from_slice(&[cbd_protocol::JointKernelAxis::Periodic { b: 1.0186 }; 2]).expect("2 axes"),
-            },
-            task_kernel: TaskKernel { width: 1.0270 },
+            joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
+            task_kernel: cbd_protocol::paper_rr::task_kernel(),
             sigma: 1e-6,
             // Two Euler steps: a genuine (transported) flow that generalises best on the RR
             // benchmark; more stages add nonlinearity that the ill-conditioned momenta amplify.
