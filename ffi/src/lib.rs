@@ -107,8 +107,8 @@ impl From<Error> for CbdStatus {
         match e {
             Error::Blob(e) => e.into(),
             Error::StorageTooSmall { .. } => CBD_ERR_STORAGE_TOO_SMALL,
-            Error::QueryDimension { .. } => CBD_ERR_QUERY_DIMENSION,
-            Error::NonFiniteQuery { .. } => CBD_ERR_NON_FINITE_QUERY,
+            Error::QueryDimension { .. } | Error::TargetDimension { .. } => CBD_ERR_QUERY_DIMENSION,
+            Error::NonFiniteQuery { .. } | Error::NonFiniteTarget { .. } => CBD_ERR_NON_FINITE_QUERY,
             Error::Diverged => CBD_ERR_DIVERGED,
             Error::NonFiniteResult => CBD_ERR_NON_FINITE_RESULT,
             Error::Internal => CBD_ERR_INTERNAL,
