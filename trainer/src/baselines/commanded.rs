@@ -374,6 +374,28 @@ pub fn fit_and_command(
     commanded_accuracy(arm, &fitted, count, seed)
 }
 
+/// `cbd compare --commanded <robot>`: the table for the arm `cbd simulate --robot <robot>`
+/// measures, CbD fitted with `settings`; prints it and returns it for the JSON.
+pub fn run_for_compare(
+    robot: &str,
+    nominal: &NominalModel,
+    train: &Measurements,
+    search: &SearchOptions,
+    settings: &crate::calibrate::Settings,
+    unit: &str,
+) -> Result<CommandedAccuracy, String> {
+    let arm = SimulatedArm::named(robot).map_err(|e| format!("--commanded: {e}"))?;
+    if arm.n_joints() != nominal.n_joints() {
+        return Err(format!("--commanded {robot}: that arm has {} joints, the model file's {}", arm.n_joints(), nominal.n_joints()));
+    }
+    let cbd_fit = |model: &NominalModel, data: &Measurements| -> Result<Vec<u8>, String> {
+        crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob).map_err(|e| e.to_string())
+    };
+    let c = fit_and_command(&arm, nominal, train, search, &cbd_fit, 1000, 15)?;
+    println!("{}", c.table(unit));
+    Ok(c)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
