@@ -157,3 +157,74 @@ fn the_cost_is_fixed_and_the_result_deterministic() {
     assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
     assert_eq!(ca.residual.to_bits(), cb.residual.to_bits());
 }
+
+mod never_panics {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// Any f64 bits as target and seed (NaN, ∞, huge, subnormal): a typed error or a finite command.
+        #[test]
+        fn compensate_with_arbitrary_values(t in proptest::array::uniform2(any::<u64>()), s in proptest::array::uniform2(any::<u64>())) {
+            let blob = reference_blob();
+            let mut storage = vec![0.0; 100_000];
+            let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+            let (target, seed) = (t.map(f64::from_bits), s.map(f64::from_bits));
+            let mut q = [0.0; 2];
+            match cal.compensate(&target, &seed, &mut q) {
+                Ok(c) => {
+                    prop_assert!(target.iter().chain(&seed).all(|v| v.is_finite()));
+                    prop_assert!(q.iter().all(|v| v.is_finite()) && !c.residual.is_nan());
+                }
+                Err(Error::NonFiniteTarget { .. }) => prop_assert!(target.iter().any(|v| !v.is_finite())),
+                Err(Error::NonFiniteQuery { .. }) => prop_assert!(seed.iter().any(|v| !v.is_finite())),
+                Err(Error::NonFiniteResult) => {}
+                Err(e) => prop_assert!(false, "unexpected error {e:?}"),
+            }
+            let nominal = cal.model().nominal.clone();
+            let mut start = [0.0; 2];
+            let _ = nominal_position(&nominal, &target, &seed, &mut start, 8, 1.0);
+        }
+    }
+}
+
+/// Host wall time of compensate against one evaluate at N = 256 (printed, not asserted: the
+/// machine's load decides wall time; the firmware's instruction count is the fixed figure).
+/// `cargo test --release -p cbd-tests --test compensate -- --ignored --nocapture cost`
+#[test]
+#[ignore]
+fn cost_relative_to_evaluate() {
+    let six = model_blob(six_joint(), 256, 0.02, Integrator { method: IntegratorMethod::Euler, steps: 1 }, 2.0);
+    for (name, blob) in [("RR reference (Heun x 5)", reference_blob()), ("six-joint (Euler x 1)", six)] {
+        let mut storage = vec![0.0; 1_000_000];
+        let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+        let n = cal.model().n_joints();
+        let q: Vec<f64> = (0..n).map(|d| 0.3 + 0.1 * d as f64).collect();
+        let target: Vec<f64> = cal.evaluate(&q).unwrap().position().iter().map(|v| v + 1e-3).collect();
+        let reps = 2000;
+        let t = std::time::Instant::now();
+        for _ in 0..reps {
+            std::hint::black_box(cal.evaluate(std::hint::black_box(&q)).unwrap());
+        }
+        let evaluate = t.elapsed().as_secs_f64() / reps as f64;
+        let t = std::time::Instant::now();
+        for _ in 0..reps {
+            std::hint::black_box(cal.evaluate_transported(std::hint::black_box(&q)).unwrap());
+        }
+        let transported = t.elapsed().as_secs_f64() / reps as f64;
+        let mut out = vec![0.0; n];
+        let t = std::time::Instant::now();
+        for _ in 0..reps {
+            std::hint::black_box(cal.compensate(std::hint::black_box(&target), &q, &mut out).unwrap());
+        }
+        let compensate = t.elapsed().as_secs_f64() / reps as f64;
+        eprintln!(
+            "{name}: evaluate {:.1} us, evaluate_transported {:.1} us, compensate {:.1} us = {:.2} x evaluate",
+            evaluate * 1e6,
+            transported * 1e6,
+            compensate * 1e6,
+            compensate / evaluate
+        );
+    }
+}
