@@ -245,3 +245,58 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("cbd-compensate-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn bad_csv_input_names_the_file_line_and_column() {
+        let cols = vec!["x".to_string(), "y".to_string()];
+        let p = file("a.csv", "x,y\n0.5,0.1\n0.5,abc\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.ends_with("a.csv:3: column `y`: `abc` is not a number"), "{e}");
+        let p = file("b.csv", "x,z\n0.5,1\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.contains("b.csv:1: no column `y`"), "{e}");
+        let p = file("c.csv", "x,y\n0.5\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.contains("c.csv:2: column `y` is missing"), "{e}");
+        let p = file("d.csv", "x,y\n0.5,inf\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.contains("d.csv:2: column `y`: `inf` is not finite"), "{e}");
+        let p = file("e.csv", "x,y\n");
+        assert!(read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err().contains("no data rows"));
+        let p = file("f.csv", "x,y\n1,2\n\n3,4\n");
+        assert_eq!(read_columns(&p, &cols, &[2.0, 1.0]).unwrap(), vec![vec![2.0, 2.0], vec![6.0, 4.0]]);
+    }
+
+    #[test]
+    fn commands_reach_reachable_targets_of_a_trained_model() {
+        let real = crate::simulate::rr::RealRr::default();
+        let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 12 }, 2));
+        let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
+        let blob = crate::calibrate::calibrate(&crate::simulate::rr::nominal(), &train, &settings).unwrap().fit.blob;
+        let joints = crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 50, seed: 9 }, 2);
+        let targets: Vec<Vec<f64>> = joints.chunks_exact(2).map(|q| crate::predict::evaluate_blob(&blob, q).unwrap()).collect();
+        let rows = compensate_all(&blob, &targets, None, 8, None).unwrap();
+        for (r, t) in rows.iter().zip(&targets) {
+            let y = crate::predict::evaluate_blob(&blob, &r.joints).unwrap();
+            let miss = ((y[0] - t[0]).powi(2) + (y[1] - t[1]).powi(2)).sqrt();
+            // The fitted RR model is good to about 1e-9 m (its momenta cancel to 1 part in 1e9).
+            assert!(miss < 1e-8 && (miss - r.compensation.residual).abs() < 1e-12, "{miss} {:?}", r.compensation.residual);
+        }
+        // A target out of reach: flagged, finite command.
+        let rows = compensate_all(&blob, &[vec![3.0, 0.0]], None, 8, None).unwrap();
+        assert!(!rows[0].compensation.reached && rows[0].joints.iter().all(|v| v.is_finite()));
+        assert!(flags(&rows[0].compensation).starts_with("not_reached"));
+    }
+}
