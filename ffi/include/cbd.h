@@ -25,6 +25,15 @@
 // Largest task dimension (position coordinates) a model can have.
 #define CBD_MAX_TASK_DIM 3
 
+// `flags` bit of [`cbd_compensate`]: the residual is within the tolerance.
+#define CBD_COMPENSATE_REACHED 1
+
+// `flags` bit of [`cbd_compensate`]: the Jacobian at the command is nearly singular.
+#define CBD_COMPENSATE_SINGULAR 2
+
+// `flags` bit of [`cbd_compensate`]: the command is outside the calibrated region.
+#define CBD_COMPENSATE_EXTRAPOLATING 4
+
 // The result of every call that can fail. `CBD_OK` is 0; every error is non-zero.
 typedef enum {
   // Success.
@@ -131,6 +140,25 @@ CbdStatus cbd_evaluate(CbdCalibrator *calibrator,
                        double *jacobian,
                        size_t jacobian_len,
                        double *support);
+
+// Compensation (issue 15): writes to `command` (`n_joints` values) the joint command q with
+// k1(q) = `target` (`task_dim` values), by the runtime's fixed number of damped minimum-norm
+// Gauss–Newton steps from `seed` (`n_joints` values, e.g. the nominal inverse kinematics), and
+// to `residual` |k1(q) − target| and to `flags` the `CBD_COMPENSATE_*` bits. A target that is
+// not reached is a successful call with the `REACHED` bit clear.
+//
+// # Safety
+// `calibrator` is NULL or a pointer into storage passed to `cbd_load`; `target` points to
+// `task_dim` readable values, `seed` to `n_joints` readable values, `command` to `n_joints`
+// writable values; `residual` and `flags` are NULL or writable. One handle per thread.
+CbdStatus cbd_compensate(CbdCalibrator *calibrator,
+                         const double *target,
+                         size_t task_dim,
+                         const double *seed,
+                         double *command,
+                         size_t n_joints,
+                         double *residual,
+                         uint32_t *flags);
 
 // Joints of the loaded model (the length of `q`), 0 for NULL or a handle that is not loaded.
 //

@@ -107,8 +107,8 @@ impl From<Error> for CbdStatus {
         match e {
             Error::Blob(e) => e.into(),
             Error::StorageTooSmall { .. } => CBD_ERR_STORAGE_TOO_SMALL,
-            Error::QueryDimension { .. } => CBD_ERR_QUERY_DIMENSION,
-            Error::NonFiniteQuery { .. } => CBD_ERR_NON_FINITE_QUERY,
+            Error::QueryDimension { .. } | Error::TargetDimension { .. } => CBD_ERR_QUERY_DIMENSION,
+            Error::NonFiniteQuery { .. } | Error::NonFiniteTarget { .. } => CBD_ERR_NON_FINITE_QUERY,
             Error::Diverged => CBD_ERR_DIVERGED,
             Error::NonFiniteResult => CBD_ERR_NON_FINITE_RESULT,
             Error::Internal => CBD_ERR_INTERNAL,
@@ -293,6 +293,65 @@ pub unsafe extern "C" fn cbd_evaluate(
     }
     if let Some(s) = support.as_mut() {
         *s = e.support();
+    }
+    CBD_OK
+}
+
+/// `flags` bit of [`cbd_compensate`]: the residual is within the tolerance.
+pub const CBD_COMPENSATE_REACHED: u32 = 1;
+/// `flags` bit of [`cbd_compensate`]: the Jacobian at the command is nearly singular.
+pub const CBD_COMPENSATE_SINGULAR: u32 = 2;
+/// `flags` bit of [`cbd_compensate`]: the command is outside the calibrated region.
+pub const CBD_COMPENSATE_EXTRAPOLATING: u32 = 4;
+
+/// Compensation (issue 15): writes to `command` (`n_joints` values) the joint command q with
+/// k1(q) = `target` (`task_dim` values), by the runtime's fixed number of damped minimum-norm
+/// Gauss–Newton steps from `seed` (`n_joints` values, e.g. the nominal inverse kinematics), and
+/// to `residual` |k1(q) − target| and to `flags` the `CBD_COMPENSATE_*` bits. A target that is
+/// not reached is a successful call with the `REACHED` bit clear.
+///
+/// # Safety
+/// `calibrator` is NULL or a pointer into storage passed to `cbd_load`; `target` points to
+/// `task_dim` readable values, `seed` to `n_joints` readable values, `command` to `n_joints`
+/// writable values; `residual` and `flags` are NULL or writable. One handle per thread.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn cbd_compensate(
+    calibrator: *mut CbdCalibrator,
+    target: *const f64,
+    task_dim: usize,
+    seed: *const f64,
+    command: *mut f64,
+    n_joints: usize,
+    residual: *mut f64,
+    flags: *mut u32,
+) -> CbdStatus {
+    let handle = match loaded(calibrator) {
+        Ok(_) => &mut *calibrator,
+        Err(e) => return e,
+    };
+    if target.is_null() || seed.is_null() || command.is_null() {
+        return CBD_ERR_NULL_POINTER;
+    }
+    let (n, m) = (handle.cal.model().n_joints(), handle.cal.model().task_dim());
+    if n_joints != n || task_dim != m {
+        return CBD_ERR_QUERY_DIMENSION;
+    }
+    let (target, seed) = (core::slice::from_raw_parts(target, m), core::slice::from_raw_parts(seed, n));
+    let mut out = [0.0; cbd_runtime::protocol::MAX_JOINTS];
+    let Some(out) = out.get_mut(..n) else { return CBD_ERR_INTERNAL };
+    let c = match handle.cal.compensate(target, seed, out) {
+        Ok(c) => c,
+        Err(e) => return e.into(),
+    };
+    core::slice::from_raw_parts_mut(command, n).copy_from_slice(out);
+    if let Some(r) = residual.as_mut() {
+        *r = c.residual;
+    }
+    if let Some(f) = flags.as_mut() {
+        *f = u32::from(c.reached) * CBD_COMPENSATE_REACHED
+            + u32::from(c.singular) * CBD_COMPENSATE_SINGULAR
+            + u32::from(c.extrapolating) * CBD_COMPENSATE_EXTRAPOLATING;
     }
     CBD_OK
 }

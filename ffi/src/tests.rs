@@ -159,3 +159,31 @@ fn versions_and_names() {
     }
     assert_eq!(unsafe { core::ffi::CStr::from_ptr(cbd_status_name(-1)) }.to_str().unwrap(), "CBD_UNKNOWN_STATUS");
 }
+
+#[test]
+fn compensate_gives_the_runtimes_bits_and_its_errors() {
+    let blob = blobs::rr_reference_blob();
+    let (mut storage, bytes) = storage_for(&blob);
+    let (s, h) = load(&blob, &mut storage, bytes);
+    assert_eq!(s, CBD_OK);
+    let model = decode(&blob).unwrap();
+    let mut reals = vec![0.0 as Real; storage_len(model.n_points as usize, 2, 2, model.integrator)];
+    let mut cal = Calibrator::load(&blob, &mut reals).unwrap();
+    let (target, seed) = ([0.9, 0.6], [0.3, 1.0]);
+    let (mut command, mut residual, mut flags) = ([0.0; 2], 0.0, 0u32);
+    let s = unsafe { cbd_compensate(h, target.as_ptr(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, &mut residual, &mut flags) };
+    assert_eq!(s, CBD_OK);
+    let mut expected = [0.0; 2];
+    let c = cal.compensate(&target, &seed, &mut expected).unwrap();
+    assert_eq!(command.map(f64::to_bits), expected.map(f64::to_bits));
+    assert_eq!(residual.to_bits(), c.residual.to_bits());
+    assert_eq!(flags & CBD_COMPENSATE_REACHED != 0, c.reached);
+    assert!(c.reached);
+    let nan = [f64::NAN, 0.0];
+    let s = unsafe { cbd_compensate(h, nan.as_ptr(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
+    assert_eq!(s, CBD_ERR_NON_FINITE_QUERY);
+    let s = unsafe { cbd_compensate(h, target.as_ptr(), 3, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
+    assert_eq!(s, CBD_ERR_QUERY_DIMENSION);
+    let s = unsafe { cbd_compensate(h, core::ptr::null(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
+    assert_eq!(s, CBD_ERR_NULL_POINTER);
+}

@@ -1,4 +1,6 @@
-//! Arbitrary bytes → `Calibrator::load` into fixed storage → evaluate a few configurations.
+//! Arbitrary bytes → `Calibrator::load` into fixed storage → evaluate a few configurations, and
+//! compensate (the nominal inverse kinematics, then `Calibrator::compensate`) towards targets made
+//! of the same values (NaN, ∞, huge, wrong lengths included).
 //!
 //! Every input is tried twice: as a raw blob (exercises the frame checks: magic, version,
 //! length, CRC), and with its header and checksum repaired around bytes 10..len-4 (so that
@@ -81,6 +83,33 @@ fn load_and_evaluate(blob: &[u8], data: &[u8], storage: &mut [f64]) {
             Err(Error::NonFiniteQuery { .. }) => assert!(q.iter().any(|v| !v.is_finite())),
             Err(Error::NonFiniteResult) => {}
             Err(e) => panic!("unexpected evaluate error {e:?}"),
+        }
+    }
+    // Compensation: every query as a seed, every query's first m values as a target.
+    let nominal = cal.model().nominal.clone();
+    let scale = cal.model().normalisation.task_scale;
+    let all = queries(data, n);
+    for (seed, target_source) in all.iter().zip(all.iter().rev()) {
+        let target: Vec<f64> = target_source.iter().copied().take(m).collect();
+        let mut start = vec![0.0; seed.len()];
+        let seed = match cbd_runtime::inverse_kinematics::nominal_position(&nominal, &target, seed, &mut start, 4, scale) {
+            Some(_) => start,
+            None => seed.clone(),
+        };
+        let mut out = vec![0.0; n];
+        match cal.compensate(&target, &seed, &mut out) {
+            Ok(c) => {
+                assert!(target.len() == m && seed.len() == n);
+                assert!(out.iter().all(|v| v.is_finite()), "non-finite command returned as Ok");
+                assert!(!c.residual.is_nan() && c.residual >= 0.0);
+                assert!(!c.reached || c.residual.is_finite());
+            }
+            Err(Error::TargetDimension { .. }) => assert!(target.len() != m),
+            Err(Error::QueryDimension { .. }) => assert!(seed.len() != n),
+            Err(Error::NonFiniteTarget { .. }) => assert!(target.iter().any(|v| !v.is_finite())),
+            Err(Error::NonFiniteQuery { .. }) => assert!(seed.iter().any(|v| !v.is_finite())),
+            Err(Error::NonFiniteResult) => {}
+            Err(e) => panic!("unexpected compensate error {e:?}"),
         }
     }
 }

@@ -11,9 +11,11 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
 pub mod calibrator;
+pub mod compensate;
 pub mod effects;
 pub mod flow;
 pub mod integrate;
+pub mod inverse_kinematics;
 pub mod kernel;
 pub mod nominal;
 pub mod query_derivatives;
@@ -21,6 +23,7 @@ pub mod real;
 pub mod rigid;
 pub mod rigid_derivatives;
 
+pub use compensate::{CompensateOptions, Compensation};
 pub use calibrator::{
     initial_state, integrate_control_points, integrate_control_points_with_features, integrate_points, storage_len, Calibrator, Evaluation,
 };
@@ -37,6 +40,10 @@ pub enum Error {
     QueryDimension { expected: usize, found: usize },
     /// A query coordinate is NaN or infinite.
     NonFiniteQuery { index: usize },
+    /// A compensation target has the wrong number of coordinates.
+    TargetDimension { expected: usize, found: usize },
+    /// A compensation target coordinate is NaN or infinite.
+    NonFiniteTarget { index: usize },
     /// The control points' flow produced a non-finite value.
     Diverged,
     /// The query's flow produced a non-finite value.
@@ -52,6 +59,8 @@ impl core::fmt::Display for Error {
             Error::StorageTooSmall { needed, got } => write!(f, "storage too small: model needs {needed} values, got {got}"),
             Error::QueryDimension { expected, found } => write!(f, "query has {found} joints, model has {expected}"),
             Error::NonFiniteQuery { index } => write!(f, "query joint {index} is not finite"),
+            Error::TargetDimension { expected, found } => write!(f, "target has {found} coordinates, model has {expected}"),
+            Error::NonFiniteTarget { index } => write!(f, "target coordinate {index} is not finite"),
             Error::Diverged => write!(f, "the control points' flow diverged (non-finite state)"),
             Error::NonFiniteResult => write!(f, "evaluation produced a non-finite value"),
             Error::Internal => write!(f, "internal size invariant failed"),

@@ -3,8 +3,14 @@
 //! (position and Jacobian) and must finish before the next tick.
 //!
 //! ```text
-//! cbd-control-loop [BLOB] [--rate HZ] [--seconds S] [--strict]
+//! cbd-control-loop [BLOB] [--rate HZ] [--seconds S] [--strict] [--cartesian]
 //! ```
+//!
+//! With `--cartesian` (issue 15) the loop follows a Cartesian path instead: every tick it turns the
+//! path's next target into a joint command with `Calibrator::compensate`, seeded with the previous
+//! tick's command. The path is the calibrated tool position along the joint trajectory below
+//! (reachable by construction; computed before the loop); it reports compensation times, the
+//! largest residual |k1(q) − target| and the ticks whose target was not reached.
 //!
 //! Without BLOB it uses the 256-point RR grid blob of the firmware check with the scheme `cbd demo` trains
 //! (Euler × 2; pass a blob from `cbd demo --out FILE` for a trained model).
@@ -31,10 +37,11 @@ struct Args {
     rate_hz: f64,
     seconds: f64,
     strict: bool,
+    cartesian: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
-    let mut args = Args { blob: None, rate_hz: 1000.0, seconds: 2.0, strict: false };
+    let mut args = Args { blob: None, rate_hz: 1000.0, seconds: 2.0, strict: false, cartesian: false };
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value"))?.parse::<f64>().map_err(|e| format!("{name}: {e}"));
@@ -42,7 +49,8 @@ fn parse_args() -> Result<Args, String> {
             "--rate" => args.rate_hz = value("--rate")?,
             "--seconds" => args.seconds = value("--seconds")?,
             "--strict" => args.strict = true,
-            "-h" | "--help" => return Err("usage: cbd-control-loop [BLOB] [--rate HZ] [--seconds S] [--strict]".into()),
+            "--cartesian" => args.cartesian = true,
+            "-h" | "--help" => return Err("usage: cbd-control-loop [BLOB] [--rate HZ] [--seconds S] [--strict] [--cartesian]".into()),
             _ if args.blob.is_none() && !a.starts_with('-') => args.blob = Some(a),
             _ => return Err(format!("unexpected argument {a}")),
         }
@@ -90,6 +98,23 @@ fn run(args: &Args) -> Result<bool, String> {
     let mut errors = 0usize;
     let mut checksum = 0u64;
     let mut q = vec![0.0; n];
+    // --cartesian: the path's targets (m per tick), the previous command, the largest residual.
+    let m = model.task_dim();
+    let mut targets = Vec::new();
+    if args.cartesian {
+        targets.reserve(cycles * m);
+        for k in 0..cycles {
+            trajectory(k as f64 / args.rate_hz, &mut q);
+            let e = cal.evaluate(&q).map_err(|e| format!("path tick {k}: {e}"))?;
+            targets.extend(e.position().iter());
+        }
+        trajectory(0.0, &mut q);
+        for qd in q.iter_mut() {
+            *qd += 0.05;
+        }
+    }
+    let mut command = vec![0.0; n];
+    let (mut worst_residual, mut not_reached) = (0.0f64, 0usize);
     let start = Instant::now();
     let mut k = 0usize;
     while k < cycles {
@@ -119,19 +144,41 @@ fn run(args: &Args) -> Result<bool, String> {
                 std::hint::spin_loop();
             }
         }
-        trajectory(k as f64 / args.rate_hz, &mut q);
-        let t0 = Instant::now();
-        let result = cal.evaluate(std::hint::black_box(&q));
-        let t1 = Instant::now();
-        eval_times.push(t1 - t0);
-        match result {
-            Ok(e) => {
-                for v in e.position().iter().chain(e.jacobian().iter()) {
-                    checksum = checksum.rotate_left(5) ^ v.to_bits();
+        let t1 = if args.cartesian {
+            // q holds the previous tick's command: the seed.
+            let target = &targets[k * m..(k + 1) * m];
+            let t0 = Instant::now();
+            let result = cal.compensate(std::hint::black_box(target), &q, &mut command);
+            let t1 = Instant::now();
+            eval_times.push(t1 - t0);
+            match result {
+                Ok(c) => {
+                    worst_residual = worst_residual.max(c.residual);
+                    not_reached += usize::from(!c.reached);
+                    for v in command.iter().chain([c.residual].iter()) {
+                        checksum = checksum.rotate_left(5) ^ v.to_bits();
+                    }
+                    q.copy_from_slice(&command);
                 }
+                Err(_) => errors += 1,
             }
-            Err(_) => errors += 1,
-        }
+            t1
+        } else {
+            trajectory(k as f64 / args.rate_hz, &mut q);
+            let t0 = Instant::now();
+            let result = cal.evaluate(std::hint::black_box(&q));
+            let t1 = Instant::now();
+            eval_times.push(t1 - t0);
+            match result {
+                Ok(e) => {
+                    for v in e.position().iter().chain(e.jacobian().iter()) {
+                        checksum = checksum.rotate_left(5) ^ v.to_bits();
+                    }
+                }
+                Err(_) => errors += 1,
+            }
+            t1
+        };
         if t1 > deadline {
             misses += 1;
         }
@@ -156,8 +203,12 @@ fn run(args: &Args) -> Result<bool, String> {
         total.as_secs_f64(),
         period.as_secs_f64() * 1e6
     );
+    if args.cartesian {
+        println!("Cartesian path: compensate every tick; largest residual {worst_residual:.3e}, {not_reached} ticks not reached");
+    }
     println!(
-        "evaluation time: worst {:.1} µs, p99 {:.1} µs, median {:.1} µs, mean {:.1} µs, best {:.1} µs",
+        "{} time: worst {:.1} µs, p99 {:.1} µs, median {:.1} µs, mean {:.1} µs, best {:.1} µs",
+        if args.cartesian { "compensation" } else { "evaluation" },
         us(sorted.last().copied().unwrap_or_default()),
         us(percentile(&sorted, 0.99)),
         us(percentile(&sorted, 0.5)),

@@ -186,8 +186,38 @@ fn run(out: &mut hio::HostStream) -> Result<(), ()> {
         .map_err(|_| ())?;
         line.flush(out)?;
     }
+    // Compensation (issue 15): the cost of `compensate` alone (its inputs are made before the clock starts).
+    let mut compensate_costs = [0u32; shared::COMPENSATE_COUNT];
+    let mut seed = [0.0; MAX_JOINTS];
+    let mut command = [0.0; MAX_JOINTS];
+    let mut target = [0.0; cbd_runtime::protocol::MAX_TASK_DIM];
+    for (i, cost) in compensate_costs.iter_mut().enumerate() {
+        let (seed, command) = (seed.get_mut(..n).ok_or(())?, command.get_mut(..n).ok_or(())?);
+        let written = match shared::compensate_inputs(&mut cal, i, seed, &mut target) {
+            Ok(m) => {
+                let target = target.get(..m).ok_or(())?;
+                let painted = stack_paint::paint();
+                let start = ticks();
+                let result = black_box(cal.compensate(black_box(target), black_box(seed), command));
+                let end = ticks();
+                stack = stack.max(stack_paint::used_since(&painted));
+                *cost = (end - start) as u32;
+                match result {
+                    Ok(c) => shared::write_compensation(&mut line, i, command, &c),
+                    Err(_) => shared::write_compensation_error(&mut line, i),
+                }
+            }
+            Err(_) => shared::write_compensation_error(&mut line, i),
+        };
+        written.map_err(|_| ())?;
+        line.flush(out)?;
+    }
     for (i, cost) in costs.iter().enumerate() {
         writeln!(line, "t{i:03} {cost}").map_err(|_| ())?;
+        line.flush(out)?;
+    }
+    for (i, cost) in compensate_costs.iter().enumerate() {
+        writeln!(line, "ct{i:03} {cost}").map_err(|_| ())?;
         line.flush(out)?;
     }
     writeln!(line, "stack {stack}").map_err(|_| ())?;

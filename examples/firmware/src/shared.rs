@@ -54,3 +54,43 @@ pub fn write_result(w: &mut impl Write, i: usize, position: impl Iterator<Item =
 pub fn write_error(w: &mut impl Write, i: usize) -> fmt::Result {
     writeln!(w, "q{i:03} error")
 }
+
+/// How many compensation cases (issue 15) follow the evaluations.
+pub const COMPENSATE_COUNT: usize = 8;
+
+/// Inputs of compensation case `i`: the target is the calibrated position k1 at configuration `i`
+/// (reachable by construction), the seed that configuration with every joint moved by +0.05 rad.
+/// Writes `seed` (n values) and `target` (m values); returns m.
+pub fn compensate_inputs(
+    cal: &mut cbd_runtime::Calibrator<'_>,
+    i: usize,
+    seed: &mut [f64],
+    target: &mut [f64; cbd_runtime::protocol::MAX_TASK_DIM],
+) -> Result<usize, cbd_runtime::Error> {
+    config(i, seed);
+    let e = cal.evaluate_transported(seed)?;
+    let mut m = 0;
+    for (t, p) in target.iter_mut().zip(e.position().iter()) {
+        *t = *p;
+        m += 1;
+    }
+    for s in seed.iter_mut() {
+        *s += 0.05;
+    }
+    Ok(m)
+}
+
+/// One compensation line: `qc<i> <command…> | <residual> <reached><singular><extrapolating>`,
+/// values as the 16 hex digits of `f64::to_bits`, flags as 0/1.
+pub fn write_compensation(w: &mut impl Write, i: usize, command: &[f64], c: &cbd_runtime::Compensation) -> fmt::Result {
+    write!(w, "qc{i:03}")?;
+    for v in command {
+        write!(w, " {:016x}", v.to_bits())?;
+    }
+    writeln!(w, " | {:016x} {}{}{}", c.residual.to_bits(), c.reached as u8, c.singular as u8, c.extrapolating as u8)
+}
+
+/// The line printed when compensation case `i` fails.
+pub fn write_compensation_error(w: &mut impl Write, i: usize) -> fmt::Result {
+    writeln!(w, "qc{i:03} error")
+}

@@ -82,6 +82,19 @@ fn eval(path: &Path, transported: bool) -> Result<(), String> {
         };
         written.map_err(|e| e.to_string())?;
     }
+    // Compensation cases, as the firmware prints them (after its evaluations).
+    let (mut seed, mut command, mut target) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS], [0.0; cbd_runtime::protocol::MAX_TASK_DIM]);
+    for i in 0..shared::COMPENSATE_COUNT {
+        let (seed, command) = (&mut seed[..n], &mut command[..n]);
+        let written = match shared::compensate_inputs(&mut cal, i, seed, &mut target) {
+            Ok(m) => match cal.compensate(&target[..m], seed, command) {
+                Ok(c) => shared::write_compensation(&mut out, i, command, &c),
+                Err(_) => shared::write_compensation_error(&mut out, i),
+            },
+            Err(_) => shared::write_compensation_error(&mut out, i),
+        };
+        written.map_err(|e| e.to_string())?;
+    }
     print!("{out}");
     Ok(())
 }

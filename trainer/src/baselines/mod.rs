@@ -1,5 +1,6 @@
 //! The peers Calibration by Diffeomorphisms is compared with.
 
+pub mod commanded;
 pub mod compare;
 pub mod dh_calibration;
 pub mod krr;

@@ -24,6 +24,11 @@ pub struct CompareArgs {
     /// Write a chart of every method's test-error distribution (PNG and SVG) into this directory.
     #[arg(long)]
     pub plots: Option<PathBuf>,
+    /// The data come from `cbd simulate --robot <rr|six>`: add the commanded-accuracy table (true
+    /// tool error of that simulated arm after each method's compensation, 1000 random reachable
+    /// targets; JSON key `commanded`). Fits DH, kernel ridge and CbD again for it.
+    #[arg(long)]
+    pub commanded: Option<String>,
     /// CbD's hyperparameters and scheme, as in `cbd fit` (chosen by the pipeline when unset).
     #[command(flatten)]
     pub solver: crate::cli::fit::SolverArgs,
@@ -84,8 +89,16 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
         let files = crate::report::plots::method_comparison(dir, &methods, unit)?;
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
+    let commanded = match &args.commanded {
+        Some(robot) => Some(crate::baselines::commanded::run_for_compare(robot, &inputs.nominal, train, &search, &settings, unit)?),
+        None => None,
+    };
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&comparison.to_json()).map_err(|e| e.to_string())?;
+        let mut json = comparison.to_json();
+        if let Some(c) = &commanded {
+            json["commanded"] = c.to_json();
+        }
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod compare;
+pub mod compensate;
 pub mod demo;
 pub mod diagnose;
 pub mod eval;
@@ -35,6 +36,8 @@ pub enum Command {
     Compare(compare::CompareArgs),
     /// Fit time, memory and evaluation time against N (writes BENCHMARKS.md with --markdown).
     Bench(bench::BenchArgs),
+    /// Joint commands that put the calibrated arm's tool at Cartesian targets (calibrated inverse kinematics).
+    Compensate(compensate::CompensateArgs),
     /// Trace the residual to physical effects (library fit, out-of-sample selection) and report before/after.
     Diagnose(diagnose::DiagnoseArgs),
 }
@@ -85,6 +88,7 @@ pub fn run(cli: Cli) -> Result<(), String> {
         Command::Compare(args) => compare::run(args),
         Command::Report(args) => report::run(args),
         Command::Diagnose(args) => diagnose::run(args),
+        Command::Compensate(args) => compensate::run(args),
     }
 }
 

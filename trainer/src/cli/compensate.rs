@@ -1,0 +1,302 @@
+//! `cbd compensate`: joint commands that put the calibrated arm's tool at Cartesian targets
+//! (`Calibrator::compensate`: damped minimum-norm Gauss–Newton on the exact Jacobian of k1 from a
+//! seed, the nominal model's inverse kinematics), with the residual and flags of every row.
+
+use crate::cli::{load_nominal, ModelArgs};
+use crate::data::csv_import::ColumnSpec;
+use cbd_protocol::{JointKind, Model, NominalModel};
+use cbd_runtime::inverse_kinematics::nominal_position;
+use cbd_runtime::{CompensateOptions, Compensation};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, clap::Args)]
+pub struct CompensateArgs {
+    #[command(flatten)]
+    pub model: ModelArgs,
+    /// The calibrated model.
+    #[arg(long)]
+    pub blob: PathBuf,
+    /// Targets (CSV with the model file's position columns, e.g. x, y or x_mm, y_mm, z_mm).
+    #[arg(long)]
+    pub targets: PathBuf,
+    /// Seeds, one row per target (CSV with the model file's joint columns): where the nominal
+    /// inverse kinematics starts; with more joints than task coordinates, the command keeps the
+    /// seed's redundant coordinates (orientation) and branch. Without: the training configuration
+    /// whose nominal position is nearest the target.
+    #[arg(long)]
+    pub seeds: Option<PathBuf>,
+    /// Joint commands (CSV: the joint columns in the file's units, then `residual` in the file's
+    /// length unit and `flags`: `ok`, or `not_reached`, `singular`, `extrapolating` joined by `+`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Write a summary as JSON here (rows, reached, singular, extrapolating, residual statistics).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Gauss–Newton steps on the calibrated model (fixed: the cost is the same for every target).
+    #[arg(long, default_value_t = 8)]
+    pub iterations: usize,
+    /// Largest residual (the file's length unit) counted as reached; default 1e-9 of the model's
+    /// task scale (the RMS radius of its training positions).
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+}
+
+/// Steps of the nominal inverse kinematics that makes the seed of every row.
+const NOMINAL_IK_ITERATIONS: usize = 8;
+
+/// Reads the named numeric columns of a CSV file (header line first). Errors name the file, the
+/// line and the column. Blank lines are skipped.
+pub fn read_columns(path: &Path, columns: &[String], scales: &[f64]) -> Result<Vec<Vec<f64>>, String> {
+    let bytes = crate::data::read_capped(path, 1 << 30, "CSV file")?;
+    let text = String::from_utf8(bytes).map_err(|e| format!("{}: not UTF-8 text: {e}", path.display()))?;
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines.next().ok_or_else(|| format!("{}: empty file (expected a header line with {})", path.display(), columns.join(", ")))?;
+    let names: Vec<&str> = header.split(',').map(|s| s.trim().trim_matches('"')).collect();
+    let mut index = Vec::with_capacity(columns.len());
+    for c in columns {
+        let i = names.iter().position(|n| n == c).ok_or_else(|| {
+            format!("{}:1: no column `{c}` (the header has {}; expected {})", path.display(), names.join(", "), columns.join(", "))
+        })?;
+        index.push(i);
+    }
+    let mut rows = Vec::new();
+    for (i, line) in lines {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let mut row = Vec::with_capacity(columns.len());
+        for ((c, &k), scale) in columns.iter().zip(&index).zip(scales) {
+            let field = fields.get(k).ok_or_else(|| format!("{}:{}: column `{c}` is missing ({} fields)", path.display(), i + 1, fields.len()))?;
+            let v: f64 = field
+                .parse()
+                .map_err(|_| format!("{}:{}: column `{c}`: `{field}` is not a number", path.display(), i + 1))?;
+            if !v.is_finite() {
+                return Err(format!("{}:{}: column `{c}`: `{field}` is not finite", path.display(), i + 1));
+            }
+            row.push(v * scale);
+        }
+        rows.push(row);
+    }
+    if rows.is_empty() {
+        return Err(format!("{}: no data rows", path.display()));
+    }
+    Ok(rows)
+}
+
+/// Per joint column: the factor from the file's unit to the model's (radians or model length).
+fn joint_scales(spec: &ColumnSpec) -> Vec<f64> {
+    spec.joint_kinds
+        .iter()
+        .map(|k| match k {
+            JointKind::Revolute => spec.angle_unit.radians(),
+            JointKind::Prismatic => spec.length_unit.factor_to(spec.model_length_unit),
+        })
+        .collect()
+}
+
+/// The flags column: `ok`, or what is wrong joined by `+`.
+pub fn flags(c: &Compensation) -> String {
+    let mut out = Vec::new();
+    if !c.reached {
+        out.push("not_reached");
+    }
+    if c.singular {
+        out.push("singular");
+    }
+    if c.extrapolating {
+        out.push("extrapolating");
+    }
+    if out.is_empty() {
+        "ok".into()
+    } else {
+        out.join("+")
+    }
+}
+
+/// The training configuration (of the blob) whose nominal position is nearest `target`: the
+/// default hint of the nominal inverse kinematics.
+pub fn nearest_training_configuration(model: &Model<'_>, target: &[f64]) -> Vec<f64> {
+    let n = model.n_joints();
+    let mut best = (f64::INFINITY, vec![0.0; n]);
+    let points: Vec<f64> = model.points.iter().collect();
+    for q in points.chunks_exact(n.max(1)) {
+        let k0 = cbd_runtime::nominal::forward_kinematics(&model.nominal, q);
+        let d: f64 = k0.position.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
+        if d < best.0 {
+            best = (d, q.to_vec());
+        }
+    }
+    best.1
+}
+
+/// One row's result.
+pub struct CommandRow {
+    pub joints: Vec<f64>,
+    pub compensation: Compensation,
+}
+
+/// Compensates every target (model units): seed from `seeds` (or [`nearest_training_configuration`]),
+/// nominal IK of the target from it ([`nominal_position`]), then `Calibrator::compensate_with`.
+/// Errors name the row (0-based index into `targets`).
+pub fn compensate_all(
+    blob: &[u8],
+    targets: &[Vec<f64>],
+    seeds: Option<&[Vec<f64>]>,
+    iterations: usize,
+    tolerance: Option<f64>,
+) -> Result<Vec<CommandRow>, String> {
+    let model = cbd_protocol::decode(blob).map_err(|e| e.to_string())?;
+    let (n, m) = (model.n_joints(), model.task_dim());
+    let nominal: NominalModel = model.nominal.clone();
+    let hints: Vec<Vec<f64>> = match seeds {
+        Some(s) => s.to_vec(),
+        None => targets.iter().map(|t| nearest_training_configuration(&model, t)).collect(),
+    };
+    let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, n, m, model.integrator)];
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| e.to_string())?;
+    let mut options = CompensateOptions::for_model(&cal);
+    options.iterations = iterations;
+    if let Some(t) = tolerance {
+        options.tolerance = t;
+    }
+    let scale = cal.model().normalisation.task_scale;
+    let mut out = Vec::with_capacity(targets.len());
+    for (row, (target, hint)) in targets.iter().zip(&hints).enumerate() {
+        let mut seed = vec![0.0; n];
+        nominal_position(&nominal, target, hint, &mut seed, NOMINAL_IK_ITERATIONS, scale)
+            .ok_or_else(|| format!("row {row}: the nominal inverse kinematics failed (target or seed not finite)"))?;
+        let mut joints = vec![0.0; n];
+        let compensation = cal.compensate_with(target, &seed, &mut joints, &options).map_err(|e| format!("row {row}: {e}"))?;
+        out.push(CommandRow { joints, compensation });
+    }
+    Ok(out)
+}
+
+pub fn run(args: CompensateArgs) -> Result<(), String> {
+    crate::cli::check_output(&args.out)?;
+    if let Some(path) = &args.json {
+        crate::cli::check_output(path)?;
+    }
+    if args.iterations == 0 || args.iterations > 64 {
+        return Err(format!("--iterations must be between 1 and 64, got {}", args.iterations));
+    }
+    if let Some(t) = args.tolerance {
+        if !(t > 0.0 && t.is_finite()) {
+            return Err(format!("--tolerance must be a positive finite length, got {t}"));
+        }
+    }
+    let (nominal, spec) = load_nominal(&args.model)?;
+    let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    if model.n_joints() != nominal.n_joints() || model.task_dim() != nominal.task_dim() {
+        return Err(format!(
+            "{}: the model has {} joints and {}-D positions, but the model file's arm has {} joints and {}-D positions",
+            args.blob.display(),
+            model.n_joints(),
+            model.task_dim(),
+            nominal.n_joints(),
+            nominal.task_dim()
+        ));
+    }
+    let length = spec.length_unit.factor_to(spec.model_length_unit);
+    let targets = read_columns(&args.targets, &spec.position_columns, &vec![length; spec.position_columns.len()])?;
+    let seeds = match &args.seeds {
+        Some(path) => {
+            let seeds = read_columns(path, &spec.joint_columns, &joint_scales(&spec))?;
+            if seeds.len() != targets.len() {
+                return Err(format!(
+                    "{}: {} seed rows for {} target rows in {} (one seed per target)",
+                    path.display(),
+                    seeds.len(),
+                    targets.len(),
+                    args.targets.display()
+                ));
+            }
+            Some(seeds)
+        }
+        None => None,
+    };
+    let tolerance = args.tolerance.map(|t| t * length);
+    let rows = compensate_all(&blob, &targets, seeds.as_deref(), args.iterations, tolerance)
+        .map_err(|e| format!("{}: {e}", args.targets.display()))?;
+    let (joint_scale, unit) = (joint_scales(&spec), spec.length_unit.name());
+    let mut text = format!("{},residual,flags\n", spec.joint_columns.join(","));
+    for r in &rows {
+        let q: Vec<String> = r.joints.iter().zip(&joint_scale).map(|(v, s)| format!("{:?}", v / s)).collect();
+        text.push_str(&format!("{},{:?},{}\n", q.join(","), r.compensation.residual / length, flags(&r.compensation)));
+    }
+    crate::cli::write_atomically(&args.out, text.as_bytes())?;
+    let count = |f: &dyn Fn(&Compensation) -> bool| rows.iter().filter(|r| f(&r.compensation)).count();
+    let residuals: Vec<f64> = rows.iter().map(|r| r.compensation.residual / length).collect();
+    let stats = crate::report::stats::ErrorStats::of_errors(&residuals);
+    let (reached, singular, extrapolating) = (count(&|c| c.reached), count(&|c| c.singular), count(&|c| c.extrapolating));
+    eprintln!(
+        "{} targets: {reached} reached, {singular} singular, {extrapolating} outside the calibrated region; residual median {:.3e} max {:.3e} {unit}",
+        rows.len(),
+        stats.median,
+        stats.max
+    );
+    if let Some(path) = &args.json {
+        let json = serde_json::json!({
+            "rows": rows.len(), "reached": reached, "singular": singular, "extrapolating": extrapolating,
+            "iterations": args.iterations, "unit": unit,
+            "residual": {"mean": stats.mean, "median": stats.median, "p99": stats.p99, "max": stats.max},
+        });
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("cbd-compensate-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn bad_csv_input_names_the_file_line_and_column() {
+        let cols = vec!["x".to_string(), "y".to_string()];
+        let p = file("a.csv", "x,y\n0.5,0.1\n0.5,abc\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.ends_with("a.csv:3: column `y`: `abc` is not a number"), "{e}");
+        let p = file("b.csv", "x,z\n0.5,1\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.contains("b.csv:1: no column `y`"), "{e}");
+        let p = file("c.csv", "x,y\n0.5\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.contains("c.csv:2: column `y` is missing"), "{e}");
+        let p = file("d.csv", "x,y\n0.5,inf\n");
+        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
+        assert!(e.contains("d.csv:2: column `y`: `inf` is not finite"), "{e}");
+        let p = file("e.csv", "x,y\n");
+        assert!(read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err().contains("no data rows"));
+        let p = file("f.csv", "x,y\n1,2\n\n3,4\n");
+        assert_eq!(read_columns(&p, &cols, &[2.0, 1.0]).unwrap(), vec![vec![2.0, 2.0], vec![6.0, 4.0]]);
+    }
+
+    #[test]
+    fn commands_reach_reachable_targets_of_a_trained_model() {
+        let real = crate::simulate::rr::RealRr::default();
+        let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 12 }, 2));
+        let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
+        let blob = crate::calibrate::calibrate(&crate::simulate::rr::nominal(), &train, &settings).unwrap().fit.blob;
+        let joints = crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 50, seed: 9 }, 2);
+        let targets: Vec<Vec<f64>> = joints.chunks_exact(2).map(|q| crate::predict::evaluate_blob(&blob, q).unwrap()).collect();
+        let rows = compensate_all(&blob, &targets, None, 8, None).unwrap();
+        for (r, t) in rows.iter().zip(&targets) {
+            let y = crate::predict::evaluate_blob(&blob, &r.joints).unwrap();
+            let miss = ((y[0] - t[0]).powi(2) + (y[1] - t[1]).powi(2)).sqrt();
+            // The fitted RR model is good to about 1e-9 m (its momenta cancel to 1 part in 1e9).
+            assert!(miss < 1e-8 && (miss - r.compensation.residual).abs() < 1e-12, "{miss} {:?}", r.compensation.residual);
+        }
+        // A target out of reach: flagged, finite command.
+        let rows = compensate_all(&blob, &[vec![3.0, 0.0]], None, 8, None).unwrap();
+        assert!(!rows[0].compensation.reached && rows[0].joints.iter().all(|v| v.is_finite()));
+        assert!(flags(&rows[0].compensation).starts_with("not_reached"));
+    }
+}
