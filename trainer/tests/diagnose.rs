@@ -60,13 +60,13 @@ fn second_harmonic_transmission_error_of_the_rr_arm() {
 }
 
 fn six_arm(seed: u64) -> (NominalModel, EffectArm) {
-    use cbd_trainer::baselines::dh_calibration::{apply_parameters, parameter_count};
+    use cbd_trainer::nominal::dh_parameters::{apply_parameters, parameter_count};
     use rand::{Rng, SeedableRng};
     let nominal = ur5_nominal();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let deg = std::f64::consts::PI / 180.0;
     // Geometric errors of a real arm: ±0.5 mm, ±0.05°.
-    let p: Vec<f64> = cbd_trainer::baselines::dh_calibration::parameter_names(6)
+    let p: Vec<f64> = cbd_trainer::nominal::dh_parameters::parameter_names(6)
         .iter()
         .map(|s| {
             if s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r") {

@@ -145,7 +145,7 @@ fn a_bump_is_unexplained_structure_and_nothing_is_invented() {
 /// A six-joint arm with geometric errors only: nothing but geometry.
 #[test]
 fn six_joint_geometry_only_invents_nothing() {
-    use cbd_trainer::baselines::dh_calibration::{apply_parameters, parameter_names};
+    use cbd_trainer::nominal::dh_parameters::{apply_parameters, parameter_names};
     use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
     let nominal = ur5_nominal();
     for seed in SEEDS {

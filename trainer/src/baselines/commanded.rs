@@ -349,9 +349,11 @@ pub fn fit_and_command(
     seed: u64,
 ) -> Result<CommandedAccuracy, String> {
     let dh = match nominal {
-        NominalModel::DhChain(_) => super::dh_calibration::calibrate_dh(nominal, train, &super::dh_calibration::DhCalibrationOptions::default())
-            .ok()
-            .map(|f| f.model),
+        NominalModel::DhChain(_) => {
+            super::dh_calibration::calibrate_dh(nominal, train, &super::dh_calibration::DhCalibrationOptions::default())
+                .ok()
+                .map(|f| f.model)
+        }
         NominalModel::PlanarChain { .. } => None,
     };
     let planar = match nominal {
@@ -453,7 +455,8 @@ mod tests {
             data.push(q, &truth.position(q));
         }
         let fit = PlanarCalibration::fit(&data).unwrap();
-        for (a, b) in [fit.base, fit.lengths, fit.offsets].iter().flatten().zip([truth.base, truth.lengths, truth.offsets].iter().flatten()) {
+        for (a, b) in [fit.base, fit.lengths, fit.offsets].iter().flatten().zip([truth.base, truth.lengths, truth.offsets].iter().flatten())
+        {
             assert!((a - b).abs() < 1e-12, "{fit:?}");
         }
         let q = fit.inverse(&truth.position(&[0.7, -1.2]), &[0.6, -1.0]).unwrap();

@@ -12,7 +12,7 @@
 //! in scaled parameters) and are reported by name.
 
 use crate::data::Measurements;
-use crate::nominal::Pose;
+use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
 use crate::solver::least_squares::TruncatedSvd;
 use cbd_protocol::{DhChain, NominalModel};
 use cbd_runtime::nominal::forward_kinematics;
@@ -95,49 +95,6 @@ impl std::fmt::Display for DhCalibrationError {
 }
 
 impl std::error::Error for DhCalibrationError {}
-
-/// Number of parameters for `n` joints: 4 per joint, 6 base, 3 tool.
-pub fn parameter_count(n: usize) -> usize {
-    4 * n + 9
-}
-
-/// Parameter names, in the order of [`DhFitStats::parameter_changes`].
-pub fn parameter_names(n: usize) -> Vec<String> {
-    let mut names = Vec::with_capacity(parameter_count(n));
-    for i in 1..=n {
-        for p in ["a", "alpha", "d", "theta_offset"] {
-            names.push(format!("{p}{i}"));
-        }
-    }
-    for p in ["base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz", "tool_tx", "tool_ty", "tool_tz"] {
-        names.push(p.to_string());
-    }
-    names
-}
-
-/// The chain with parameter changes `p` applied to `nominal`.
-pub fn apply_parameters(nominal: &DhChain, p: &[f64]) -> DhChain {
-    let mut c = nominal.clone();
-    let n = c.joints.len();
-    for (i, j) in c.joints.iter_mut().enumerate() {
-        j.a += p[4 * i];
-        j.alpha += p[4 * i + 1];
-        j.d += p[4 * i + 2];
-        j.theta_offset += p[4 * i + 3];
-    }
-    let o = 4 * n;
-    let r = [p[o + 3], p[o + 4], p[o + 5]];
-    let angle = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-    let rot = if angle > 0.0 { Pose::axis_angle([r[0] / angle, r[1] / angle, r[2] / angle], angle) } else { Pose::IDENTITY };
-    let mut base = rot.compose(&Pose::from_transform(&nominal.base));
-    for k in 0..3 {
-        base.t[k] = nominal.base.translation[k] + p[o + k];
-        c.tool.translation[k] += p[o + 6 + k];
-    }
-    // Base rotation turns about the base origin: rot ∘ base, then restore/shift the translation.
-    c.base = base.to_transform();
-    c
-}
 
 /// k − y over the data's `m = data.task_dim` coordinates (2 for a planar arm's DH form).
 fn residuals(chain: &DhChain, data: &Measurements, out: &mut [f64]) {

@@ -50,7 +50,8 @@ pub fn read_columns(path: &Path, columns: &[String], scales: &[f64]) -> Result<V
     let bytes = crate::data::read_capped(path, 1 << 30, "CSV file")?;
     let text = String::from_utf8(bytes).map_err(|e| format!("{}: not UTF-8 text: {e}", path.display()))?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| format!("{}: empty file (expected a header line with {})", path.display(), columns.join(", ")))?;
+    let (_, header) =
+        lines.next().ok_or_else(|| format!("{}: empty file (expected a header line with {})", path.display(), columns.join(", ")))?;
     let names: Vec<&str> = header.split(',').map(|s| s.trim().trim_matches('"')).collect();
     let mut index = Vec::with_capacity(columns.len());
     for c in columns {
@@ -64,10 +65,9 @@ pub fn read_columns(path: &Path, columns: &[String], scales: &[f64]) -> Result<V
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         let mut row = Vec::with_capacity(columns.len());
         for ((c, &k), scale) in columns.iter().zip(&index).zip(scales) {
-            let field = fields.get(k).ok_or_else(|| format!("{}:{}: column `{c}` is missing ({} fields)", path.display(), i + 1, fields.len()))?;
-            let v: f64 = field
-                .parse()
-                .map_err(|_| format!("{}:{}: column `{c}`: `{field}` is not a number", path.display(), i + 1))?;
+            let field =
+                fields.get(k).ok_or_else(|| format!("{}:{}: column `{c}` is missing ({} fields)", path.display(), i + 1, fields.len()))?;
+            let v: f64 = field.parse().map_err(|_| format!("{}:{}: column `{c}`: `{field}` is not a number", path.display(), i + 1))?;
             if !v.is_finite() {
                 return Err(format!("{}:{}: column `{c}`: `{field}` is not finite", path.display(), i + 1));
             }

@@ -7,15 +7,15 @@
 //! effects: ∂k/∂θ = Dk_rigid(q + δ) · response; task effects (link bending): ∂k/∂θ = response.
 
 use super::kinematics::{self, Response};
-use crate::baselines::dh_calibration::{apply_parameters, parameter_count, parameter_names};
 use crate::data::Measurements;
+use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
 use cbd_protocol::{Effect, NominalModel};
 use faer::Mat;
 
 /// One scalar parameter of the library.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Param {
-    /// Index into the DH parameter vector (`dh_calibration::parameter_names`) or, for a planar
+    /// Index into the DH parameter vector (`nominal::dh_parameters::parameter_names`) or, for a planar
     /// chain, the link index.
     Geometric(usize),
     EncoderScale {

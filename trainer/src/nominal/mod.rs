@@ -1,6 +1,7 @@
 //! Nominal models built from files: rigid-transform helpers, DH frames, and the conversion of a
 //! URDF joint chain into an equivalent standard Denavit–Hartenberg chain.
 
+pub mod dh_parameters;
 pub mod planar;
 pub mod urdf;
 

@@ -3,7 +3,7 @@
 //! (base translation and rotation, joint offsets, link lengths) works on the equivalent DH chain
 //! and reads its first two task coordinates: the planar task space of the data.
 
-use crate::baselines::dh_calibration::parameter_names;
+use super::dh_parameters::parameter_names;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform};
 use cbd_runtime::nominal::forward_kinematics;
 
@@ -28,7 +28,7 @@ pub fn as_dh(model: &NominalModel) -> NominalModel {
     }
 }
 
-/// Indices (into `dh_calibration::parameter_names(n)`) of the parameters that move a planar DH
+/// Indices (into `dh_parameters::parameter_names(n)`) of the parameters that move a planar DH
 /// chain's tool within its plane: a_k, θ_offset_k, base x, y translation and base rotation about
 /// z. The others (α, d, base z, tilts, tool) move it out of the plane or not at all.
 pub fn in_plane_parameters(n: usize) -> Vec<usize> {

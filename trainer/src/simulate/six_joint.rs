@@ -67,14 +67,14 @@ impl SixJointRobot {
             j.alpha += rng.gen_range(-0.1..0.1) * deg;
             j.theta_offset += rng.gen_range(-0.1..0.1) * deg;
         }
-        let mut p = vec![0.0; crate::baselines::dh_calibration::parameter_count(6)];
+        let mut p = vec![0.0; crate::nominal::dh_parameters::parameter_count(6)];
         let o = 24;
         for k in 0..3 {
             p[o + k] = rng.gen_range(-1.0..1.0);
             p[o + 3 + k] = rng.gen_range(-0.05..0.05) * deg;
             p[o + 6 + k] = rng.gen_range(-0.5..0.5);
         }
-        let real = crate::baselines::dh_calibration::apply_parameters(&real, &p);
+        let real = crate::nominal::dh_parameters::apply_parameters(&real, &p);
         SixJointRobot {
             nominal: NominalModel::DhChain(nominal),
             real,
