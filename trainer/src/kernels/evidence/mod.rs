@@ -17,13 +17,15 @@
 
 mod likelihood;
 mod search;
+mod starts;
 mod table;
 
 pub(crate) use table::PairTable;
 
 use crate::data::Measurements;
-use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation, MAX_JOINTS};
+use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
 use search::minimise;
+use starts::DataScales;
 use std::cell::RefCell;
 use table::Theta;
 
@@ -121,70 +123,9 @@ pub fn choose_cbd_hyperparameters(
     let used = data.subset(&rows);
     let table = PairTable::new(nominal, &used, norm);
     let (n, m) = (table.n, table.m);
-    // Scales from the data: residual variance, mean |Dk0|² per joint, joint spread.
-    let var_r = (table.residual.iter().map(|v| v * v).sum::<f64>() / table.residual.len() as f64).max(1e-30);
-    let count = table.count;
-    let mean_jj = (0..count).map(|i| table.jj[(i * (i + 1) / 2 + i) * m * m..][..m * m].iter().step_by(m + 1).sum::<f64>()).sum::<f64>()
-        / (count * m) as f64;
-    let mut spread = [0.0; MAX_JOINTS];
-    let pairs = table.dist2.len() as f64;
-    for f in table.axis_terms.chunks_exact(n.max(1)) {
-        for d in 0..n {
-            spread[d] += -f[d] / pairs;
-        }
-    }
-    let total: f64 = spread[..n].iter().sum::<f64>().max(1e-12);
-    // b Σ spread = ln 2 (periodic) and Σ spread / ℓ² = ln 2 (Gaussian): typical pairs at kernel ½.
-    let log_b0 = (2f64.ln() / total).ln();
-    let log_l0 = (total / 2f64.ln()).sqrt().ln();
-    let width_at =
-        |shift: f64| -> Vec<f64> { (0..n).map(|d| if table.periodic[d] { log_b0 + shift } else { log_l0 - 0.5 * shift }).collect() };
-    let gamma_v0 = (0.5 * var_r / mean_jj.max(1e-30)).ln();
-    let starts = [
-        // Balanced: half the residual's variance to each field, noise a tenth.
-        Theta {
-            log_widths: width_at(0.0),
-            log_gamma_v: gamma_v0,
-            log_a: 0.0,
-            log_gamma_w: (0.5 * var_r).ln(),
-            log_sigma: 0.5 * (0.1 * var_r).ln(),
-        },
-        // Smooth: near-constant joint kernel (offsets and first harmonics) and a nearly affine task field.
-        Theta {
-            log_widths: width_at(-4.0f64.ln() * 2.0),
-            log_gamma_v: gamma_v0 + 100f64.ln(),
-            log_a: 10f64.ln(),
-            log_gamma_w: (100.0 * var_r).ln(),
-            log_sigma: 0.5 * (1e-4 * var_r).ln(),
-        },
-        // Nearly noise-free: the balanced kernels, noise 1e-5 of the residual.
-        Theta {
-            log_widths: width_at(0.0),
-            log_gamma_v: gamma_v0,
-            log_a: 0.0,
-            log_gamma_w: (0.5 * var_r).ln(),
-            log_sigma: 0.5 * (1e-10 * var_r).ln(),
-        },
-        // Rough: narrow kernels, more noise.
-        Theta {
-            log_widths: width_at(4f64.ln()),
-            log_gamma_v: gamma_v0,
-            log_a: 0.3f64.ln(),
-            log_gamma_w: (0.5 * var_r).ln(),
-            log_sigma: 0.5 * (0.03 * var_r).ln(),
-        },
-    ];
-    let ln = |v: f64| v.ln();
-    let mut lower = vec![0.0; n + 4];
-    let mut upper = vec![0.0; n + 4];
-    for d in 0..n {
-        (lower[d], upper[d]) = if table.periodic[d] { (ln(1e-5), ln(1e3)) } else { (log_l0 - ln(1e3), log_l0 + ln(1e3)) };
-    }
-    (lower[n], upper[n]) = (gamma_v0 - ln(1e12), gamma_v0 + ln(1e8));
-    (lower[n + 1], upper[n + 1]) = (ln(1e-2), ln(1e3));
-    (lower[n + 2], upper[n + 2]) = (ln(var_r * 1e-12), ln(var_r * 1e8));
-    // σ from 1e-8 of the residual's spread (and 1e-12 of the workspace) to three times it.
-    (lower[n + 3], upper[n + 3]) = ((0.5 * ln(var_r * 1e-16)).max(ln(1e-12)), 0.5 * ln(var_r * 10.0));
+    let scales = DataScales::of(&table);
+    let starts = scales.starts(&table);
+    let (lower, upper) = scales.bounds(&table);
     // Every start on a coarse subset of the rows (each evaluation there is cheap), then the best
     // refined on all the evidence rows.
     let evaluations = RefCell::new(0usize);
