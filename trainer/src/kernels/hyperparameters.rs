@@ -178,7 +178,31 @@ pub fn choose_hyperparameters(
     let task_scale = options.task_scale.unwrap_or_else(|| super::normalisation_of(data).task_scale);
     let residual = Mat::from_fn(used.len(), m, |i, c| (used.position(i)[c] - nominal_pos[i][c]) / task_scale);
     let template: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
-    // Data-driven start: mean over pairs of (1 − cos Δ_d) (periodic) or Δ_d² / 2 (Gaussian).
+    let init = data_start(&used, &template, options);
+    let gp = ResidualGp::new(&used, template, residual);
+    let bounds = Bounds {
+        width: (options.b_range.0.ln(), options.b_range.1.ln()),
+        noise: (options.noise_ratio_range.0.ln(), options.noise_ratio_range.1.ln()),
+    };
+    let Some(mut point) = grid_search(&gp, &init, &bounds, options.grid_half_width) else {
+        return Err(HyperparameterError::NoValidSetting);
+    };
+    pattern_search(&gp, &mut point, &bounds, options);
+    let gamma = point.value.1;
+    Ok(Hyperparameters {
+        kernel: kernel_of(&gp.template, &point.theta, gamma),
+        noise_sigma: (point.log_lambda.exp() * gamma).sqrt(),
+        task_scale,
+        log_marginal_likelihood: point.value.0,
+        evaluations: gp.evaluations.get(),
+        rows_used: used.len(),
+    })
+}
+
+/// Log widths where typical pairs of rows have kernel ½: from the mean over pairs of (1 − cos Δ_d)
+/// (periodic) or Δ_d² / 2 (Gaussian), unless the options give a start.
+fn data_start(used: &Measurements, template: &[bool], options: &SearchOptions) -> Vec<f64> {
+    let n = template.len();
     let mut spread = vec![0.0; n];
     let pairs = used.len().min(200);
     for i in 0..pairs {
@@ -192,98 +216,128 @@ pub fn choose_hyperparameters(
     // b Σ_d spread_d = ln 2 (periodic); Σ_d spread_d / ℓ² = ln 2 (Gaussian): same shared factor.
     let b0 = options.initial_b.unwrap_or(2f64.ln() / total);
     let w0 = options.initial_width.unwrap_or((total / 2f64.ln()).sqrt());
-    let init: Vec<f64> = template.iter().map(|&p| if p { b0.ln() } else { w0.ln() }).collect();
-    let (lo_b, hi_b) = (options.b_range.0.ln(), options.b_range.1.ln());
-    let (lo_l, hi_l) = (options.noise_ratio_range.0.ln(), options.noise_ratio_range.1.ln());
+    template.iter().map(|&p| if p { b0.ln() } else { w0.ln() }).collect()
+}
 
-    // The kernel's exponent is Σ_d w_d f_d(Δ_d) with w_d = b_d or 1/ℓ_d²: tabulate f_d once
-    // (lower triangle, row-major) so each evaluation costs one exp per pair.
-    let count_used = used.len();
-    let tri = count_used * (count_used + 1) / 2;
-    let mut table = vec![0.0; n * tri];
-    {
+/// The GP on the residual for one joint kernel, its profiled marginal likelihood counted per call.
+struct ResidualGp {
+    template: Vec<bool>,
+    count: usize,
+    /// The kernel's exponent is Σ_d w_d f_d(Δ_d) with w_d = b_d or 1/ℓ_d²: f_d per pair (lower
+    /// triangle, row-major), so each evaluation costs one exp per pair.
+    terms: Vec<f64>,
+    residual: Mat<f64>,
+    evaluations: std::cell::Cell<usize>,
+}
+
+impl ResidualGp {
+    fn new(used: &Measurements, template: Vec<bool>, residual: Mat<f64>) -> Self {
+        let (n, count) = (template.len(), used.len());
+        let mut terms = vec![0.0; n * count * (count + 1) / 2];
         let mut at = 0;
-        for i in 0..count_used {
+        for i in 0..count {
             let xi = used.joints(i);
             for j in 0..=i {
                 let xj = used.joints(j);
                 for d in 0..n {
                     let delta = xi[d] - xj[d];
-                    table[at * n + d] = if template[d] { delta.cos() - 1.0 } else { -0.5 * delta * delta };
+                    terms[at * n + d] = if template[d] { delta.cos() - 1.0 } else { -0.5 * delta * delta };
                 }
                 at += 1;
             }
         }
+        ResidualGp { template, count, terms, residual, evaluations: std::cell::Cell::new(0) }
     }
-    let evaluations = std::cell::Cell::new(0usize);
-    let eval = |theta: &[f64], log_lambda: f64| -> Option<(f64, f64)> {
-        evaluations.set(evaluations.get() + 1);
-        let w: Vec<f64> = theta.iter().zip(&template).map(|(t, &p)| if p { t.exp() } else { (-2.0 * t).exp() }).collect();
-        let mut c = Mat::<f64>::zeros(count_used, count_used);
+
+    /// (log marginal likelihood, γ) at log widths `theta` and log noise ratio `log_lambda`.
+    fn eval(&self, theta: &[f64], log_lambda: f64) -> Option<(f64, f64)> {
+        self.evaluations.set(self.evaluations.get() + 1);
+        let n = self.template.len();
+        let w: Vec<f64> = theta.iter().zip(&self.template).map(|(t, &p)| if p { t.exp() } else { (-2.0 * t).exp() }).collect();
+        let mut c = Mat::<f64>::zeros(self.count, self.count);
         let mut at = 0;
-        for i in 0..count_used {
+        for i in 0..self.count {
             for j in 0..=i {
-                let f = &table[at * n..at * n + n];
+                let f = &self.terms[at * n..at * n + n];
                 let v = f.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>().exp();
                 c[(i, j)] = v;
                 c[(j, i)] = v;
                 at += 1;
             }
         }
-        profiled_lml(&c, &residual, log_lambda.exp())
-    };
-    // Coarse grid on (shared width factor, noise ratio). A wider periodic kernel has smaller b,
-    // a wider Gaussian one larger ℓ: the factor multiplies b and divides ℓ² alike.
-    let mut best: Option<(f64, f64)> = None;
-    let mut theta = init.clone();
-    let mut log_lambda = 1e-2f64.ln();
+        profiled_lml(&c, &self.residual, log_lambda.exp())
+    }
+}
+
+/// Log bounds of the widths (b, or ℓ) and of the noise ratio λ.
+struct Bounds {
+    width: (f64, f64),
+    noise: (f64, f64),
+}
+
+/// The best point found so far.
+struct SearchPoint {
+    /// (log marginal likelihood, γ).
+    value: (f64, f64),
+    theta: Vec<f64>,
+    log_lambda: f64,
+}
+
+/// Coarse grid on (shared width factor, noise ratio). A wider periodic kernel has smaller b, a
+/// wider Gaussian one larger ℓ: the factor multiplies b and divides ℓ² alike.
+fn grid_search(gp: &ResidualGp, init: &[f64], bounds: &Bounds, half_width: i32) -> Option<SearchPoint> {
+    let (lo_b, hi_b) = bounds.width;
     let shift = |k: f64| -> Vec<f64> {
-        init.iter().zip(&template).map(|(t, &p)| if p { (t + k).clamp(lo_b, hi_b) } else { (t - 0.5 * k).clamp(lo_b, hi_b) }).collect()
+        init.iter().zip(&gp.template).map(|(t, &p)| if p { (t + k).clamp(lo_b, hi_b) } else { (t - 0.5 * k).clamp(lo_b, hi_b) }).collect()
     };
-    for k in -options.grid_half_width..=options.grid_half_width {
+    let mut best: Option<SearchPoint> = None;
+    for k in -half_width..=half_width {
         let th = shift(k as f64 * 4f64.ln());
         for e in (-10..=2).step_by(2) {
-            let ll = (10f64.powi(e)).ln().clamp(lo_l, hi_l);
-            if let Some(v) = eval(&th, ll) {
-                if best.map_or(true, |b| v.0 > b.0) {
-                    best = Some(v);
-                    theta = th.clone();
-                    log_lambda = ll;
+            let ll = (10f64.powi(e)).ln().clamp(bounds.noise.0, bounds.noise.1);
+            if let Some(v) = gp.eval(&th, ll) {
+                if best.as_ref().map_or(true, |b| v.0 > b.value.0) {
+                    best = Some(SearchPoint { value: v, theta: th.clone(), log_lambda: ll });
                 }
             }
         }
     }
-    let Some(mut best) = best else { return Err(HyperparameterError::NoValidSetting) };
+    best
+}
+
+/// Compass search from `point` within the evaluation budget: λ and the shared width first, then
+/// (per axis) every axis alone; steps from a factor 2 halving down to 5 %.
+fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, options: &SearchOptions) {
+    let n = gp.template.len();
+    let (lo_b, hi_b) = bounds.width;
     let budget = options.max_evaluations.max(4);
     // Coordinates: 0 = λ, 1 = shared width (all axes), 2.. = single axes (second phase).
     let phases: Vec<Vec<usize>> =
         if options.per_axis && n > 1 { vec![vec![0, 1], (0..=n + 1).filter(|&k| k != 1).collect()] } else { vec![vec![0, 1]] };
     for coords in phases {
         let mut step = 2f64.ln(); // factor 2, then halving
-        while step > 1.05f64.ln() && evaluations.get() < budget {
+        while step > 1.05f64.ln() && gp.evaluations.get() < budget {
             let mut improved = false;
             for &k in &coords {
                 for dir in [1.0, -1.0] {
-                    if evaluations.get() >= budget {
+                    if gp.evaluations.get() >= budget {
                         break;
                     }
-                    let (mut th, mut ll) = (theta.clone(), log_lambda);
+                    let (mut th, mut ll) = (point.theta.clone(), point.log_lambda);
                     match k {
-                        0 => ll = (ll + dir * step).clamp(lo_l, hi_l),
+                        0 => ll = (ll + dir * step).clamp(bounds.noise.0, bounds.noise.1),
                         1 => th
                             .iter_mut()
-                            .zip(&template)
+                            .zip(&gp.template)
                             .for_each(|(t, &p)| *t = (*t + if p { dir * step } else { -0.5 * dir * step }).clamp(lo_b, hi_b)),
                         a => th[a - 2] = (th[a - 2] + dir * step).clamp(lo_b, hi_b),
                     }
-                    if th == theta && ll == log_lambda {
+                    if th == point.theta && ll == point.log_lambda {
                         continue;
                     }
-                    if let Some(v) = eval(&th, ll) {
-                        if v.0 > best.0 + 1e-9 * best.0.abs() {
-                            best = v;
-                            theta = th;
-                            log_lambda = ll;
+                    if let Some(v) = gp.eval(&th, ll) {
+                        if v.0 > point.value.0 + 1e-9 * point.value.0.abs() {
+                            *point = SearchPoint { value: v, theta: th, log_lambda: ll };
                             improved = true;
                             break; // keep moving along improving directions
                         }
@@ -295,15 +349,6 @@ pub fn choose_hyperparameters(
             }
         }
     }
-    let gamma = best.1;
-    Ok(Hyperparameters {
-        kernel: kernel_of(&template, &theta, gamma),
-        noise_sigma: (log_lambda.exp() * gamma).sqrt(),
-        task_scale,
-        log_marginal_likelihood: best.0,
-        evaluations: evaluations.get(),
-        rows_used: used.len(),
-    })
 }
 
 #[cfg(test)]
