@@ -90,8 +90,10 @@ BLOBS="rr rr256 six six-effects"
 for name in $BLOBS; do
     host="$OUT/host-$name.txt"
     [ -s "$host" ] || "$HOST" eval "$OUT/blobs/$name.blob" >"$host"
-    if "$C_OUT/check" lines "$OUT/blobs/$name.blob" >"$C_OUT/host-c-$name.txt" && diff -q "$C_OUT/host-c-$name.txt" "$host" >/dev/null; then
-        pass "C host: $name blob, $(grep -c '^q' "$host") configurations bit-identical to the Rust runtime (cbd-fw-host eval)"
+    # The C programs evaluate; the host's `qc` lines (compensation) are checked through C by the
+    # cbd-ffi test `compensate_gives_the_runtimes_bits_and_its_errors`, not here.
+    if "$C_OUT/check" lines "$OUT/blobs/$name.blob" >"$C_OUT/host-c-$name.txt" && diff -q "$C_OUT/host-c-$name.txt" <(grep -v '^qc' "$host") >/dev/null; then
+        pass "C host: $name blob, $(grep -c '^q[0-9]' "$host") configurations bit-identical to the Rust runtime (cbd-fw-host eval)"
     else
         fail "C host: $name blob differs from cbd-fw-host eval ($C_OUT/host-c-$name.txt)"
     fi
@@ -152,7 +154,7 @@ for variant in $VARIANTS; do
         done
         for cpu in $cpus; do
             run="$C_OUT/fw-$name-$variant-$cpu.txt"
-            if wait "${pid[$cpu]}" && diff <(grep '^q' "$run") "$OUT/host-$name.txt" >"$C_OUT/diff-$name-$variant-$cpu.txt"; then
+            if wait "${pid[$cpu]}" && diff <(grep '^q' "$run") <(grep -v '^qc' "$OUT/host-$name.txt") >"$C_OUT/diff-$name-$variant-$cpu.txt"; then
                 pass "C firmware ($variant) on $cpu: $name blob, $(grep -c '^q' "$run") configurations bit-identical to the host runtime"
             else
                 fail "C firmware ($variant) on $cpu: $name blob (see $run, $C_OUT/diff-$name-$variant-$cpu.txt)"
