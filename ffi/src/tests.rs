@@ -180,10 +180,15 @@ fn compensate_gives_the_runtimes_bits_and_its_errors() {
     assert_eq!(flags & CBD_COMPENSATE_REACHED != 0, c.reached);
     assert!(c.reached);
     let nan = [f64::NAN, 0.0];
-    let s = unsafe { cbd_compensate(h, nan.as_ptr(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
+    let s =
+        unsafe { cbd_compensate(h, nan.as_ptr(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
     assert_eq!(s, CBD_ERR_NON_FINITE_QUERY);
-    let s = unsafe { cbd_compensate(h, target.as_ptr(), 3, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
+    let s = unsafe {
+        cbd_compensate(h, target.as_ptr(), 3, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut())
+    };
     assert_eq!(s, CBD_ERR_QUERY_DIMENSION);
-    let s = unsafe { cbd_compensate(h, core::ptr::null(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut()) };
+    let s = unsafe {
+        cbd_compensate(h, core::ptr::null(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut())
+    };
     assert_eq!(s, CBD_ERR_NULL_POINTER);
 }

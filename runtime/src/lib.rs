@@ -23,11 +23,11 @@ pub mod real;
 pub mod rigid;
 pub mod rigid_derivatives;
 
-pub use compensate::{CompensateOptions, Compensation};
 pub use calibrator::{
     initial_state, integrate_control_points, integrate_control_points_with_features, integrate_points, storage_len, Calibrator, Evaluation,
 };
 pub use cbd_protocol as protocol;
+pub use compensate::{CompensateOptions, Compensation};
 
 /// Why loading or evaluation failed. The runtime returns these; it never panics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

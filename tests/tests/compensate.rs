@@ -118,7 +118,8 @@ fn bad_input_is_an_error_and_unreachable_or_singular_is_flagged() {
     assert!(c.is_ok(), "{c:?} {q:?}");
     // Exactly at a singular command with the target there (zero momenta: k1 = k0, stretched
     // out at q2 = 0): reached, flagged singular.
-    let identity = model_blob(NominalModel::planar(&[1.0, 0.5]).unwrap(), 3, 0.0, Integrator { method: IntegratorMethod::Euler, steps: 1 }, 1.0);
+    let identity =
+        model_blob(NominalModel::planar(&[1.0, 0.5]).unwrap(), 3, 0.0, Integrator { method: IntegratorMethod::Euler, steps: 1 }, 1.0);
     let mut storage2 = vec![0.0; 100_000];
     let mut flat = Calibrator::load(&identity, &mut storage2).unwrap();
     let c = flat.compensate(&[1.5, 0.0], &[0.0, 0.0], &mut q).unwrap();
@@ -126,7 +127,8 @@ fn bad_input_is_an_error_and_unreachable_or_singular_is_flagged() {
     // Far from every measured configuration is flagged as extrapolation: the reference model's
     // grid covers the torus, so no command is outside; checked on a model with three points
     // (periodic kernel b = 1: support ≥ e^-4 everywhere, so the threshold is raised to 0.5).
-    let few = model_blob(NominalModel::planar(&[1.0, 0.5]).unwrap(), 3, 0.01, Integrator { method: IntegratorMethod::Euler, steps: 1 }, 1.0);
+    let few =
+        model_blob(NominalModel::planar(&[1.0, 0.5]).unwrap(), 3, 0.01, Integrator { method: IntegratorMethod::Euler, steps: 1 }, 1.0);
     let mut storage = vec![0.0; 100_000];
     let mut cal = Calibrator::load(&few, &mut storage).unwrap();
     let mut support_min = f64::INFINITY;

@@ -115,11 +115,8 @@ pub fn nominal_position(
     }
     if let NominalModel::PlanarChain { lengths, .. } = nominal {
         if let ([l1, l2], [x, y]) = (lengths.as_slice(), target) {
-            let elbow = if libm::sin(seed.get(1).copied().unwrap_or(0.0)) >= 0.0 {
-                planar::Elbow::Positive
-            } else {
-                planar::Elbow::Negative
-            };
+            let elbow =
+                if libm::sin(seed.get(1).copied().unwrap_or(0.0)) >= 0.0 { planar::Elbow::Positive } else { planar::Elbow::Negative };
             if let Some(closed) = planar::two_link(*l1, *l2, [*x, *y], elbow) {
                 // The same angles modulo 2π as the seed's turns, so that the solution is near it.
                 for (dst, (c, s)) in q.iter_mut().zip(closed.iter().zip(seed.iter())) {
