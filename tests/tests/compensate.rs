@@ -55,26 +55,9 @@ fn rr_reference_model_reaches_reachable_targets() {
     assert!(worst <= 1e-9 * 1.5);
 }
 
+/// The UR5 nominal chain of the simulator.
 fn six_joint() -> NominalModel {
-    let deg = core::f64::consts::PI / 180.0;
-    let j = |a: f64, alpha: f64, d: f64| DhJoint { kind: JointKind::Revolute, a, alpha: alpha * deg, d, theta_offset: 0.0 };
-    let mut tool = Transform::IDENTITY;
-    tool.translation = [0.0, 0.0, 31.0];
-    NominalModel::DhChain(DhChain {
-        convention: DhConvention::Standard,
-        joints: heapless::Vec::from_slice(&[
-            j(0.0, 90.0, 89.159),
-            j(-425.0, 0.0, 0.0),
-            j(-392.25, 0.0, 0.0),
-            j(0.0, 90.0, 109.15),
-            j(0.0, -90.0, 94.65),
-            j(0.0, 0.0, 82.3),
-        ])
-        .unwrap(),
-        base: Transform::IDENTITY,
-        tool,
-        effects: Effects::NONE,
-    })
+    NominalModel::DhChain(cbd_trainer::simulate::six_joint::ur5_nominal())
 }
 
 #[test]

@@ -4,6 +4,8 @@
 //! unexplained structure and absorbed by CbD. The data are simulated by `simulate::effects`,
 //! which implements the effects independently of the runtime.
 
+mod common;
+
 use cbd_protocol::NominalModel;
 use cbd_trainer::data::Measurements;
 use cbd_trainer::diagnose::library::{GroupKind, Param};
@@ -61,21 +63,9 @@ fn second_harmonic_transmission_error_of_the_rr_arm() {
 
 fn six_arm(seed: u64) -> (NominalModel, EffectArm) {
     use cbd_trainer::nominal::dh_parameters::{apply_parameters, parameter_count};
-    use rand::{Rng, SeedableRng};
     let nominal = ur5_nominal();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let deg = std::f64::consts::PI / 180.0;
     // Geometric errors of a real arm: ±0.5 mm, ±0.05°.
-    let p: Vec<f64> = cbd_trainer::nominal::dh_parameters::parameter_names(6)
-        .iter()
-        .map(|s| {
-            if s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r") {
-                rng.gen_range(-0.05..0.05) * deg
-            } else {
-                rng.gen_range(-0.5..0.5)
-            }
-        })
-        .collect();
+    let p = common::six_joint_geometric_errors(seed);
     assert_eq!(p.len(), parameter_count(6));
     let real = NominalModel::DhChain(apply_parameters(&nominal, &p));
     (NominalModel::DhChain(nominal), EffectArm::new(real))

@@ -4,6 +4,8 @@
 //! translation and rotation, joint offsets and link-length errors; a six-joint arm with DH, base
 //! and tool errors. Five seeds (arm, configurations, noise draw) × two noise levels per case.
 
+mod common;
+
 use cbd_protocol::NominalModel;
 use cbd_trainer::data::Measurements;
 use cbd_trainer::diagnose::library::{GroupKind, Param};
@@ -145,23 +147,12 @@ fn a_bump_is_unexplained_structure_and_nothing_is_invented() {
 /// A six-joint arm with geometric errors only: nothing but geometry.
 #[test]
 fn six_joint_geometry_only_invents_nothing() {
-    use cbd_trainer::nominal::dh_parameters::{apply_parameters, parameter_names};
+    use cbd_trainer::nominal::dh_parameters::apply_parameters;
     use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
     let nominal = ur5_nominal();
     for seed in SEEDS {
         for noise in [0.01, 0.05] {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-            let deg = std::f64::consts::PI / 180.0;
-            let p: Vec<f64> = parameter_names(6)
-                .iter()
-                .map(|s| {
-                    if s.starts_with("alpha") || s.starts_with("theta") || s.starts_with("base_r") {
-                        rng.gen_range(-0.05..0.05) * deg
-                    } else {
-                        rng.gen_range(-0.5..0.5)
-                    }
-                })
-                .collect();
+            let p = common::six_joint_geometric_errors(seed);
             let arm = EffectArm::new(NominalModel::DhChain(apply_parameters(&nominal, &p)));
             let train = arm.measure(&random_configurations(300, 10 * seed), noise, 10 * seed + 100);
             let test = arm.measure(&random_configurations(200, 10 * seed + 1), noise, 10 * seed + 101);
