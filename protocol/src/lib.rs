@@ -18,6 +18,7 @@ mod effects;
 mod limits;
 mod model;
 pub mod paper_rr;
+pub mod ur5;
 mod validate;
 
 pub use effects::*;

@@ -3,7 +3,7 @@
 
 use cbd_protocol::*;
 use serde_json::Value;
-use std::f64::consts::{FRAC_PI_2, PI};
+use std::f64::consts::PI;
 
 use crate::shared::Lcg;
 
@@ -89,37 +89,7 @@ pub fn six_effects_blob() -> Vec<u8> {
 }
 
 fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
-    let deg = PI / 180.0;
-    let joint = |a: f64, alpha_deg: f64, d: f64| DhJoint {
-        kind: JointKind::Revolute,
-        a,
-        alpha: if alpha_deg == 90.0 {
-            FRAC_PI_2
-        } else if alpha_deg == -90.0 {
-            -FRAC_PI_2
-        } else {
-            alpha_deg * deg
-        },
-        d,
-        theta_offset: 0.0,
-    };
-    let mut tool = Transform::IDENTITY;
-    tool.translation = [0.0, 0.0, 31.0];
-    let chain = DhChain {
-        convention: DhConvention::Standard,
-        joints: heapless::Vec::from_slice(&[
-            joint(0.0, 90.0, 89.159),
-            joint(-425.0, 0.0, 0.0),
-            joint(-392.25, 0.0, 0.0),
-            joint(0.0, 90.0, 109.15),
-            joint(0.0, -90.0, 94.65),
-            joint(0.0, 0.0, 82.3),
-        ])
-        .expect("6 joints"),
-        base: Transform::IDENTITY,
-        tool,
-        effects,
-    };
+    let chain = DhChain { effects, ..cbd_protocol::ur5::chain() };
     const N: usize = 64;
     let mut rng = Lcg(0x0005_5e1f);
     let x: Vec<f64> = (0..N * 6).map(|_| PI * rng.symmetric()).collect();

@@ -6,7 +6,7 @@
 use super::add_noise;
 use crate::data::Measurements;
 use crate::nominal::{cross, dh_frames, dh_joint_axes, dot, sub};
-use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform};
+use cbd_protocol::{DhChain, NominalModel};
 use cbd_runtime::nominal::forward_kinematics;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -30,27 +30,7 @@ pub struct SixJointRobot {
 }
 
 /// The UR5 nominal model used by the simulation (standard DH, mm).
-pub fn ur5_nominal() -> DhChain {
-    let deg = std::f64::consts::PI / 180.0;
-    let j = |a, alpha: f64, d| DhJoint { kind: JointKind::Revolute, a, alpha: alpha * deg, d, theta_offset: 0.0 };
-    let mut tool = Transform::IDENTITY;
-    tool.translation = [0.0, 0.0, 31.0];
-    DhChain {
-        convention: DhConvention::Standard,
-        joints: heapless::Vec::from_slice(&[
-            j(0.0, 90.0, 89.159),
-            j(-425.0, 0.0, 0.0),
-            j(-392.25, 0.0, 0.0),
-            j(0.0, 90.0, 109.15),
-            j(0.0, -90.0, 94.65),
-            j(0.0, 0.0, 82.3),
-        ])
-        .expect("6 joints"),
-        base: Transform::IDENTITY,
-        tool,
-        effects: cbd_protocol::Effects::NONE,
-    }
-}
+pub use cbd_protocol::ur5::chain as ur5_nominal;
 
 impl SixJointRobot {
     /// UR5-like robot with geometric errors drawn from `seed`: lengths ±0.5 mm, angles ±0.1°
