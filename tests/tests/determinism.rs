@@ -155,7 +155,7 @@ fn failed_write_keeps_the_old_file() {
             eprintln!("note: the directory mode does not stop this user (root); read-only case not exercised");
             std::fs::write(&path, b"old model").unwrap();
         } else {
-            let e = result.expect_err("write into a read-only directory");
+            let e = result.expect_err("write into a read-only directory").to_string();
             assert!(e.contains(dir.to_str().unwrap()), "{e}");
             assert_eq!(std::fs::read(&path).unwrap(), b"old model");
         }
@@ -166,13 +166,13 @@ fn failed_write_keeps_the_old_file() {
     let target = dir.join("occupied");
     std::fs::create_dir(&target).unwrap();
     std::fs::write(target.join("inside"), b"keep").unwrap();
-    let e = write_atomically(&target, b"new model").expect_err("output path is a directory");
+    let e = write_atomically(&target, b"new model").expect_err("output path is a directory").to_string();
     assert!(e.contains("occupied"), "{e}");
     assert_eq!(std::fs::read(target.join("inside")).unwrap(), b"keep");
     assert_eq!(leftovers(&dir, &["model.blob", "occupied"]), Vec::<String>::new());
 
     // 4. A missing directory: error naming it, nothing created.
-    let e = write_atomically(&dir.join("missing/model.blob"), b"x").expect_err("missing directory");
+    let e = write_atomically(&dir.join("missing/model.blob"), b"x").expect_err("missing directory").to_string();
     assert!(e.contains("missing"), "{e}");
     assert!(!dir.join("missing").exists());
 }

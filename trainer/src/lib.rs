@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod cli;
 pub mod data;
 pub mod diagnose;
+pub mod error;
 pub mod flow;
 pub mod io;
 pub mod kernels;
@@ -15,3 +16,5 @@ pub mod predict;
 pub mod report;
 pub mod simulate;
 pub mod solver;
+
+pub use error::{Error, Result};

@@ -98,14 +98,14 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
     let robot = SixJointRobot::ur5_like(21);
     let train = robot.measure(&random_configurations(150, 22), 23);
     let test = robot.measure(&random_configurations(200, 24), 25);
-    let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> Result<(Predictor, String), String> {
+    let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> cbd_trainer::Result<(Predictor, String)> {
         let mut opts = CbdOptions::paper_rr();
         opts.normalisation = cbd_trainer::kernels::normalisation_of(data);
         opts.joint_kernel = cbd_trainer::kernels::default_joint_kernel(nominal);
         opts.task_kernel.width = 1.0;
         opts.sigma = robot.noise_std / opts.normalisation.task_scale;
         opts.max_iterations = 15;
-        let fit = fit_cbd(nominal, data, &opts).map_err(|e| e.to_string())?;
+        let fit = fit_cbd(nominal, data, &opts)?;
         let predictor: Predictor =
             Box::new(move |joints: &[f64]| cbd_trainer::predict::evaluate_blob(&fit.blob, joints).expect("blob evaluates"));
         Ok((predictor, String::new()))

@@ -10,6 +10,7 @@
 
 use super::krr::KernelRidge;
 use crate::data::Measurements;
+use crate::error::Error;
 use crate::kernels::hyperparameters::{choose_hyperparameters, SearchOptions};
 use crate::report::stats::ErrorStats;
 use crate::simulate::{rr::RealRr, six_joint::SixJointRobot};
@@ -36,11 +37,11 @@ pub enum SimulatedArm {
 
 impl SimulatedArm {
     /// The arm `cbd simulate --robot <name>` measures: `rr` or `six`.
-    pub fn named(name: &str) -> Result<SimulatedArm, String> {
+    pub fn named(name: &str) -> crate::Result<SimulatedArm> {
         match name {
             "rr" => Ok(SimulatedArm::Rr(RealRr::default())),
             "six" => Ok(SimulatedArm::Six(Box::new(SixJointRobot::ur5_like(1)))),
-            other => Err(format!("unknown simulated robot `{other}` (expected rr or six)")),
+            other => Err(Error::InvalidInput(format!("unknown simulated robot `{other}` (expected rr or six)"))),
         }
     }
     /// Noise-free tool position when commanded `q`.
@@ -236,11 +237,11 @@ fn distance(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The table for `count` targets drawn from `seed` (see the module doc).
-pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize, seed: u64) -> Result<CommandedAccuracy, String> {
+pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize, seed: u64) -> crate::Result<CommandedAccuracy> {
     let n = arm.n_joints();
     let nominal = fitted.nominal;
     if nominal.n_joints() != n {
-        return Err(format!("the model has {} joints, the simulated arm {n}", nominal.n_joints()));
+        return Err(Error::InvalidInput(format!("the model has {} joints, the simulated arm {n}", nominal.n_joints())));
     }
     let configurations = arm.random_configurations(count, seed);
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xc0ffee);
@@ -252,13 +253,14 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
     let mut storages: Vec<Vec<f64>> = Vec::new();
     let mut models = Vec::new();
     for (name, blob) in &fitted.cbd {
-        let model = cbd_protocol::decode(blob).map_err(|e| format!("{name}: {e}"))?;
+        let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(*name))?;
         storages.push(vec![0.0; cbd_runtime::storage_len(model.n_points as usize, model.n_joints(), model.task_dim(), model.integrator)]);
         models.push((*name, model));
     }
     let mut calibrators = Vec::new();
     for ((name, model), storage) in models.into_iter().zip(storages.iter_mut()) {
-        calibrators.push((name, cbd_runtime::Calibrator::from_model(model, storage).map_err(|e| format!("{name}: {e}"))?));
+        calibrators
+            .push((name, cbd_runtime::Calibrator::from_model(model, storage).map_err(|e| Error::from(e).context(name.to_string()))?));
     }
     let mut names = vec!["nominal", "dh", "krr"];
     names.extend(calibrators.iter().map(|(name, _)| *name));
@@ -314,10 +316,10 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         // (d) CbD compensation from the nominal IK.
         for (k, (name, cal)) in calibrators.iter_mut().enumerate() {
             let mut q = vec![0.0; n];
-            let c = cal.compensate(&x, &q_nominal, &mut q).map_err(|e| format!("{name}: compensate: {e}"))?;
+            let c = cal.compensate(&x, &q_nominal, &mut q).map_err(|e| Error::from(e).context(format!("{name}: compensate")))?;
             record(3 + k, &q, c.reached);
             residuals[3 + k].push(c.residual);
-            let e = cal.evaluate(q_star).map_err(|e| format!("{name}: evaluate: {e}"))?;
+            let e = cal.evaluate(q_star).map_err(|e| Error::from(e).context(format!("{name}: evaluate")))?;
             forward[3 + k].push(distance(&e.position().iter().copied().collect::<Vec<_>>(), &x));
         }
     }
@@ -344,10 +346,10 @@ pub fn fit_and_command(
     nominal: &NominalModel,
     train: &Measurements,
     search: &SearchOptions,
-    cbd_fit: &dyn Fn(&NominalModel, &Measurements) -> Result<Vec<u8>, String>,
+    cbd_fit: &dyn Fn(&NominalModel, &Measurements) -> crate::Result<Vec<u8>>,
     count: usize,
     seed: u64,
-) -> Result<CommandedAccuracy, String> {
+) -> crate::Result<CommandedAccuracy> {
     let dh = match nominal {
         NominalModel::DhChain(_) => {
             super::dh_calibration::calibrate_dh(nominal, train, &super::dh_calibration::DhCalibrationOptions::default())
@@ -385,13 +387,17 @@ pub fn run_for_compare(
     search: &SearchOptions,
     settings: &crate::calibrate::Settings,
     unit: &str,
-) -> Result<CommandedAccuracy, String> {
-    let arm = SimulatedArm::named(robot).map_err(|e| format!("--commanded: {e}"))?;
+) -> crate::Result<CommandedAccuracy> {
+    let arm = SimulatedArm::named(robot).map_err(|e| e.context("--commanded"))?;
     if arm.n_joints() != nominal.n_joints() {
-        return Err(format!("--commanded {robot}: that arm has {} joints, the model file's {}", arm.n_joints(), nominal.n_joints()));
+        return Err(Error::InvalidInput(format!(
+            "--commanded {robot}: that arm has {} joints, the model file's {}",
+            arm.n_joints(),
+            nominal.n_joints()
+        )));
     }
-    let cbd_fit = |model: &NominalModel, data: &Measurements| -> Result<Vec<u8>, String> {
-        crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob).map_err(|e| e.to_string())
+    let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
+        crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
     };
     let c = fit_and_command(&arm, nominal, train, search, &cbd_fit, 1000, 15)?;
     println!("{}", c.table(unit));
@@ -402,9 +408,9 @@ pub fn run_for_compare(
 mod tests {
     use super::*;
 
-    fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> Result<Vec<u8>, String> {
+    fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> crate::Result<Vec<u8>> {
         let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
-        crate::calibrate::calibrate(nominal, data, &settings).map(|c| c.fit.blob).map_err(|e| e.to_string())
+        crate::calibrate::calibrate(nominal, data, &settings).map(|c| c.fit.blob)
     }
 
     /// Issue 15's criteria for CbD's row `best` (cbd on the RR arm, dh+cbd on the six-joint arm,

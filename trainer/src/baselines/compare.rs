@@ -5,6 +5,7 @@
 use super::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use super::krr::KernelRidge;
 use crate::data::Measurements;
+use crate::error::{Error, ImportError};
 use crate::kernels::hyperparameters::{choose_hyperparameters, Hyperparameters, SearchOptions};
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
@@ -17,7 +18,7 @@ pub type Predictor = Box<dyn Fn(&[f64]) -> Vec<f64>>;
 /// The hook through which CbD enters the comparison (see [`compare_peers`]).
 /// A fitted correction and one line saying what was chosen (hyperparameters, scheme, warnings).
 pub type FittedCorrection = (Predictor, String);
-pub type CorrectionFitter<'a> = &'a dyn Fn(&NominalModel, &Measurements) -> Result<FittedCorrection, String>;
+pub type CorrectionFitter<'a> = &'a dyn Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection>;
 
 /// One method's row.
 #[derive(Debug, Clone, PartialEq)]
@@ -109,7 +110,7 @@ pub fn compare_files(
     test_csv: impl AsRef<std::path::Path>,
     search: &SearchOptions,
     cbd: Option<CorrectionFitter>,
-) -> Result<(Comparison, Vec<String>), crate::data::model_file::ImportError> {
+) -> Result<(Comparison, Vec<String>), ImportError> {
     let inputs = read_compare_files(model_file, train_csv, test_csv)?;
     Ok((compare_peers(&inputs.nominal, &inputs.train.measurements, &inputs.test.measurements, search, cbd), inputs.warnings))
 }
@@ -128,7 +129,7 @@ pub fn read_compare_files(
     model_file: impl AsRef<std::path::Path>,
     train_csv: impl AsRef<std::path::Path>,
     test_csv: impl AsRef<std::path::Path>,
-) -> Result<CompareInputs, crate::data::model_file::ImportError> {
+) -> Result<CompareInputs, ImportError> {
     use crate::data::csv_import::read_measurements;
     let model = crate::data::model_file::load_model_file(model_file)?;
     let spec = model.column_spec()?;
@@ -148,7 +149,7 @@ fn nominal_predictor(model: NominalModel, m: usize) -> Predictor {
 /// fitted as the planar chain it is in a moved frame (`nominal::planar::as_planar_in_frame`),
 /// the data moved into that frame and the predictions back. (Lifting the data to 3-D instead
 /// would hand the correction a noise-free coordinate, which drives its noise estimate to zero.)
-pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -> Result<FittedCorrection, String> {
+pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -> crate::Result<FittedCorrection> {
     use crate::nominal::planar::as_planar_in_frame;
     let (m, full) = (data.task_dim, base.task_dim());
     if m == full {
@@ -166,12 +167,12 @@ pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -
         });
         return Ok((back, note));
     }
-    Err(format!("a model of {full} task coordinates for data of {m} that is not a planar arm's DH form"))
+    Err(Error::InvalidInput(format!("a model of {full} task coordinates for data of {m} that is not a planar arm's DH form")))
 }
 
-fn krr_on(model: &NominalModel, train: &Measurements, search: &SearchOptions) -> Result<(Predictor, Hyperparameters), String> {
-    let h = choose_hyperparameters(model, train, search).map_err(|e| e.to_string())?;
-    let krr = KernelRidge::fit(model, train, h.kernel.clone(), h.ridge()).map_err(|e| e.to_string())?;
+fn krr_on(model: &NominalModel, train: &Measurements, search: &SearchOptions) -> crate::Result<(Predictor, Hyperparameters)> {
+    let h = choose_hyperparameters(model, train, search)?;
+    let krr = KernelRidge::fit(model, train, h.kernel.clone(), h.ridge())?;
     let model = model.clone();
     Ok((Box::new(move |joints: &[f64]| krr.predict(&model, joints)), h))
 }
@@ -211,7 +212,7 @@ pub fn compare_peers(
 ) -> Comparison {
     let m = nominal.task_dim();
     let mut rows = Vec::new();
-    let mut push = |name: &str, fitted: Result<(Predictor, String), String>, seconds: f64| {
+    let mut push = |name: &str, fitted: crate::Result<(Predictor, String)>, seconds: f64| {
         let (stats, train_stats, note, test_errors) = match fitted {
             Ok((p, note)) => {
                 let predicted = p(&test.joints);
@@ -241,7 +242,7 @@ pub fn compare_peers(
                     format!("{} iterations, rank {}/{}, train rms {:.4}", s.iterations, s.rank, s.n_parameters, s.final_rms),
                 )
             })
-            .map_err(|e| e.to_string()),
+            .map_err(|e| Error::from(e.clone())),
         dh_seconds,
     );
 

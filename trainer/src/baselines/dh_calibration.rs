@@ -183,40 +183,118 @@ fn rms(r: &[f64], m: usize) -> f64 {
     (r.iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64).sqrt()
 }
 
-/// Fits all DH parameters plus base and tool to `data` (positions in the model's length unit).
-/// A planar arm is fitted as its DH form (`nominal::planar::as_dh`) on its two task coordinates,
-/// over the parameters that move the tool in the plane (link lengths, joint offsets, base x, y
-/// and yaw) when `options.planar_as_dh`; the returned model is then that DH form, read in its
-/// first two coordinates.
-pub fn calibrate_dh(
-    nominal: &NominalModel,
-    data: &Measurements,
-    options: &DhCalibrationOptions,
-) -> Result<DhCalibration, DhCalibrationError> {
-    if !options.planar_as_dh && !matches!(nominal, NominalModel::DhChain(_)) {
-        return Err(DhCalibrationError::NotADhChain);
-    }
-    let dh_form = crate::nominal::planar::as_dh(nominal);
-    let NominalModel::DhChain(chain0) = &dh_form else { return Err(DhCalibrationError::NotADhChain) };
+/// The Jacobian of the residuals at parameter changes `p` from `chain0`: analytic columns for the
+/// DH rows, base translation and tool; central differences for the base rotation (its axis-angle
+/// parametrisation), with `scratch` for the two residual vectors.
+fn jacobian_at(chain0: &DhChain, p: &[f64], data: &Measurements, jac: &mut Mat<f64>, scratch: (&mut [f64], &mut [f64])) {
+    let (rp, rm) = scratch;
     let n = chain0.joints.len();
-    let np = parameter_count(n);
-    let m = nominal.task_dim();
-    let rows = m * data.len();
-    if data.len() < 2 || data.task_dim != m {
-        return Err(DhCalibrationError::TooFewMeasurements { rows: data.len() });
+    analytic_jacobian(&apply_parameters(chain0, p), data, jac);
+    for k in 4 * n + 3..4 * n + 6 {
+        let h = 1e-6;
+        let mut q = p.to_vec();
+        q[k] = p[k] + h;
+        residuals(&apply_parameters(chain0, &q), data, rp);
+        q[k] = p[k] - h;
+        residuals(&apply_parameters(chain0, &q), data, rm);
+        for i in 0..jac.nrows() {
+            jac[(i, k)] = (rp[i] - rm[i]) / (2.0 * h);
+        }
     }
-    // Out of the plane's parameters never change (first-order blind in the plane's coordinates).
-    let out_of_plane: Vec<usize> = if m < 3 {
-        let inside = crate::nominal::planar::in_plane_parameters(n);
-        (0..np).filter(|k| !inside.contains(k)).collect()
-    } else {
-        Vec::new()
-    };
-    let names = parameter_names(n);
+}
+
+/// The parameters a planar arm's data (m < 3 coordinates) cannot see, which never change
+/// (first-order blind in the plane's coordinates); none for 3-D data.
+fn out_of_plane_parameters(n: usize, m: usize) -> Vec<usize> {
+    if m >= 3 {
+        return Vec::new();
+    }
+    let inside = crate::nominal::planar::in_plane_parameters(n);
+    (0..parameter_count(n)).filter(|k| !inside.contains(k)).collect()
+}
+
+/// The parameters redundant at this Jacobian (none when `tolerance` is 0), less those out of the plane.
+fn redundant_in_plane(jac: &Mat<f64>, colnorm: &[f64], tolerance: f64, out_of_plane: &[usize]) -> Vec<usize> {
+    if !(tolerance > 0.0) {
+        return Vec::new();
+    }
+    let mut f = redundant_parameters(jac, colnorm, tolerance);
+    f.retain(|k| !out_of_plane.contains(k));
+    f
+}
+
+/// The unidentifiable directions worth reporting: directions of the out-of-plane parameters alone
+/// are not news, only those that move an in-plane parameter are.
+fn reported_null_directions(factored: &TruncatedSvd, rank_tolerance: f64, out_of_plane: &[usize]) -> Vec<Vec<f64>> {
+    (0..factored.scales().len())
+        .filter(|&k| !factored.keeps(k, rank_tolerance))
+        .map(|k| factored.direction(k))
+        .filter(|v| v.iter().enumerate().any(|(i, w)| w.abs() > 0.3 && !out_of_plane.contains(&i)))
+        .collect()
+}
+
+/// Sets the Jacobian columns of parameters that do not move (out of the plane, frozen) to zero.
+fn zero_columns(jac: &mut Mat<f64>, columns: &[usize]) {
+    for &k in columns {
+        for i in 0..jac.nrows() {
+            jac[(i, k)] = 0.0;
+        }
+    }
+}
+
+/// The column norms of `jac`, floored: a parameter with almost no effect must not take huge steps
+/// (a null direction drifting to 1e10 rad would ruin the arithmetic).
+fn column_scales(jac: &Mat<f64>, colnorm: &mut [f64]) {
+    for (k, c) in colnorm.iter_mut().enumerate() {
+        *c = (0..jac.nrows()).map(|i| jac[(i, k)] * jac[(i, k)]).sum::<f64>().sqrt();
+    }
+    let floor = 1e-6 * colnorm.iter().cloned().fold(0.0, f64::max);
+    for c in colnorm.iter_mut() {
+        *c = c.max(floor).max(f64::MIN_POSITIVE);
+    }
+}
+
+/// An unidentifiable direction as its large components, largest first: `+0.71·d1 -0.71·d2`.
+fn describe_direction(v: &[f64], names: &[String]) -> String {
+    let mut parts: Vec<(f64, &str)> = v.iter().zip(names).filter(|(w, _)| w.abs() > 0.3).map(|(w, s)| (*w, s.as_str())).collect();
+    parts.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+    parts.iter().map(|(w, s)| format!("{w:+.2}·{s}")).collect::<Vec<_>>().join(" ")
+}
+
+/// The same chain with its θ offsets and α in (−π, π].
+fn with_wrapped_angles(mut chain: DhChain) -> DhChain {
+    for j in chain.joints.iter_mut() {
+        j.theta_offset = j.theta_offset.sin().atan2(j.theta_offset.cos());
+        j.alpha = j.alpha.sin().atan2(j.alpha.cos());
+    }
+    chain
+}
+
+/// What the Levenberg–Marquardt iterations of [`calibrate_dh`] end with.
+struct Minimum {
+    /// Parameter changes from the nominal, and the residuals there.
+    p: Vec<f64>,
+    r: Vec<f64>,
+    iterations: usize,
+    converged: bool,
+    /// Rank of the last scaled Jacobian and its reported unidentifiable directions.
+    rank: usize,
+    null_dirs: Vec<Vec<f64>>,
+    /// The parameters held fixed in stage 1.
+    redundant_at_nominal: Vec<usize>,
+}
+
+/// Levenberg–Marquardt on the scaled Jacobian's SVD from the nominal `chain0` (residuals `r`
+/// there), the `out_of_plane` parameters fixed.
+fn minimise(
+    chain0: &DhChain,
+    data: &Measurements,
+    out_of_plane: &[usize],
+    options: &DhCalibrationOptions,
+    mut r: Vec<f64>,
+) -> Result<Minimum, DhCalibrationError> {
+    let (rows, np) = (r.len(), parameter_count(chain0.joints.len()));
     let mut p = vec![0.0; np];
-    let mut r = vec![0.0; rows];
-    residuals(chain0, data, &mut r);
-    let initial_rms = rms(&r, m);
     let mut cost = 0.5 * r.iter().map(|v| v * v).sum::<f64>();
     let mut mu = -1.0;
     let mut nu = 2.0;
@@ -246,62 +324,23 @@ pub fn calibrate_dh(
     let mut svd: Option<TruncatedSvd> = None;
     while iterations < options.max_iterations {
         if recompute {
-            // Analytic columns for the DH rows, base translation and tool; central differences
-            // for the base rotation (its axis-angle parametrisation).
-            let chain = apply_parameters(chain0, &p);
-            analytic_jacobian(&chain, data, &mut jac);
-            for k in 4 * n + 3..4 * n + 6 {
-                let h = 1e-6;
-                let mut q = p.clone();
-                q[k] = p[k] + h;
-                residuals(&apply_parameters(chain0, &q), data, &mut rp);
-                q[k] = p[k] - h;
-                residuals(&apply_parameters(chain0, &q), data, &mut rm);
-                for i in 0..rows {
-                    jac[(i, k)] = (rp[i] - rm[i]) / (2.0 * h);
-                }
-            }
-            for &k in &out_of_plane {
-                for i in 0..rows {
-                    jac[(i, k)] = 0.0;
-                }
-            }
-            for k in 0..np {
-                colnorm[k] = (0..rows).map(|i| jac[(i, k)] * jac[(i, k)]).sum::<f64>().sqrt();
-            }
-            // Floor the scaling: a parameter with almost no effect must not take huge steps
-            // (a null direction drifting to 1e10 rad would ruin the arithmetic).
-            let floor = 1e-6 * colnorm.iter().cloned().fold(0.0, f64::max);
-            for c in colnorm.iter_mut() {
-                *c = c.max(floor).max(f64::MIN_POSITIVE);
-            }
+            jacobian_at(chain0, &p, data, &mut jac, (&mut rp, &mut rm));
+            zero_columns(&mut jac, out_of_plane);
+            column_scales(&jac, &mut colnorm);
             if frozen.is_none() {
-                let f = if options.redundancy_tolerance > 0.0 {
-                    let mut f = redundant_parameters(&jac, &colnorm, options.redundancy_tolerance);
-                    f.retain(|k| !out_of_plane.contains(k));
-                    f
-                } else {
-                    Vec::new()
-                };
-                redundant_at_nominal = f.clone();
-                frozen = Some(f);
+                redundant_at_nominal = redundant_in_plane(&jac, &colnorm, options.redundancy_tolerance, out_of_plane);
+                frozen = Some(redundant_at_nominal.clone());
             }
-            for &k in frozen.as_deref().unwrap_or(&[]) {
-                for i in 0..rows {
-                    jac[(i, k)] = 0.0;
-                }
+            let still = frozen.as_deref().unwrap_or(&[]);
+            zero_columns(&mut jac, still);
+            for &k in still {
                 colnorm[k] = 1.0;
             }
             // The scaled Jacobian J D⁻¹ = U Σ Vᵀ: λ_k = σ_k² are the eigenvalues of D⁻¹ JᵀJ D⁻¹.
-            let factored = TruncatedSvd::with_scales(jac.as_ref(), colnorm.clone()).map_err(DhCalibrationError::Numerical)?;
+            let factored =
+                TruncatedSvd::with_scales(jac.as_ref(), colnorm.clone()).map_err(|e| DhCalibrationError::Numerical(e.to_string()))?;
             rank = (0..np).filter(|&k| factored.keeps(k, options.rank_tolerance)).count();
-            // Directions of the out-of-plane parameters alone are not news: only those that move an
-            // in-plane parameter are reported.
-            null_dirs = (0..np)
-                .filter(|&k| !factored.keeps(k, options.rank_tolerance))
-                .map(|k| factored.direction(k))
-                .filter(|v| v.iter().enumerate().any(|(i, w)| w.abs() > 0.3 && !out_of_plane.contains(&i)))
-                .collect();
+            null_dirs = reported_null_directions(&factored, options.rank_tolerance, out_of_plane);
             if mu < 0.0 {
                 mu = 1e-3 * factored.eigenvalues().first().copied().unwrap_or(0.0);
             }
@@ -313,7 +352,7 @@ pub fn calibrate_dh(
         // Step in scaled parameters over the identifiable directions, and the decrease the linear model predicts.
         let (mut step_s, predicted) = factored.damped_step(&r, mu, options.rank_tolerance);
         // Rounding in the singular vectors must not move what stays out of the plane.
-        for &k in &out_of_plane {
+        for &k in out_of_plane {
             step_s[k] = 0.0;
         }
         iterations += 1;
@@ -358,23 +397,41 @@ pub fn calibrate_dh(
             }
         }
     }
-    let unidentifiable = null_dirs
-        .iter()
-        .map(|v| {
-            let mut parts: Vec<(f64, &str)> = v.iter().zip(&names).filter(|(w, _)| w.abs() > 0.3).map(|(w, s)| (*w, s.as_str())).collect();
-            parts.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
-            parts.iter().map(|(w, s)| format!("{w:+.2}·{s}")).collect::<Vec<_>>().join(" ")
-        })
-        .collect();
-    let redundant_at_nominal = redundant_at_nominal.iter().map(|&k| names[k].clone()).collect();
-    let mut chain = apply_parameters(chain0, &p);
-    for j in chain.joints.iter_mut() {
-        // Same model, angles in (−π, π].
-        j.theta_offset = j.theta_offset.sin().atan2(j.theta_offset.cos());
-        j.alpha = j.alpha.sin().atan2(j.alpha.cos());
+    Ok(Minimum { p, r, iterations, converged, rank, null_dirs, redundant_at_nominal })
+}
+
+/// Fits all DH parameters plus base and tool to `data` (positions in the model's length unit).
+/// A planar arm is fitted as its DH form (`nominal::planar::as_dh`) on its two task coordinates,
+/// over the parameters that move the tool in the plane (link lengths, joint offsets, base x, y
+/// and yaw) when `options.planar_as_dh`; the returned model is then that DH form, read in its
+/// first two coordinates.
+pub fn calibrate_dh(
+    nominal: &NominalModel,
+    data: &Measurements,
+    options: &DhCalibrationOptions,
+) -> Result<DhCalibration, DhCalibrationError> {
+    if !options.planar_as_dh && !matches!(nominal, NominalModel::DhChain(_)) {
+        return Err(DhCalibrationError::NotADhChain);
     }
+    let dh_form = crate::nominal::planar::as_dh(nominal);
+    let NominalModel::DhChain(chain0) = &dh_form else { return Err(DhCalibrationError::NotADhChain) };
+    let n = chain0.joints.len();
+    let np = parameter_count(n);
+    let m = nominal.task_dim();
+    let rows = m * data.len();
+    if data.len() < 2 || data.task_dim != m {
+        return Err(DhCalibrationError::TooFewMeasurements { rows: data.len() });
+    }
+    let out_of_plane = out_of_plane_parameters(n, m);
+    let names = parameter_names(n);
+    let mut r = vec![0.0; rows];
+    residuals(chain0, data, &mut r);
+    let initial_rms = rms(&r, m);
+    let Minimum { p, r, iterations, converged, rank, null_dirs, redundant_at_nominal } = minimise(chain0, data, &out_of_plane, options, r)?;
+    let unidentifiable = null_dirs.iter().map(|v| describe_direction(v, &names)).collect();
+    let redundant_at_nominal = redundant_at_nominal.iter().map(|&k| names[k].clone()).collect();
     Ok(DhCalibration {
-        model: NominalModel::DhChain(chain),
+        model: NominalModel::DhChain(with_wrapped_angles(apply_parameters(chain0, &p))),
         stats: DhFitStats {
             iterations,
             initial_rms,

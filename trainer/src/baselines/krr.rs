@@ -27,6 +27,8 @@ pub enum KrrError {
     NotPositiveDefinite { n: usize, ridge: f64 },
 }
 
+impl std::error::Error for KrrError {}
+
 impl std::fmt::Display for KrrError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {

@@ -37,21 +37,6 @@ pub struct Calibration {
     pub warnings: Vec<String>,
 }
 
-#[derive(Debug, Clone, PartialEq)]
-pub struct CalibrateError(pub String);
-
-impl std::fmt::Display for CalibrateError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for CalibrateError {}
-
-fn err(e: impl std::fmt::Display) -> CalibrateError {
-    CalibrateError(e.to_string())
-}
-
 /// The paper's RR hyperparameters (docs/DESIGN.md §6) in data units: lengths in units of l1 = 1,
 /// task kernel with unit amplitude, σ = 1e-6.
 pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
@@ -88,13 +73,13 @@ pub fn choose_hyperparameters(
     data: &Measurements,
     norm: &Normalisation,
     settings: &Settings,
-) -> Result<(CbdHyperparameters, Option<Evidence>), CalibrateError> {
+) -> crate::Result<(CbdHyperparameters, Option<Evidence>)> {
     let (mut h, evidence) = match settings.source {
         HyperparameterSource::PaperRr => (paper_rr_hyperparameters(), None),
         // Every value is given: no search (the placeholder's fields are all replaced below).
         HyperparameterSource::Evidence if settings.overrides.is_complete(base) => (placeholder_hyperparameters(base), None),
         HyperparameterSource::Evidence => {
-            let e = choose_cbd_hyperparameters(base, data, norm, &settings.evidence).map_err(err)?;
+            let e = choose_cbd_hyperparameters(base, data, norm, &settings.evidence)?;
             (e.hyperparameters.clone(), Some(e))
         }
     };
@@ -120,23 +105,23 @@ pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation 
 }
 
 /// Calibrates `nominal` on `data` (training rows only).
-pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> Result<Calibration, CalibrateError> {
+pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<Calibration> {
     // The evidence needs three rows (a covariance and something to predict), the fit two.
     let needed = if settings.source == HyperparameterSource::Evidence && !settings.overrides.is_complete(nominal) { 3 } else { 2 };
     if data.len() < needed {
-        return Err(err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }));
+        return Err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }.into());
     }
     let (base, dh) = if settings.dh_first {
-        let fitted = calibrate_dh(nominal, data, &DhCalibrationOptions::default()).map_err(err)?;
+        let fitted = calibrate_dh(nominal, data, &DhCalibrationOptions::default())?;
         (fitted.model, Some(fitted.stats))
     } else {
         (nominal.clone(), None)
     };
     let norm = normalisation(data, settings);
     let (hyperparameters, evidence) = choose_hyperparameters(&base, data, &norm, settings)?;
-    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings).map_err(err)?;
+    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings);
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
-    let fit = fit_cbd(&base, data, &options).map_err(err)?;
+    let fit = fit_cbd(&base, data, &options)?;
     let warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
     Ok(Calibration { base, dh, hyperparameters, evidence, scheme, options, fit, warnings })
 }

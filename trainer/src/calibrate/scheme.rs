@@ -43,26 +43,22 @@ pub fn choose_scheme(
     h: &CbdHyperparameters,
     norm: &Normalisation,
     settings: &Settings,
-) -> Result<SchemeChoice, String> {
+) -> SchemeChoice {
     let method = settings.integrator.unwrap_or(IntegratorMethod::Euler);
     if let Some(steps) = settings.steps {
-        return Ok(SchemeChoice { integrator: Integrator { method, steps }, chosen_by: "given".into(), cross_validation: vec![] });
+        return SchemeChoice { integrator: Integrator { method, steps }, chosen_by: "given".into(), cross_validation: vec![] };
     }
     let candidates = [Integrator { method, steps: 1 }, Integrator { method, steps: 2 }];
     let folds = settings.scheme_folds;
     if folds < 2 || data.len() < 2 * folds {
-        return Ok(SchemeChoice {
-            integrator: candidates[0],
-            chosen_by: "too few rows to cross-validate".into(),
-            cross_validation: vec![],
-        });
+        return SchemeChoice { integrator: candidates[0], chosen_by: "too few rows to cross-validate".into(), cross_validation: vec![] };
     }
     if data.len() * data.task_dim > DENSE_MAX_UNKNOWNS {
-        return Ok(SchemeChoice {
+        return SchemeChoice {
             integrator: candidates[0],
             chosen_by: format!("N·m > {DENSE_MAX_UNKNOWNS}: cross-validation skipped (its fits would dominate); --steps chooses"),
             cross_validation: vec![],
-        });
+        };
     }
     let mut quiet = settings.clone();
     quiet.verbose = false;
@@ -73,7 +69,7 @@ pub fn choose_scheme(
         for fold in 0..folds {
             let (train, held) = data.fold(folds, fold);
             let predicted = fit_cbd(base, &train, &opts)
-                .map_err(|e| e.to_string())
+                .map_err(crate::Error::from)
                 .and_then(|fit| crate::predict::evaluate_blob(&fit.blob, &held.joints));
             match predicted {
                 Ok(p) => {
@@ -101,5 +97,5 @@ pub fn choose_scheme(
         _ => Some((i, e)),
     });
     let integrator = best.map_or(candidates[0], |(i, _)| i);
-    Ok(SchemeChoice { integrator, chosen_by: format!("{folds}-fold cross-validation"), cross_validation })
+    SchemeChoice { integrator, chosen_by: format!("{folds}-fold cross-validation"), cross_validation }
 }

@@ -455,5 +455,5 @@ fn replace_section(path: &std::path::Path, heading: &str, body: &str) -> Result<
         }
         None => format!("{}\n{}\n", text.trim_end(), body),
     };
-    crate::cli::write_atomically(path, new.as_bytes())
+    Ok(crate::cli::write_atomically(path, new.as_bytes())?)
 }

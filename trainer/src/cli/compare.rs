@@ -36,9 +36,9 @@ pub struct CompareArgs {
 
 /// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
 /// gives (nominal, DH-calibrated, with effects): the blob `cbd fit` writes for the same data and flags.
-pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> Result<FittedCorrection, String> + '_ {
-    move |nominal: &NominalModel, data: &Measurements| -> Result<FittedCorrection, String> {
-        let calibration = crate::calibrate::calibrate(nominal, data, settings).map_err(|e| e.to_string())?;
+pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> + '_ {
+    move |nominal: &NominalModel, data: &Measurements| -> crate::Result<FittedCorrection> {
+        let calibration = crate::calibrate::calibrate(nominal, data, settings)?;
         crate::cli::fit::print_calibration(&calibration, !settings.verbose);
         let mut note = calibration.describe_hyperparameters();
         if let Some(e) = &calibration.evidence {

@@ -123,8 +123,8 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     print_report(&report);
     if let Some(dir) = &args.plots {
         use crate::report::plots::{demo_figures, position_errors, DemoPlotInputs};
-        let nominal_map = |q: &[f64]| -> Result<Vec<f64>, String> { Ok(nominal_at(q)) };
-        let real_map = |q: &[f64]| -> Result<Vec<f64>, String> { Ok(q.chunks_exact(2).flat_map(|x| real.position(x)).collect()) };
+        let nominal_map = |q: &[f64]| -> crate::Result<Vec<f64>> { Ok(nominal_at(q)) };
+        let real_map = |q: &[f64]| -> crate::Result<Vec<f64>> { Ok(q.chunks_exact(2).flat_map(|x| real.position(x)).collect()) };
         let calibrated_map = |q: &[f64]| crate::predict::evaluate_blob(&blob, q);
         let test_before = position_errors(&nominal_at(&test.joints), &test.positions, 2);
         let test_after = position_errors(&calibrated_test, &test.positions, 2);

@@ -14,6 +14,8 @@ pub enum ImportError {
     Toml { file: PathBuf, message: String },
     /// The model file parses but describes no valid model.
     Model { file: PathBuf, message: String },
+    /// One field or section of a model file is not valid: `field` names it (`[chain.base]`).
+    Field { file: PathBuf, field: String, message: String },
     /// A URDF file could not be read or converted.
     Urdf { file: PathBuf, message: String },
     /// A problem in a CSV file. `line` is 1-based (the header is line 1); `column` is the
@@ -27,6 +29,7 @@ impl fmt::Display for ImportError {
             ImportError::Io { file, message } => write!(f, "{}: {message}", file.display()),
             ImportError::Toml { file, message } => write!(f, "{}: {}", file.display(), message.trim_end()),
             ImportError::Model { file, message } => write!(f, "{}: {message}", file.display()),
+            ImportError::Field { file, field, message } => write!(f, "{}: {field}: {message}", file.display()),
             ImportError::Urdf { file, message } => write!(f, "{}: URDF: {message}", file.display()),
             ImportError::Csv { file, line, column, message } => {
                 write!(f, "{}", file.display())?;

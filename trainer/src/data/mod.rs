@@ -61,13 +61,14 @@ pub const MAX_URDF_BYTES: u64 = 8 << 20;
 
 /// Reads at most `cap` bytes of `path`; a longer file (or an endless one such as `/dev/zero`) is an
 /// error naming the path, what it is and the cap, before the memory runs out.
-pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> Result<Vec<u8>, String> {
+pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Result<Vec<u8>> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let file = std::fs::File::open(path).map_err(|e| crate::Error::io(path, e))?;
     let mut bytes = Vec::new();
-    file.take(cap + 1).read_to_end(&mut bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    file.take(cap + 1).read_to_end(&mut bytes).map_err(|e| crate::Error::io(path, e))?;
     if bytes.len() as u64 > cap {
-        return Err(format!("{}: larger than {} MiB, the most a {what} may be", path.display(), cap >> 20));
+        let reason = format!("larger than {} MiB, the most a {what} may be", cap >> 20);
+        return Err(crate::Error::Path { path: path.to_path_buf(), reason });
     }
     Ok(bytes)
 }
@@ -86,14 +87,14 @@ mod tests {
     /// Issue 17 item 8: `--blob /dev/zero` read until the memory ran out.
     #[test]
     fn blob_and_urdf_reads_are_capped() {
-        let e = read_capped(std::path::Path::new("/dev/zero"), MAX_BLOB_BYTES, "blob").unwrap_err();
+        let e = read_capped(std::path::Path::new("/dev/zero"), MAX_BLOB_BYTES, "blob").unwrap_err().to_string();
         assert!(e.starts_with("/dev/zero: larger than 64 MiB, the most a blob may be"), "{e}");
         let dir = std::env::temp_dir().join(format!("cbd-read-capped-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let f = dir.join("a.bin");
         std::fs::write(&f, vec![7u8; 1025]).unwrap();
         assert_eq!(read_capped(&f, 1025, "blob").unwrap().len(), 1025);
-        assert!(read_capped(&f, 1024, "URDF").unwrap_err().contains("the most a URDF may be"));
+        assert!(read_capped(&f, 1024, "URDF").unwrap_err().to_string().contains("the most a URDF may be"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -222,7 +222,7 @@ struct RawPlanar {
 pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError> {
     let path = path.as_ref();
     let io = |message: String| ImportError::Io { file: path.to_path_buf(), message };
-    let bytes = super::read_capped(path, super::MAX_MODEL_FILE_BYTES, "model file").map_err(|e| io(strip_path(&e, path)))?;
+    let bytes = super::read_capped(path, super::MAX_MODEL_FILE_BYTES, "model file").map_err(|e| io(e.without_path()))?;
     let text = String::from_utf8(bytes).map_err(|e| io(format!("not UTF-8 text: {e}")))?;
     parse_model_file(&text, path)
 }
@@ -258,8 +258,8 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             };
             let _ = joints.push(DhJoint { kind, a: j.a, alpha: j.alpha * deg, d: j.d, theta_offset: j.theta_offset * deg });
         }
-        let base = transform(chain.base.as_ref(), deg).map_err(|m| model_err(format!("[chain.base]: {m}")))?;
-        let tool = transform(chain.tool.as_ref(), deg).map_err(|m| model_err(format!("[chain.tool]: {m}")))?;
+        let base = transform(chain.base.as_ref(), deg, "[chain.base]", path)?;
+        let tool = transform(chain.tool.as_ref(), deg, "[chain.tool]", path)?;
         let convention = match chain.convention {
             RawConvention::Standard => DhConvention::Standard,
             RawConvention::Modified => DhConvention::Modified,
@@ -272,12 +272,11 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     } else if let Some(u) = raw.urdf {
         let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
         let urdf_err = |message: String| ImportError::Urdf { file: urdf_path.clone(), message };
-        let bytes = super::read_capped(&urdf_path, super::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(strip_path(&e, &urdf_path)))?;
+        let bytes = super::read_capped(&urdf_path, super::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(e.without_path()))?;
         let text = String::from_utf8(bytes).map_err(|e| urdf_err(format!("not UTF-8 text: {e}")))?;
         let robot = urdf_rs::read_from_string(&text).map_err(|e| urdf_err(e.to_string()))?;
         let scale = LengthUnit::M.factor_to(raw.length_unit);
-        let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale)
-            .map_err(|message| ImportError::Urdf { file: urdf_path.clone(), message })?;
+        let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|e| urdf_err(e.to_string()))?;
         (NominalModel::DhChain(conv.chain), conv.joint_names)
     } else {
         let lengths = raw.planar.expect("one section").lengths;
@@ -319,12 +318,6 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
 }
 
 /// A TOML basic string.
-/// A [`super::read_capped`] message without its leading "path: " (the error type adds it).
-fn strip_path(message: &str, path: &Path) -> String {
-    let prefix = format!("{}: ", path.display());
-    message.strip_prefix(&prefix).unwrap_or(message).to_string()
-}
-
 fn quoted(s: &str) -> String {
     let mut out = String::from("\"");
     for c in s.chars() {
@@ -415,11 +408,13 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
     out
 }
 
-fn transform(raw: Option<&RawTransform>, deg: f64) -> Result<Transform, String> {
+/// The base or tool transform of `[chain]`; errors name `field` (`[chain.base]`) of `file`.
+fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> Result<Transform, ImportError> {
+    let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: field.to_string(), message };
     let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
     let translation = raw.translation.unwrap_or([0.0; 3]);
     let rotation = match (raw.rpy, raw.rotation) {
-        (Some(_), Some(_)) => return Err("give either rpy or rotation, not both".into()),
+        (Some(_), Some(_)) => return Err(bad("give either rpy or rotation, not both".into())),
         (Some([r, p, y]), None) => Pose::rpy(r * deg, p * deg, y * deg).r,
         (None, Some(m)) => {
             // Must be a rotation: orthonormal with determinant +1.
@@ -428,24 +423,24 @@ fn transform(raw: Option<&RawTransform>, deg: f64) -> Result<Transform, String> 
                     let dot: f64 = (0..3).map(|k| m[i][k] * m[j][k]).sum();
                     let want = if i == j { 1.0 } else { 0.0 };
                     if (dot - want).abs() > 1e-6 {
-                        return Err(format!("rotation is not orthonormal (rows {} and {} have dot product {dot})", i + 1, j + 1));
+                        return Err(bad(format!("rotation is not orthonormal (rows {} and {} have dot product {dot})", i + 1, j + 1)));
                     }
                 }
             }
             let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
                 + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
             if det < 0.0 {
-                return Err("rotation has determinant −1 (a reflection)".into());
+                return Err(bad("rotation has determinant −1 (a reflection)".into()));
             }
             m
         }
         (None, None) => Pose::IDENTITY.r,
     };
     if translation.iter().chain(rotation.iter().flatten()).any(|v| !v.is_finite()) {
-        return Err("non-finite value".into());
+        return Err(bad("non-finite value".into()));
     }
     if let Some(v) = translation.iter().find(|v| v.abs() > MAX_MAGNITUDE) {
-        return Err(format!("translation {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)"));
+        return Err(bad(format!("translation {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)")));
     }
     Ok(Pose { r: rotation, t: translation }.to_transform())
 }

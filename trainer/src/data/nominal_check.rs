@@ -18,7 +18,7 @@ const STILL_FRACTION: f64 = 1e-6;
 
 /// Warnings about `nominal` on `data` (rows at file `lines` of `file`), or an error when the
 /// nominal positions are not finite or beyond [`MAX_MAGNITUDE`].
-pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u64], file: &Path) -> Result<Vec<String>, String> {
+pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u64], file: &Path) -> crate::Result<Vec<String>> {
     let m = data.task_dim;
     let mut predicted = Measurements::new(data.n_joints, m);
     let mut squared = 0.0;
@@ -26,10 +26,10 @@ pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u6
         let p = &cbd_runtime::nominal::forward_kinematics(nominal, data.joints(i)).position[..m];
         if let Some(v) = p.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
             let line = lines.get(i).copied().unwrap_or(0);
-            return Err(format!(
-                "{}:{line}: the nominal model's position at this configuration is {v:e} (beyond ±{MAX_MAGNITUDE:e}): its lengths or effects are out of range",
-                file.display()
-            ));
+            let message = format!(
+                "the nominal model's position at this configuration is {v:e} (beyond ±{MAX_MAGNITUDE:e}): its lengths or effects are out of range"
+            );
+            return Err(crate::Error::NominalAtRow { file: file.to_path_buf(), line, message });
         }
         squared += p.iter().zip(data.position(i)).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
         predicted.push(data.joints(i), p);
@@ -83,7 +83,7 @@ mod tests {
         let w = nominal_warnings(&huge, &data, &lines, file).unwrap();
         assert!(w.iter().any(|w| w.starts_with("t.csv: the nominal model is 1.") && w.contains("wrong unit")), "{w:?}");
         let beyond = NominalModel::planar(&[1e150, 0.5]).unwrap();
-        let e = nominal_warnings(&beyond, &data, &lines, file).unwrap_err();
+        let e = nominal_warnings(&beyond, &data, &lines, file).unwrap_err().to_string();
         assert!(e.starts_with("t.csv:2: the nominal model's position"), "{e}");
     }
 }

@@ -11,6 +11,7 @@
 //! and joint limits (ignored).
 
 use super::{add, cross, dot, norm, scale, sub, Pose};
+use crate::error::{Error, Result};
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, MAX_JOINTS};
 
 /// A URDF chain converted to DH: the chain (lengths multiplied by `length_scale`) and the URDF
@@ -30,12 +31,12 @@ struct AxisLine {
 }
 
 /// The joints from `base_link` to `tip_link`, base first.
-fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) -> Result<Vec<&'a urdf_rs::Joint>, String> {
+fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) -> Result<Vec<&'a urdf_rs::Joint>> {
     if !robot.links.iter().any(|l| l.name == base_link) {
-        return Err(format!("URDF robot '{}' has no link named '{base_link}' (base_link)", robot.name));
+        return Err(Error::Urdf(format!("URDF robot '{}' has no link named '{base_link}' (base_link)", robot.name)));
     }
     if !robot.links.iter().any(|l| l.name == tip_link) {
-        return Err(format!("URDF robot '{}' has no link named '{tip_link}' (tip_link)", robot.name));
+        return Err(Error::Urdf(format!("URDF robot '{}' has no link named '{tip_link}' (tip_link)", robot.name)));
     }
     // Each link's parent joint, looked up in O(1): the walk stays linear in the chain's length
     // (a search per link made a 200k-link chain quadratic).
@@ -47,14 +48,13 @@ fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) ->
     let mut path = Vec::new();
     let mut link = tip_link;
     while link != base_link {
-        let joint = parent_joint
-            .get(link)
-            .copied()
-            .ok_or_else(|| format!("URDF: link '{tip_link}' is not a descendant of '{base_link}' (no joint has child '{link}')"))?;
+        let joint = parent_joint.get(link).copied().ok_or_else(|| {
+            Error::Urdf(format!("URDF: link '{tip_link}' is not a descendant of '{base_link}' (no joint has child '{link}')"))
+        })?;
         path.push(joint);
         link = joint.parent.link.as_str();
         if path.len() > robot.joints.len() {
-            return Err("URDF: the joint tree has a cycle".into());
+            return Err(Error::Urdf("URDF: the joint tree has a cycle".into()));
         }
     }
     path.reverse();
@@ -70,17 +70,17 @@ fn origin_pose(origin: &urdf_rs::Pose, length_scale: f64) -> Pose {
 /// Pose of `tip_link` in `base_link`'s frame at joint values `q` (URDF order; prismatic values
 /// in the scaled unit), computed directly from the URDF (the reference the DH conversion is
 /// tested against). Lengths are multiplied by `length_scale`.
-pub fn urdf_tip_pose(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, q: &[f64], length_scale: f64) -> Result<Pose, String> {
+pub fn urdf_tip_pose(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, q: &[f64], length_scale: f64) -> Result<Pose> {
     let mut pose = Pose::IDENTITY;
     let mut k = 0;
     for joint in joint_path(robot, base_link, tip_link)? {
         pose = pose.compose(&origin_pose(&joint.origin, length_scale));
-        let axis = unit(joint.axis.xyz.0).ok_or_else(|| format!("URDF joint '{}' has a zero axis", joint.name))?;
+        let axis = unit(joint.axis.xyz.0).ok_or_else(|| Error::Urdf(format!("URDF joint '{}' has a zero axis", joint.name)))?;
         match joint.joint_type {
             urdf_rs::JointType::Fixed => continue,
             urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => pose = pose.compose(&Pose::axis_angle(axis, q[k])),
             urdf_rs::JointType::Prismatic => pose = pose.compose(&Pose::translation(scale(axis, q[k]))),
-            ref other => return Err(format!("URDF joint '{}' has unsupported type {other:?}", joint.name)),
+            ref other => return Err(Error::Urdf(format!("URDF joint '{}' has unsupported type {other:?}", joint.name))),
         }
         k += 1;
     }
@@ -95,7 +95,7 @@ fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
 /// Converts the chain `base_link` → `tip_link` of `robot` into a standard DH chain whose task
 /// position is the origin of `tip_link`, in `base_link`'s frame. Lengths are multiplied by
 /// `length_scale` (URDF is in metres: 1000 gives millimetres).
-pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, length_scale: f64) -> Result<UrdfChain, String> {
+pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, length_scale: f64) -> Result<UrdfChain> {
     let mut pose = Pose::IDENTITY;
     let mut lines = Vec::new();
     let mut names = Vec::new();
@@ -106,24 +106,24 @@ pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, 
             urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => JointKind::Revolute,
             urdf_rs::JointType::Prismatic => JointKind::Prismatic,
             ref other => {
-                return Err(format!(
+                return Err(Error::Urdf(format!(
                     "URDF joint '{}' has unsupported type {other:?} (only revolute, continuous, prismatic and fixed)",
                     joint.name
-                ))
+                )))
             }
         };
-        let axis = unit(joint.axis.xyz.0).ok_or_else(|| format!("URDF joint '{}' has a zero axis", joint.name))?;
+        let axis = unit(joint.axis.xyz.0).ok_or_else(|| Error::Urdf(format!("URDF joint '{}' has a zero axis", joint.name)))?;
         lines.push(AxisLine { kind, point: pose.t, dir: pose.rotate(axis) });
         names.push(joint.name.clone());
     }
     if lines.is_empty() {
-        return Err(format!("URDF: no movable joint between '{base_link}' and '{tip_link}'"));
+        return Err(Error::Urdf(format!("URDF: no movable joint between '{base_link}' and '{tip_link}'")));
     }
     if lines.len() > MAX_JOINTS {
-        return Err(format!(
+        return Err(Error::Urdf(format!(
             "URDF: {} movable joints between '{base_link}' and '{tip_link}'; at most {MAX_JOINTS} are supported",
             lines.len()
-        ));
+        )));
     }
     let tip = pose;
     let chain = dh_from_axis_lines(&lines, &tip);
@@ -284,11 +284,11 @@ mod tests {
     #[test]
     fn urdf_errors_name_the_problem() {
         let robot = urdf_rs::read_from_string(TEST_URDF).unwrap();
-        let e = chain_from_urdf(&robot, "world", "nowhere", 1.0).unwrap_err();
+        let e = chain_from_urdf(&robot, "world", "nowhere", 1.0).unwrap_err().to_string();
         assert!(e.contains("nowhere"), "{e}");
-        let e = chain_from_urdf(&robot, "l3", "l1", 1.0).unwrap_err();
+        let e = chain_from_urdf(&robot, "l3", "l1", 1.0).unwrap_err().to_string();
         assert!(e.contains("not a descendant"), "{e}");
-        let e = chain_from_urdf(&robot, "flange", "tool0", 1.0).unwrap_err();
+        let e = chain_from_urdf(&robot, "flange", "tool0", 1.0).unwrap_err().to_string();
         assert!(e.contains("no movable joint"), "{e}");
     }
 }

@@ -164,8 +164,10 @@ details{margin:.5em 0}";
 
 /// The page for a run: `json` as written by `cbd demo --json` or `cbd compare --json`, `source`
 /// names it, `figures` are embedded in order, `unit` names the length unit of the errors.
-pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str) -> Result<String, String> {
-    let top = json.as_object().ok_or_else(|| format!("{source}: expected a JSON object at the top level"))?;
+pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str) -> crate::Result<String> {
+    let top = json
+        .as_object()
+        .ok_or_else(|| crate::Error::Path { path: source.into(), reason: "expected a JSON object at the top level".into() })?;
     let mut out = String::new();
     let kind = if top.contains_key("methods") { "method comparison" } else { "calibration run" };
     let _ = writeln!(
@@ -276,7 +278,7 @@ pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str)
     Ok(out)
 }
 
-fn convergence_section(out: &mut String, fit: &Map<String, Value>, unit: &str) -> Result<(), String> {
+fn convergence_section(out: &mut String, fit: &Map<String, Value>, unit: &str) -> crate::Result<()> {
     let summary: Vec<(String, String)> = fit
         .iter()
         .filter(|(k, v)| *k != "log" && !matches!(v, Value::Array(_) | Value::Object(_)))
@@ -338,8 +340,8 @@ fn strip_xml_declaration(svg: &str) -> &str {
 const ORDER: [&str; 6] = ["error_heatmaps", "workspace_grid", "error_histogram", "method_comparison", "residual_vs_joint", "convergence"];
 
 /// The PNGs in `dir`, in page order.
-pub fn collect_figures(dir: &Path) -> Result<Vec<Figure>, String> {
-    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+pub fn collect_figures(dir: &Path) -> crate::Result<Vec<Figure>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| crate::Error::io(dir, e))?;
     let mut paths: Vec<PathBuf> =
         entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png"))).collect();
     let rank = |p: &PathBuf| {
@@ -350,9 +352,9 @@ pub fn collect_figures(dir: &Path) -> Result<Vec<Figure>, String> {
     paths
         .into_iter()
         .map(|p| {
-            let png = std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+            let png = std::fs::read(&p).map_err(|e| crate::Error::io(&p, e))?;
             if !png.starts_with(b"\x89PNG\r\n\x1a\n") {
-                return Err(format!("{}: not a PNG file", p.display()));
+                return Err(crate::Error::Path { path: p, reason: "not a PNG file".into() });
             }
             Ok(Figure { name: p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(), png })
         })
@@ -362,10 +364,14 @@ pub fn collect_figures(dir: &Path) -> Result<Vec<Figure>, String> {
 /// `cbd report`: reads the run's JSON at `json`, embeds the PNGs of `plots`, writes the page to
 /// `out`. The length unit is the JSON's `unit` / `length_unit` when present, else `unit`.
 /// Returns the number of figures embedded.
-pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str) -> Result<usize, String> {
-    let text = std::fs::read_to_string(json_path).map_err(|e| format!("{}: {e}", json_path.display()))?;
-    let json: Value =
-        serde_json::from_str(&text).map_err(|e| format!("{}: line {}, column {}: {e}", json_path.display(), e.line(), e.column()))?;
+pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str) -> crate::Result<usize> {
+    let text = std::fs::read_to_string(json_path).map_err(|e| crate::Error::io(json_path, e))?;
+    let json: Value = serde_json::from_str(&text).map_err(|e| crate::Error::Json {
+        path: json_path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        error: e,
+    })?;
     let unit = ["unit", "length_unit"].iter().find_map(|k| json.get(*k).and_then(|v| v.as_str())).unwrap_or(unit).to_string();
     let figures = match plots {
         Some(dir) => collect_figures(dir)?,
@@ -471,9 +477,9 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let bad = dir.join("bad.json");
         std::fs::write(&bad, "{\n  \"nominal\": ,\n}").unwrap();
-        let err = write_report(&bad, None, &dir.join("r.html"), "m").unwrap_err();
+        let err = write_report(&bad, None, &dir.join("r.html"), "m").unwrap_err().to_string();
         assert!(err.contains("bad.json") && err.contains("line 2"), "{err}");
-        let err = write_report(&dir.join("missing.json"), None, &dir.join("r.html"), "m").unwrap_err();
+        let err = write_report(&dir.join("missing.json"), None, &dir.join("r.html"), "m").unwrap_err().to_string();
         assert!(err.contains("missing.json"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -110,16 +110,16 @@ pub struct TruncatedSvd {
 
 impl TruncatedSvd {
     /// Columns scaled to unit norm (an all-zero column keeps scale `f64::MIN_POSITIVE`).
-    pub fn unit_columns(a: MatRef<'_, f64>) -> Result<Self, String> {
+    pub fn unit_columns(a: MatRef<'_, f64>) -> crate::Result<Self> {
         let scale = (0..a.ncols()).map(|k| column_norm(a, k).max(f64::MIN_POSITIVE)).collect();
         Self::with_scales(a, scale)
     }
 
     /// Columns divided by `scale` (positive, one per column).
-    pub fn with_scales(a: MatRef<'_, f64>, scale: Vec<f64>) -> Result<Self, String> {
+    pub fn with_scales(a: MatRef<'_, f64>, scale: Vec<f64>) -> crate::Result<Self> {
         assert_eq!(scale.len(), a.ncols(), "one scale per column");
         let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, k| a[(i, k)] / scale[k]);
-        let svd = scaled.thin_svd().map_err(|e| format!("SVD did not converge: {e:?}"))?;
+        let svd = scaled.thin_svd().map_err(|e| crate::Error::Numerical(format!("SVD did not converge: {e:?}")))?;
         let sigma = (0..svd.S().dim()).map(|k| svd.S()[k]).collect();
         Ok(TruncatedSvd { scale, u: svd.U().to_owned(), sigma, v: svd.V().to_owned() })
     }

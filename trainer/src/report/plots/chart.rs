@@ -19,38 +19,39 @@ pub(super) fn ensure_font() {
     });
 }
 
-pub(super) fn pe<E: std::fmt::Display>(e: E) -> String {
-    format!("plot: {e}")
+/// A plotting backend's error as the trainer's.
+pub(super) fn pe<E: std::fmt::Display>(e: E) -> crate::Error {
+    crate::Error::Plot(format!("plot: {e}"))
 }
 
 /// One figure, drawable on any backend.
 pub(super) trait Figure {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()>;
 }
 
 /// Draws `fig` to `dir/stem.png` and `dir/stem.svg`.
-pub(super) fn render<F: Figure>(dir: &Path, stem: &str, size: (u32, u32), fig: &F) -> Result<Vec<PathBuf>, String> {
+pub(super) fn render<F: Figure>(dir: &Path, stem: &str, size: (u32, u32), fig: &F) -> crate::Result<Vec<PathBuf>> {
     ensure_font();
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(|e| crate::Error::io(dir, e))?;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     {
         let root = BitMapBackend::new(&png, size).into_drawing_area();
         root.fill(&WHITE).map_err(pe)?;
-        fig.draw(&root).map_err(|e| format!("{}: {e}", png.display()))?;
-        root.present().map_err(|e| format!("{}: {e}", png.display()))?;
+        fig.draw(&root).map_err(|e| e.context(png.display().to_string()))?;
+        root.present().map_err(|e| crate::Error::Plot(format!("{}: {e}", png.display())))?;
     }
     {
         let root = SVGBackend::new(&svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(pe)?;
-        fig.draw(&root).map_err(|e| format!("{}: {e}", svg.display()))?;
-        root.present().map_err(|e| format!("{}: {e}", svg.display()))?;
+        fig.draw(&root).map_err(|e| e.context(svg.display().to_string()))?;
+        root.present().map_err(|e| crate::Error::Plot(format!("{}: {e}", svg.display())))?;
     }
     Ok(vec![png, svg])
 }
 
 /// Draws `fig` as an SVG document in memory (for inline use in HTML).
-pub(super) fn render_svg_string<F: Figure>(size: (u32, u32), fig: &F) -> Result<String, String> {
+pub(super) fn render_svg_string<F: Figure>(size: (u32, u32), fig: &F) -> crate::Result<String> {
     ensure_font();
     let mut buf = String::new();
     {
@@ -165,7 +166,7 @@ pub(super) const METHOD_COLORS: [RGBColor; 8] = [
 pub(super) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
     font_size: u32,
-) -> Result<(), String> {
+) -> crate::Result<()> {
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)

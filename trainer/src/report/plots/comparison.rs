@@ -17,9 +17,10 @@ struct Comparison<'a> {
 }
 
 impl Figure for Comparison<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()> {
         let n = self.methods.len();
-        let (lo, hi) = finite_range(self.methods.iter().flat_map(|(_, v)| v)).ok_or("comparison: no finite errors")?;
+        let (lo, hi) = finite_range(self.methods.iter().flat_map(|(_, v)| v))
+            .ok_or_else(|| crate::Error::Plot("comparison: no finite errors".into()))?;
         // One more decade on the right for the median labels.
         let (lo, hi) = ((lo - 0.03 * (hi - lo)).floor(), (hi + 0.03 * (hi - lo)).ceil() + 1.0);
         let names: Vec<String> = self.methods.iter().map(|(s, _)| s.clone()).collect();
@@ -92,9 +93,9 @@ impl Figure for Comparison<'_> {
 /// cross: maximum), in the order given, top to bottom. `methods`: (name, per-configuration
 /// position errors in `unit`). Writes `method_comparison.png` ([`COMPARISON_WIDTH`] ×
 /// (150 + 70 per method)) and `.svg`.
-pub fn method_comparison(dir: &Path, methods: &[(String, Vec<f64>)], unit: &str) -> Result<Vec<PathBuf>, String> {
+pub fn method_comparison(dir: &Path, methods: &[(String, Vec<f64>)], unit: &str) -> crate::Result<Vec<PathBuf>> {
     if methods.is_empty() {
-        return Err("method comparison: no methods".into());
+        return Err(crate::Error::Plot("method comparison: no methods".into()));
     }
     let methods: Vec<(String, Vec<f64>)> = methods
         .iter()

@@ -15,7 +15,7 @@ struct Convergence<'a> {
 }
 
 impl Figure for Convergence<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()> {
         let root = root.titled("Levenberg–Marquardt convergence", (FONT, 26)).map_err(pe)?;
         let areas = root.split_evenly((1, 2));
         let last = self.log.iter().map(|r| r.0).fold(1.0, f64::max);
@@ -60,13 +60,13 @@ impl Figure for Convergence<'_> {
 /// The solver's per-iteration log: energy and RMS training error (in `unit`) against iteration,
 /// both on log axes. `log`: (iteration, energy, train_rms). Writes `convergence.png`
 /// ([`CONVERGENCE_SIZE`]) and `.svg`.
-pub fn convergence(dir: &Path, log: &[(usize, f64, f64)], unit: &str) -> Result<Vec<PathBuf>, String> {
+pub fn convergence(dir: &Path, log: &[(usize, f64, f64)], unit: &str) -> crate::Result<Vec<PathBuf>> {
     let log: Vec<(f64, f64, f64)> = log.iter().map(|&(i, e, r)| (i as f64, e, r)).collect();
     render(dir, "convergence", CONVERGENCE_SIZE, &Convergence { log: &log, unit })
 }
 
 /// [`convergence`] as an SVG document in a string, for inline use in a page.
-pub fn convergence_svg(log: &[(usize, f64, f64)], unit: &str) -> Result<String, String> {
+pub fn convergence_svg(log: &[(usize, f64, f64)], unit: &str) -> crate::Result<String> {
     let log: Vec<(f64, f64, f64)> = log.iter().map(|&(i, e, r)| (i as f64, e, r)).collect();
     render_svg_string(CONVERGENCE_SIZE, &Convergence { log: &log, unit })
 }

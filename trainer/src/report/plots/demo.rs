@@ -7,7 +7,7 @@ use super::workspace::workspace_grid;
 use std::path::{Path, PathBuf};
 
 /// Batch kinematics of a planar arm: joints row-major (2 per row) → positions row-major (2 per row).
-pub type PlanarMap<'a> = &'a dyn Fn(&[f64]) -> Result<Vec<f64>, String>;
+pub type PlanarMap<'a> = &'a dyn Fn(&[f64]) -> crate::Result<Vec<f64>>;
 
 /// What [`demo_figures`] needs from `cbd demo` (planar two-joint arms).
 pub struct DemoPlotInputs<'a> {
@@ -39,7 +39,7 @@ fn as_points(v: &[f64]) -> Vec<[f64; 2]> {
 
 /// Every figure of the RR demo: heatmaps over a `heatmap_per_axis`² grid of [0, 2π)², the
 /// workspace grid, the test-set histogram and the convergence plot. Returns the files written.
-pub fn demo_figures(dir: &Path, inputs: &DemoPlotInputs) -> Result<Vec<PathBuf>, String> {
+pub fn demo_figures(dir: &Path, inputs: &DemoPlotInputs) -> crate::Result<Vec<PathBuf>> {
     let two_pi = 2.0 * std::f64::consts::PI;
     let mut written = Vec::new();
 

@@ -56,7 +56,7 @@ impl Heatmaps<'_> {
         }
     }
 
-    fn panel<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>, title: &str, values: &[f64]) -> Result<(), String> {
+    fn panel<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>, title: &str, values: &[f64]) -> crate::Result<()> {
         let (da, db) = (self.cell_size(self.range_a), self.cell_size(self.range_b));
         let xr = (self.range_a.0 - da / 2.0)..(self.range_a.1 + da / 2.0);
         let yr = (self.range_b.0 - db / 2.0)..(self.range_b.1 + db / 2.0);
@@ -93,7 +93,7 @@ impl Heatmaps<'_> {
         Ok(())
     }
 
-    fn colour_bar<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn colour_bar<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> crate::Result<()> {
         let (lo, hi) = self.scale;
         let mut chart = ChartBuilder::on(area)
             .caption(" ", (FONT, 24))
@@ -126,7 +126,7 @@ impl Heatmaps<'_> {
 }
 
 impl Figure for Heatmaps<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()> {
         let title = format!(
             "log10 position error over the ({}, {}) grid — median {} → {} {}",
             bare_name(self.joint_a),
@@ -165,23 +165,24 @@ pub fn error_heatmaps(
     after: &[f64],
     per_axis: usize,
     unit: &str,
-) -> Result<Vec<PathBuf>, String> {
+) -> crate::Result<Vec<PathBuf>> {
     if grid.is_empty() || grid.len() != before.len() || grid.len() != after.len() {
-        return Err(format!(
+        return Err(crate::Error::Plot(format!(
             "heatmaps: {} grid points but {} errors before and {} after calibration",
             grid.len(),
             before.len(),
             after.len()
-        ));
+        )));
     }
     if per_axis == 0 {
-        return Err("heatmaps: per_axis must be at least 1".into());
+        return Err(crate::Error::Plot("heatmaps: per_axis must be at least 1".into()));
     }
-    let range_a = finite_range(grid.iter().map(|p| &p.0)).ok_or("heatmaps: no finite joint values")?;
-    let range_b = finite_range(grid.iter().map(|p| &p.1)).ok_or("heatmaps: no finite joint values")?;
+    let range_a = finite_range(grid.iter().map(|p| &p.0)).ok_or_else(|| crate::Error::Plot("heatmaps: no finite joint values".into()))?;
+    let range_b = finite_range(grid.iter().map(|p| &p.1)).ok_or_else(|| crate::Error::Plot("heatmaps: no finite joint values".into()))?;
     let before_bins = bin_log_errors(grid, before, per_axis, range_a, range_b);
     let after_bins = bin_log_errors(grid, after, per_axis, range_a, range_b);
-    let (lo, hi) = finite_range(before_bins.iter().chain(&after_bins)).ok_or("heatmaps: no finite errors")?;
+    let (lo, hi) =
+        finite_range(before_bins.iter().chain(&after_bins)).ok_or_else(|| crate::Error::Plot("heatmaps: no finite errors".into()))?;
     let logs_before: Vec<f64> = before.iter().map(|&e| log_err(e)).collect();
     let logs_after: Vec<f64> = after.iter().map(|&e| log_err(e)).collect();
     let fig = Heatmaps {

@@ -18,8 +18,9 @@ struct Histograms<'a> {
 }
 
 impl Figure for Histograms<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
-        let (lo, hi) = finite_range(self.before.iter().chain(&self.after)).ok_or("histogram: no finite errors")?;
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()> {
+        let (lo, hi) =
+            finite_range(self.before.iter().chain(&self.after)).ok_or_else(|| crate::Error::Plot("histogram: no finite errors".into()))?;
         let (lo, hi) = ((lo - 0.05 * (hi - lo)).floor(), (hi + 0.05 * (hi - lo)).ceil());
         let bins = 60usize;
         let width = (hi - lo) / bins as f64;
@@ -76,7 +77,7 @@ impl Figure for Histograms<'_> {
 /// Histograms of the position error before and after calibration on a log10 axis, overlaid, with
 /// medians marked (paper Fig. 12). Errors in `unit`. Writes `error_histogram.png`
 /// ([`HISTOGRAM_SIZE`]) and `.svg`.
-pub fn error_histograms(dir: &Path, before: &[f64], after: &[f64], unit: &str) -> Result<Vec<PathBuf>, String> {
+pub fn error_histograms(dir: &Path, before: &[f64], after: &[f64], unit: &str) -> crate::Result<Vec<PathBuf>> {
     let fig = Histograms {
         before: before.iter().map(|&e| log_err(e)).collect(),
         after: after.iter().map(|&e| log_err(e)).collect(),

@@ -20,7 +20,7 @@ struct Residuals<'a> {
 }
 
 impl Figure for Residuals<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()> {
         let nj = self.joint_names.len();
         // The title promises curves only when there are some to draw.
         let title = if self.effects.is_empty() {
@@ -33,7 +33,8 @@ impl Figure for Residuals<'_> {
         let cols = if nj == 1 { 1 } else { 2 };
         let areas = root.split_evenly((rows, cols));
         let curve_values = self.effects.iter().flat_map(|(_, _, c)| c.iter().map(|p| &p.1));
-        let (r0, r1) = finite_range(self.residuals.iter().chain(curve_values)).ok_or("residual plot: no finite residuals")?;
+        let (r0, r1) = finite_range(self.residuals.iter().chain(curve_values))
+            .ok_or_else(|| crate::Error::Plot("residual plot: no finite residuals".into()))?;
         let pad = 0.06 * (r1 - r0);
         for (j, area) in areas.iter().enumerate().take(nj) {
             let xs: Vec<f64> = self.joints.iter().skip(j).step_by(nj).copied().collect();
@@ -98,6 +99,7 @@ pub fn residual_vs_joint(
     residual_label: &str,
     effects: &[EffectCurve],
 ) -> Result<Vec<PathBuf>, String> {
+    // Text errors: its one caller, `diagnose::report`, still reports errors as text.
     let nj = joint_names.len();
     if nj == 0 || joints.len() != nj * residuals.len() || residuals.is_empty() {
         return Err(format!("residual plot: {} joint values for {} residuals and {nj} joints", joints.len(), residuals.len()));
@@ -106,5 +108,5 @@ pub fn residual_vs_joint(
         return Err(format!("residual plot: effect `{name}` refers to joint {j} of {nj}"));
     }
     let size = (RESIDUAL_WIDTH, 40 + 420 * nj.div_ceil(2) as u32);
-    render(dir, "residual_vs_joint", size, &Residuals { joint_names, joints, residuals, residual_label, effects })
+    render(dir, "residual_vs_joint", size, &Residuals { joint_names, joints, residuals, residual_label, effects }).map_err(String::from)
 }

@@ -138,14 +138,14 @@ fn workspace_histogram_comparison_residual_and_convergence_figures() {
 fn demo_figures_from_planar_maps() {
     let dir = tmp("demo");
     let fk = |l1: f64, l2: f64| {
-        move |q: &[f64]| -> Result<Vec<f64>, String> {
+        move |q: &[f64]| -> crate::Result<Vec<f64>> {
             Ok(q.chunks_exact(2)
                 .flat_map(|x| [l1 * x[0].cos() + l2 * (x[0] + x[1]).cos(), l1 * x[0].sin() + l2 * (x[0] + x[1]).sin()])
                 .collect())
         }
     };
     let (nominal, real) = (fk(1.0, 0.5), fk(1.1, 0.45));
-    let calibrated = |q: &[f64]| -> Result<Vec<f64>, String> { Ok(fk(1.1, 0.45)(q)?.into_iter().map(|v| v + 1e-6).collect()) };
+    let calibrated = |q: &[f64]| -> crate::Result<Vec<f64>> { Ok(fk(1.1, 0.45)(q)?.into_iter().map(|v| v + 1e-6).collect()) };
     let before = vec![0.1, 0.12, 0.08];
     let after = vec![1e-6, 2e-6, 3e-6];
     let inputs = DemoPlotInputs {
@@ -194,10 +194,10 @@ fn rr_demo_figures() {
     let train = real_arm.measure(&configurations(Sampling::Grid { per_axis: 16 }, 2));
     let test = real_arm.measure(&configurations(Sampling::Uniform { count: 3000, seed: 2026 }, 2));
     let fit = crate::solver::fit_cbd(&nominal_model, &train, &crate::solver::CbdOptions::paper_rr()).unwrap();
-    let nominal = |q: &[f64]| -> Result<Vec<f64>, String> {
+    let nominal = |q: &[f64]| -> crate::Result<Vec<f64>> {
         Ok(q.chunks_exact(2).flat_map(|x| cbd_runtime::nominal::forward_kinematics(&nominal_model, x).position[..2].to_vec()).collect())
     };
-    let real = |q: &[f64]| -> Result<Vec<f64>, String> { Ok(q.chunks_exact(2).flat_map(|x| real_arm.position(x)).collect()) };
+    let real = |q: &[f64]| -> crate::Result<Vec<f64>> { Ok(q.chunks_exact(2).flat_map(|x| real_arm.position(x)).collect()) };
     let calibrated = |q: &[f64]| crate::predict::evaluate_blob(&fit.blob, q);
     let test_before = position_errors(&nominal(&test.joints).unwrap(), &test.positions, 2);
     let test_after = position_errors(&calibrated(&test.joints).unwrap(), &test.positions, 2);

@@ -49,7 +49,7 @@ impl Workspace<'_> {
         title: &str,
         ((x0, x1), (y0, y1)): ((f64, f64), (f64, f64)),
         model: (&[[f64; 2]], RGBColor, &str),
-    ) -> Result<(), String> {
+    ) -> crate::Result<()> {
         let area = area.titled(title, (FONT, 24)).map_err(pe)?;
         let (margin, xlab, ylab) = (14, 55, 75);
         // Equal axis scales: fit the data box (plus legend room on top) into the plotting area,
@@ -100,7 +100,7 @@ impl Workspace<'_> {
 }
 
 impl Figure for Workspace<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()> {
         let root = root.titled(&format!("Images of a {n} × {n} joint grid in the workspace", n = self.per_axis), (FONT, 28)).map_err(pe)?;
         // Equal aspect: one square data box shared by both panels, with room for the legend.
         let all = self.nominal.iter().chain(self.real).chain(self.calibrated);
@@ -129,15 +129,15 @@ pub fn workspace_grid(
     per_axis: usize,
     periodic: bool,
     unit: &str,
-) -> Result<Vec<PathBuf>, String> {
+) -> crate::Result<Vec<PathBuf>> {
     let n = per_axis * per_axis;
     if per_axis < 2 || nominal.len() != n || real.len() != n || calibrated.len() != n {
-        return Err(format!(
+        return Err(crate::Error::Plot(format!(
             "workspace grid: expected {n} points per model ({per_axis} per axis, at least 2), got {}, {} and {}",
             nominal.len(),
             real.len(),
             calibrated.len()
-        ));
+        )));
     }
     render(dir, "workspace_grid", WORKSPACE_SIZE, &Workspace { nominal, real, calibrated, per_axis, periodic, unit })
 }

@@ -28,7 +28,7 @@ pub(super) fn encode_checked(
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(|e| FitError::Encode(e.to_string()))?;
     // Never hand out a blob the runtime does not reproduce.
-    let runtime = crate::predict::evaluate_blob(&blob, &data.joints).map_err(FitError::RuntimeMismatch)?;
+    let runtime = crate::predict::evaluate_blob(&blob, &data.joints).map_err(|e| FitError::RuntimeMismatch(e.to_string()))?;
     let scale = train_predictions.iter().fold(0.0f64, |s, v| s.max(v.abs())).max(f64::MIN_POSITIVE);
     let max_diff = runtime.iter().zip(train_predictions).fold(0.0f64, |s, (a, b)| s.max((a - b).abs())) / scale;
     if !(max_diff <= 1e-12) {
