@@ -6,7 +6,7 @@ use super::units::{AngleUnit, LengthUnit};
 use super::Measurements;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Which columns hold what, and in which units.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,15 +88,9 @@ pub fn read_measurements(path: impl AsRef<Path>, spec: &ColumnSpec) -> Result<Im
 
 /// As [`read_measurements`], from any reader; `path` names the source in errors.
 pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &ColumnSpec) -> Result<ImportedMeasurements, ImportError> {
-    let file: PathBuf = path.to_path_buf();
-    let err = |line: Option<u64>, column: Option<&str>, message: String| ImportError::Csv {
-        file: file.clone(),
-        line,
-        column: column.map(str::to_string),
-        message,
-    };
+    let err = CsvErrors { file: path };
     if spec.joint_columns.len() != spec.joint_kinds.len() || spec.joint_limits.len() != spec.joint_kinds.len() {
-        return Err(err(
+        return Err(err.at(
             None,
             None,
             format!("{} joint columns named for a model with {} joints", spec.joint_columns.len(), spec.joint_kinds.len()),
@@ -104,33 +98,16 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     }
     let mut bytes = Vec::new();
     let mut reader = reader;
-    reader.read_to_end(&mut bytes).map_err(|e| ImportError::Io { file: file.clone(), message: e.to_string() })?;
+    reader.read_to_end(&mut bytes).map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
     // Records come in file order, so one cursor counts each byte's newline once: linear in the file.
     let lines_seen = std::cell::RefCell::new(LineCounter::new(&bytes));
     let line_of = |pos: &csv::Position| lines_seen.borrow_mut().line_at(pos.byte());
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(true).trim(csv::Trim::All).from_reader(bytes.as_slice());
-    let header = rdr.headers().map_err(|e| err(Some(1), None, format!("cannot read the header: {e}")))?.clone();
+    let header = rdr.headers().map_err(|e| err.at(Some(1), None, format!("cannot read the header: {e}")))?.clone();
     if header.is_empty() || (header.len() == 1 && header[0].is_empty()) {
-        return Err(err(Some(1), None, "empty file: no header row".into()));
+        return Err(err.at(Some(1), None, "empty file: no header row".into()));
     }
-    let find = |name: &str| -> Result<usize, ImportError> {
-        let hits: Vec<usize> = header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
-        match hits.as_slice() {
-            [i] => Ok(*i),
-            [] => Err(err(
-                Some(1),
-                Some(name),
-                format!("no such column in the header (columns: {})", header.iter().collect::<Vec<_>>().join(", ")),
-            )),
-            _ => Err(err(Some(1), Some(name), "column name appears more than once in the header".into())),
-        }
-    };
-    let joint_idx = spec.joint_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
-    let pos_idx = spec.position_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
-    let rad = spec.angle_unit.radians();
-    let len = spec.length_unit.factor_to(spec.model_length_unit);
-    let joint_factor: Vec<f64> = spec.joint_kinds.iter().map(|k| if *k == JointKind::Revolute { rad } else { len }).collect();
-
+    let row = RowReader::new(&header, spec, err)?;
     let (n, m) = (spec.joint_columns.len(), spec.position_columns.len());
     let mut data = Measurements::new(n, m);
     let mut lines = Vec::new();
@@ -142,7 +119,7 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     loop {
         let more = rdr.read_record(&mut record).map_err(|e| {
             let line = e.position().map(line_of);
-            err(line, None, format!("malformed CSV: {e}"))
+            err.at(line, None, format!("malformed CSV: {e}"))
         })?;
         if !more {
             break;
@@ -152,67 +129,9 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             continue; // blank line
         }
         if record.len() != header.len() {
-            return Err(err(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
+            return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
-        // A field parsed as a number; finiteness is checked again after conversion (below). The
-        // field's text is only copied into an error message, never per value (10⁶-row files).
-        let raw_value = |idx: usize, name: &str| -> Result<f64, ImportError> {
-            let text = &record[idx];
-            if text.is_empty() {
-                return Err(err(Some(line), Some(name), "missing value".into()));
-            }
-            let v: f64 = text.parse().map_err(|_| err(Some(line), Some(name), format!("not a number: '{text}'")))?;
-            if !v.is_finite() {
-                return Err(err(Some(line), Some(name), format!("not a finite number: '{text}'")));
-            }
-            Ok(v)
-        };
-        // A value converted to the model's unit must be finite and within MAX_MAGNITUDE *after*
-        // the conversion (1e307 m is finite, 1e310 mm is not), so nothing non-finite gets past
-        // the reader.
-        let bounded = |v: f64, idx: usize, name: &str, unit: &str, model_unit: &str| -> Result<f64, ImportError> {
-            if v.abs() <= MAX_MAGNITUDE {
-                return Ok(v);
-            }
-            let in_model = if v.is_finite() { format!("{v:e} {model_unit}") } else { format!("beyond the largest number in {model_unit}") };
-            Err(err(
-                Some(line),
-                Some(name),
-                format!(
-                    "'{}' {unit} is {in_model}; values must stay within ±{MAX_MAGNITUDE:e} in the model's unit (wrong unit or column?)",
-                    &record[idx]
-                ),
-            ))
-        };
-        for d in 0..n {
-            let (unit, model_unit) = match spec.joint_kinds[d] {
-                JointKind::Revolute => (spec.angle_unit.name(), "rad"),
-                _ => (spec.length_unit.name(), spec.model_length_unit.name()),
-            };
-            let name = &spec.joint_columns[d];
-            let v = raw_value(joint_idx[d], name)? * joint_factor[d];
-            // The joint's range first: it names the real cause (a unit or column mistake).
-            let [lo, hi] = spec.joint_limits[d];
-            if v.is_finite() && !(lo..=hi).contains(&v) {
-                let f = joint_factor[d];
-                return Err(err(
-                    Some(line),
-                    Some(name),
-                    format!(
-                        "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
-                        &record[joint_idx[d]],
-                        short(lo / f),
-                        short(hi / f)
-                    ),
-                ));
-            }
-            q[d] = bounded(v, joint_idx[d], name, unit, model_unit)?;
-        }
-        for c in 0..m {
-            let name = &spec.position_columns[c];
-            let v = raw_value(pos_idx[c], name)? * len;
-            y[c] = bounded(v, pos_idx[c], name, spec.length_unit.name(), spec.model_length_unit.name())?;
-        }
+        row.convert(&record, line, &mut q, &mut y)?;
         let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
         match seen.get(&key) {
             Some(&first) => repeats.push((first, data.len())),
@@ -224,15 +143,155 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         lines.push(line);
     }
     if data.len() < spec.min_rows.max(1) {
-        return Err(err(None, None, format!("{} data rows; at least {} needed", data.len(), spec.min_rows.max(1))));
+        return Err(err.at(None, None, format!("{} data rows; at least {} needed", data.len(), spec.min_rows.max(1))));
     }
-    let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * bounding_box_diagonal(&data));
+    let duplicates = check_repeats(&data, &lines, &repeats, spec, err)?;
+    Ok(ImportedMeasurements { measurements: data, lines, duplicates })
+}
+
+/// Builds the CSV errors of one file.
+#[derive(Clone, Copy)]
+struct CsvErrors<'a> {
+    file: &'a Path,
+}
+
+impl CsvErrors<'_> {
+    fn at(&self, line: Option<u64>, column: Option<&str>, message: String) -> ImportError {
+        ImportError::Csv { file: self.file.to_path_buf(), line, column: column.map(str::to_string), message }
+    }
+}
+
+/// Turns one record into a joint configuration and a position in the model's units, checking
+/// each value (a number, finite, in the joint's range, within [`MAX_MAGNITUDE`]).
+struct RowReader<'a> {
+    spec: &'a ColumnSpec,
+    err: CsvErrors<'a>,
+    /// Record index of each joint column and each position column.
+    joint_idx: Vec<usize>,
+    pos_idx: Vec<usize>,
+    /// File unit → model unit, per joint and for lengths.
+    joint_factor: Vec<f64>,
+    length_factor: f64,
+}
+
+impl<'a> RowReader<'a> {
+    /// Finds the spec's columns in `header`: each must appear exactly once.
+    fn new(header: &csv::StringRecord, spec: &'a ColumnSpec, err: CsvErrors<'a>) -> Result<Self, ImportError> {
+        let find = |name: &str| -> Result<usize, ImportError> {
+            let hits: Vec<usize> = header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
+            match hits.as_slice() {
+                [i] => Ok(*i),
+                [] => Err(err.at(
+                    Some(1),
+                    Some(name),
+                    format!("no such column in the header (columns: {})", header.iter().collect::<Vec<_>>().join(", ")),
+                )),
+                _ => Err(err.at(Some(1), Some(name), "column name appears more than once in the header".into())),
+            }
+        };
+        let joint_idx = spec.joint_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
+        let pos_idx = spec.position_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
+        let rad = spec.angle_unit.radians();
+        let length_factor = spec.length_unit.factor_to(spec.model_length_unit);
+        let joint_factor = spec.joint_kinds.iter().map(|k| if *k == JointKind::Revolute { rad } else { length_factor }).collect();
+        Ok(RowReader { spec, err, joint_idx, pos_idx, joint_factor, length_factor })
+    }
+
+    /// The record at file `line` into `q` (joints) and `y` (position).
+    fn convert(&self, record: &csv::StringRecord, line: u64, q: &mut [f64], y: &mut [f64]) -> Result<(), ImportError> {
+        let spec = self.spec;
+        for d in 0..q.len() {
+            let (unit, model_unit) = match spec.joint_kinds[d] {
+                JointKind::Revolute => (spec.angle_unit.name(), "rad"),
+                _ => (spec.length_unit.name(), spec.model_length_unit.name()),
+            };
+            let name = &spec.joint_columns[d];
+            let idx = self.joint_idx[d];
+            let v = self.raw_value(record, line, idx, name)? * self.joint_factor[d];
+            // The joint's range first: it names the real cause (a unit or column mistake).
+            let [lo, hi] = spec.joint_limits[d];
+            if v.is_finite() && !(lo..=hi).contains(&v) {
+                let f = self.joint_factor[d];
+                return Err(self.err.at(
+                    Some(line),
+                    Some(name),
+                    format!(
+                        "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
+                        &record[idx],
+                        short(lo / f),
+                        short(hi / f)
+                    ),
+                ));
+            }
+            q[d] = self.bounded(record, line, v, idx, name, (unit, model_unit))?;
+        }
+        for c in 0..y.len() {
+            let name = &spec.position_columns[c];
+            let v = self.raw_value(record, line, self.pos_idx[c], name)? * self.length_factor;
+            let units = (spec.length_unit.name(), spec.model_length_unit.name());
+            y[c] = self.bounded(record, line, v, self.pos_idx[c], name, units)?;
+        }
+        Ok(())
+    }
+
+    /// A field parsed as a number; finiteness is checked again after conversion ([`Self::bounded`]).
+    /// The field's text is only copied into an error message, never per value (10⁶-row files).
+    fn raw_value(&self, record: &csv::StringRecord, line: u64, idx: usize, name: &str) -> Result<f64, ImportError> {
+        let text = &record[idx];
+        if text.is_empty() {
+            return Err(self.err.at(Some(line), Some(name), "missing value".into()));
+        }
+        let v: f64 = text.parse().map_err(|_| self.err.at(Some(line), Some(name), format!("not a number: '{text}'")))?;
+        if !v.is_finite() {
+            return Err(self.err.at(Some(line), Some(name), format!("not a finite number: '{text}'")));
+        }
+        Ok(v)
+    }
+
+    /// A value converted to the model's unit must be finite and within MAX_MAGNITUDE *after* the
+    /// conversion (1e307 m is finite, 1e310 mm is not), so nothing non-finite gets past the reader.
+    /// `units`: the file's unit and the model's, for the message.
+    fn bounded(
+        &self,
+        record: &csv::StringRecord,
+        line: u64,
+        v: f64,
+        idx: usize,
+        name: &str,
+        units: (&str, &str),
+    ) -> Result<f64, ImportError> {
+        if v.abs() <= MAX_MAGNITUDE {
+            return Ok(v);
+        }
+        let (unit, model_unit) = units;
+        let in_model = if v.is_finite() { format!("{v:e} {model_unit}") } else { format!("beyond the largest number in {model_unit}") };
+        Err(self.err.at(
+            Some(line),
+            Some(name),
+            format!(
+                "'{}' {unit} is {in_model}; values must stay within ±{MAX_MAGNITUDE:e} in the model's unit (wrong unit or column?)",
+                &record[idx]
+            ),
+        ))
+    }
+}
+
+/// The repeated joint configurations (`repeats`: first row, repeating row) as duplicates, or an
+/// error at the first whose positions differ by more than the repeat tolerance.
+fn check_repeats(
+    data: &Measurements,
+    lines: &[u64],
+    repeats: &[(usize, usize)],
+    spec: &ColumnSpec,
+    err: CsvErrors<'_>,
+) -> Result<Vec<Duplicate>, ImportError> {
+    let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * bounding_box_diagonal(data));
     let mut duplicates = Vec::new();
-    for (first, row) in repeats {
+    for &(first, row) in repeats {
         let distance = data.position(first).iter().zip(data.position(row)).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
         let (line, first_line) = (lines[row], lines[first]);
         if distance > tolerance {
-            return Err(err(
+            return Err(err.at(
                 Some(line),
                 None,
                 format!(
@@ -243,7 +302,7 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         }
         duplicates.push(Duplicate { line, first_line, distance });
     }
-    Ok(ImportedMeasurements { measurements: data, lines, duplicates })
+    Ok(duplicates)
 }
 
 /// Largest magnitude of an imported value in the model's unit. Squares and sums of squares of
