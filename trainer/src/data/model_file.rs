@@ -39,16 +39,20 @@
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
-use super::csv_import::{default_joint_limits, ColumnSpec, MAX_MAGNITUDE};
-use super::effects_section::{self, RawEffect, RawGravity};
-use crate::nominal::urdf::chain_from_urdf;
-use crate::nominal::Pose;
-use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
+use super::csv_import::{default_joint_limits, ColumnSpec};
+use super::effects_section;
+use cbd_protocol::{JointKind, NominalModel};
+use raw::RawModelFile;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
+mod raw;
+mod sections;
+mod writer;
+
 pub use super::import_error::ImportError;
 pub use super::units::{AngleUnit, LengthUnit};
+pub use writer::write_model_file;
 
 /// A loaded model file.
 #[derive(Debug, Clone, PartialEq)]
@@ -146,78 +150,6 @@ impl ModelFile {
     }
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawModelFile {
-    name: Option<String>,
-    description: Option<String>,
-    length_unit: LengthUnit,
-    angle_unit: AngleUnit,
-    chain: Option<RawChain>,
-    urdf: Option<RawUrdf>,
-    planar: Option<RawPlanar>,
-    measurements: Option<MeasurementSection>,
-    gravity: Option<RawGravity>,
-    #[serde(default)]
-    effects: Vec<RawEffect>,
-}
-
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(rename_all = "lowercase")]
-enum RawConvention {
-    Standard,
-    Modified,
-}
-
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(rename_all = "lowercase")]
-enum RawKind {
-    Revolute,
-    Prismatic,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawChain {
-    convention: RawConvention,
-    joints: Vec<RawJoint>,
-    base: Option<RawTransform>,
-    tool: Option<RawTransform>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawJoint {
-    kind: Option<RawKind>,
-    a: f64,
-    alpha: f64,
-    d: f64,
-    #[serde(default)]
-    theta_offset: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawTransform {
-    translation: Option<[f64; 3]>,
-    rpy: Option<[f64; 3]>,
-    rotation: Option<[[f64; 3]; 3]>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawUrdf {
-    path: PathBuf,
-    base_link: String,
-    tip_link: String,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawPlanar {
-    lengths: Vec<f64>,
-}
-
 /// Reads and checks a model file (see the module documentation for the format).
 pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError> {
     let path = path.as_ref();
@@ -234,60 +166,16 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     let model_err = |message: String| ImportError::Model { file: file.clone(), message };
     let _ = &raw.description;
     let deg = raw.angle_unit.radians();
-    let sections = raw.chain.is_some() as u8 + raw.urdf.is_some() as u8 + raw.planar.is_some() as u8;
-    if sections != 1 {
-        return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({sections} found)")));
+    let given = raw.chain.is_some() as u8 + raw.urdf.is_some() as u8 + raw.planar.is_some() as u8;
+    if given != 1 {
+        return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({given} found)")));
     }
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
-        if chain.joints.is_empty() || chain.joints.len() > MAX_JOINTS {
-            return Err(model_err(format!("[chain] has {} joints; 1 to {MAX_JOINTS} are supported", chain.joints.len())));
-        }
-        let mut joints = heapless::Vec::<DhJoint, MAX_JOINTS>::new();
-        for (i, j) in chain.joints.iter().enumerate() {
-            for (name, v) in [("a", j.a), ("alpha", j.alpha), ("d", j.d), ("theta_offset", j.theta_offset)] {
-                if !v.is_finite() {
-                    return Err(model_err(format!("[chain] joint {}: {name} is not finite", i + 1)));
-                }
-                if v.abs() > MAX_MAGNITUDE {
-                    return Err(model_err(format!("[chain] joint {}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)", i + 1)));
-                }
-            }
-            let kind = match j.kind.unwrap_or(RawKind::Revolute) {
-                RawKind::Revolute => JointKind::Revolute,
-                RawKind::Prismatic => JointKind::Prismatic,
-            };
-            let _ = joints.push(DhJoint { kind, a: j.a, alpha: j.alpha * deg, d: j.d, theta_offset: j.theta_offset * deg });
-        }
-        let base = transform(chain.base.as_ref(), deg, "[chain.base]", path)?;
-        let tool = transform(chain.tool.as_ref(), deg, "[chain.tool]", path)?;
-        let convention = match chain.convention {
-            RawConvention::Standard => DhConvention::Standard,
-            RawConvention::Modified => DhConvention::Modified,
-        };
-        let n = joints.len();
-        (
-            NominalModel::DhChain(DhChain { convention, joints, base, tool, effects: cbd_protocol::Effects::NONE }),
-            (1..=n).map(|i| format!("q{i}")).collect(),
-        )
+        sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
-        let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
-        let urdf_err = |message: String| ImportError::Urdf { file: urdf_path.clone(), message };
-        let bytes = super::read_capped(&urdf_path, super::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(e.without_path()))?;
-        let text = String::from_utf8(bytes).map_err(|e| urdf_err(format!("not UTF-8 text: {e}")))?;
-        let robot = urdf_rs::read_from_string(&text).map_err(|e| urdf_err(e.to_string()))?;
-        let scale = LengthUnit::M.factor_to(raw.length_unit);
-        let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|e| urdf_err(e.to_string()))?;
-        (NominalModel::DhChain(conv.chain), conv.joint_names)
+        sections::urdf_chain(&u, raw.length_unit, path)?
     } else {
-        let lengths = raw.planar.expect("one section").lengths;
-        if lengths.is_empty() || lengths.len() > MAX_JOINTS || lengths.iter().any(|l| !l.is_finite()) {
-            return Err(model_err(format!("[planar] needs 1 to {MAX_JOINTS} finite lengths")));
-        }
-        if let Some((i, l)) = lengths.iter().enumerate().find(|(_, l)| l.abs() > MAX_MAGNITUDE) {
-            return Err(model_err(format!("[planar] lengths[{}] = {l:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)", i + 1)));
-        }
-        let n = lengths.len();
-        (NominalModel::planar(&lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect())
+        sections::planar(&raw.planar.expect("one section").lengths, path)?
     };
     effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(model_err)?;
     if let Some(m) = &raw.measurements {
@@ -317,138 +205,10 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     })
 }
 
-/// A TOML basic string.
-fn quoted(s: &str) -> String {
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => out += "\\\"",
-            '\\' => out += "\\\\",
-            c if (c as u32) < 0x20 || c == '\u{7f}' => out += &format!("\\u{:04X}", c as u32),
-            c => out.push(c),
-        }
-    }
-    out + "\""
-}
-
-/// The model file for `m` (the inverse of [`parse_model_file`]): its chain (a URDF-based model is
-/// written as the DH table it was converted to), measurement columns, gravity model and effects.
-/// Every number is written so that it reads back to the same value in the file's units; angles
-/// go through the file's angle unit (degrees: equal to within an ulp or two).
-pub fn write_model_file(m: &ModelFile, header: &str) -> String {
-    use std::fmt::Write as _;
-    let f = |v: f64| format!("{v:?}");
-    let per_unit = m.angle_unit.radians();
-    let mut out = String::new();
-    for line in header.lines() {
-        let _ = writeln!(out, "# {line}");
-    }
-    if let Some(name) = &m.name {
-        let _ = writeln!(out, "name = {}", quoted(name));
-    }
-    let _ = writeln!(out, "length_unit = \"{}\"\nangle_unit = \"{}\"", m.length_unit.name(), m.angle_unit.name());
-    match &m.nominal {
-        NominalModel::DhChain(c) => {
-            let convention = match c.convention {
-                DhConvention::Standard => "standard",
-                DhConvention::Modified => "modified",
-            };
-            let _ = writeln!(out, "\n[chain]\nconvention = \"{convention}\"\njoints = [");
-            for j in &c.joints {
-                let kind = match j.kind {
-                    JointKind::Revolute => "revolute",
-                    JointKind::Prismatic => "prismatic",
-                };
-                let _ = writeln!(
-                    out,
-                    "  {{ a = {}, alpha = {}, d = {}, theta_offset = {}, kind = \"{kind}\" }},",
-                    f(j.a),
-                    f(j.alpha / per_unit),
-                    f(j.d),
-                    f(j.theta_offset / per_unit)
-                );
-            }
-            out += "]\n";
-            for (name, t) in [("base", &c.base), ("tool", &c.tool)] {
-                let r = &t.rotation;
-                let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
-                let _ = writeln!(
-                    out,
-                    "{name} = {{ translation = {}, rotation = [{}] }}",
-                    effects_section::list(&t.translation),
-                    rows.join(", ")
-                );
-            }
-        }
-        NominalModel::PlanarChain { lengths, .. } => {
-            let _ = writeln!(out, "\n[planar]\nlengths = {}", effects_section::list(lengths));
-        }
-    }
-    if let Some(s) = &m.measurements {
-        let names = |v: &[String]| v.iter().map(|n| quoted(n)).collect::<Vec<_>>().join(", ");
-        let _ = writeln!(out, "\n[measurements]\njoints = [{}]\npositions = [{}]", names(&s.joints), names(&s.positions));
-        if let Some(u) = s.angle_unit {
-            let _ = writeln!(out, "angle_unit = \"{}\"", u.name());
-        }
-        if let Some(u) = s.length_unit {
-            let _ = writeln!(out, "length_unit = \"{}\"", u.name());
-        }
-        if let Some(r) = s.min_rows {
-            let _ = writeln!(out, "min_rows = {r}");
-        }
-        if let Some(limits) = &s.joint_limits {
-            let pairs: Vec<String> = limits.iter().map(|p| effects_section::list(p)).collect();
-            let _ = writeln!(out, "joint_limits = [{}]", pairs.join(", "));
-        }
-        if let Some(t) = s.repeat_tolerance {
-            let _ = writeln!(out, "repeat_tolerance = {}", f(t));
-        }
-    }
-    out += &effects_section::write(&m.nominal, per_unit);
-    out
-}
-
-/// The base or tool transform of `[chain]`; errors name `field` (`[chain.base]`) of `file`.
-fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> Result<Transform, ImportError> {
-    let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: field.to_string(), message };
-    let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
-    let translation = raw.translation.unwrap_or([0.0; 3]);
-    let rotation = match (raw.rpy, raw.rotation) {
-        (Some(_), Some(_)) => return Err(bad("give either rpy or rotation, not both".into())),
-        (Some([r, p, y]), None) => Pose::rpy(r * deg, p * deg, y * deg).r,
-        (None, Some(m)) => {
-            // Must be a rotation: orthonormal with determinant +1.
-            for i in 0..3 {
-                for j in 0..3 {
-                    let dot: f64 = (0..3).map(|k| m[i][k] * m[j][k]).sum();
-                    let want = if i == j { 1.0 } else { 0.0 };
-                    if (dot - want).abs() > 1e-6 {
-                        return Err(bad(format!("rotation is not orthonormal (rows {} and {} have dot product {dot})", i + 1, j + 1)));
-                    }
-                }
-            }
-            let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-            if det < 0.0 {
-                return Err(bad("rotation has determinant −1 (a reflection)".into()));
-            }
-            m
-        }
-        (None, None) => Pose::IDENTITY.r,
-    };
-    if translation.iter().chain(rotation.iter().flatten()).any(|v| !v.is_finite()) {
-        return Err(bad("non-finite value".into()));
-    }
-    if let Some(v) = translation.iter().find(|v| v.abs() > MAX_MAGNITUDE) {
-        return Err(bad(format!("translation {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)")));
-    }
-    Ok(Pose { r: rotation, t: translation }.to_transform())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cbd_protocol::Effect;
+    use cbd_protocol::{DhConvention, Effect};
     use cbd_runtime::nominal::forward_kinematics;
 
     const SMALL: &str = r#"

@@ -1,0 +1,115 @@
+//! The model file's three ways to give the nominal chain — `[chain]` (a DH table), `[urdf]` and
+//! `[planar]` — each read into the nominal model and its joint names.
+
+use super::raw::{RawChain, RawConvention, RawKind, RawTransform, RawUrdf};
+use super::{ImportError, LengthUnit};
+use crate::data::csv_import::MAX_MAGNITUDE;
+use crate::nominal::urdf::chain_from_urdf;
+use crate::nominal::Pose;
+use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
+use std::path::Path;
+
+/// The nominal model and its joint names.
+type Section = (NominalModel, Vec<String>);
+
+fn model_error(path: &Path, message: String) -> ImportError {
+    ImportError::Model { file: path.to_path_buf(), message }
+}
+
+/// `[chain]`: the DH table with angles in the file's unit (`deg` radians per unit), base and tool.
+pub(super) fn dh_chain(chain: &RawChain, deg: f64, path: &Path) -> Result<Section, ImportError> {
+    let model_err = |message: String| model_error(path, message);
+    if chain.joints.is_empty() || chain.joints.len() > MAX_JOINTS {
+        return Err(model_err(format!("[chain] has {} joints; 1 to {MAX_JOINTS} are supported", chain.joints.len())));
+    }
+    let mut joints = heapless::Vec::<DhJoint, MAX_JOINTS>::new();
+    for (i, j) in chain.joints.iter().enumerate() {
+        for (name, v) in [("a", j.a), ("alpha", j.alpha), ("d", j.d), ("theta_offset", j.theta_offset)] {
+            if !v.is_finite() {
+                return Err(model_err(format!("[chain] joint {}: {name} is not finite", i + 1)));
+            }
+            if v.abs() > MAX_MAGNITUDE {
+                return Err(model_err(format!("[chain] joint {}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)", i + 1)));
+            }
+        }
+        let kind = match j.kind.unwrap_or(RawKind::Revolute) {
+            RawKind::Revolute => JointKind::Revolute,
+            RawKind::Prismatic => JointKind::Prismatic,
+        };
+        let _ = joints.push(DhJoint { kind, a: j.a, alpha: j.alpha * deg, d: j.d, theta_offset: j.theta_offset * deg });
+    }
+    let base = transform(chain.base.as_ref(), deg, "[chain.base]", path)?;
+    let tool = transform(chain.tool.as_ref(), deg, "[chain.tool]", path)?;
+    let convention = match chain.convention {
+        RawConvention::Standard => DhConvention::Standard,
+        RawConvention::Modified => DhConvention::Modified,
+    };
+    let n = joints.len();
+    Ok((
+        NominalModel::DhChain(DhChain { convention, joints, base, tool, effects: cbd_protocol::Effects::NONE }),
+        (1..=n).map(|i| format!("q{i}")).collect(),
+    ))
+}
+
+/// `[urdf]`: the URDF's chain from `base_link` to `tip_link` as a DH chain in `length_unit`; a
+/// relative URDF path is relative to the model file at `path`.
+pub(super) fn urdf_chain(u: &RawUrdf, length_unit: LengthUnit, path: &Path) -> Result<Section, ImportError> {
+    let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
+    let urdf_err = |message: String| ImportError::Urdf { file: urdf_path.clone(), message };
+    let bytes = crate::data::read_capped(&urdf_path, crate::data::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(e.without_path()))?;
+    let text = String::from_utf8(bytes).map_err(|e| urdf_err(format!("not UTF-8 text: {e}")))?;
+    let robot = urdf_rs::read_from_string(&text).map_err(|e| urdf_err(e.to_string()))?;
+    let scale = LengthUnit::M.factor_to(length_unit);
+    let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|e| urdf_err(e.to_string()))?;
+    Ok((NominalModel::DhChain(conv.chain), conv.joint_names))
+}
+
+/// `[planar]`: a planar arm of revolute joints with these link lengths.
+pub(super) fn planar(lengths: &[f64], path: &Path) -> Result<Section, ImportError> {
+    let model_err = |message: String| model_error(path, message);
+    if lengths.is_empty() || lengths.len() > MAX_JOINTS || lengths.iter().any(|l| !l.is_finite()) {
+        return Err(model_err(format!("[planar] needs 1 to {MAX_JOINTS} finite lengths")));
+    }
+    if let Some((i, l)) = lengths.iter().enumerate().find(|(_, l)| l.abs() > MAX_MAGNITUDE) {
+        return Err(model_err(format!("[planar] lengths[{}] = {l:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)", i + 1)));
+    }
+    let n = lengths.len();
+    Ok((NominalModel::planar(lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect()))
+}
+
+/// The base or tool transform of `[chain]`; errors name `field` (`[chain.base]`) of `file`.
+fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> Result<Transform, ImportError> {
+    let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: field.to_string(), message };
+    let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
+    let translation = raw.translation.unwrap_or([0.0; 3]);
+    let rotation = match (raw.rpy, raw.rotation) {
+        (Some(_), Some(_)) => return Err(bad("give either rpy or rotation, not both".into())),
+        (Some([r, p, y]), None) => Pose::rpy(r * deg, p * deg, y * deg).r,
+        (None, Some(m)) => {
+            // Must be a rotation: orthonormal with determinant +1.
+            for i in 0..3 {
+                for j in 0..3 {
+                    let dot: f64 = (0..3).map(|k| m[i][k] * m[j][k]).sum();
+                    let want = if i == j { 1.0 } else { 0.0 };
+                    if (dot - want).abs() > 1e-6 {
+                        return Err(bad(format!("rotation is not orthonormal (rows {} and {} have dot product {dot})", i + 1, j + 1)));
+                    }
+                }
+            }
+            let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+            if det < 0.0 {
+                return Err(bad("rotation has determinant −1 (a reflection)".into()));
+            }
+            m
+        }
+        (None, None) => Pose::IDENTITY.r,
+    };
+    if translation.iter().chain(rotation.iter().flatten()).any(|v| !v.is_finite()) {
+        return Err(bad("non-finite value".into()));
+    }
+    if let Some(v) = translation.iter().find(|v| v.abs() > MAX_MAGNITUDE) {
+        return Err(bad(format!("translation {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)")));
+    }
+    Ok(Pose { r: rotation, t: translation }.to_transform())
+}

@@ -1,0 +1,96 @@
+//! Writing a model file: the inverse of [`super::parse_model_file`].
+
+use super::ModelFile;
+use crate::data::effects_section;
+use cbd_protocol::{DhConvention, JointKind, NominalModel};
+
+/// A TOML basic string.
+fn quoted(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out += "\\\"",
+            '\\' => out += "\\\\",
+            c if (c as u32) < 0x20 || c == '\u{7f}' => out += &format!("\\u{:04X}", c as u32),
+            c => out.push(c),
+        }
+    }
+    out + "\""
+}
+
+/// The model file for `m` (the inverse of [`parse_model_file`]): its chain (a URDF-based model is
+/// written as the DH table it was converted to), measurement columns, gravity model and effects.
+/// Every number is written so that it reads back to the same value in the file's units; angles
+/// go through the file's angle unit (degrees: equal to within an ulp or two).
+pub fn write_model_file(m: &ModelFile, header: &str) -> String {
+    use std::fmt::Write as _;
+    let f = |v: f64| format!("{v:?}");
+    let per_unit = m.angle_unit.radians();
+    let mut out = String::new();
+    for line in header.lines() {
+        let _ = writeln!(out, "# {line}");
+    }
+    if let Some(name) = &m.name {
+        let _ = writeln!(out, "name = {}", quoted(name));
+    }
+    let _ = writeln!(out, "length_unit = \"{}\"\nangle_unit = \"{}\"", m.length_unit.name(), m.angle_unit.name());
+    match &m.nominal {
+        NominalModel::DhChain(c) => {
+            let convention = match c.convention {
+                DhConvention::Standard => "standard",
+                DhConvention::Modified => "modified",
+            };
+            let _ = writeln!(out, "\n[chain]\nconvention = \"{convention}\"\njoints = [");
+            for j in &c.joints {
+                let kind = match j.kind {
+                    JointKind::Revolute => "revolute",
+                    JointKind::Prismatic => "prismatic",
+                };
+                let _ = writeln!(
+                    out,
+                    "  {{ a = {}, alpha = {}, d = {}, theta_offset = {}, kind = \"{kind}\" }},",
+                    f(j.a),
+                    f(j.alpha / per_unit),
+                    f(j.d),
+                    f(j.theta_offset / per_unit)
+                );
+            }
+            out += "]\n";
+            for (name, t) in [("base", &c.base), ("tool", &c.tool)] {
+                let r = &t.rotation;
+                let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
+                let _ = writeln!(
+                    out,
+                    "{name} = {{ translation = {}, rotation = [{}] }}",
+                    effects_section::list(&t.translation),
+                    rows.join(", ")
+                );
+            }
+        }
+        NominalModel::PlanarChain { lengths, .. } => {
+            let _ = writeln!(out, "\n[planar]\nlengths = {}", effects_section::list(lengths));
+        }
+    }
+    if let Some(s) = &m.measurements {
+        let names = |v: &[String]| v.iter().map(|n| quoted(n)).collect::<Vec<_>>().join(", ");
+        let _ = writeln!(out, "\n[measurements]\njoints = [{}]\npositions = [{}]", names(&s.joints), names(&s.positions));
+        if let Some(u) = s.angle_unit {
+            let _ = writeln!(out, "angle_unit = \"{}\"", u.name());
+        }
+        if let Some(u) = s.length_unit {
+            let _ = writeln!(out, "length_unit = \"{}\"", u.name());
+        }
+        if let Some(r) = s.min_rows {
+            let _ = writeln!(out, "min_rows = {r}");
+        }
+        if let Some(limits) = &s.joint_limits {
+            let pairs: Vec<String> = limits.iter().map(|p| effects_section::list(p)).collect();
+            let _ = writeln!(out, "joint_limits = [{}]", pairs.join(", "));
+        }
+        if let Some(t) = s.repeat_tolerance {
+            let _ = writeln!(out, "repeat_tolerance = {}", f(t));
+        }
+    }
+    out += &effects_section::write(&m.nominal, per_unit);
+    out
+}
