@@ -90,7 +90,7 @@ fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
 /// Per joint of a DH chain at joints `x`, in the base frame: its axis z_i, a point o_i on it, and
 /// `ends[i]`, the origin of the frame after the joint's full transform (the distal end of link i).
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct DhWalk {
+pub struct DhWalk {
     pub axes: [[f64; 3]; MAX_JOINTS],
     pub origins: [[f64; 3]; MAX_JOINTS],
     pub ends: [[f64; 3]; MAX_JOINTS],
@@ -100,10 +100,11 @@ pub(crate) struct DhWalk {
     pub tool: [f64; 3],
 }
 
-/// The one DH frame walk: forward kinematics, its Hessian and the effects all use it. Callers
-/// that do not read `ends` pay nothing for it (dead stores to a local are removed).
+/// The one DH frame walk: forward kinematics, its Hessian, the effects and the trainer's
+/// six-joint simulator all use it. Callers that do not read `ends` pay nothing for it (dead
+/// stores to a local are removed).
 #[inline(always)]
-pub(crate) fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
+pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
     let mut frame = frame_of(&chain.base);
     let mut out = DhWalk {
         axes: [[0.0; 3]; MAX_JOINTS],

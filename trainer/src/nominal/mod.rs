@@ -159,23 +159,6 @@ pub fn dh_frames(chain: &DhChain, q: &[f64]) -> Vec<Pose> {
     out
 }
 
-/// The joint axes (point on the axis, unit direction) of a DH chain at `q`, in the world frame.
-pub fn dh_joint_axes(chain: &DhChain, q: &[f64]) -> Vec<([f64; 3], [f64; 3])> {
-    let frames = dh_frames(chain, q);
-    chain
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(i, joint)| {
-            let f = match chain.convention {
-                DhConvention::Standard => frames[i],
-                DhConvention::Modified => frames[i].compose(&trans_x_rot_x(joint.a, joint.alpha)),
-            };
-            (f.t, f.axis(2))
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

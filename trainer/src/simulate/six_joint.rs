@@ -5,9 +5,10 @@
 
 use super::add_noise;
 use crate::data::Measurements;
-use crate::nominal::{cross, dh_frames, dh_joint_axes, dot, sub};
+use crate::nominal::{cross, dot, sub};
 use cbd_protocol::{DhChain, NominalModel};
 use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::rigid::dh_walk;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -66,21 +67,20 @@ impl SixJointRobot {
 
     /// Gravity torque about each joint axis of the real arm at `q` (N·mm).
     pub fn gravity_torques(&self, q: &[f64]) -> [f64; 6] {
-        let frames = dh_frames(&self.real, q);
-        let axes = dh_joint_axes(&self.real, q);
+        let walk = dh_walk(&self.real, q);
         // Link k (0-based) moves with joint k and spans the origins of frames k and k+1
         // (o_k − o_{k−1} = d z + a x depends on θ_k in standard DH).
         let centres: Vec<[f64; 3]> = (0..6)
             .map(|k| {
-                let (a, b) = (frames[k].t, frames[k + 1].t);
+                let (a, b) = (if k == 0 { walk.start } else { walk.ends[k - 1] }, walk.ends[k]);
                 [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0, (a[2] + b[2]) / 2.0]
             })
             .collect();
         let mut tau = [0.0; 6];
-        for (i, (origin, axis)) in axes.iter().enumerate() {
+        for i in 0..6 {
             for k in i..6 {
                 let force = [0.0, 0.0, -GRAVITY * self.link_masses[k]];
-                tau[i] += dot(cross(sub(centres[k], *origin), force), *axis);
+                tau[i] += dot(cross(sub(centres[k], walk.origins[i]), force), walk.axes[i]);
             }
         }
         tau
