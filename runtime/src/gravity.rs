@@ -1,0 +1,127 @@
+//! Gravity torques of a mass model on the rigid chain and their first and second derivatives.
+//!
+//! ```text
+//! V(q) = Σ_k g·(m_k o_k(q) + R_k(q) s_k)        τ = ∂V/∂q  (the gravity regressor: linear in m_k, s_k)
+//! ```
+//!
+//! o_k, R_k: origin and rotation of link k's own frame (at its distal end); m_k its mass, s_k = m_k r_k
+//! its first moment (r_k the centre of mass in that frame). w_k = R_k s_k is a vector carried by
+//! every joint up to k, so it enters the column sums exactly as the points do (∂w/∂q_a = z_a × w,
+//! 0 for a prismatic joint) and the derivative formulas of [`crate::effects`] hold unchanged.
+//! The point-mass model of `[gravity] link_masses` is s_k = 0; a [`cbd_protocol::Effect::GravityMoment`]
+//! is one link's (m, s) felt by one joint.
+//!
+//! f64 through `libm`, no fused multiply-add, no panic path.
+
+use crate::effects::{add_scaled, at, at2, dot, gravity_vector, sorted3, Chain, Order, V3, ZERO};
+use cbd_protocol::{GravityModel, NominalModel, MAX_JOINTS as NJ};
+
+/// The gravity torques τ = ∇V and their derivatives (V(q) = Σ_k g·(m_k o_k(q) + R_k(q) s_k)), joint order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GravityTerms {
+    /// τ_j = ∂V/∂q_j.
+    pub tau: [f64; NJ],
+    /// `[j][e]`: ∂²V/∂q_j∂q_e (order ≥ `First`).
+    pub d_tau: [[f64; NJ]; NJ],
+    /// `[j][e][d]`: ∂³V/∂q_j∂q_e∂q_d (order `Second`).
+    pub d2_tau: [[[f64; NJ]; NJ]; NJ],
+}
+
+impl GravityTerms {
+    pub(crate) const ZERO: GravityTerms = GravityTerms { tau: [0.0; NJ], d_tau: [[0.0; NJ]; NJ], d2_tau: [[[0.0; NJ]; NJ]; NJ] };
+}
+
+/// w = R s: a vector given in a link's own frame (rows of R), in the base frame.
+#[inline(always)]
+fn rotate(rows: &[V3; 3], s: &V3) -> V3 {
+    [dot(&rows[0], s), dot(&rows[1], s), dot(&rows[2], s)]
+}
+
+/// τ, Dτ, D²τ of the mass model `moment_of(k) = (m_k, s_k)` (s_k in link k's own frame).
+pub(crate) fn gravity_of(chain: &Chain, g: &V3, moment_of: impl Fn(usize) -> (f64, V3), order: Order) -> GravityTerms {
+    let n = chain.n;
+    let mut out = GravityTerms::ZERO;
+    // w_k = R_k s_k: the first moments in the base frame (carried by every joint up to k).
+    let mut first_moments = [ZERO; NJ];
+    let mut masses = [0.0; NJ];
+    for (k, (w, m)) in first_moments.iter_mut().zip(masses.iter_mut()).enumerate().take(n) {
+        let (m_k, s_k) = moment_of(k);
+        *m = m_k;
+        if s_k != ZERO {
+            *w = rotate(&at(&chain.rotations, k), &s_k);
+        }
+    }
+    // col_c = Σ_{k ≥ c} (m_k ∂o_k/∂q_c + ∂w_k/∂q_c): what joint c does to the link moments (V's gradient is g·col).
+    let mut col = [ZERO; NJ];
+    for (c, col_c) in col.iter_mut().enumerate().take(n) {
+        for (k, end) in chain.ends.iter().enumerate().take(n).skip(c) {
+            add_scaled(col_c, &chain.point_rate(c, end), at(&masses, k));
+            let w_k = at(&first_moments, k);
+            if w_k != ZERO {
+                let rate = chain.carry(c, &w_k);
+                add_scaled(col_c, &rate, 1.0);
+            }
+        }
+    }
+    // τ_c = ∂V/∂q_c = g·col_c
+    for (t, col_c) in out.tau.iter_mut().zip(col.iter()).take(n) {
+        *t = dot(g, col_c);
+    }
+    if order == Order::Value {
+        return out;
+    }
+    let mut dual = [ZERO; NJ];
+    for (a, d) in dual.iter_mut().enumerate().take(n) {
+        *d = chain.gravity_dual(a, g);
+    }
+    // ∂²V/∂q_a∂q_b = g·(z_a × col_b) = gz_a·col_b for a ≤ b
+    for (j, row) in out.d_tau.iter_mut().enumerate().take(n) {
+        for (e, v) in row.iter_mut().enumerate().take(n) {
+            let (a, b) = (j.min(e), j.max(e));
+            *v = dot(&at(&dual, a), &at(&col, b));
+        }
+    }
+    if order == Order::First {
+        return out;
+    }
+    // carried[b][c] = ∂col_c/∂q_b = z_b × col_c for b ≤ c (prismatic b: 0)
+    let mut carried = [[ZERO; NJ]; NJ];
+    for (b, row) in carried.iter_mut().enumerate().take(n) {
+        for (c, v) in row.iter_mut().enumerate().take(n).skip(b) {
+            *v = chain.carry(b, &at(&col, c));
+        }
+    }
+    // ∂³V/∂q_a∂q_b∂q_c = g·(z_a × (z_b × col_c)) = gz_a·carried[b][c] for sorted a ≤ b ≤ c
+    for (i, plane) in out.d2_tau.iter_mut().enumerate().take(n) {
+        for (j, row) in plane.iter_mut().enumerate().take(n) {
+            for (k, v) in row.iter_mut().enumerate().take(n) {
+                let (a, b, c) = sorted3(i, j, k);
+                *v = dot(&at(&dual, a), &at2(&carried, b, c));
+            }
+        }
+    }
+    out
+}
+
+/// Gravity torques τ_j(q) = ∂V/∂q_j of the rigid chain of `model` under its gravity/mass model,
+/// and (with `order`) their first and second derivatives.
+pub fn gravity_terms(model: &NominalModel, q: &[f64], order: Order) -> GravityTerms {
+    let gravity = &model.effects().gravity;
+    gravity_of(&Chain::of(model, q), &gravity_vector(model, gravity), point_masses(gravity), order)
+}
+
+/// The point-mass model of `[gravity]`: m_k = `link_masses[k]` (1 when the list is empty) at the
+/// origin of link k's frame, s_k = 0.
+pub(crate) fn point_masses(gravity: &GravityModel) -> impl Fn(usize) -> (f64, V3) + '_ {
+    move |k| (gravity.link_masses.get(k).copied().unwrap_or(1.0), ZERO)
+}
+
+/// One link's moment set: (m, s) at `link`, nothing elsewhere.
+pub(crate) fn one_link(link: usize, mass: f64, first_moment: V3) -> impl Fn(usize) -> (f64, V3) {
+    move |k| if k == link { (mass, first_moment) } else { (0.0, ZERO) }
+}
+
+/// τ_j(q) = ∂V/∂q_j, V(q) = Σ_k m_k g·o_k(q) (the point-mass model): the gravity torques of the rigid chain of `model`.
+pub fn gravity_torques(model: &NominalModel, q: &[f64]) -> [f64; NJ] {
+    gravity_terms(model, q, Order::Value).tau
+}
