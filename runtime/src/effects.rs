@@ -494,7 +494,7 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 
 #[cfg(test)]
 #[allow(clippy::needless_range_loop)]
-mod tests {
+pub(crate) mod tests {
     extern crate std;
     use super::*;
     use crate::nominal::forward_kinematics;
@@ -549,11 +549,11 @@ mod tests {
         })
     }
 
-    fn models() -> [(&'static str, NominalModel); 3] {
+    pub(crate) fn models() -> [(&'static str, NominalModel); 3] {
         [("rr", rr()), ("dh-standard", six(DhConvention::Standard)), ("dh-modified", six(DhConvention::Modified))]
     }
 
-    fn config(n: usize, seed: u64) -> [f64; NJ] {
+    pub(crate) fn config(n: usize, seed: u64) -> [f64; NJ] {
         let mut s = seed;
         let mut q = [0.0; NJ];
         for v in q.iter_mut().take(n) {
@@ -570,28 +570,8 @@ mod tests {
         (0..chain.n).map(|k| gravity.link_masses.get(k).copied().unwrap_or(1.0) * dot(&g, &chain.ends[k])).sum()
     }
 
-    /// A mass distribution off the link ends: m_k and s_k = m_k r_k, different per link.
-    fn moments(k: usize) -> (f64, V3) {
-        let m = [3.7, 8.4, 2.3, 1.2, 1.2, 0.2, 0.5][k];
-        (m, [m * (0.1 - 0.07 * k as f64), m * 0.02 * k as f64, m * (-0.05 + 0.01 * k as f64)])
-    }
-
-    /// V(q) = Σ_k g·(m_k o_k + R_k s_k), with R_k from the frame walk.
-    fn potential_with_moments(model: &NominalModel, q: &[f64]) -> f64 {
-        let chain = Chain::of(model, q);
-        let g = gravity_vector(model, &model.effects().gravity);
-        (0..chain.n)
-            .map(|k| {
-                let (m, s) = moments(k);
-                let r = &chain.rotations[k];
-                let w = [dot(&r[0], &s), dot(&r[1], &s), dot(&r[2], &s)];
-                m * dot(&g, &chain.ends[k]) + dot(&g, &w)
-            })
-            .sum()
-    }
-
     /// Central difference of `f` along joint d.
-    fn fd<const L: usize>(q: &[f64], d: usize, h: f64, f: impl Fn(&[f64]) -> [f64; L]) -> [f64; L] {
+    pub(crate) fn fd<const L: usize>(q: &[f64], d: usize, h: f64, f: impl Fn(&[f64]) -> [f64; L]) -> [f64; L] {
         let (mut a, mut b) = (q.to_vec(), q.to_vec());
         a[d] += h;
         b[d] -= h;
@@ -599,7 +579,7 @@ mod tests {
         core::array::from_fn(|i| (fa[i] - fb[i]) / (2.0 * h))
     }
 
-    fn close(what: &str, fd: f64, exact: f64, scale: f64, tol: f64) -> f64 {
+    pub(crate) fn close(what: &str, fd: f64, exact: f64, scale: f64, tol: f64) -> f64 {
         let err = (fd - exact).abs() / scale;
         assert!(err < tol, "{what}: fd {fd} vs {exact} (relative error {err:e})");
         err
@@ -627,73 +607,6 @@ mod tests {
                         for e in 0..n {
                             close(&format!("{name} d2tau {j} {e} {d}"), ddt[j * NJ + e], t.d2_tau[j][e][d], scale, 1e-8);
                         }
-                    }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn torques_of_off_end_masses_and_their_derivatives_match_finite_differences() {
-        use crate::gravity::gravity_of;
-        for (name, model) in models() {
-            let n = model.n_joints();
-            let g = gravity_vector(&model, &model.effects().gravity);
-            let terms = |x: &[f64], order| gravity_of(&Chain::of(&model, x), &g, moments, order);
-            for seed in 1..4 {
-                let q = config(n, seed);
-                let q = &q[..n];
-                let t = terms(q, Order::Second);
-                let scale = 1.0 + t.tau.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-                // The first moments matter: the torques differ from those of the masses alone.
-                let alone = gravity_of(&Chain::of(&model, q), &g, |k| (moments(k).0, ZERO), Order::Value).tau;
-                assert!((0..n).any(|j| (alone[j] - t.tau[j]).abs() > 1e-3 * scale), "{name}: {alone:?} vs {:?}", t.tau);
-                for d in 0..n {
-                    let v = fd(q, d, 1e-5, |x| [potential_with_moments(&model, x)]);
-                    close(&format!("{name} tau {d}"), v[0], t.tau[d], scale, 1e-8);
-                    let dt = fd(q, d, 1e-5, |x| terms(x, Order::Value).tau);
-                    let ddt = fd(q, d, 1e-5, |x| {
-                        let t = terms(x, Order::First).d_tau;
-                        core::array::from_fn::<f64, 49, _>(|i| t[i / NJ][i % NJ])
-                    });
-                    for j in 0..n {
-                        close(&format!("{name} dtau {j} {d}"), dt[j], t.d_tau[j][d], scale, 1e-8);
-                        for e in 0..n {
-                            close(&format!("{name} d2tau {j} {e} {d}"), ddt[j * NJ + e], t.d2_tau[j][e][d], scale, 1e-8);
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn link_frames_are_rotations_that_move_with_their_link() {
-        // R_k orthonormal, and o_k + R_k x is a point of link k: its rate is z_a × (p − o_a).
-        for (name, model) in models() {
-            let n = model.n_joints();
-            let q = config(n, 5);
-            let q = &q[..n];
-            let chain = Chain::of(&model, q);
-            let x = [0.3, -0.2, 0.7];
-            let point = |c: &Chain, k: usize| {
-                let r = &c.rotations[k];
-                let w = [dot(&r[0], &x), dot(&r[1], &x), dot(&r[2], &x)];
-                [c.ends[k][0] + w[0], c.ends[k][1] + w[1], c.ends[k][2] + w[2]]
-            };
-            for k in 0..n {
-                let r = &chain.rotations[k];
-                for a in 0..3 {
-                    for b in 0..3 {
-                        let rtr: f64 = (0..3).map(|i| r[i][a] * r[i][b]).sum();
-                        assert!((rtr - if a == b { 1.0 } else { 0.0 }).abs() < 1e-12, "{name} R_{k}");
-                    }
-                }
-                for d in 0..n {
-                    let rate = fd(q, d, 1e-6, |y| point(&Chain::of(&model, y), k));
-                    let exact = if d <= k { chain.point_rate(d, &point(&chain, k)) } else { ZERO };
-                    for c in 0..3 {
-                        close(&format!("{name} point of link {k} along q{d}"), rate[c], exact[c], 1.0, 1e-8);
                     }
                 }
             }

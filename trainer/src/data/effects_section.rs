@@ -300,3 +300,89 @@ pub fn list(values: &[f64]) -> String {
     let items: Vec<String> = values.iter().map(|v| format!("{v:?}")).collect();
     format!("[{}]", items.join(", "))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cbd_protocol::NominalModel;
+
+    /// The sections of a model file, as `model_file` reads them.
+    #[derive(Debug, Deserialize)]
+    struct Sections {
+        gravity: Option<RawGravity>,
+        #[serde(default)]
+        effects: Vec<RawEffect>,
+    }
+
+    fn six() -> NominalModel {
+        NominalModel::DhChain(crate::simulate::six_joint::ur5_nominal())
+    }
+
+    fn read(text: &str, nominal: &NominalModel, rad_per_unit: f64) -> Result<NominalModel, String> {
+        let sections: Sections = toml::from_str(text).map_err(|e| e.to_string())?;
+        let mut out = nominal.clone();
+        apply(sections.gravity.as_ref(), &sections.effects, rad_per_unit, &mut out)?;
+        Ok(out)
+    }
+
+    #[test]
+    fn link_moments_round_trip_in_the_files_units() {
+        let deg = std::f64::consts::PI / 180.0;
+        let mut model = six();
+        model.effects_mut().list = heapless::Vec::from_slice(&[
+            Effect::Transmission { joint: 3, harmonic: 1, cos: 1e-3, sin: -2e-3 },
+            Effect::GravityMoment { joint: 1, link: 2, mass: 3e-7, first_moment: [4.5e-5, 0.0, -1.2e-5] },
+            Effect::GravityMoment { joint: 1, link: 5, mass: -1e-8, first_moment: [0.0, 2e-6, 0.0] },
+        ])
+        .unwrap();
+        for rad_per_unit in [1.0, deg] {
+            let text = write(&model, rad_per_unit);
+            assert!(text.contains("[[gravity.link_moments]]\njoint = 2\nlink = 3\n"), "{text}");
+            let back = read(&text, &six(), rad_per_unit).unwrap();
+            // Same effects (moments listed after [[effects]] on reading), values to rounding.
+            let (a, b) = (&model.effects().list, &back.effects().list);
+            assert_eq!(a.len(), b.len(), "{text}");
+            for e in a.iter() {
+                let found = b.iter().any(|f| match (e, f) {
+                    (
+                        Effect::GravityMoment { joint, link, mass, first_moment },
+                        Effect::GravityMoment { joint: j, link: l, mass: m, first_moment: s },
+                    ) => {
+                        joint == j
+                            && link == l
+                            && (mass - m).abs() <= 1e-15 * mass.abs()
+                            && first_moment.iter().zip(s).all(|(x, y)| (x - y).abs() <= 1e-15 * x.abs())
+                    }
+                    (Effect::Transmission { cos, sin, .. }, Effect::Transmission { cos: c, sin: s, .. }) => {
+                        (cos - c).abs() <= 1e-15 * cos.abs() && (sin - s).abs() <= 1e-15 * sin.abs()
+                    }
+                    _ => false,
+                });
+                assert!(found, "{e:?} not read back from\n{text}");
+            }
+            // In degrees the file holds c·m with c = 1 degree per mass·mm: 180/π times the radian value.
+            if rad_per_unit != 1.0 {
+                assert!(text.contains(&format!("mass = {:?}", 3e-7 / deg)), "{text}");
+            }
+        }
+    }
+
+    #[test]
+    fn bad_link_moments_are_errors_naming_the_entry_and_field() {
+        let entry = |body: &str| format!("[gravity]\ndirection = [0, 0, -1]\n\n[[gravity.link_moments]]\n{body}\n");
+        let cases = [
+            ("joint = 0\nlink = 2\nmass = 1\nfirst_moment = [0, 0, 0]", "entry 1: joint = 0, the model has 6"),
+            ("joint = 2\nlink = 7\nmass = 1\nfirst_moment = [0, 0, 0]", "entry 1: link = 7, the model has 6"),
+            ("joint = 3\nlink = 2\nmass = 1\nfirst_moment = [0, 0, 0]", "entry 1: link = 2 is before joint = 3"),
+            ("joint = 2\nlink = 3\nmass = 1\nfirst_moment = [0, 0]", "entry 1: first_moment has 2 entries; this model needs 3"),
+            ("joint = 2\nlink = 3\nmass = nan\nfirst_moment = [0, 0, 0]", "[[gravity.link_moments]] entry 1: mass = NaN is not finite"),
+            ("joint = 2\nlink = 3\nmass = 1\nfirst_moment = [0, inf, 0]", "entry 1: first_moment = inf is not finite"),
+            ("joint = 2\nlink = 3\nmasses = 1\nfirst_moment = [0, 0, 0]", "unknown field `masses`"),
+        ];
+        for (body, needle) in cases {
+            let err = read(&entry(body), &six(), 1.0).unwrap_err();
+            assert!(err.contains(needle), "{body}: {err}");
+        }
+        assert!(read(&entry("joint = 2\nlink = 3\nmass = 1\nfirst_moment = [0, 0, 0]"), &six(), 1.0).is_ok());
+    }
+}
