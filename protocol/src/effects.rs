@@ -69,4 +69,23 @@ pub enum Effect {
     GravityCompliance { joint: u8, compliance: f64 },
     /// Tool point displaced by compliance · (g − (g·u) u), u the unit direction of link `link`.
     LinkBending { link: u8, compliance: f64 },
+    /// One link's share of a compliant joint's gravity deflection, from a physical mass model:
+    /// δ_j += ∂/∂q_j g·(mass·o_k(q) + R_k(q)·first_moment), k = `link` ≥ j = `joint`, o_k and R_k
+    /// the origin and rotation of link k's frame (the frame at its distal end: the DH frame after
+    /// joint k, or for a planar chain the link's end with x along the link). `mass` = c_j·m_k and
+    /// `first_moment` = c_j·m_k·r_k (r_k the centre of mass in link k's frame) are products with
+    /// the joint's compliance c_j; the gauge c_j = 1 (joint unit per mass·length unit) makes them
+    /// read as a mass and a first moment (mass × length) of the file's units. Per compliant
+    /// joint: each compliant joint carries its own set (format 4 and later).
+    GravityMoment { joint: u8, link: u8, mass: f64, first_moment: [f64; 3] },
+}
+
+impl Effect {
+    /// The first blob format version that can hold this effect.
+    pub const fn first_format(&self) -> u16 {
+        match self {
+            Effect::GravityMoment { .. } => 4,
+            _ => 2,
+        }
+    }
 }

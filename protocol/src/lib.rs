@@ -29,8 +29,11 @@ pub use validate::ModelError;
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
-pub const FORMAT_VERSION: u16 = 3;
-/// The oldest format this build reads (format 2 lacks the Hamiltonian momentum laws).
+/// Format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
+/// the same layout without it and load unchanged.
+pub const FORMAT_VERSION: u16 = 4;
+/// The oldest format this build reads (format 2 lacks the Hamiltonian momentum laws, formats 2
+/// and 3 the gravity moment effect).
 pub const OLDEST_FORMAT_VERSION: u16 = 2;
 /// Bytes before the payload: magic, version, payload length.
 pub const HEADER_LEN: usize = 10;
@@ -180,6 +183,12 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     if model.momentum_law.first_format() > version {
         // A format-2 blob cannot hold a later law: the bytes were not written by an encoder.
         return Err(DecodeError::Invalid(ModelError::OutOfRange { field: "momentum_law (not in this blob's format version)" }));
+    }
+    if model.nominal.effects().list.iter().any(|e| e.first_format() > version) {
+        // A format-3 blob cannot hold a gravity moment: the bytes were not written by an encoder.
+        return Err(DecodeError::Invalid(ModelError::OutOfRange {
+            field: "nominal.effects.list.GravityMoment (not in this blob's format version)",
+        }));
     }
     model.validate().map_err(DecodeError::Invalid)?;
     Ok(model)

@@ -57,7 +57,7 @@ fn every_single_bit_flip_is_rejected() {
             let err = decode(&bad).expect_err("a flipped bit must not load");
             let expected_kind = match byte {
                 0..=3 => matches!(err, DecodeError::BadMagic),
-                // A flip to another readable version (3 → 2) is caught by the checksum.
+                // A flip to another version is unsupported or, if readable, caught by the checksum.
                 4..=5 => matches!(err, DecodeError::UnsupportedVersion { .. } | DecodeError::ChecksumMismatch { .. }),
                 6..=9 => matches!(err, DecodeError::Truncated { .. } | DecodeError::TrailingBytes { .. }),
                 _ => matches!(err, DecodeError::ChecksumMismatch { .. }),
@@ -281,4 +281,66 @@ fn the_flow_kernel_carries_the_laws_sign_exactly() {
     assert_eq!(k.for_flow(MomentumLaw::WithDivergence), k);
     assert_eq!(k.for_flow(MomentumLaw::Hamiltonian).gamma.to_bits(), (-8.0f64).to_bits());
     assert!(MomentumLaw::Hamiltonian.has_divergence() && !MomentumLaw::HamiltonianWithoutDivergence.has_divergence());
+}
+
+fn with_gravity_moment<'a>(p: &'a [u8], m: &'a [u8]) -> Model<'a> {
+    let mut model = sample_model(p, m);
+    let effects = model.nominal.effects_mut();
+    effects.list.push(Effect::GravityCompliance { joint: 0, compliance: 2e-3 }).unwrap();
+    effects.list.push(Effect::GravityMoment { joint: 0, link: 1, mass: 0.8, first_moment: [-0.1, 0.02, 0.0] }).unwrap();
+    model
+}
+
+#[test]
+fn format_3_blobs_still_load_and_cannot_hold_a_gravity_moment() {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
+    // A format-3 blob with the format-3 effects (point-mass gravity) reads as the same model.
+    let mut old = sample_model(&p, &m);
+    old.nominal.effects_mut().list.push(Effect::GravityCompliance { joint: 1, compliance: 1e-3 }).unwrap();
+    assert_eq!(decode(&framed(&old, 3)), Ok(old.clone()));
+    // Format 4 holds the moments and round-trips them; a format-3 header on the same bytes is refused.
+    let model = with_gravity_moment(&p, &m);
+    let mut buf = [0u8; 2048];
+    let len = encode(&model, &mut buf).unwrap();
+    assert_eq!(u16::from_le_bytes([buf[4], buf[5]]), 4);
+    assert_eq!(decode(&buf[..len]), Ok(model.clone()));
+    assert_eq!(
+        decode(&framed(&model, 3)),
+        Err(DecodeError::Invalid(ModelError::OutOfRange {
+            field: "nominal.effects.list.GravityMoment (not in this blob's format version)"
+        }))
+    );
+}
+
+#[test]
+fn an_invalid_gravity_moment_is_named() {
+    let bad = |e: Effect| {
+        let mut effects = effects_of(&[]);
+        effects.list.push(e).unwrap();
+        effects.validate(2)
+    };
+    let at = |field: &'static str| Err(ModelError::OutOfRangeAt { field, index: 0 });
+    assert_eq!(
+        bad(Effect::GravityMoment { joint: 2, link: 1, mass: 1.0, first_moment: [0.0; 3] }),
+        at("nominal.effects.list.GravityMoment.joint")
+    );
+    assert_eq!(
+        bad(Effect::GravityMoment { joint: 0, link: 2, mass: 1.0, first_moment: [0.0; 3] }),
+        at("nominal.effects.list.GravityMoment.link")
+    );
+    assert_eq!(
+        bad(Effect::GravityMoment { joint: 1, link: 0, mass: 1.0, first_moment: [0.0; 3] }),
+        at("nominal.effects.list.GravityMoment.link (before its joint)")
+    );
+    assert_eq!(
+        bad(Effect::GravityMoment { joint: 0, link: 1, mass: f64::NAN, first_moment: [0.0; 3] }),
+        Err(ModelError::NonFinite { field: "nominal.effects.list.GravityMoment.mass", index: 0 })
+    );
+    assert_eq!(
+        bad(Effect::GravityMoment { joint: 0, link: 1, mass: 1.0, first_moment: [0.0, f64::INFINITY, 0.0] }),
+        Err(ModelError::NonFinite { field: "nominal.effects.list.GravityMoment.first_moment", index: 0 })
+    );
+    // Negative products are allowed (c_j may be of either sign; only the product is identified).
+    assert_eq!(bad(Effect::GravityMoment { joint: 0, link: 0, mass: -1.0, first_moment: [0.1, 0.0, -0.2] }), Ok(()));
 }

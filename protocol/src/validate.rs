@@ -108,6 +108,21 @@ impl Effects {
                     in_range("nominal.effects.list.LinkBending.link", link)?;
                     value("nominal.effects.list.LinkBending.compliance", compliance)?;
                 }
+                Effect::GravityMoment { joint, link, mass, first_moment } => {
+                    in_range("nominal.effects.list.GravityMoment.joint", joint)?;
+                    in_range("nominal.effects.list.GravityMoment.link", link)?;
+                    // A link before its joint adds no torque to it: an entry that means nothing.
+                    if link < joint {
+                        return Err(ModelError::OutOfRangeAt {
+                            field: "nominal.effects.list.GravityMoment.link (before its joint)",
+                            index,
+                        });
+                    }
+                    value("nominal.effects.list.GravityMoment.mass", mass)?;
+                    for v in first_moment {
+                        value("nominal.effects.list.GravityMoment.first_moment", v)?;
+                    }
+                }
             }
         }
         Ok(())

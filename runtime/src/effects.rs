@@ -22,98 +22,112 @@
 //! Everything is f64 through `libm`, with no fused multiply-add: host and firmware agree bit for
 //! bit. Out-of-range joint or link indices (rejected by validation) are ignored, never a panic.
 
+use crate::gravity::{gravity_of, one_link, point_masses};
+pub use crate::gravity::{gravity_terms, gravity_torques, GravityTerms};
 use crate::rigid::{dh_walk, Kinematics};
 use crate::rigid_derivatives::NominalHessian;
 use cbd_protocol::{DhChain, Effect, Effects, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
-type V3 = [f64; 3];
+pub(crate) type V3 = [f64; 3];
 
-const ZERO: V3 = [0.0; 3];
+pub(crate) const ZERO: V3 = [0.0; 3];
 
 #[inline(always)]
-fn cross(a: &V3, b: &V3) -> V3 {
+pub(crate) fn cross(a: &V3, b: &V3) -> V3 {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 #[inline(always)]
-fn dot(a: &V3, b: &V3) -> f64 {
+pub(crate) fn dot(a: &V3, b: &V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 #[inline(always)]
-fn sub(a: &V3, b: &V3) -> V3 {
+pub(crate) fn sub(a: &V3, b: &V3) -> V3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 #[inline(always)]
-fn scaled(a: &V3, s: f64) -> V3 {
+pub(crate) fn scaled(a: &V3, s: f64) -> V3 {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
 /// `acc += s·a`.
 #[inline(always)]
-fn add_scaled(acc: &mut V3, a: &V3, s: f64) {
+pub(crate) fn add_scaled(acc: &mut V3, a: &V3, s: f64) {
     for (o, v) in acc.iter_mut().zip(a.iter()) {
         *o += s * v;
     }
 }
 
 #[inline(always)]
-fn at<T: Copy + Default>(s: &[T], i: usize) -> T {
+pub(crate) fn at<T: Copy + Default>(s: &[T], i: usize) -> T {
     s.get(i).copied().unwrap_or_default()
 }
 
 #[inline(always)]
-fn at2<T: Copy + Default, const N: usize>(s: &[[T; N]], i: usize, j: usize) -> T {
+pub(crate) fn at2<T: Copy + Default, const N: usize>(s: &[[T; N]], i: usize, j: usize) -> T {
     s.get(i).and_then(|r| r.get(j)).copied().unwrap_or_default()
 }
 
 /// The three indices in ascending order.
 #[inline(always)]
-fn sorted3(i: usize, j: usize, k: usize) -> (usize, usize, usize) {
+pub(crate) fn sorted3(i: usize, j: usize, k: usize) -> (usize, usize, usize) {
     let (lo, hi) = (i.min(j), i.max(j));
     (lo.min(k), hi.min(k).max(lo), hi.max(k))
 }
 
 /// The rigid chain's geometry at one configuration, in the base frame.
 #[derive(Debug, Clone, Copy)]
-struct Chain {
-    n: usize,
+pub(crate) struct Chain {
+    pub n: usize,
     /// z_j: the unit axis of joint j.
-    axes: [V3; NJ],
+    pub axes: [V3; NJ],
     /// o_j: a point on axis j.
-    origins: [V3; NJ],
-    prismatic: [bool; NJ],
-    /// c_k: the distal end of link k.
-    ends: [V3; NJ],
+    pub origins: [V3; NJ],
+    pub prismatic: [bool; NJ],
+    /// c_k: the distal end of link k, the origin of link k's own frame.
+    pub ends: [V3; NJ],
+    /// R_k: the rotation of link k's own frame (rows), planar: x along the link, z the joint axis.
+    pub rotations: [[V3; 3]; NJ],
     /// The start of link 0 (base origin).
-    start: V3,
+    pub start: V3,
 }
 
 impl Chain {
     /// Planar: links from the origin, joints about z. DH: c_k the origin of frame k+1 after the
     /// full joint transform (standard and modified conventions), start the base origin.
-    fn of(model: &NominalModel, q: &[f64]) -> Chain {
-        let mut out = Chain { n: 0, axes: [ZERO; NJ], origins: [ZERO; NJ], prismatic: [false; NJ], ends: [ZERO; NJ], start: ZERO };
+    pub(crate) fn of(model: &NominalModel, q: &[f64]) -> Chain {
+        let mut out = Chain {
+            n: 0,
+            axes: [ZERO; NJ],
+            origins: [ZERO; NJ],
+            prismatic: [false; NJ],
+            ends: [ZERO; NJ],
+            rotations: [[ZERO; 3]; NJ],
+            start: ZERO,
+        };
         match model {
             NominalModel::PlanarChain { lengths, .. } => {
                 let (mut p, mut theta) = (ZERO, 0.0);
-                for ((((l, qk), axis), origin), end) in
-                    lengths.iter().zip(q).zip(out.axes.iter_mut()).zip(out.origins.iter_mut()).zip(out.ends.iter_mut())
-                {
+                let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut().zip(out.rotations.iter_mut()));
+                for ((l, qk), ((axis, origin), (end, rotation))) in lengths.iter().zip(q).zip(slots) {
                     *axis = [0.0, 0.0, 1.0];
                     *origin = p;
                     theta += qk;
-                    p[0] += l * libm::cos(theta);
-                    p[1] += l * libm::sin(theta);
+                    let (s, c) = (libm::sin(theta), libm::cos(theta));
+                    p[0] += l * c;
+                    p[1] += l * s;
                     *end = p;
+                    // R_k = Rz(q_1 + … + q_k)
+                    *rotation = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
                     out.n += 1;
                 }
             }
             NominalModel::DhChain(chain) => {
                 let walk = dh_walk(chain, q);
                 out.start = walk.start;
-                (out.axes, out.origins, out.ends) = (walk.axes, walk.origins, walk.ends);
+                (out.axes, out.origins, out.ends, out.rotations) = (walk.axes, walk.origins, walk.ends, walk.end_rotations);
                 for (prismatic, joint) in out.prismatic.iter_mut().zip(chain.joints.iter()).take(q.len()) {
                     *prismatic = joint.kind == JointKind::Prismatic;
                     out.n += 1;
@@ -125,7 +139,7 @@ impl Chain {
 
     /// ∂w/∂q_a of a vector w carried by the links after joint a: z_a × w, or 0 (prismatic).
     #[inline(always)]
-    fn carry(&self, a: usize, w: &V3) -> V3 {
+    pub(crate) fn carry(&self, a: usize, w: &V3) -> V3 {
         if at(&self.prismatic, a) {
             ZERO
         } else {
@@ -135,7 +149,7 @@ impl Chain {
 
     /// ∂c/∂q_a of a point c after joint a: z_a × (c − o_a), or z_a (prismatic).
     #[inline(always)]
-    fn point_rate(&self, a: usize, c: &V3) -> V3 {
+    pub(crate) fn point_rate(&self, a: usize, c: &V3) -> V3 {
         let z = at(&self.axes, a);
         if at(&self.prismatic, a) {
             z
@@ -146,7 +160,7 @@ impl Chain {
 
     /// `g·carry(a, w) = gz_a·w`: gz_a = g × z_a (revolute) or 0 (prismatic).
     #[inline(always)]
-    fn gravity_dual(&self, a: usize, g: &V3) -> V3 {
+    pub(crate) fn gravity_dual(&self, a: usize, g: &V3) -> V3 {
         if at(&self.prismatic, a) {
             ZERO
         } else {
@@ -156,7 +170,7 @@ impl Chain {
 }
 
 /// The gravity vector the chain sees: planar chains use the first two entries.
-fn gravity_vector(model: &NominalModel, gravity: &GravityModel) -> V3 {
+pub(crate) fn gravity_vector(model: &NominalModel, gravity: &GravityModel) -> V3 {
     let [x, y, z] = gravity.direction;
     match model {
         NominalModel::PlanarChain { .. } => [x, y, 0.0],
@@ -170,84 +184,6 @@ pub enum Order {
     Value,
     First,
     Second,
-}
-
-/// The gravity torques τ = ∇V and their derivatives (V(q) = Σ_k m_k g·c_k(q)), joint order.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GravityTerms {
-    /// τ_j = ∂V/∂q_j.
-    pub tau: [f64; NJ],
-    /// `[j][e]`: ∂²V/∂q_j∂q_e (order ≥ `First`).
-    pub d_tau: [[f64; NJ]; NJ],
-    /// `[j][e][d]`: ∂³V/∂q_j∂q_e∂q_d (order `Second`).
-    pub d2_tau: [[[f64; NJ]; NJ]; NJ],
-}
-
-impl GravityTerms {
-    const ZERO: GravityTerms = GravityTerms { tau: [0.0; NJ], d_tau: [[0.0; NJ]; NJ], d2_tau: [[[0.0; NJ]; NJ]; NJ] };
-}
-
-fn gravity_of(chain: &Chain, g: &V3, masses: &[f64], order: Order) -> GravityTerms {
-    let n = chain.n;
-    let mut out = GravityTerms::ZERO;
-    // col_c = Σ_{k ≥ c} m_k ∂c_k/∂q_c: what joint c does to the weighted link ends (V's gradient is g·col).
-    let mut col = [ZERO; NJ];
-    for (c, col_c) in col.iter_mut().enumerate().take(n) {
-        for (k, end) in chain.ends.iter().enumerate().take(n).skip(c) {
-            let m_k = masses.get(k).copied().unwrap_or(1.0);
-            add_scaled(col_c, &chain.point_rate(c, end), m_k);
-        }
-    }
-    // τ_c = ∂V/∂q_c = g·col_c
-    for (t, col_c) in out.tau.iter_mut().zip(col.iter()).take(n) {
-        *t = dot(g, col_c);
-    }
-    if order == Order::Value {
-        return out;
-    }
-    let mut dual = [ZERO; NJ];
-    for (a, d) in dual.iter_mut().enumerate().take(n) {
-        *d = chain.gravity_dual(a, g);
-    }
-    // ∂²V/∂q_a∂q_b = g·(z_a × col_b) = gz_a·col_b for a ≤ b
-    for (j, row) in out.d_tau.iter_mut().enumerate().take(n) {
-        for (e, v) in row.iter_mut().enumerate().take(n) {
-            let (a, b) = (j.min(e), j.max(e));
-            *v = dot(&at(&dual, a), &at(&col, b));
-        }
-    }
-    if order == Order::First {
-        return out;
-    }
-    // carried[b][c] = ∂col_c/∂q_b = z_b × col_c for b ≤ c (prismatic b: 0)
-    let mut carried = [[ZERO; NJ]; NJ];
-    for (b, row) in carried.iter_mut().enumerate().take(n) {
-        for (c, v) in row.iter_mut().enumerate().take(n).skip(b) {
-            *v = chain.carry(b, &at(&col, c));
-        }
-    }
-    // ∂³V/∂q_a∂q_b∂q_c = g·(z_a × (z_b × col_c)) = gz_a·carried[b][c] for sorted a ≤ b ≤ c
-    for (i, plane) in out.d2_tau.iter_mut().enumerate().take(n) {
-        for (j, row) in plane.iter_mut().enumerate().take(n) {
-            for (k, v) in row.iter_mut().enumerate().take(n) {
-                let (a, b, c) = sorted3(i, j, k);
-                *v = dot(&at(&dual, a), &at2(&carried, b, c));
-            }
-        }
-    }
-    out
-}
-
-/// Gravity torques τ_j(q) = ∂V/∂q_j of the rigid chain of `model` under its gravity/mass model,
-/// and (with `order`) their first and second derivatives.
-pub fn gravity_terms(model: &NominalModel, q: &[f64], order: Order) -> GravityTerms {
-    let gravity = &model.effects().gravity;
-    gravity_of(&Chain::of(model, q), &gravity_vector(model, gravity), &gravity.link_masses, order)
-}
-
-/// τ_j(q) = ∂V/∂q_j, V(q) = Σ_k m_k g·c_k(q): the gravity torques of the rigid chain of `model`.
-pub fn gravity_torques(model: &NominalModel, q: &[f64]) -> [f64; NJ] {
-    gravity_terms(model, q, Order::Value).tau
 }
 
 /// δ(q), b(q) and their derivatives for a list of effects.
@@ -355,12 +291,13 @@ fn add_bending(chain: &Chain, g: &V3, link: usize, compliance: f64, order: Order
 pub fn effect_terms(model: &NominalModel, effects: &[Effect], q: &[f64], order: Order) -> EffectTerms {
     let mut out = EffectTerms::ZERO;
     let n = model.n_joints().min(q.len()).min(NJ);
-    let needs_chain = effects.iter().any(|e| matches!(e, Effect::GravityCompliance { .. } | Effect::LinkBending { .. }));
+    let needs_chain =
+        effects.iter().any(|e| matches!(e, Effect::GravityCompliance { .. } | Effect::LinkBending { .. } | Effect::GravityMoment { .. }));
     let chain = if needs_chain { Chain::of(model, q) } else { Chain::of(model, &[]) };
     let gravity = &model.effects().gravity;
     let g = gravity_vector(model, gravity);
     let gravity_terms = if effects.iter().any(|e| matches!(e, Effect::GravityCompliance { .. })) {
-        gravity_of(&chain, &g, &gravity.link_masses, order)
+        gravity_of(&chain, &g, point_masses(gravity), order)
     } else {
         GravityTerms::ZERO
     };
@@ -405,29 +342,45 @@ pub fn effect_terms(model: &NominalModel, effects: &[Effect], q: &[f64], order: 
                 if j >= n {
                     continue;
                 }
-                // δ_j = κ τ_j, ∂δ_j = κ ∂τ_j, ∂²δ_j = κ ∂²τ_j
-                if let Some(delta) = out.delta.get_mut(j) {
-                    *delta += compliance * at(&gravity_terms.tau, j);
-                }
-                if let (Some(dst), Some(src)) = (out.d_delta.get_mut(j), gravity_terms.d_tau.get(j)) {
-                    for (o, t) in dst.iter_mut().zip(src.iter()) {
-                        *o += compliance * t;
-                    }
-                }
-                if order == Order::Second {
-                    if let (Some(dst), Some(src)) = (out.d2_delta.get_mut(j), gravity_terms.d2_tau.get(j)) {
-                        for (o_row, t_row) in dst.iter_mut().zip(src.iter()) {
-                            for (o, t) in o_row.iter_mut().zip(t_row.iter()) {
-                                *o += compliance * t;
-                            }
-                        }
-                    }
-                }
+                add_gravity_row(&mut out, &gravity_terms, j, compliance, order);
             }
             Effect::LinkBending { link, compliance } => add_bending(&chain, &g, link as usize, compliance, order, &mut out),
+            Effect::GravityMoment { joint, link, mass, first_moment } => {
+                let j = joint as usize;
+                if j >= n {
+                    continue;
+                }
+                // δ_j += ∂_j g·(m o_k + R_k s), its derivatives likewise (compliance 1: the gauge)
+                let t = gravity_of(&chain, &g, one_link(link as usize, mass, first_moment), order);
+                add_gravity_row(&mut out, &t, j, 1.0, order);
+            }
         }
     }
     out
+}
+
+/// δ_j += κ τ_j, ∂δ_j += κ ∂τ_j, ∂²δ_j += κ ∂²τ_j.
+fn add_gravity_row(out: &mut EffectTerms, terms: &GravityTerms, j: usize, compliance: f64, order: Order) {
+    if let Some(delta) = out.delta.get_mut(j) {
+        *delta += compliance * at(&terms.tau, j);
+    }
+    if order == Order::Value {
+        return;
+    }
+    if let (Some(dst), Some(src)) = (out.d_delta.get_mut(j), terms.d_tau.get(j)) {
+        for (o, t) in dst.iter_mut().zip(src.iter()) {
+            *o += compliance * t;
+        }
+    }
+    if order == Order::Second {
+        if let (Some(dst), Some(src)) = (out.d2_delta.get_mut(j), terms.d2_tau.get(j)) {
+            for (o_row, t_row) in dst.iter_mut().zip(src.iter()) {
+                for (o, t) in o_row.iter_mut().zip(t_row.iter()) {
+                    *o += compliance * t;
+                }
+            }
+        }
+    }
 }
 
 /// `model`'s chain without its effects.
@@ -541,7 +494,7 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 
 #[cfg(test)]
 #[allow(clippy::needless_range_loop)]
-mod tests {
+pub(crate) mod tests {
     extern crate std;
     use super::*;
     use crate::nominal::forward_kinematics;
@@ -559,6 +512,8 @@ mod tests {
             list.push(Effect::Transmission { joint: j, harmonic: 1 + j % 3, cos: 0.02 / f, sin: -0.015 }).unwrap();
             list.push(Effect::GravityCompliance { joint: j, compliance: 0.03 / f }).unwrap();
             list.push(Effect::LinkBending { link: j, compliance: 0.02 * f }).unwrap();
+            let link = (j + 1).min(n as u8 - 1);
+            list.push(Effect::GravityMoment { joint: j, link, mass: 0.3 / f, first_moment: [0.05 * f, -0.02, 0.03] }).unwrap();
         }
         Effects { gravity, list }
     }
@@ -594,11 +549,11 @@ mod tests {
         })
     }
 
-    fn models() -> [(&'static str, NominalModel); 3] {
+    pub(crate) fn models() -> [(&'static str, NominalModel); 3] {
         [("rr", rr()), ("dh-standard", six(DhConvention::Standard)), ("dh-modified", six(DhConvention::Modified))]
     }
 
-    fn config(n: usize, seed: u64) -> [f64; NJ] {
+    pub(crate) fn config(n: usize, seed: u64) -> [f64; NJ] {
         let mut s = seed;
         let mut q = [0.0; NJ];
         for v in q.iter_mut().take(n) {
@@ -616,7 +571,7 @@ mod tests {
     }
 
     /// Central difference of `f` along joint d.
-    fn fd<const L: usize>(q: &[f64], d: usize, h: f64, f: impl Fn(&[f64]) -> [f64; L]) -> [f64; L] {
+    pub(crate) fn fd<const L: usize>(q: &[f64], d: usize, h: f64, f: impl Fn(&[f64]) -> [f64; L]) -> [f64; L] {
         let (mut a, mut b) = (q.to_vec(), q.to_vec());
         a[d] += h;
         b[d] -= h;
@@ -624,7 +579,7 @@ mod tests {
         core::array::from_fn(|i| (fa[i] - fb[i]) / (2.0 * h))
     }
 
-    fn close(what: &str, fd: f64, exact: f64, scale: f64, tol: f64) -> f64 {
+    pub(crate) fn close(what: &str, fd: f64, exact: f64, scale: f64, tol: f64) -> f64 {
         let err = (fd - exact).abs() / scale;
         assert!(err < tol, "{what}: fd {fd} vs {exact} (relative error {err:e})");
         err
@@ -730,6 +685,7 @@ mod tests {
                     Effect::EncoderScale { scale, .. } => *scale = 0.0,
                     Effect::Transmission { cos, sin, .. } => (*cos, *sin) = (0.0, 0.0),
                     Effect::GravityCompliance { compliance, .. } | Effect::LinkBending { compliance, .. } => *compliance = 0.0,
+                    Effect::GravityMoment { mass, first_moment, .. } => (*mass, *first_moment) = (0.0, [0.0; 3]),
                 }
             }
             let (a, b) = (forward_kinematics(&zero, q), forward_kinematics(&rigid, q));
@@ -754,7 +710,9 @@ mod tests {
                     sin
                 }),
                 (index.clone(), value.clone()).prop_map(|(joint, compliance)| Effect::GravityCompliance { joint, compliance }),
-                (index, value).prop_map(|(link, compliance)| Effect::LinkBending { link, compliance }),
+                (index.clone(), value.clone()).prop_map(|(link, compliance)| Effect::LinkBending { link, compliance }),
+                (index.clone(), index, value.clone(), prop::array::uniform3(value))
+                    .prop_map(|(joint, link, mass, first_moment)| { Effect::GravityMoment { joint, link, mass, first_moment } }),
             ]
         }
 

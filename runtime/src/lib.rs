@@ -14,6 +14,7 @@ pub mod calibrator;
 pub mod compensate;
 pub mod effects;
 pub mod flow;
+pub mod gravity;
 pub mod integrate;
 pub mod inverse_kinematics;
 pub mod kernel;

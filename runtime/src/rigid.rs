@@ -94,6 +94,8 @@ pub struct DhWalk {
     pub axes: [[f64; 3]; MAX_JOINTS],
     pub origins: [[f64; 3]; MAX_JOINTS],
     pub ends: [[f64; 3]; MAX_JOINTS],
+    /// Rotation (row-major rows) of the frame whose origin is `ends[i]`: link i's own frame.
+    pub end_rotations: [[[f64; 3]; 3]; MAX_JOINTS],
     /// The base origin (start of link 0).
     pub start: [f64; 3],
     /// The tool point.
@@ -110,11 +112,12 @@ pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
         axes: [[0.0; 3]; MAX_JOINTS],
         origins: [[0.0; 3]; MAX_JOINTS],
         ends: [[0.0; 3]; MAX_JOINTS],
+        end_rotations: [[[0.0; 3]; 3]; MAX_JOINTS],
         start: [frame[0][3], frame[1][3], frame[2][3]],
         tool: [0.0; 3],
     };
-    let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut());
-    for ((joint, x_i), ((axis, origin), end)) in chain.joints.iter().zip(x).zip(slots) {
+    let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut().zip(out.end_rotations.iter_mut()));
+    for ((joint, x_i), ((axis, origin), (end, rotation))) in chain.joints.iter().zip(x).zip(slots) {
         let (theta, d) = match joint.kind {
             JointKind::Revolute => (x_i + joint.theta_offset, joint.d),
             JointKind::Prismatic => (joint.theta_offset, x_i + joint.d),
@@ -136,6 +139,8 @@ pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
             }
         }
         *end = [frame[0][3], frame[1][3], frame[2][3]];
+        *rotation =
+            [[frame[0][0], frame[0][1], frame[0][2]], [frame[1][0], frame[1][1], frame[1][2]], [frame[2][0], frame[2][1], frame[2][2]]];
     }
     frame = compose(&frame, &frame_of(&chain.tool));
     out.tool = [frame[0][3], frame[1][3], frame[2][3]];

@@ -22,6 +22,9 @@ fn injected(e: &Effect) -> InjectedEffect {
         }
         Effect::GravityCompliance { joint, compliance } => InjectedEffect::GravityCompliance { joint: joint as usize, compliance },
         Effect::LinkBending { link, compliance } => InjectedEffect::LinkBending { link: link as usize, compliance },
+        Effect::GravityMoment { joint, link, mass, first_moment } => {
+            InjectedEffect::GravityMoment { joint: joint as usize, link: link as usize, mass, first_moment }
+        }
     }
 }
 
@@ -42,6 +45,14 @@ fn every_effect(n: usize, reach: f64, torque: f64) -> Vec<Effect> {
         list.push(Effect::Transmission { joint: j, harmonic: 1 + j % 4, cos: 2e-3 / f, sin: -1.5e-3 });
         list.push(Effect::GravityCompliance { joint: j, compliance: 3e-3 / (f * torque) });
         list.push(Effect::LinkBending { link: j, compliance: 1e-3 * reach / f });
+        // A link's mass off its end, felt by joint j: c·m and c·m·r with r ~ 0.1–0.3 reach.
+        let (link, mass) = ((j + 1).min(n as u8 - 1), 2e-3 / (f * torque));
+        list.push(Effect::GravityMoment {
+            joint: j,
+            link,
+            mass,
+            first_moment: [0.3 * mass * reach, -0.1 * mass * reach, 0.2 * mass * reach],
+        });
     }
     list
 }
@@ -145,11 +156,12 @@ fn runtime_matches_the_independent_simulator_for_every_effect_type() {
         let n = case.rigid.n_joints();
         let all = every_effect(n, case.reach, case.torque);
         // Each type alone (one per joint), then everything together.
-        let kinds: [(&str, fn(&Effect) -> bool); 4] = [
+        let kinds: [(&str, fn(&Effect) -> bool); 5] = [
             ("encoder scale", |e| matches!(e, Effect::EncoderScale { .. })),
             ("transmission", |e| matches!(e, Effect::Transmission { .. })),
             ("gravity compliance", |e| matches!(e, Effect::GravityCompliance { .. })),
             ("link bending", |e| matches!(e, Effect::LinkBending { .. })),
+            ("gravity moment", |e| matches!(e, Effect::GravityMoment { .. })),
         ];
         let mut report = Vec::new();
         for (kind, keep) in kinds {
@@ -322,7 +334,7 @@ fn six_joint_blobs_with_effects_have_exact_jacobians() {
             let blob = model_blob(nominal.clone(), 30, 0.02, integrator, 100.0);
             let mut storage = vec![0.0; 200_000];
             let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
-            assert_eq!(cal.model().nominal.effects().list.len(), 4 * n);
+            assert_eq!(cal.model().nominal.effects().list.len(), 5 * n);
             let queries: Vec<Vec<f64>> = case.configurations.chunks_exact(n).take(5).map(|q| q.to_vec()).collect();
             let exact = exact_jacobian_error(&mut cal, &queries, 1e-6);
             eprintln!("{} {integrator:?}: exact Jacobian vs finite differences {exact:.1e}", case.name);
@@ -400,11 +412,12 @@ fn random_effects_never_panic_in_the_calibrator() {
             let index = ((lcg(&mut s).abs() * (n as f64 + 1.5)) as u8).min(255);
             let value = lcg(&mut s) * 10f64.powf(6.0 * lcg(&mut s));
             let harmonic = (lcg(&mut s).abs() * 18.0) as u8;
-            list.push(match (lcg(&mut s).abs() * 4.0) as usize {
+            list.push(match (lcg(&mut s).abs() * 5.0) as usize {
                 0 => Effect::EncoderScale { joint: index, scale: value },
                 1 => Effect::Transmission { joint: index, harmonic, cos: value, sin: -value },
                 2 => Effect::GravityCompliance { joint: index, compliance: value },
-                _ => Effect::LinkBending { link: index, compliance: value },
+                3 => Effect::LinkBending { link: index, compliance: value },
+                _ => Effect::GravityMoment { joint: index, link: harmonic % 8, mass: value, first_moment: [-value, 0.5 * value, value] },
             });
         }
         let nominal = with_effects(&base, &list);

@@ -5,6 +5,9 @@
 //! Re-derive a figure with the project's own tools and `sha256sum`, e.g.
 //! `cbd demo --quiet --out rr.blob` or `cargo run -p cbd-fw-host -- make-blobs DIR`. SHA-256 from the
 //! `sha2` crate (RustCrypto).
+//! Format 4 (the gravity moment effect) changed every blob's header and checksum, not its
+//! payload: each pin is checked twice, as written and re-framed as format 3 against the pin
+//! recorded before the bump (except the six-joint effects blob, which gained two moments).
 //! The firmware blobs are built with integer and exactly rounded arithmetic only (the same bytes on
 //! every machine); the trained blobs also depend on the floating-point kernels faer picks for the
 //! CPU, so a different SIMD level may legitimately change them: re-pin there, never here.
@@ -21,6 +24,30 @@ mod blobs;
 mod shared;
 
 const CBD: &str = env!("CARGO_BIN_EXE_cbd");
+
+/// `blob` re-framed as format 3 (version field 3, checksum recomputed). Format 4 only added an
+/// effect type, so a blob without it has the payload format 3 had: re-framed, it must hash to the
+/// pin recorded before the version bump — the payload bytes did not change, only the header.
+fn as_format_3(blob: &[u8]) -> Vec<u8> {
+    let mut out = blob.to_vec();
+    out[4..6].copy_from_slice(&3u16.to_le_bytes());
+    let end = out.len() - 4;
+    let crc = crc32_iso_hdlc(&out[..end]);
+    out[end..].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// CRC-32 (ISO-HDLC: reflected, polynomial 0xEDB88320, initial and final XOR 0xFFFFFFFF), bit by bit.
+fn crc32_iso_hdlc(bytes: &[u8]) -> u32 {
+    let mut crc = u32::MAX;
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
 
 /// SHA-256, lower-case hex, as `sha256sum` prints it.
 fn sha256_hex(bytes: &[u8]) -> String {
@@ -63,7 +90,8 @@ fn demo_blob_is_unchanged() {
     }
     // The blob is written before the test configurations are evaluated: their count does not enter it.
     let blob = cbd_blob("demo", &["demo", "--quiet", "--test-points", "1"]);
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (8334, "8672f4262492ad09f55712277d16d36e8c3820f4109ff7154b5344efe0bb9b08"));
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (8334, "64681780d2914adca9e7c50569e033312724f51aabe0265faf3cfbe4abc94820"));
+    assert_eq!(sha256_hex(&as_format_3(&blob)), "8672f4262492ad09f55712277d16d36e8c3820f4109ff7154b5344efe0bb9b08", "payload changed");
 }
 
 #[test]
@@ -74,21 +102,57 @@ fn ur5_example_blob_is_unchanged() {
     let ur5 = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5");
     let (model, data) = (format!("{ur5}/ur5.toml"), format!("{ur5}/train.csv"));
     let blob = cbd_blob("ur5", &["fit", "--quiet", "--model", &model, "--data", &data]);
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (72555, "879b3d13b2d7939b65485ab5dcd384f1b9a5cd1e159422046ddc2fc5450b4153"));
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (72555, "f39495e9889128381c93cb5359e16d637aa660fc94db01987fd22f2ac11d057c"));
+    assert_eq!(sha256_hex(&as_format_3(&blob)), "879b3d13b2d7939b65485ab5dcd384f1b9a5cd1e159422046ddc2fc5450b4153", "payload changed");
 }
 
 #[test]
 fn firmware_blobs_are_unchanged() {
     use blobs::*;
+    // (name, blob, length, SHA-256 as format 4, SHA-256 of the format-3 pin when the payload is unchanged).
     let pins = [
-        ("rr", rr_reference_blob(), 8334, "b270e30005e24193844ca2f85f1a101941b6d63cbf9b50ca390e8dd2b4709eb9"),
-        ("six", six_joint_blob(), 5160, "63ccae97ebe5fd9b327ac95aea5bed01a7949acd39f4824f9f2f7761a2d27e14"),
-        ("six-effects", six_effects_blob(), 5335, "fa3f5634e8bfeedc64e5309282994e4531bc14a0c397e804f50d268e0b546af5"),
-        ("rr64", rr_grid_blob(8, 0x0000_0064, DEMO_SCHEME), 2189, "d8f5ff2054e2f5dd6862b05b52dec1b631a919c4d0ee6254f84e4b966ba1483b"),
-        ("rr256", rr_grid_blob(16, 0x0000_0100, DEMO_SCHEME), 8334, "e66481bb34d8bbebd97169ddb459039e8cb5fc7a8c1adf2aa4ec0f4561b3d044"),
-        ("rr1024", rr_grid_blob(32, 0x0000_0400, DEMO_SCHEME), 32912, "a5e7fef82e51146408ada6c79dfe043bd8343d44457b8d6189c5fdbc9d59d81f"),
+        (
+            "rr",
+            rr_reference_blob(),
+            8334,
+            "f1d2ea3c38d102ca909ef22ea0be47ff8f7ba6669a3278e804d3dde8f342b7ed",
+            Some("b270e30005e24193844ca2f85f1a101941b6d63cbf9b50ca390e8dd2b4709eb9"),
+        ),
+        (
+            "six",
+            six_joint_blob(),
+            5160,
+            "1a97d2734e8320d69ab56db43a332180409062b2c99a28a1c664e9547f60241c",
+            Some("63ccae97ebe5fd9b327ac95aea5bed01a7949acd39f4824f9f2f7761a2d27e14"),
+        ),
+        // Two gravity moments added (format 4): 70 bytes more, a new payload.
+        ("six-effects", six_effects_blob(), 5405, "f9994400966c5e7d8808e9396cf2757cbadbdd7166a589a233ce539bf84b4e38", None),
+        (
+            "rr64",
+            rr_grid_blob(8, 0x0000_0064, DEMO_SCHEME),
+            2189,
+            "fc2bae02640de9a8a498754399e253d937366334e2cae8febc5726765f13ba39",
+            Some("d8f5ff2054e2f5dd6862b05b52dec1b631a919c4d0ee6254f84e4b966ba1483b"),
+        ),
+        (
+            "rr256",
+            rr_grid_blob(16, 0x0000_0100, DEMO_SCHEME),
+            8334,
+            "a5c3e46651a80f6396eb68b6a42bbdd815eee53c629408cbae4f6a4525895470",
+            Some("e66481bb34d8bbebd97169ddb459039e8cb5fc7a8c1adf2aa4ec0f4561b3d044"),
+        ),
+        (
+            "rr1024",
+            rr_grid_blob(32, 0x0000_0400, DEMO_SCHEME),
+            32912,
+            "8a9e965dda1b6e47ca47489cf6eba0b3c39cef6645a85897de7c980b719ce767",
+            Some("a5e7fef82e51146408ada6c79dfe043bd8343d44457b8d6189c5fdbc9d59d81f"),
+        ),
     ];
-    for (name, blob, len, sha) in pins {
+    for (name, blob, len, sha, format_3) in pins {
         assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (len, sha), "firmware blob {name}");
+        if let Some(old) = format_3 {
+            assert_eq!(sha256_hex(&as_format_3(&blob)), old, "firmware blob {name}: payload changed");
+        }
     }
 }

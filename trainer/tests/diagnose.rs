@@ -88,19 +88,29 @@ fn gravity_compliance_of_one_joint_of_the_six_joint_arm() {
     assert_eq!(physical.len(), 1, "{}", summary(&d));
     let f = physical[0];
     assert_eq!((f.kind, f.joint), (GroupKind::GravityCompliance, Some(2)), "{}", summary(&d));
-    let p = &f.parameters[0];
-    assert!((p.value - 4e-7).abs() < 0.05 * 4e-7, "{} = {} ± {}", p.name, p.value, p.std_error);
+    // The deflection curve, not one moment (individual moments may be unidentifiable).
+    let gap = common::gravity_deflection_gap(&d, &arm, 2, &test.joints);
+    assert!(gap < 0.05, "deflection of q3 off by {:.1} % (rms): {}", 100.0 * gap, summary(&d));
     assert!(mean(&d, "nominal + effects") < 0.5 * mean(&d, "nominal + geometric"), "{}", summary(&d));
     assert!(!d.unexplained_structure, "{}", summary(&d));
 }
 
-/// Issue 14: every effect kept is significant (|estimate| ≥ 3 SE for a one-parameter group) and
-/// nothing stands in for what is not there — compliance on joint 2 and a first harmonic on joint 4,
-/// exactly those two, over five arms, seeds and noise draws, at two noise levels.
+/// UR5 link masses (kg) and centres of mass in the DH frame at each link's end (mm), as
+/// Universal Robots publish them: off the link ends, different per link.
+const UR5_MASSES: [f64; 6] = [3.7, 8.393, 2.275, 1.219, 1.219, 0.1879];
+const UR5_CENTRES: [[f64; 3]; 6] =
+    [[0.0, -25.61, 1.93], [212.5, 0.0, 113.36], [150.0, 0.0, 26.5], [0.0, -1.8, 16.34], [0.0, 1.8, 16.34], [0.0, 0.0, -1.159]];
+
+/// Issue 14: every effect kept is significant (|estimate| ≥ 3 SE for a one-parameter group, the
+/// group's Wald test for the gravity regressor) and nothing stands in for what is not there —
+/// compliance on joint 2 under the UR5's real mass distribution (centres of mass off the link
+/// ends, not the library's default) and a first harmonic on joint 4, exactly those two, over five
+/// arms, seeds and noise draws, at two noise levels; the gravity deflection curve within 5 %.
 #[test]
 fn six_joint_compliance_and_harmonic_are_named_and_nothing_else() {
     for (seed, noise) in (1..=5u64).flat_map(|s| [(s, 0.01), (s, 0.03)]) {
         let (nominal, arm) = six_arm(20 + seed);
+        let arm = arm.with_mass_distribution(&UR5_MASSES, &UR5_CENTRES);
         let arm = arm.with(InjectedEffect::GravityCompliance { joint: 1, compliance: 3e-7 }).with(InjectedEffect::Transmission {
             joint: 3,
             harmonic: 1,
@@ -126,8 +136,9 @@ fn six_joint_compliance_and_harmonic_are_named_and_nothing_else() {
                 assert!(p.value.abs() >= 3.0 * p.std_error, "seed {seed}: {} = {} ± {}", p.name, p.value, p.std_error);
             }
         }
-        let c = &d.physical_effects().iter().find(|f| f.kind == GroupKind::GravityCompliance).unwrap().parameters[0];
-        assert!((c.value - 3e-7).abs() < 0.05 * 3e-7, "seed {seed}: {} = {} ± {}", c.name, c.value, c.std_error);
+        let gap = common::gravity_deflection_gap(&d, &arm, 1, &test.joints);
+        eprintln!("seed {seed}: gravity deflection of q2 off by {:.2} % (rms over the held-out rows)", 100.0 * gap);
+        assert!(gap < 0.05, "seed {seed}: deflection of q2 off by {:.1} % (rms): {}", 100.0 * gap, summary(&d));
     }
 }
 
@@ -274,6 +285,8 @@ fn write_model_keeps_the_found_effect_for_fit_and_eval() {
         .arg(dir.join("test.csv"))
         .arg("--write-model")
         .arg(&written)
+        .arg("--json")
+        .arg(dir.join("diagnosis.json"))
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -281,14 +294,14 @@ fn write_model_keeps_the_found_effect_for_fit_and_eval() {
     let file = cbd_trainer::data::model_file::load_model_file(&written).unwrap();
     let effects = &file.nominal.effects().list;
     assert!(
-        effects.iter().any(|e| matches!(e, cbd_protocol::Effect::GravityCompliance { joint: 2, .. })),
+        effects.iter().any(|e| matches!(e, cbd_protocol::Effect::GravityMoment { joint: 2, .. })),
         "{effects:?}\n{}",
         std::fs::read_to_string(&written).unwrap()
     );
     // The written file keeps the measurement columns: it is a model file `fit` and `eval`
     // accept, and the blob carries the effect (CbD fitted on top of it).
     assert_eq!(file.measurements.as_ref().map(|m| m.joints.len()), Some(6));
-    let eval_mean = |model: &str, blob: &std::path::Path| -> f64 {
+    let eval_mean = |model: &str, blob: &std::path::Path| -> (f64, f64) {
         let fit = std::process::Command::new(cbd)
             .args(["fit", "--quiet", "--model", model, "--data"])
             .arg(dir.join("train.csv"))
@@ -309,10 +322,19 @@ fn write_model_keeps_the_found_effect_for_fit_and_eval() {
             .unwrap();
         assert!(eval.status.success(), "{}", String::from_utf8_lossy(&eval.stderr));
         let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-        v["calibrated"]["mean"].as_f64().unwrap_or_else(|| panic!("{v}"))
+        let mean = |row: &str| v[row]["mean"].as_f64().unwrap_or_else(|| panic!("{v}"));
+        (mean("calibrated"), mean("nominal"))
     };
-    let plain = eval_mean(model, &dir.join("plain.blob"));
-    let augmented = eval_mean(written.to_str().unwrap(), &dir.join("augmented.blob"));
+    let (plain, _) = eval_mean(model, &dir.join("plain.blob"));
+    let (augmented, written_nominal) = eval_mean(written.to_str().unwrap(), &dir.join("augmented.blob"));
+    // The written file round-trips: its nominal chain with the effects, read back and carried by
+    // the blob `fit` wrote, gives the held-out error the diagnosis reported for nominal + effects.
+    let diagnosis: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("diagnosis.json")).unwrap()).unwrap();
+    let diagnosed = diagnosis["held_out"]["nominal + effects"]["mean"].as_f64().unwrap();
+    assert!(
+        (written_nominal - diagnosed).abs() <= 1e-9 * diagnosed,
+        "written model {written_nominal} mm vs diagnosed nominal + effects {diagnosed} mm"
+    );
     let blob = std::fs::read(dir.join("augmented.blob")).unwrap();
     let decoded = cbd_protocol::decode(&blob).unwrap();
     assert_eq!(decoded.nominal.effects().list.as_slice(), effects.as_slice());

@@ -11,7 +11,7 @@ fn repo_file(name: &str) -> String {
     std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// EXIT_CODES.md once said "this build reads 1" when the build read 2 (now 2 to 3).
+/// EXIT_CODES.md once said "this build reads 1" when the build read 2 (now 2 to 4).
 #[test]
 fn exit_codes_version_message_is_what_this_build_prints() {
     let found = cbd_protocol::FORMAT_VERSION + 1;

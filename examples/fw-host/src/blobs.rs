@@ -64,9 +64,10 @@ pub fn six_joint_blob() -> Vec<u8> {
     six_joint_blob_with(cbd_protocol::Effects::NONE)
 }
 
-/// [`six_joint_blob`] with physical effects of all four types on the chain: encoder scale,
-/// transmission harmonics, gravity compliance (tilted gravity, UR5 link masses) and link bending,
-/// sized like a real arm's (joint deflections of about a milliradian, bending of 0.05–0.1 mm).
+/// [`six_joint_blob`] with physical effects of all five types on the chain: encoder scale,
+/// transmission harmonics, gravity compliance (tilted gravity, UR5 link masses), link bending and
+/// gravity moments (compliance-weighted masses off the link ends, format 4), sized like a real
+/// arm's (joint deflections of about a milliradian, bending of 0.05–0.1 mm).
 pub fn six_effects_blob() -> Vec<u8> {
     let (s, c) = (0.05f64, (1.0f64 - 0.05 * 0.05).sqrt());
     let gravity = GravityModel {
@@ -84,6 +85,8 @@ pub fn six_effects_blob() -> Vec<u8> {
         Effect::GravityCompliance { joint: 3, compliance: 3e-7 },
         Effect::LinkBending { link: 1, compliance: 0.1 },
         Effect::LinkBending { link: 2, compliance: 0.06 },
+        Effect::GravityMoment { joint: 1, link: 2, mass: 1e-6, first_moment: [2e-4, 0.0, 1e-4] },
+        Effect::GravityMoment { joint: 4, link: 5, mass: 1e-6, first_moment: [0.0, 3e-5, -2e-5] },
     ];
     six_joint_blob_with(Effects { gravity, list: heapless::Vec::from_slice(&list).expect("fits MAX_EFFECTS") })
 }

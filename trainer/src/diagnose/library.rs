@@ -32,6 +32,13 @@ pub enum Param {
     GravityCompliance {
         joint: usize,
     },
+    /// c_j·m_k (`component` 0) or c_j·s_k along x, y, z of link k's frame (1, 2, 3): one column of
+    /// compliant joint j's gravity regressor, ∂/∂q_j g·o_k or ∂/∂q_j g·R_k e_i (gauge c_j = 1).
+    GravityMoment {
+        joint: usize,
+        link: usize,
+        component: u8,
+    },
     LinkBending {
         link: usize,
     },
@@ -93,6 +100,10 @@ pub fn param_name(model: &NominalModel, p: &Param) -> String {
         Param::TransmissionCos { joint, harmonic } => format!("q{} h{harmonic} cos", joint + 1),
         Param::TransmissionSin { joint, harmonic } => format!("q{} h{harmonic} sin", joint + 1),
         Param::GravityCompliance { joint } => format!("compliance q{}", joint + 1),
+        Param::GravityMoment { joint, link, component: 0 } => format!("q{} link {} mass", joint + 1, link + 1),
+        Param::GravityMoment { joint, link, component } => {
+            format!("q{} link {} first moment {}", joint + 1, link + 1, ["x", "y", "z"][(component as usize - 1).min(2)])
+        }
         Param::LinkBending { link } => format!("bending link {}", link + 1),
     }
 }
@@ -153,7 +164,7 @@ pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions, m: usize
             name: format!("gravity compliance q{}", j + 1),
             kind: GroupKind::GravityCompliance,
             joint: Some(j),
-            params: vec![Param::GravityCompliance { joint: j }],
+            params: gravity_regressor(n, j, m),
         });
         groups.push(Group {
             name: format!("link bending {}", j + 1),
@@ -165,6 +176,14 @@ pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions, m: usize
     groups
 }
 
+/// Compliant joint j's gravity regressor as parameters: c_j·m_k and c_j·s_k for every link
+/// k ≥ j (in-plane data: the first moment's z component does nothing and is left out). Which
+/// combinations the data identify is decided on the Jacobian (`diagnose::usable_columns`).
+fn gravity_regressor(n: usize, j: usize, m: usize) -> Vec<Param> {
+    let components = if m < 3 { 3 } else { 4 };
+    (j..n).flat_map(|link| (0..components).map(move |component| Param::GravityMoment { joint: j, link, component })).collect()
+}
+
 /// The effect a non-geometric parameter stands for, with value `v`.
 fn effect_of(p: &Param, v: f64) -> Option<Effect> {
     Some(match *p {
@@ -173,6 +192,13 @@ fn effect_of(p: &Param, v: f64) -> Option<Effect> {
         Param::TransmissionCos { joint, harmonic } => Effect::Transmission { joint: joint as u8, harmonic, cos: v, sin: 0.0 },
         Param::TransmissionSin { joint, harmonic } => Effect::Transmission { joint: joint as u8, harmonic, cos: 0.0, sin: v },
         Param::GravityCompliance { joint } => Effect::GravityCompliance { joint: joint as u8, compliance: v },
+        Param::GravityMoment { joint, link, component } => {
+            let (mass, mut first_moment) = if component == 0 { (v, [0.0; 3]) } else { (0.0, [0.0; 3]) };
+            if let Some(s) = first_moment.get_mut((component as usize).wrapping_sub(1)) {
+                *s = v;
+            }
+            Effect::GravityMoment { joint: joint as u8, link: link as u8, mass, first_moment }
+        }
         Param::LinkBending { link } => Effect::LinkBending { link: link as u8, compliance: v },
     })
 }
@@ -198,6 +224,16 @@ fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>,
             }
             (Effect::LinkBending { link: a, compliance }, Effect::LinkBending { link: b, compliance: c }) if *a == b => {
                 *compliance += c;
+                return Ok(());
+            }
+            (
+                Effect::GravityMoment { joint: a, link: k, mass, first_moment },
+                Effect::GravityMoment { joint: b, link: l, mass: m, first_moment: s },
+            ) if *a == b && *k == l => {
+                *mass += m;
+                for (o, v) in first_moment.iter_mut().zip(s) {
+                    *o += v;
+                }
                 return Ok(());
             }
             _ => {}

@@ -215,9 +215,11 @@ fn judge(
     Some(DroppedEffect { group: g, name: String::new(), reason, p_value, cv_gain })
 }
 
-/// The first kept effect that is a function of one joint's angle alone (encoder scale,
-/// transmission) on a joint whose deflection the joint-shape test still finds structured after
-/// the refined effects: what the library names there is part of a shape it does not have.
+/// The first kept joint deflection (encoder scale, transmission, gravity compliance) on a joint
+/// whose deflection the joint-shape test still finds structured after the refined effects: what
+/// the library names there is part of a shape it does not have. (Gravity compliance too: its
+/// regressor holds the joint's own first harmonic and those of the links after it, flexible
+/// enough to take a share of a localized bump.)
 fn shape_outside_library(
     train: &Measurements,
     refined: &refine::Refined,
@@ -225,12 +227,13 @@ fn shape_outside_library(
     groups: &[Group],
     options: &StructureOptions,
 ) -> Option<DroppedEffect> {
-    let of_one_angle = |g: &usize| matches!(groups[*g].kind, GroupKind::EncoderScale | GroupKind::Transmission { .. });
-    if !kept.iter().any(of_one_angle) {
+    let is_joint_deflection =
+        |g: &usize| matches!(groups[*g].kind, GroupKind::EncoderScale | GroupKind::Transmission { .. } | GroupKind::GravityCompliance);
+    if !kept.iter().any(is_joint_deflection) {
         return None;
     }
     let tests = structure_tests(&refined.model, train, &residual(&refined.model, train), options);
-    kept.iter().filter(|g| of_one_angle(g)).find_map(|&g| {
+    kept.iter().filter(|g| is_joint_deflection(g)).find_map(|&g| {
         let shape = tests.iter().find(|t| t.family == "joint shape" && t.joint == groups[g].joint && t.significant)?;
         Some(DroppedEffect {
             group: g,
@@ -260,9 +263,10 @@ fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
     predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
-/// Columns of each group that enter the selection: geometric pruned to an identifiable set,
-/// other groups' columns kept when not (numerically) zero and not in the span of the
-/// identifiable geometric columns.
+/// Columns of each group that enter the selection: geometric pruned to an identifiable set, a
+/// gravity regressor pruned to the combinations identifiable beside the geometric columns, other
+/// groups' columns kept when not (numerically) zero and not in the span of the identifiable
+/// geometric columns.
 fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol: f64) -> Vec<Vec<usize>> {
     let norms: Vec<f64> = (0..jac.ncols()).map(|k| (0..jac.nrows()).map(|i| jac[(i, k)].powi(2)).sum::<f64>().sqrt()).collect();
     // A column of rounding noise (e.g. the gravity torque about a vertical axis) is zero:
@@ -283,6 +287,11 @@ fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol
             if group.kind == GroupKind::Geometric {
                 geometric = identifiable_columns(jac, &cols, tol);
                 geometric.clone()
+            } else if group.kind == GroupKind::GravityCompliance {
+                // The gravity regressor's identifiable combinations: the columns column-pivoted
+                // Gram–Schmidt keeps beside the geometric ones (the others are fitted as zero).
+                let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
+                identifiable_columns(jac, &with, tol).into_iter().filter(|c| cols.contains(c)).collect()
             } else {
                 let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
                 let kept = identifiable_columns(jac, &with, tol);

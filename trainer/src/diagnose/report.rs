@@ -24,6 +24,9 @@ fn unit_of(model: &NominalModel, p: &Param, units: &Units) -> String {
         Param::GravityCompliance { joint } if !model.is_revolute(*joint) => format!("{length}/(mass·{length})"),
         Param::GravityCompliance { .. } => format!("{angle}/(mass·{length})"),
         Param::LinkBending { .. } => length.into(),
+        // Products c_j·m_k, c_j·s_k in the gauge c_j = 1 (angle or length unit per mass·length).
+        Param::GravityMoment { component: 0, .. } => "mass".into(),
+        Param::GravityMoment { .. } => format!("mass·{length}"),
         _ => String::new(),
     }
 }
@@ -32,7 +35,7 @@ fn unit_of(model: &NominalModel, p: &Param, units: &Units) -> String {
 /// (a revolute joint's compliance), converted from radians.
 fn shown(model: &NominalModel, p: &Param, v: f64, units: &Units) -> f64 {
     let per_angle = match p {
-        Param::GravityCompliance { joint } => model.is_revolute(*joint),
+        Param::GravityCompliance { joint } | Param::GravityMoment { joint, .. } => model.is_revolute(*joint),
         _ => is_angle(model, p),
     };
     if per_angle {

@@ -6,7 +6,7 @@
 //!
 //! Augmented kinematics (as `cbd_protocol::effects` defines it): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
 
-use crate::nominal::{dh_frames, dot, norm, scale, sub};
+use crate::nominal::{dh_frames, dot, norm, scale, sub, Pose};
 use cbd_protocol::{GravityModel, NominalModel};
 use cbd_runtime::nominal::forward_kinematics;
 
@@ -17,8 +17,12 @@ pub enum InjectedEffect {
     EncoderScale { joint: usize, scale: f64 },
     /// δ_j += cos · cos(h q_j) + sin · sin(h q_j).
     Transmission { joint: usize, harmonic: u32, cos: f64, sin: f64 },
-    /// δ_j += compliance · τ_j(q), τ_j = ∂V/∂q_j with V(q) = Σ_k m_k g·c_k(q) (rigid chain at q).
+    /// δ_j += compliance · τ_j(q), τ_j = ∂V/∂q_j with V(q) = Σ_k m_k g·(o_k(q) + R_k(q) r_k) (rigid
+    /// chain at q; m_k the arm's link masses, r_k its centres of mass in the link frames, 0 = link end).
     GravityCompliance { joint: usize, compliance: f64 },
+    /// δ_j += ∂/∂q_j g·(mass·o_k(q) + R_k(q)·first_moment), k = `link`: one link's compliance-weighted
+    /// mass moments (`cbd_protocol::Effect::GravityMoment`).
+    GravityMoment { joint: usize, link: usize, mass: f64, first_moment: [f64; 3] },
     /// b += compliance · (g − (g·u_k) u_k), u_k the unit direction of link k (rigid chain at q).
     LinkBending { link: usize, compliance: f64 },
     /// Outside the library: task-space displacement `amplitude` · exp(−|q − centre|² / (2 width²))
@@ -40,6 +44,7 @@ impl InjectedEffect {
             InjectedEffect::EncoderScale { .. }
                 | InjectedEffect::Transmission { .. }
                 | InjectedEffect::GravityCompliance { .. }
+                | InjectedEffect::GravityMoment { .. }
                 | InjectedEffect::LinkBending { .. }
         )
     }
@@ -51,6 +56,9 @@ impl InjectedEffect {
 pub struct EffectArm {
     pub rigid: NominalModel,
     pub gravity: GravityModel,
+    /// r_k: centre of mass of link k in its own frame (the frame at its distal end); empty: every
+    /// centre at its link's end (the point-mass model).
+    pub centres_of_mass: Vec<[f64; 3]>,
     pub effects: Vec<InjectedEffect>,
 }
 
@@ -73,6 +81,28 @@ fn link_points(rigid: &NominalModel, q: &[f64]) -> Vec<[f64; 3]> {
     }
 }
 
+/// The frame of every link k = 0..n at its distal end: DH frames 1..n; planar: the link's end,
+/// rotated by q_1 + … + q_k about z (x along the link).
+fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Pose> {
+    match rigid {
+        NominalModel::DhChain(chain) => dh_frames(chain, q).into_iter().skip(1).take(chain.joints.len()).collect(),
+        NominalModel::PlanarChain { lengths, .. } => {
+            let (mut p, mut theta) = ([0.0; 3], 0.0);
+            lengths
+                .iter()
+                .zip(q)
+                .map(|(l, qk)| {
+                    theta += qk;
+                    p[0] += l * theta.cos();
+                    p[1] += l * theta.sin();
+                    let (s, c) = theta.sin_cos();
+                    Pose { r: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], t: p }
+                })
+                .collect()
+        }
+    }
+}
+
 fn gravity_vector(rigid: &NominalModel, gravity: &GravityModel) -> [f64; 3] {
     match rigid {
         NominalModel::PlanarChain { .. } => [gravity.direction[0], gravity.direction[1], 0.0],
@@ -90,19 +120,48 @@ fn gravity_potential(rigid: &NominalModel, gravity: &GravityModel, q: &[f64]) ->
     link_points(rigid, q).iter().skip(1).enumerate().map(|(k, c)| mass(gravity, k) * dot(g, *c)).sum()
 }
 
-/// τ_j(q) = ∂V/∂q_j by central differences (step 1e-6; V is smooth, error ~1e-12 relative).
-pub fn gravity_torques_numerical(rigid: &NominalModel, gravity: &GravityModel, q: &[f64]) -> Vec<f64> {
+/// V(q) = Σ_k g·(m_k o_k(q) + R_k(q) s_k) for the moments `moment(k) = (m_k, s_k)`.
+fn moment_potential(rigid: &NominalModel, gravity: &GravityModel, q: &[f64], moment: &dyn Fn(usize) -> (f64, [f64; 3])) -> f64 {
+    let g = gravity_vector(rigid, gravity);
+    link_frames(rigid, q)
+        .iter()
+        .enumerate()
+        .map(|(k, frame)| {
+            let (m, s) = moment(k);
+            m * dot(g, frame.t) + dot(g, frame.rotate(s))
+        })
+        .sum()
+}
+
+/// ∂f/∂q_j by central differences (step 1e-6; f is smooth, error ~1e-12 relative).
+fn gradient(q: &[f64], f: impl Fn(&[f64]) -> f64) -> Vec<f64> {
     let h = 1e-6;
     (0..q.len())
         .map(|j| {
             let mut qp = q.to_vec();
             qp[j] += h;
-            let vp = gravity_potential(rigid, gravity, &qp);
+            let vp = f(&qp);
             qp[j] -= 2.0 * h;
-            let vm = gravity_potential(rigid, gravity, &qp);
+            let vm = f(&qp);
             (vp - vm) / (2.0 * h)
         })
         .collect()
+}
+
+/// τ_j(q) = ∂V/∂q_j of the point masses by central differences.
+pub fn gravity_torques_numerical(rigid: &NominalModel, gravity: &GravityModel, q: &[f64]) -> Vec<f64> {
+    gradient(q, |x| gravity_potential(rigid, gravity, x))
+}
+
+/// τ_j(q) = ∂V/∂q_j of masses m_k (`gravity.link_masses`, 1 by default) with centres r_k in their
+/// link frames (s_k = m_k r_k), by central differences.
+pub fn gravity_torques_of_distribution(rigid: &NominalModel, gravity: &GravityModel, centres: &[[f64; 3]], q: &[f64]) -> Vec<f64> {
+    let moment = |k: usize| {
+        let m = mass(gravity, k);
+        let r = centres.get(k).copied().unwrap_or([0.0; 3]);
+        (m, [m * r[0], m * r[1], m * r[2]])
+    };
+    gradient(q, |x| moment_potential(rigid, gravity, x, &moment))
 }
 
 fn wrap(a: f64) -> f64 {
@@ -115,7 +174,23 @@ impl EffectArm {
         let gravity = rigid.effects().gravity.clone();
         let mut rigid = rigid;
         rigid.effects_mut().list.clear();
-        EffectArm { rigid, gravity, effects: Vec::new() }
+        EffectArm { rigid, gravity, centres_of_mass: Vec::new(), effects: Vec::new() }
+    }
+
+    /// The same arm with link masses `masses` whose centres are `centres` (link frames).
+    pub fn with_mass_distribution(mut self, masses: &[f64], centres: &[[f64; 3]]) -> EffectArm {
+        self.gravity.link_masses = heapless::Vec::from_slice(masses).expect("at most MAX_JOINTS links");
+        self.centres_of_mass = centres.to_vec();
+        self
+    }
+
+    /// τ(q) of the arm's mass distribution (rigid chain at q).
+    pub fn gravity_torques(&self, q: &[f64]) -> Vec<f64> {
+        if self.centres_of_mass.is_empty() {
+            gravity_torques_numerical(&self.rigid, &self.gravity, q)
+        } else {
+            gravity_torques_of_distribution(&self.rigid, &self.gravity, &self.centres_of_mass, q)
+        }
     }
 
     pub fn with(mut self, effect: InjectedEffect) -> EffectArm {
@@ -135,8 +210,12 @@ impl EffectArm {
                     delta[joint] += cos * hq.cos() + sin * hq.sin();
                 }
                 InjectedEffect::GravityCompliance { joint, compliance } => {
-                    let t = tau.get_or_insert_with(|| gravity_torques_numerical(&self.rigid, &self.gravity, q));
+                    let t = tau.get_or_insert_with(|| self.gravity_torques(q));
                     delta[joint] += compliance * t[joint];
+                }
+                InjectedEffect::GravityMoment { joint, link, mass, first_moment } => {
+                    let one = |k: usize| if k == link { (mass, first_moment) } else { (0.0, [0.0; 3]) };
+                    delta[joint] += gradient(q, |x| moment_potential(&self.rigid, &self.gravity, x, &one))[joint];
                 }
                 InjectedEffect::DeadZone { joint, width } => {
                     let v = q[joint];
