@@ -15,6 +15,7 @@ pub mod compensate;
 pub mod effects;
 pub mod flow;
 pub mod integrate;
+pub mod inverse_flow;
 pub mod inverse_kinematics;
 pub mod kernel;
 pub mod nominal;
