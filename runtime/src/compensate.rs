@@ -41,19 +41,22 @@ pub struct CompensateOptions {
 pub const NOMINAL_ITERATIONS: usize = 8;
 
 impl CompensateOptions {
-    /// The inverse-flow start and seven Gauss–Newton steps. Measured over 2000 reachable targets
-    /// (`steps_saved_by_the_inverse_flow_start` in tests/tests/compensate.rs): the start saves
-    /// about two steps on the bulk (p99 of the reference RR model below 1e-15 of the reach after
-    /// four steps, against 5e-8 from the nominal seed; six-joint models: three steps instead of
-    /// five), but the targets with the arm almost stretched out, where k1 folds, still need seven
-    /// (RR: 99.95 % within 1e-9 of the reach, 99.85 % with six, 99.35 % with two and a chord step).
-    /// M7 (dp) cost at N = 256: about 8.5 evaluations (BENCHMARKS.md "Compensation"). Tolerance 1e-9 of the model's task scale (the RMS radius of its training positions, a
+    /// Eight Gauss–Newton steps from the seed, the inverse-flow start off. Measured over 2000
+    /// reachable targets (`steps_saved_by_the_inverse_flow_start` in tests/tests/compensate.rs):
+    /// the start saves about two steps on the bulk (six-joint test models: 99.9 % within 1e-9 of
+    /// the reach after three steps instead of five), not in the fold band of the reference RR
+    /// model (arm almost stretched out: 99.95 % after seven steps from the start, 100 % after
+    /// eight from the seed); and on a trained model whose momenta cancel (the RR demo's evidence
+    /// kernels) ψ⁻¹ and φ alone are far from k1's inverse, so the start is worse than the seed
+    /// (`cbd-trainer commanded` RR: commanded error 1.24e-8 against forward 1.02e-8 with the
+    /// start and seven steps). M7 (dp) cost at N = 256: 8.6 evaluations (BENCHMARKS.md
+    /// "Compensation"). Tolerance 1e-9 of the model's task scale (the RMS radius of its training positions, a
     /// length of the arm's size); extrapolation below support 0.05 (as `cbd eval`); singular
     /// below conditioning 1e-6.
     pub fn for_model(cal: &Calibrator<'_>) -> CompensateOptions {
         CompensateOptions {
-            inverse_flow_start: true,
-            iterations: 7,
+            inverse_flow_start: false,
+            iterations: 8,
             start_corrections: 0,
             chord_steps: 0,
             tolerance: 1e-9 * cal.model.normalisation.task_scale,
@@ -204,7 +207,7 @@ impl<'a> Calibrator<'a> {
             }
         }
         // A residual that overflows (a target near f64::MAX) is never below another: `best` is
-        // then the seed with residual ∞, support and conditioning 0, flagged on every count.
+        // then the start with residual ∞, support and conditioning 0, flagged on every count.
         for (dst, v) in out.iter_mut().zip(best.q.iter()) {
             *dst = *v;
         }
