@@ -12,9 +12,21 @@ use nalgebra::{SMatrix, SVector};
 /// makes the cost depend on the data.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CompensateOptions {
-    /// Gauss–Newton steps. Cost: `iterations` evaluations with the exact Jacobian plus one
-    /// position-only evaluation ([`Calibrator::evaluate_transported`]) of the last iterate.
+    /// Start from the inverse flows, k1⁻¹ ≈ φ ∘ k0⁻¹ ∘ ψ⁻¹ ([`Calibrator::inverse_flow_start`]),
+    /// instead of the seed itself (the seed then picks the nominal inverse kinematics' branch).
+    pub inverse_flow_start: bool,
+    /// Gauss–Newton steps on the exact Jacobian Dk1, each after an evaluation with it.
     pub iterations: usize,
+    /// Corrections of the inverse-flow start before the Gauss–Newton steps (defect correction):
+    /// each evaluates k1 at the start (position only) and restarts the inverse flows from the
+    /// target moved by the miss, y ← y + (target − k1(start)). Near a fold (the arm almost
+    /// stretched) the nominal closed form inside it resolves the fold's square-root behaviour that
+    /// slows Newton there. Ignored without `inverse_flow_start`.
+    pub start_corrections: usize,
+    /// Chord steps after those: each reuses the last exact Jacobian and needs only a position
+    /// ([`Calibrator::evaluate_transported`]). Cost in all: `iterations` evaluations with the exact
+    /// Jacobian, `chord_steps + 1` position-only evaluations, and the start.
+    pub chord_steps: usize,
     /// Largest |k1(q) − target| (user units) counted as reached.
     pub tolerance: f64,
     /// Kernel support below which the command is flagged outside the calibrated region
@@ -24,15 +36,29 @@ pub struct CompensateOptions {
     pub singular_conditioning: f64,
 }
 
+/// Gauss–Newton steps of the nominal inverse kinematics inside [`Calibrator::inverse_flow_start`]
+/// (on k0 alone: cheap beside one evaluation of k1).
+pub const NOMINAL_ITERATIONS: usize = 8;
+
 impl CompensateOptions {
-    /// Eight steps (measured: with four, 1.4 % of reachable targets of the reference RR model,
-    /// those with the arm almost stretched out, where k1 folds, stay above 1e-9 of the reach; with
-    /// six 0.5 %; with eight none of 3000); tolerance 1e-9 of the model's task scale (the RMS radius of its training
-    /// positions, a length of the arm's size); extrapolation below support 0.05 (as `cbd eval`);
-    /// singular below conditioning 1e-6.
+    /// Eight Gauss–Newton steps from the seed, the inverse-flow start off. Measured over 2000
+    /// reachable targets (`steps_saved_by_the_inverse_flow_start` in tests/tests/compensate.rs):
+    /// the start saves about two steps on the bulk (six-joint test models: 99.9 % within 1e-9 of
+    /// the reach after three steps instead of five), not in the fold band of the reference RR
+    /// model (arm almost stretched out: 99.95 % after seven steps from the start, 100 % after
+    /// eight from the seed); and on a trained model whose momenta cancel (the RR demo's evidence
+    /// kernels) ψ⁻¹ and φ alone are far from k1's inverse, so the start is worse than the seed
+    /// (`cbd-trainer commanded` RR: commanded error 1.24e-8 against forward 1.02e-8 with the
+    /// start and seven steps). M7 (dp) cost at N = 256: 8.6 evaluations (BENCHMARKS.md
+    /// "Compensation"). Tolerance 1e-9 of the model's task scale (the RMS radius of its training positions, a
+    /// length of the arm's size); extrapolation below support 0.05 (as `cbd eval`); singular
+    /// below conditioning 1e-6.
     pub fn for_model(cal: &Calibrator<'_>) -> CompensateOptions {
         CompensateOptions {
+            inverse_flow_start: false,
             iterations: 8,
+            start_corrections: 0,
+            chord_steps: 0,
             tolerance: 1e-9 * cal.model.normalisation.task_scale,
             extrapolation_threshold: 0.05,
             singular_conditioning: 1e-6,
@@ -81,10 +107,12 @@ impl<'a> Calibrator<'a> {
         self.compensate_with(target, seed, out, &options)
     }
 
-    /// Writes to `out` the joint command q with k1(q) = `target`: `options.iterations` damped
-    /// minimum-norm Gauss–Newton steps ([`damped_min_norm_step`]) on the exact Jacobian Dk1 from
-    /// `seed`, q ← q + Dk1ᵀ (Dk1 Dk1ᵀ + λ² I)⁻¹ (target − k1(q)). With more joints than task
-    /// coordinates (n > m) each step is the minimum-norm one, so the command stays near the seed
+    /// Writes to `out` the joint command q with k1(q) = `target`: from the inverse-flow start
+    /// ([`Calibrator::inverse_flow_start`], `seed` choosing the nominal branch; the seed itself
+    /// without `options.inverse_flow_start` or when the start fails), `options.iterations` damped
+    /// minimum-norm Gauss–Newton steps ([`damped_min_norm_step`]) on the exact Jacobian Dk1 and
+    /// `options.chord_steps` with the last one, q ← q + Dk1ᵀ (Dk1 Dk1ᵀ + λ² I)⁻¹ (target − k1(q)).
+    /// With more joints than task coordinates (n > m) each step is the minimum-norm one, so the command stays near the seed
     /// (its orientation and branch). The iterate with the smallest residual is returned, with
     /// flags instead of an error when the target is not reached, Dk1 is singular there or the
     /// command lies outside the calibrated region.
@@ -120,35 +148,66 @@ impl<'a> Calibrator<'a> {
         }
         let target_v = padded_target(target);
         let scale = self.model.normalisation.task_scale;
+        // k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹: inverse-flow start (the seed when it fails: a target whose
+        // pull-back k0 cannot reach stays with Newton from the seed).
+        let mut start = [0.0; NJ];
+        let start_slice = start.get_mut(..n).ok_or(Error::Internal)?;
+        let from_flows = options.inverse_flow_start && self.inverse_flow_start(target, seed, start_slice, NOMINAL_ITERATIONS).is_ok();
         let mut q = SVector::<f64, NJ>::zeros();
-        for (dst, s) in q.iter_mut().zip(seed.iter()) {
+        for (dst, s) in q.iter_mut().zip(if from_flows { start_slice.iter() } else { seed.iter() }) {
             *dst = *s;
         }
         let mut best = Iterate { q, residual: f64::INFINITY, support: 0.0, conditioning: 0.0 };
         let mut query = [0.0; NJ];
-        for step in 0..=options.iterations {
-            let last = step == options.iterations;
+        // Defect correction of the start: the inverse flows from the target moved by the miss.
+        let mut moved_target = target_v;
+        for _ in 0..if from_flows { options.start_corrections } else { 0 } {
+            for (dst, v) in query.iter_mut().zip(q.iter()) {
+                *dst = *v;
+            }
+            let e = self.evaluate_transported(query.get(..n).ok_or(Error::Internal)?)?;
+            let (position, transported) = evaluation_matrices(&e, m, n);
+            let r = target_v - position;
+            let residual = r.norm();
+            if residual < best.residual {
+                best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&transported, m) };
+            }
+            moved_target += r;
+            let moved = moved_target.as_slice().get(..m).ok_or(Error::Internal)?;
+            if self.inverse_flow_start(moved, seed, start_slice, NOMINAL_ITERATIONS).is_ok() {
+                for (dst, s) in q.iter_mut().zip(start_slice.iter()) {
+                    *dst = *s;
+                }
+            }
+        }
+        let mut jacobian = SMatrix::<f64, MT, NJ>::zeros();
+        let evaluations = options.iterations + options.chord_steps;
+        for step in 0..=evaluations {
+            let exact = step < options.iterations;
             for (dst, v) in query.iter_mut().zip(q.iter()) {
                 *dst = *v;
             }
             let qs = query.get(..n).ok_or(Error::Internal)?;
-            // The last iterate needs only its position: eq. (19)'s transported J(1) stands in for
-            // Dk1 in its conditioning (same position bits, no tangents).
-            let e = if last { self.evaluate_transported(qs)? } else { self.evaluate(qs)? };
-            let (position, jacobian) = evaluation_matrices(&e, m, n);
+            // Chord steps and the last iterate need only the position: eq. (19)'s transported
+            // J(1) stands in for Dk1 in their conditioning (same position bits, no tangents).
+            let e = if exact { self.evaluate(qs)? } else { self.evaluate_transported(qs)? };
+            let (position, this_jacobian) = evaluation_matrices(&e, m, n);
+            if exact {
+                jacobian = this_jacobian;
+            }
             let r = target_v - position;
             let residual = r.norm();
             if residual < best.residual {
-                best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&jacobian, m) };
+                best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&this_jacobian, m) };
             }
-            if !last {
+            if step < evaluations {
                 if let Some(dq) = damped_min_norm_step(&jacobian, &r, m, scale, |d| self.model.nominal.is_revolute(d)) {
                     q += dq;
                 }
             }
         }
         // A residual that overflows (a target near f64::MAX) is never below another: `best` is
-        // then the seed with residual ∞, support and conditioning 0, flagged on every count.
+        // then the start with residual ∞, support and conditioning 0, flagged on every count.
         for (dst, v) in out.iter_mut().zip(best.q.iter()) {
             *dst = *v;
         }

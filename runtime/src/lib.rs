@@ -16,6 +16,7 @@ pub mod effects;
 pub mod flow;
 pub mod gravity;
 pub mod integrate;
+pub mod inverse_flow;
 pub mod inverse_kinematics;
 pub mod kernel;
 pub mod nominal;

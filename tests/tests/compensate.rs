@@ -213,3 +213,75 @@ fn cost_relative_to_evaluate() {
         );
     }
 }
+
+/// Residual distribution against the number of steps, with and without the inverse-flow start
+/// (k1⁻¹ ≈ φ ∘ k0⁻¹ ∘ ψ⁻¹), over `count` reachable targets (the targets and seeds of
+/// [`round_trip`]). Printed for BENCHMARKS.md:
+/// `cargo test --release -p cbd-tests --test compensate -- --ignored --nocapture steps_saved`
+#[test]
+#[ignore]
+fn steps_saved_by_the_inverse_flow_start() {
+    let euler = Integrator { method: IntegratorMethod::Euler, steps: 1 };
+    let heun = Integrator { method: IntegratorMethod::Heun, steps: 2 };
+    let blobs: Vec<(&str, Vec<u8>, f64, f64)> = vec![
+        ("RR reference (Heun x 5)", reference_blob(), 1.5, 0.1),
+        ("six-joint N=40 (Euler x 1)", model_blob(six_joint(), 40, 0.02, euler, 2.0), 1000.0, 0.05),
+        ("six-joint N=40 (Heun x 2)", model_blob(six_joint(), 40, 0.02, heun, 2.0), 1000.0, 0.05),
+        ("six-joint N=256 (Euler x 1)", model_blob(six_joint(), 256, 0.02, euler, 2.0), 1000.0, 0.05),
+    ];
+    let count = 2000;
+    let only = std::env::var("CBD_STEPS_BLOB").ok();
+    for (name, blob, reach, perturbation) in blobs {
+        if only.as_deref().is_some_and(|o| !name.starts_with(o)) {
+            continue;
+        }
+        let mut storage = vec![0.0; 1_000_000];
+        let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+        let nominal = cal.model().nominal.clone();
+        let scale = cal.model().normalisation.task_scale;
+        let n = nominal.n_joints();
+        let mut s = 99u64;
+        let cases: Vec<(Vec<f64>, Vec<f64>)> = (0..count)
+            .map(|_| {
+                let q_true: Vec<f64> = (0..n).map(|_| 3.0 * lcg(&mut s)).collect();
+                let target: Vec<f64> = cal.evaluate(&q_true).unwrap().position().iter().copied().collect();
+                let hint: Vec<f64> = q_true.iter().map(|q| q + perturbation * lcg(&mut s)).collect();
+                let mut seed = vec![0.0; n];
+                nominal_position(&nominal, &target, &hint, &mut seed, 8, scale).unwrap();
+                (target, seed)
+            })
+            .collect();
+        eprintln!("{name}: {count} targets, residual / reach (median, p99, p99.9, max), fraction within 1e-9");
+        let mut configs: Vec<(String, cbd_runtime::CompensateOptions)> = Vec::new();
+        for start in [false, true] {
+            for iterations in 0..=8 {
+                let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
+                (o.inverse_flow_start, o.iterations, o.chord_steps, o.start_corrections) = (start, iterations, 0, 0);
+                configs.push((format!("{} + {iterations} full", if start { "flows" } else { "seed " }), o));
+            }
+            for (iterations, chord) in [(1, 1), (2, 1), (2, 2), (3, 1), (5, 1), (5, 2), (6, 1)] {
+                let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
+                (o.inverse_flow_start, o.iterations, o.chord_steps, o.start_corrections) = (start, iterations, chord, 0);
+                configs.push((format!("{} + {iterations} full + {chord} chord", if start { "flows" } else { "seed " }), o));
+            }
+            if start {
+                for (corrections, iterations, chord) in
+                    [(1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 2, 0), (1, 2, 1), (1, 4, 0), (1, 5, 0), (1, 6, 0)]
+                {
+                    let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
+                    (o.inverse_flow_start, o.iterations, o.chord_steps, o.start_corrections) = (true, iterations, chord, corrections);
+                    configs.push((format!("flows x{} + {iterations} full + {chord} chord", corrections + 1), o));
+                }
+            }
+        }
+        for (label, options) in configs {
+            let mut q = vec![0.0; n];
+            let mut r: Vec<f64> =
+                cases.iter().map(|(target, seed)| cal.compensate_with(target, seed, &mut q, &options).unwrap().residual / reach).collect();
+            r.sort_by(f64::total_cmp);
+            let at = |p: f64| r[((p * count as f64) as usize).min(count - 1)];
+            let within = r.iter().filter(|v| **v <= 1e-9).count() as f64 / count as f64;
+            eprintln!("  {label:<28} {:9.2e} {:9.2e} {:9.2e} {:9.2e}  {:.4}", at(0.5), at(0.99), at(0.999), r[count - 1], within);
+        }
+    }
+}

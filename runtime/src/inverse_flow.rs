@@ -1,0 +1,223 @@
+//! The inverse flows, compensation's start (issue 15, docs/DESIGN.md §10): k1 = ψ ∘ k0 ∘ φ⁻¹, so
+//! k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹. ψ⁻¹ integrates the task field w backward along the control points'
+//! stored trajectory (its stages in reverse order, the field negated), k0⁻¹ is the nominal model's
+//! inverse kinematics ([`crate::inverse_kinematics::nominal_position`]) and φ integrates the joint
+//! field v forward along the same trajectory, both with the model's fixed-step scheme. The runtime's
+//! k1 integrates eq. (20) at the query with eq. (19)'s transported J, which omits D²k·v, so k1 is
+//! this composition only to first order in the deformation: the start misses the target by a
+//! second-order term (measured in tests/tests/inverse_flow.rs) plus the scheme's discretisation
+//! error; Newton steps on k1 ([`crate::compensate`]) remove the rest. Fixed cost, no heap, no panic.
+
+use crate::flow::{Fixed, Shape};
+use crate::integrate::integrate_checked;
+use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
+use crate::real::{exp, to_f64, Real};
+use crate::{Calibrator, Error};
+use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+
+/// Which way a flow is integrated: from t = 0 to 1 (ψ, φ) or from t = 1 back to 0 (ψ⁻¹, φ⁻¹).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    Forward,
+    Backward,
+}
+
+/// Stage `g` of the pass in `direction` reads the stored stage `total − 1 − g` when backward: the
+/// trajectory reversed, so each step of the scheme runs on the same stages as forward, mirrored.
+fn stored_stage(direction: Direction, total: usize, g: usize) -> usize {
+    match direction {
+        Direction::Forward => g,
+        Direction::Backward => total.saturating_sub(g + 1),
+    }
+}
+
+/// w(y) = Σ_j K_W(y, k_j) P_j over one stage's samples (the field of [`crate::flow::task_field`],
+/// without its Jacobian), internal units.
+#[inline(always)]
+fn task_velocity<S: Shape>(shape: S, kernel: &TaskKernel, y: &[Real], samples: &[Real]) -> [Real; MT] {
+    let (m, n) = (shape.m(), shape.n());
+    let width = kernel.width as Real;
+    let exponent_scale = -0.5 / (width * width);
+    let mut yy = [0.0; MT];
+    for (dst, src) in yy.iter_mut().zip(y).take(m) {
+        *dst = *src;
+    }
+    let mut w = [0.0; MT];
+    for s in samples.chunks_exact((2 * m + n).max(1)) {
+        let mut r2 = 0.0;
+        for (y_c, k_c) in yy.iter().zip(s).take(m) {
+            let e = y_c - k_c;
+            r2 += e * e;
+        }
+        let kw = exp(exponent_scale * r2);
+        for (w_a, p_a) in w.iter_mut().zip(s.iter().skip(m)).take(m) {
+            *w_a += kw * p_a;
+        }
+    }
+    w
+}
+
+/// v(x) = Σ_j K_V(x, x_j) u_j over one stage's samples (the field of [`crate::flow::joint_field`],
+/// without its Jacobian), `kernel` the flow's kernel (its sign folded into γ), `features` the
+/// configurations' [`crate::kernel::write_features`] table.
+#[inline(always)]
+fn joint_velocity<S: Shape>(shape: S, kernel: &JointKernel, x: &[Real], features: &[Real], samples: &[Real]) -> [Real; NJ] {
+    let (m, n) = (shape.m(), shape.n());
+    let mut xx = [0.0; NJ];
+    for (dst, src) in xx.iter_mut().zip(x).take(n) {
+        *dst = to_f64(*src);
+    }
+    let mut fx = [[0.0; FEATURES_PER_JOINT]; NJ];
+    joint_features(kernel, xx.get(..n).unwrap_or(&[]), &mut fx);
+    let mut v = [0.0; NJ];
+    let (mut pairs, _) = features.as_chunks::<FEATURES_PER_JOINT>();
+    for s in samples.chunks_exact((2 * m + n).max(1)) {
+        let Some((fxj, rest)) = pairs.split_at_checked(n) else { break };
+        pairs = rest;
+        let (mut first, mut second) = ([0.0; NJ], [0.0; NJ]);
+        let k = joint_kernel_parts_n(kernel, n, &fx, fxj, &mut first, &mut second);
+        for (v_a, u_a) in v.iter_mut().zip(s.iter().skip(2 * m)).take(n) {
+            *v_a += k * u_a;
+        }
+    }
+    v
+}
+
+impl Calibrator<'_> {
+    /// ψ(y) (forward) or ψ⁻¹(y) (backward): the task-space flow of w along the stored trajectory,
+    /// `y` and `out` in user units (m values).
+    pub fn task_flow(&self, y: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        match (self.dims.m, self.dims.n) {
+            (2, 2) => self.task_flow_shaped(Fixed::<2, 2>, y, direction, out),
+            (3, 6) => self.task_flow_shaped(Fixed::<3, 6>, y, direction, out),
+            _ => self.task_flow_shaped(self.dims, y, direction, out),
+        }
+    }
+
+    /// φ(x) (forward) or φ⁻¹(x) (backward): the joint-space flow of v along the stored
+    /// trajectory, `x` and `out` joint configurations (n values).
+    pub fn joint_flow(&self, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        match (self.dims.m, self.dims.n) {
+            (2, 2) => self.joint_flow_shaped(Fixed::<2, 2>, x, direction, out),
+            (3, 6) => self.joint_flow_shaped(Fixed::<3, 6>, x, direction, out),
+            _ => self.joint_flow_shaped(self.dims, x, direction, out),
+        }
+    }
+
+    #[inline(always)]
+    fn task_flow_shaped<S: Shape>(&self, shape: S, y: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        let m = self.dims.m;
+        if y.len() != m || out.len() != m {
+            return Err(Error::TargetDimension { expected: m, found: if y.len() != m { y.len() } else { out.len() } });
+        }
+        let norm = &self.model.normalisation;
+        let inv_scale = 1.0 / norm.task_scale;
+        let mut state = [0.0 as Real; MT];
+        for ((dst, v), o) in state.iter_mut().zip(y).zip(norm.task_offset.iter()) {
+            *dst = ((v - o) * inv_scale) as Real;
+        }
+        let kernel = self.model.task_kernel;
+        let sign: Real = if direction == Direction::Forward { 1.0 } else { -1.0 };
+        self.flow_along_trajectory(state.get_mut(..m).ok_or(Error::Internal)?, direction, |samples, s, rate| {
+            let w = task_velocity(shape, &kernel, s, samples);
+            for (r, w_a) in rate.iter_mut().zip(w.iter()) {
+                *r = sign * w_a;
+            }
+        })?;
+        for ((dst, v), o) in out.iter_mut().zip(state.iter()).zip(norm.task_offset.iter()) {
+            *dst = o + norm.task_scale * to_f64(*v);
+        }
+        if out.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::NonFiniteResult)
+        }
+    }
+
+    #[inline(always)]
+    fn joint_flow_shaped<S: Shape>(&self, shape: S, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        let n = self.dims.n;
+        if x.len() != n || out.len() != n {
+            return Err(Error::QueryDimension { expected: n, found: if x.len() != n { x.len() } else { out.len() } });
+        }
+        let mut state = [0.0 as Real; NJ];
+        for (dst, v) in state.iter_mut().zip(x) {
+            *dst = *v as Real;
+        }
+        let kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
+        let features: &[Real] = self.features;
+        let sign: Real = if direction == Direction::Forward { 1.0 } else { -1.0 };
+        self.flow_along_trajectory(state.get_mut(..n).ok_or(Error::Internal)?, direction, |samples, s, rate| {
+            let v = joint_velocity(shape, &kernel, s, features, samples);
+            for (r, v_a) in rate.iter_mut().zip(v.iter()) {
+                *r = sign * v_a;
+            }
+        })?;
+        for (dst, v) in out.iter_mut().zip(state.iter()) {
+            *dst = to_f64(*v);
+        }
+        if out.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::NonFiniteResult)
+        }
+    }
+
+    /// Integrates `state` (at most [`NJ`] values) with the model's scheme, the rate of every stage
+    /// given by `rate(samples, state, out)` from the stage's stored samples, reversed when backward.
+    fn flow_along_trajectory(
+        &self,
+        state: &mut [Real],
+        direction: Direction,
+        rate: impl Fn(&[Real], &[Real], &mut [Real]),
+    ) -> Result<(), Error> {
+        let block = self.model.n_points as usize * self.dims.sample_len();
+        let total = self.model.integrator.stage_count();
+        let trajectory: &[Real] = self.trajectory;
+        let mut scratch = [0.0 as Real; 3 * NJ];
+        integrate_checked(self.model.integrator.method, self.model.integrator.steps, state, &mut scratch, Error::Internal, |g, s, out| {
+            let stage = stored_stage(direction, total, g);
+            let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
+            rate(samples, s, out);
+            if out.iter().all(|v| v.is_finite()) {
+                Ok(())
+            } else {
+                Err(Error::NonFiniteResult)
+            }
+        })
+    }
+
+    /// k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹: the start of compensation. ψ⁻¹(target), then the nominal inverse
+    /// kinematics of that point from `seed` (closed form where the nominal model has one, the
+    /// seed's branch and orientation; otherwise `nominal_iterations` Gauss–Newton steps on k0 from
+    /// the seed), then φ. Writes the start to `out` (n values).
+    pub fn inverse_flow_start(&self, target: &[f64], seed: &[f64], out: &mut [f64], nominal_iterations: usize) -> Result<(), Error> {
+        let (m, n) = (self.dims.m, self.dims.n);
+        if seed.len() != n || out.len() != n {
+            return Err(Error::QueryDimension { expected: n, found: if seed.len() != n { seed.len() } else { out.len() } });
+        }
+        let mut pulled = [0.0; MT];
+        let pulled = pulled.get_mut(..m).ok_or(Error::Internal)?;
+        self.task_flow(target, Direction::Backward, pulled)?;
+        let mut nominal = [0.0; NJ];
+        let nominal = nominal.get_mut(..n).ok_or(Error::Internal)?;
+        let scale = self.model.normalisation.task_scale;
+        crate::inverse_kinematics::nominal_position(&self.model.nominal, pulled, seed, nominal, nominal_iterations, scale)
+            .ok_or(Error::NonFiniteResult)?;
+        self.joint_flow(nominal, Direction::Forward, out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_backward_pass_reads_the_stages_in_reverse() {
+        let total = 10;
+        let forward: [usize; 10] = core::array::from_fn(|g| stored_stage(Direction::Forward, total, g));
+        let backward: [usize; 10] = core::array::from_fn(|g| stored_stage(Direction::Backward, total, g));
+        assert_eq!(forward, [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]);
+        assert_eq!(backward, [9, 8, 7, 6, 5, 4, 3, 2, 1, 0]);
+    }
+}
