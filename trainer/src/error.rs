@@ -64,6 +64,9 @@ pub enum Error {
     KernelRidge(#[from] crate::baselines::krr::KrrError),
     #[error(transparent)]
     DhCalibration(#[from] crate::baselines::dh_calibration::DhCalibrationError),
+    /// A `--effect` specification of `cbd simulate` that does not parse.
+    #[error(transparent)]
+    EffectSpec(#[from] crate::simulate::effects::EffectSpecError),
     /// A failure of a module that still reports its errors as text (diagnosis, effect specs).
     #[error("{0}")]
     Message(String),

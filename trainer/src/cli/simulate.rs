@@ -114,7 +114,7 @@ fn effect_arm(rigid: cbd_protocol::NominalModel, specs: &[String]) -> Result<cra
     let n = rigid.n_joints();
     let mut arm = crate::simulate::effects::EffectArm::new(rigid);
     for spec in specs {
-        arm = arm.with(crate::simulate::effects::parse_effect(spec, n)?);
+        arm = arm.with(crate::simulate::effects::parse_effect(spec, n).map_err(|e| e.to_string())?);
     }
     Ok(arm)
 }

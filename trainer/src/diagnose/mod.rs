@@ -351,29 +351,8 @@ pub fn diagnose(
     let selection = forward_select(&problem, &group_cols, &options.selection);
     // 5. Refinement on the nonlinear model; then every effect must be significant and earn its
     // place, or it is dropped (the weakest first) and the rest refined again.
-    let mut kept = selection.selected.clone();
-    let mut dropped = Vec::new();
-    let (chosen_cols, start, full_sse, chosen_params, refined) = loop {
-        let chosen_cols: Vec<usize> = kept.iter().flat_map(|&g| group_cols[g].clone()).collect();
-        let (start, full_sse) = problem.fit(&chosen_cols);
-        let chosen_params: Vec<Param> = chosen_cols.iter().map(|&k| params[k]).collect();
-        let refined = refine::refine(model, &train, &chosen_params, &start, options.gauss_newton_iterations)?;
-        let cv_with = problem.cv_rms(&chosen_cols);
-        let weakest = kept
-            .iter()
-            .filter(|&&g| groups[g].kind != GroupKind::Geometric)
-            .filter_map(|&g| judge(g, &group_cols, &chosen_cols, &refined, &problem, cv_with, options.selection.margin))
-            .max_by(|a, b| a.p_value.total_cmp(&b.p_value))
-            .or_else(|| shape_outside_library(&train, &refined, &kept, &groups, &options.structure));
-        match weakest {
-            Some(mut d) => {
-                kept.retain(|&g| g != d.group);
-                d.name = groups[d.group].name.clone();
-                dropped.push(d);
-            }
-            None => break (chosen_cols, start, full_sse, chosen_params, refined),
-        }
-    };
+    let Pruned { kept, dropped, chosen_cols, start, full_sse, chosen_params, refined } =
+        refine_and_prune(model, &train, &problem, &groups, &group_cols, &params, selection.selected.clone(), options)?;
     let base_sse = problem.base_sse().max(f64::MIN_POSITIVE);
     let step_of = |g: usize| selection.steps.iter().find(|s| s.group == g).expect("a kept group was selected");
     let found: Vec<FoundEffect> = kept
@@ -413,46 +392,12 @@ pub fn diagnose(
     let r1 = residual(&refined.model, &train);
     let structure_after = structure_tests(&refined.model, &train, &r1, &options.structure);
     let unexplained_structure = structure_after.iter().any(|t| t.significant);
-    // 7. Held-out table.
-    let mut table = Vec::new();
-    let mut push = |name: &str, predicted: Vec<f64>| {
-        let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
-        table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
-    };
-    // Rows in the order the corrections build up: nominal → + geometric (refitted alone: what
-    // geometric calibration gives) → + effects → + effects + CbD; and CbD alone on the nominal.
-    push("nominal", predict(model, &test.joints, m));
-    let geometric_only = if !found.iter().any(|f| f.kind == GroupKind::Geometric) {
-        model.clone()
-    } else if found.len() == 1 {
-        refined.model.clone()
-    } else {
-        let gp: Vec<Param> = chosen_params.iter().copied().filter(|p| matches!(p, Param::Geometric(_))).collect();
-        let gs: Vec<f64> = chosen_params.iter().zip(&start).filter(|(p, _)| matches!(p, Param::Geometric(_))).map(|(_, v)| *v).collect();
-        refine::refine(model, &train, &gp, &gs, options.gauss_newton_iterations)?.model
-    };
-    push("nominal + geometric", predict(&geometric_only, &test.joints, m));
-    push("nominal + effects", predict(&refined.model, &test.joints, m));
-    if let Some(fit) = cbd {
-        // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
-        let (with_effects, _) = fit_on(fit, &refined.model, &train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
-        push("nominal + effects + CbD", with_effects(&test.joints));
-        let (plain, _) = fit(given, &train).map_err(|e| format!("CbD on nominal: {e}"))?;
-        push("nominal + CbD", plain(&test.joints));
-    }
+    // 7. Held-out table and the recommendation.
+    let geometric_only = geometric_only_model(model, &found, &refined, &chosen_params, &start, &train, options)?;
+    let table = held_out_table(given, model, &geometric_only, &refined.model, &train, &test, cbd)?;
     let recommendation = match cbd {
         Some(fit) if !found.is_empty() && options.recommendation_folds >= 2 => {
-            let folds = options.recommendation_folds;
-            let with_effects =
-                cross_validated_rms(fit, &refined.model, &train, folds).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
-            let plain = cross_validated_rms(fit, given, &train, folds).map_err(|e| format!("CbD on nominal: {e}"))?;
-            let effects_hurt = plain < with_effects;
-            Some(Recommendation {
-                cross_validation: vec![("nominal + effects + CbD".into(), with_effects), ("nominal + CbD".into(), plain)],
-                folds,
-                best: if effects_hurt { "nominal + CbD" } else { "nominal + effects + CbD" }.into(),
-                effects_hurt,
-            })
+            Some(recommend(fit, given, &refined.model, &train, options.recommendation_folds)?)
         }
         _ => None,
     };
@@ -477,5 +422,129 @@ pub fn diagnose(
         train,
         model_start: dh_form.clone(),
         recommendation,
+    })
+}
+
+/// The selected groups after refinement and pruning: what stays, what was dropped and why, and
+/// the refined fit of what stays.
+struct Pruned {
+    kept: Vec<usize>,
+    dropped: Vec<DroppedEffect>,
+    chosen_cols: Vec<usize>,
+    start: Vec<f64>,
+    full_sse: f64,
+    chosen_params: Vec<Param>,
+    refined: refine::Refined,
+}
+
+/// Stage 5: refine the selected groups on the nonlinear model; every non-geometric effect must be
+/// significant and earn its place, or the weakest is dropped and the rest refined again.
+#[allow(clippy::too_many_arguments)]
+fn refine_and_prune(
+    model: &NominalModel,
+    train: &Measurements,
+    problem: &LinearProblem,
+    groups: &[Group],
+    group_cols: &[Vec<usize>],
+    params: &[Param],
+    selected: Vec<usize>,
+    options: &DiagnoseOptions,
+) -> Result<Pruned, String> {
+    let mut kept = selected;
+    let mut dropped = Vec::new();
+    let pruned = loop {
+        let chosen_cols: Vec<usize> = kept.iter().flat_map(|&g| group_cols[g].clone()).collect();
+        let (start, full_sse) = problem.fit(&chosen_cols);
+        let chosen_params: Vec<Param> = chosen_cols.iter().map(|&k| params[k]).collect();
+        let refined = refine::refine(model, train, &chosen_params, &start, options.gauss_newton_iterations)?;
+        let cv_with = problem.cv_rms(&chosen_cols);
+        let weakest = kept
+            .iter()
+            .filter(|&&g| groups[g].kind != GroupKind::Geometric)
+            .filter_map(|&g| judge(g, group_cols, &chosen_cols, &refined, problem, cv_with, options.selection.margin))
+            .max_by(|a, b| a.p_value.total_cmp(&b.p_value))
+            .or_else(|| shape_outside_library(train, &refined, &kept, groups, &options.structure));
+        match weakest {
+            Some(mut d) => {
+                kept.retain(|&g| g != d.group);
+                d.name = groups[d.group].name.clone();
+                dropped.push(d);
+            }
+            None => break Pruned { kept, dropped, chosen_cols, start, full_sse, chosen_params, refined },
+        }
+    };
+    Ok(pruned)
+}
+
+/// The model the "+ geometric" row evaluates: the geometric parameters refitted alone (what a
+/// geometric calibration gives), or the refined model when geometry is all that was found.
+fn geometric_only_model(
+    model: &NominalModel,
+    found: &[FoundEffect],
+    refined: &refine::Refined,
+    chosen_params: &[Param],
+    start: &[f64],
+    train: &Measurements,
+    options: &DiagnoseOptions,
+) -> Result<NominalModel, String> {
+    if !found.iter().any(|f| f.kind == GroupKind::Geometric) {
+        return Ok(model.clone());
+    }
+    if found.len() == 1 {
+        return Ok(refined.model.clone());
+    }
+    let gp: Vec<Param> = chosen_params.iter().copied().filter(|p| matches!(p, Param::Geometric(_))).collect();
+    let gs: Vec<f64> = chosen_params.iter().zip(start).filter(|(p, _)| matches!(p, Param::Geometric(_))).map(|(_, v)| *v).collect();
+    Ok(refine::refine(model, train, &gp, &gs, options.gauss_newton_iterations)?.model)
+}
+
+/// The held-out rows in the order the corrections build up: nominal → + geometric → + effects →
+/// + effects + CbD; and CbD alone on the nominal (the CbD rows only when `cbd` is given).
+fn held_out_table(
+    given: &NominalModel,
+    model: &NominalModel,
+    geometric_only: &NominalModel,
+    with_effects: &NominalModel,
+    train: &Measurements,
+    test: &Measurements,
+    cbd: Option<CorrectionFitter>,
+) -> Result<Vec<TableRow>, String> {
+    // The file's task dimension: a planar arm's DH form (`model`) is read in its two coordinates.
+    let m = given.task_dim();
+    let mut table = Vec::new();
+    let mut push = |name: &str, predicted: Vec<f64>| {
+        let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
+        table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
+    };
+    push("nominal", predict(model, &test.joints, m));
+    push("nominal + geometric", predict(geometric_only, &test.joints, m));
+    push("nominal + effects", predict(with_effects, &test.joints, m));
+    if let Some(fit) = cbd {
+        // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
+        let (on_effects, _) = fit_on(fit, with_effects, train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+        push("nominal + effects + CbD", on_effects(&test.joints));
+        let (plain, _) = fit(given, train).map_err(|e| format!("CbD on nominal: {e}"))?;
+        push("nominal + CbD", plain(&test.joints));
+    }
+    Ok(table)
+}
+
+/// Whether CbD does better on top of the found effects or on the nominal model alone, judged by
+/// `folds`-fold cross-validation on the training rows.
+fn recommend(
+    fit: CorrectionFitter,
+    given: &NominalModel,
+    with_effects: &NominalModel,
+    train: &Measurements,
+    folds: usize,
+) -> Result<Recommendation, String> {
+    let on_effects = cross_validated_rms(fit, with_effects, train, folds).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+    let plain = cross_validated_rms(fit, given, train, folds).map_err(|e| format!("CbD on nominal: {e}"))?;
+    let effects_hurt = plain < on_effects;
+    Ok(Recommendation {
+        cross_validation: vec![("nominal + effects + CbD".into(), on_effects), ("nominal + CbD".into(), plain)],
+        folds,
+        best: if effects_hurt { "nominal + CbD" } else { "nominal + effects + CbD" }.into(),
+        effects_hurt,
     })
 }

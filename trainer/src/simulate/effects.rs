@@ -293,30 +293,37 @@ impl EffectArm {
     }
 }
 
+/// A `--effect` specification that does not parse: the spec and what is wrong with it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("--effect {spec}: {reason}")]
+pub struct EffectSpecError {
+    pub spec: String,
+    pub reason: String,
+}
+
 /// Parses `type:key=value,...`, e.g. `transmission:joint=2,harmonic=2,cos=0.001,sin=0`
 /// (joints and links 1-based on the command line; angles in radians, lengths in model units).
 /// Types: encoder_scale (scale), transmission (harmonic, cos, sin), gravity_compliance
 /// (compliance), link_bending (link, compliance), bump (centre=a;b;..., width, dx, dy, dz),
 /// dead_zone (width), thermal (dx, dy, dz per row).
-pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, String> {
+pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
+    let bad = |reason: String| EffectSpecError { spec: spec.to_string(), reason };
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     let mut kv = std::collections::BTreeMap::new();
     for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
-        let (k, v) = part.split_once('=').ok_or_else(|| format!("--effect {spec}: `{part}` is not key=value"))?;
+        let (k, v) = part.split_once('=').ok_or_else(|| bad(format!("`{part}` is not key=value")))?;
         kv.insert(k.trim().to_string(), v.trim().to_string());
     }
-    let num = |k: &str, default: Option<f64>| -> Result<f64, String> {
+    let num = |k: &str, default: Option<f64>| -> Result<f64, EffectSpecError> {
         match kv.get(k) {
-            Some(v) => {
-                v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("--effect {spec}: {k}={v} is not a finite number"))
-            }
-            None => default.ok_or_else(|| format!("--effect {spec}: missing {k}=")),
+            Some(v) => v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad(format!("{k}={v} is not a finite number"))),
+            None => default.ok_or_else(|| bad(format!("missing {k}="))),
         }
     };
-    let index = |k: &str| -> Result<usize, String> {
+    let index = |k: &str| -> Result<usize, EffectSpecError> {
         let v = num(k, None)?;
         if v.fract() != 0.0 || v < 1.0 || v > n_joints as f64 {
-            return Err(format!("--effect {spec}: {k} must be between 1 and {n_joints}"));
+            return Err(bad(format!("{k} must be between 1 and {n_joints}")));
         }
         Ok(v as usize - 1)
     };
@@ -325,22 +332,27 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Strin
         "transmission" => {
             let h = num("harmonic", None)?;
             if h.fract() != 0.0 || !(1.0..=16.0).contains(&h) {
-                return Err(format!("--effect {spec}: harmonic must be an integer from 1 to 16"));
+                return Err(bad(format!("harmonic must be an integer from 1 to 16")));
             }
-            InjectedEffect::Transmission { joint: index("joint")?, harmonic: h as u32, cos: num("cos", Some(0.0))?, sin: num("sin", Some(0.0))? }
+            InjectedEffect::Transmission {
+                joint: index("joint")?,
+                harmonic: h as u32,
+                cos: num("cos", Some(0.0))?,
+                sin: num("sin", Some(0.0))?,
+            }
         }
         "gravity_compliance" => InjectedEffect::GravityCompliance { joint: index("joint")?, compliance: num("compliance", None)? },
         "link_bending" => InjectedEffect::LinkBending { link: index("link")?, compliance: num("compliance", None)? },
         "bump" => {
-            let centre: Result<Vec<f64>, String> = kv
+            let centre: Result<Vec<f64>, EffectSpecError> = kv
                 .get("centre")
-                .ok_or_else(|| format!("--effect {spec}: missing centre=q1;q2;..."))?
+                .ok_or_else(|| bad(format!("missing centre=q1;q2;...")))?
                 .split(';')
-                .map(|v| v.trim().parse::<f64>().map_err(|_| format!("--effect {spec}: bad centre value `{v}`")))
+                .map(|v| v.trim().parse::<f64>().map_err(|_| bad(format!("bad centre value `{v}`"))))
                 .collect();
             let centre = centre?;
             if centre.len() != n_joints {
-                return Err(format!("--effect {spec}: centre needs {n_joints} values"));
+                return Err(bad(format!("centre needs {n_joints} values")));
             }
             InjectedEffect::Bump {
                 centre,
@@ -351,9 +363,9 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Strin
         "dead_zone" => InjectedEffect::DeadZone { joint: index("joint")?, width: num("width", None)? },
         "thermal" => InjectedEffect::ThermalDrift { per_row: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?] },
         other => {
-            return Err(format!(
-                "--effect {spec}: unknown type `{other}` (encoder_scale, transmission, gravity_compliance, link_bending, bump, dead_zone, thermal)"
-            ))
+            return Err(bad(format!(
+                "unknown type `{other}` (encoder_scale, transmission, gravity_compliance, link_bending, bump, dead_zone, thermal)"
+            )))
         }
     };
     Ok(effect)
