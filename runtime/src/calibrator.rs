@@ -3,7 +3,7 @@
 use crate::flow::{control_point_rates, control_point_rates_with_features, write_samples, Dims, FlowParams};
 use crate::integrate::{integrate_checked, scratch_len};
 use crate::kernel::{features_len, joint_features, FEATURES_PER_JOINT};
-use crate::nominal::{forward_kinematics, Kinematics};
+use crate::kinematics::{forward_kinematics, Kinematics};
 use crate::real::Real;
 use crate::Error;
 use cbd_protocol::{decode, Integrator, Model, MAX_JOINTS, MAX_TASK_DIM};

@@ -12,18 +12,14 @@
 
 pub mod calibrator;
 pub mod compensate;
-pub mod effects;
 pub mod flow;
-pub mod gravity;
 pub mod integrate;
 pub mod inverse_flow;
 pub mod inverse_kinematics;
 pub mod kernel;
-pub mod nominal;
+pub mod kinematics;
 pub mod query_derivatives;
 pub mod real;
-pub mod rigid;
-pub mod rigid_derivatives;
 
 pub use calibrator::{
     initial_state, integrate_control_points, integrate_control_points_with_features, integrate_points, storage_len, Calibrator, Evaluation,

@@ -20,7 +20,7 @@ use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
 use crate::real::Real;
 use cbd_protocol::{JointKernel, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
-pub use crate::rigid_derivatives::NominalHessian;
+pub use crate::kinematics::rigid_derivatives::NominalHessian;
 
 /// `∂_d Dv(ξ)[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V(ξ, x_j)`, indexed `[d][f][e]`.
 pub type JointHessian = [[[Real; NJ]; NJ]; NJ];
@@ -120,12 +120,12 @@ fn joint_sums<S: Shape, const HESSIAN: bool>(shape: S, samples: &[Real], rows: &
 }
 
 /// Second derivatives of the nominal forward kinematics at `x` (with effects, the augmented
-/// D²k0_aug of [`crate::effects::hessian`]).
+/// D²k0_aug of [`crate::kinematics::effects::hessian`]).
 pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
     if !model.effects().is_empty() {
-        return crate::effects::hessian(model, x);
+        return crate::kinematics::effects::hessian(model, x);
     }
-    crate::rigid_derivatives::hessian(model, x)
+    crate::kinematics::rigid_derivatives::hessian(model, x)
 }
 
 /// The rates of one direction's tangent (δk, δJ) given the stage's fields:
@@ -297,7 +297,7 @@ impl crate::Calibrator<'_> {
         let support = write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian);
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
-        let k0 = crate::nominal::forward_kinematics(&self.model.nominal, q).normalised(norm);
+        let k0 = crate::kinematics::forward_kinematics(&self.model.nominal, q).normalised(norm);
         let h0 = if exact_jacobian { nominal_hessian(&self.model.nominal, q) } else { [[[0.0; NJ]; NJ]; MT] };
         let ql = dims.query_len();
         let state_len = if exact_jacobian { query_tangent_len(dims) } else { ql };

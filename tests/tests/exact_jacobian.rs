@@ -88,8 +88,8 @@ fn nominal_hessian_matches_finite_differences() {
             xa[d] += step;
             xb[d] -= step;
             let (ja, jb) = (
-                cbd_runtime::nominal::forward_kinematics(&nominal, &xa).jacobian,
-                cbd_runtime::nominal::forward_kinematics(&nominal, &xb).jacobian,
+                cbd_runtime::kinematics::forward_kinematics(&nominal, &xa).jacobian,
+                cbd_runtime::kinematics::forward_kinematics(&nominal, &xb).jacobian,
             );
             for a in 0..3 {
                 for e in 0..6 {

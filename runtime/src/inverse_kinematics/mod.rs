@@ -138,7 +138,7 @@ pub fn nominal_position(
     let (mut best_q, mut best_residual) = (q, f64::INFINITY);
     for step in 0..=iterations {
         let qs = q.as_slice().get(..n)?;
-        let k0 = crate::nominal::forward_kinematics(nominal, qs);
+        let k0 = crate::kinematics::forward_kinematics(nominal, qs);
         let (position, jacobian) = matrices_of(&k0.position, &k0.jacobian, m, n);
         let r = target_v - position;
         let residual = r.norm();

@@ -15,7 +15,7 @@ use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
 use crate::solver::least_squares::TruncatedSvd;
 use cbd_protocol::{DhChain, NominalModel};
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kinematics::forward_kinematics;
 use faer::Mat;
 
 /// Settings of the fit.

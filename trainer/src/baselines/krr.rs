@@ -4,7 +4,7 @@
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, NominalModel, MAX_JOINTS};
 use cbd_runtime::kernel::{joint_features, joint_kernel, joint_kernel_from_features, read_features, write_features, FEATURES_PER_JOINT};
-use cbd_runtime::nominal::{forward_kinematics, Kinematics};
+use cbd_runtime::kinematics::{forward_kinematics, Kinematics};
 use faer::{linalg::solvers::Solve, Mat, Side};
 
 /// A fitted residual regression: one scalar-kernel regression per task coordinate.

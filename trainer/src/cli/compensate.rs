@@ -118,7 +118,7 @@ pub fn nearest_training_configuration(model: &Model<'_>, target: &[f64]) -> Vec<
     let mut best = (f64::INFINITY, vec![0.0; n]);
     let points: Vec<f64> = model.points.iter().collect();
     for q in points.chunks_exact(n.max(1)) {
-        let k0 = cbd_runtime::nominal::forward_kinematics(&model.nominal, q);
+        let k0 = cbd_runtime::kinematics::forward_kinematics(&model.nominal, q);
         let d: f64 = k0.position.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
         if d < best.0 {
             best = (d, q.to_vec());

@@ -91,7 +91,7 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     let calibrated_grid = crate::predict::evaluate_blob(&blob, &train.joints)?;
 
     let nominal_at = |joints: &[f64]| -> Vec<f64> {
-        joints.chunks_exact(2).flat_map(|q| cbd_runtime::nominal::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
+        joints.chunks_exact(2).flat_map(|q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
     };
     // The peer with its own hyperparameters (its GP marginal likelihood on the same rows).
     let t0 = Instant::now();

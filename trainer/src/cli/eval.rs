@@ -69,7 +69,7 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
             far += 1;
         }
         predicted.extend(e.position().iter());
-        nominal_pred.extend_from_slice(&cbd_runtime::nominal::forward_kinematics(&nominal, data.joints(i)).position[..m]);
+        nominal_pred.extend_from_slice(&cbd_runtime::kinematics::forward_kinematics(&nominal, data.joints(i)).position[..m]);
     }
     let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
     let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;

@@ -209,7 +209,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
 mod tests {
     use super::*;
     use cbd_protocol::{DhConvention, Effect};
-    use cbd_runtime::nominal::forward_kinematics;
+    use cbd_runtime::kinematics::forward_kinematics;
 
     const SMALL: &str = r#"
 length_unit = "m"

@@ -23,7 +23,7 @@ pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u6
     let mut predicted = Measurements::new(data.n_joints, m);
     let mut squared = 0.0;
     for i in 0..data.len() {
-        let p = &cbd_runtime::nominal::forward_kinematics(nominal, data.joints(i)).position[..m];
+        let p = &cbd_runtime::kinematics::forward_kinematics(nominal, data.joints(i)).position[..m];
         if let Some(v) = p.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
             let line = lines.get(i).copied().unwrap_or(0);
             let message = format!(
@@ -63,7 +63,7 @@ mod tests {
         let mut data = Measurements::new(2, 2);
         for i in 0..16 {
             let q = [0.4 * i as f64 - 3.0, 0.3 * i as f64 - 2.0];
-            data.push(&q, &cbd_runtime::nominal::forward_kinematics(&real, &q).position[..2]);
+            data.push(&q, &cbd_runtime::kinematics::forward_kinematics(&real, &q).position[..2]);
         }
         (data, (2..18).collect())
     }

@@ -3,7 +3,7 @@
 
 use cbd_protocol::{Integrator, JointKernel, MomentumLaw, NominalModel, Normalisation, TaskKernel};
 use cbd_runtime::flow::{Dims, FlowParams};
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kinematics::forward_kinematics;
 
 /// The fixed part of a flow: configurations, their nominal kinematics, kernels and scheme.
 #[derive(Debug, Clone)]

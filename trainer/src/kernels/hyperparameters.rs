@@ -16,7 +16,7 @@
 use crate::baselines::krr::kernel_matrix;
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
 
 /// Search settings.

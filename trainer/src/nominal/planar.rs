@@ -5,7 +5,7 @@
 
 use super::dh_parameters::parameter_names;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform};
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kinematics::forward_kinematics;
 
 /// The DH form of `model`: a `PlanarChain` becomes the standard DH chain with a_k = l_k,
 /// α = d = θ_offset = 0, identity base and tool, the same effects and the in-plane part of its

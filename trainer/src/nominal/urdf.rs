@@ -225,7 +225,7 @@ mod tests {
     use super::tests_support::TEST_URDF;
     use super::*;
     use cbd_protocol::NominalModel;
-    use cbd_runtime::nominal::forward_kinematics;
+    use cbd_runtime::kinematics::forward_kinematics;
 
     /// Issue 17 item 8: a 200k-deep URDF did not finish in 120 s (a search through all joints
     /// for every link on the path). The walk is now linear.

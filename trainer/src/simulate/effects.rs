@@ -1,5 +1,5 @@
 //! Physical effects injected into simulated measurements, implemented here independently of the
-//! runtime's `cbd_runtime::effects` (own frame walk, gravity torques by differentiating the
+//! runtime's `cbd_runtime::kinematics::effects` (own frame walk, gravity torques by differentiating the
 //! potential energy numerically): an independent check of what `cbd diagnose` finds and of what
 //! the runtime evaluates. Also effects outside the diagnosis library (a localized bump, a dead
 //! zone, a thermal-like drift) for testing that they are reported as unexplained structure.
@@ -8,7 +8,7 @@
 
 use crate::nominal::{dh_frames, dot, norm, scale, sub, Pose};
 use cbd_protocol::{GravityModel, NominalModel};
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kinematics::forward_kinematics;
 
 /// One injected effect. `joint`/`link` are 0-based.
 #[derive(Debug, Clone, PartialEq)]

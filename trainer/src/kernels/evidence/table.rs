@@ -3,7 +3,7 @@
 
 use crate::data::Measurements;
 use cbd_protocol::{NominalModel, Normalisation};
-use cbd_runtime::nominal::forward_kinematics;
+use cbd_runtime::kinematics::forward_kinematics;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::cholesky::llt::inverse::{inverse as llt_inverse, inverse_scratch as llt_inverse_scratch};

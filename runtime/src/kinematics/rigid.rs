@@ -1,5 +1,5 @@
 //! k0 and Dk0 of the rigid chain alone (planar chain or DH table, effects aside): the one DH frame
-//! walk. `nominal::forward_kinematics` dispatches here for effect-free models, and the effects
+//! walk. `kinematics::forward_kinematics` dispatches here for effect-free models, and the effects
 //! build on it.
 
 use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel, Normalisation, Transform, MAX_JOINTS, MAX_TASK_DIM};

@@ -1,17 +1,25 @@
-//! The nominal forward kinematics k0 and its Jacobian Dk0, in the model's own units.
+//! The nominal forward kinematics k0 and its derivatives, in the model's own units: the rigid DH
+//! chain beside its derivatives (`rigid`, `rigid_derivatives`), the physical effects on top of it
+//! (`effects`, with the gravity torques of a mass model in `gravity`), and the dispatch between
+//! them here.
+
+pub mod effects;
+pub mod gravity;
+pub mod rigid;
+pub mod rigid_derivatives;
 
 use cbd_protocol::NominalModel;
 
-pub use crate::rigid::{dh_frames, Kinematics};
+pub use rigid::{dh_frames, Kinematics};
 
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
-/// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::effects::kinematics`]).
+/// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::kinematics::effects::kinematics`]).
 pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
     // Effect-free models take the rigid chain's code below, unchanged (same bits, same cost).
     if !model.effects().is_empty() {
-        return crate::effects::kinematics(model, x);
+        return crate::kinematics::effects::kinematics(model, x);
     }
-    crate::rigid::kinematics(model, x)
+    crate::kinematics::rigid::kinematics(model, x)
 }
 
 #[cfg(test)]

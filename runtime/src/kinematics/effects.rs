@@ -22,10 +22,10 @@
 //! Everything is f64 through `libm`, with no fused multiply-add: host and firmware agree bit for
 //! bit. Out-of-range joint or link indices (rejected by validation) are ignored, never a panic.
 
-use crate::gravity::{gravity_of, one_link, point_masses};
-pub use crate::gravity::{gravity_terms, gravity_torques, GravityTerms};
-use crate::rigid::{dh_walk, Kinematics};
-use crate::rigid_derivatives::NominalHessian;
+use crate::kinematics::gravity::{gravity_of, one_link, point_masses};
+pub use crate::kinematics::gravity::{gravity_terms, gravity_torques, GravityTerms};
+use crate::kinematics::rigid::{dh_walk, Kinematics};
+use crate::kinematics::rigid_derivatives::NominalHessian;
 use cbd_protocol::{DhChain, Effect, Effects, GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 pub(crate) type V3 = [f64; 3];
@@ -398,14 +398,14 @@ fn without_effects(model: &NominalModel) -> NominalModel {
 }
 
 /// k_rigid(q) and Dk_rigid(q): the chain alone, its effects ignored (evaluated by the effect-free
-/// code path, [`crate::rigid::kinematics`], so that the rigid part is the same arithmetic either way).
+/// code path, [`crate::kinematics::rigid::kinematics`], so that the rigid part is the same arithmetic either way).
 pub fn rigid_kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
-    crate::rigid::kinematics(&without_effects(model), q)
+    crate::kinematics::rigid::kinematics(&without_effects(model), q)
 }
 
-/// D²k_rigid(q): the chain alone (the effect-free code path, [`crate::rigid_derivatives::hessian`]).
+/// D²k_rigid(q): the chain alone (the effect-free code path, [`crate::kinematics::rigid_derivatives::hessian`]).
 pub fn rigid_hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
-    crate::rigid_derivatives::hessian(&without_effects(model), q)
+    crate::kinematics::rigid_derivatives::hessian(&without_effects(model), q)
 }
 
 /// s = q + δ(q) (first `n` entries).
@@ -418,7 +418,7 @@ fn deflected(q: &[f64], t: &EffectTerms, n: usize) -> [f64; NJ] {
 }
 
 /// k0_aug(q) = k_rigid(q + δ(q)) + b(q) and Dk0_aug = Dk_rigid(s)(I + Dδ) + Db, model units.
-/// (Out of line: the effect-free path of `nominal::forward_kinematics` keeps its code and cost.)
+/// (Out of line: the effect-free path of `kinematics::forward_kinematics` keeps its code and cost.)
 #[inline(never)]
 #[cold]
 pub fn kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
@@ -426,7 +426,7 @@ pub fn kinematics(model: &NominalModel, q: &[f64]) -> Kinematics {
     let m = model.task_dim();
     let t = effect_terms(model, &model.effects().list, q, Order::First);
     let s = deflected(q, &t, n);
-    let rigid = crate::rigid::kinematics(&without_effects(model), s.get(..n).unwrap_or(&[]));
+    let rigid = crate::kinematics::rigid::kinematics(&without_effects(model), s.get(..n).unwrap_or(&[]));
     let mut out = rigid;
     for (a, ((p, b), (row, rigid_row))) in
         out.position.iter_mut().zip(t.b.iter()).zip(out.jacobian.iter_mut().zip(rigid.jacobian.iter())).enumerate()
@@ -458,8 +458,8 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
     let s = deflected(q, &t, n);
     let s = s.get(..n).unwrap_or(&[]);
     let rigid = without_effects(model);
-    let jac = crate::rigid::kinematics(&rigid, s).jacobian;
-    let h = crate::rigid_derivatives::hessian(&rigid, s);
+    let jac = crate::kinematics::rigid::kinematics(&rigid, s).jacobian;
+    let h = crate::kinematics::rigid_derivatives::hessian(&rigid, s);
     let mut out = [[[0.0; NJ]; NJ]; MT];
     for (((out_a, h_a), jac_a), d2b_a) in out.iter_mut().zip(h.iter()).zip(jac.iter()).zip(t.d2_b.iter()).take(m) {
         // right[i][d] = Σ_j H[a][i][j] A[j][d] = H[a][i][d] + Σ_j H[a][i][j] Dδ[j][d]
@@ -497,7 +497,7 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 pub(crate) mod tests {
     extern crate std;
     use super::*;
-    use crate::nominal::forward_kinematics;
+    use crate::kinematics::forward_kinematics;
     use crate::query_derivatives::nominal_hessian;
     use cbd_protocol::DhConvention;
     use cbd_protocol::{DhChain, DhJoint, Effects, Transform};

@@ -1,5 +1,5 @@
 //! D²k0 of the rigid chain alone (effects aside): the second derivatives beside the first
-//! ([`crate::rigid`]). `query_derivatives::nominal_hessian` dispatches here for effect-free
+//! ([`crate::kinematics::rigid`]). `query_derivatives::nominal_hessian` dispatches here for effect-free
 //! models, and the effects' Hessian builds on it.
 
 use cbd_protocol::{DhChain, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
@@ -42,7 +42,7 @@ fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
 // Column j of Dk0 is z_j × (p − o_j) (revolute) or z_j (prismatic). Its derivative with respect
 // to joint i: the axes and origins of joints after i turn with joint i, and p moves with every joint.
 fn dh_hessian(chain: &DhChain, x: &[f64], h: &mut NominalHessian) {
-    let (axes, origins, p) = crate::rigid::dh_frames(chain, x);
+    let (axes, origins, p) = crate::kinematics::rigid::dh_frames(chain, x);
     let n = chain.joints.len().min(x.len());
     for (j, (joint_j, (z_j, o_j))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {
         for (i, (joint_i, (z_i, o_i))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {
