@@ -16,7 +16,7 @@ pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, inte
     let dims = Dims { n: n_joints, m: task_dim };
     let trajectory = integrator.stage_count() * n_points * dims.sample_len();
     let load = (1 + scratch_len(1)) * n_points * dims.state_len();
-    let query = n_points * crate::query_derivatives::kernel_row_len(n_joints) + crate::query_derivatives::query_work_len(dims);
+    let query = n_points * crate::flow::query_derivatives::kernel_row_len(n_joints) + crate::flow::query_derivatives::query_work_len(dims);
     features_len(n_points, n_joints) + trajectory + if load > query { load } else { query }
 }
 
@@ -252,7 +252,7 @@ impl<'a> Calibrator<'a> {
     }
 
     /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint
-    /// configuration `q` (see [`crate::query_derivatives`]); also the paper's transported J(1).
+    /// configuration `q` (see [`crate::flow::query_derivatives`]); also the paper's transported J(1).
     pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
         self.evaluate_query(q, true)
     }

@@ -1,6 +1,6 @@
 //! Compensation: the joint command q that puts the calibrated model's tool at a target,
 //! k1(q) = target, by a fixed number of damped minimum-norm Gauss–Newton steps on the exact
-//! Jacobian Dk1 (eq. 20 and [`crate::query_derivatives`]) from a seed, typically the nominal
+//! Jacobian Dk1 (eq. 20 and [`crate::flow::query_derivatives`]) from a seed, typically the nominal
 //! model's inverse kinematics ([`crate::inverse_kinematics`]). Fixed cost, no heap, no panic.
 
 use crate::inverse_kinematics::{conditioning, damped_min_norm_step, matrices_of, padded_target};

@@ -14,11 +14,9 @@ pub mod calibrator;
 pub mod compensate;
 pub mod flow;
 pub mod integrate;
-pub mod inverse_flow;
 pub mod inverse_kinematics;
 pub mod kernel;
 pub mod kinematics;
-pub mod query_derivatives;
 pub mod real;
 
 pub use calibrator::{

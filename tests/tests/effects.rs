@@ -6,8 +6,8 @@
 //! random effects never panic.
 
 use cbd_protocol::*;
+use cbd_runtime::flow::query_derivatives::nominal_hessian;
 use cbd_runtime::kinematics::forward_kinematics;
-use cbd_runtime::query_derivatives::nominal_hessian;
 use cbd_runtime::{Calibrator, Error};
 use cbd_tests::{lcg, model_blob};
 use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};

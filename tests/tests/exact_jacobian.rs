@@ -2,7 +2,7 @@
 //! planar RR arm and for 6-joint DH chains (standard and modified, with a prismatic joint).
 
 use cbd_protocol::*;
-use cbd_runtime::query_derivatives::nominal_hessian;
+use cbd_runtime::flow::query_derivatives::nominal_hessian;
 use cbd_runtime::Calibrator;
 use cbd_tests::{lcg, model_blob};
 

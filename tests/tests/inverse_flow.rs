@@ -1,9 +1,9 @@
-//! The inverse flows of compensation's start (`runtime/src/inverse_flow.rs`): ψ⁻¹ and φ⁻¹ undo
+//! The inverse flows of compensation's start (`runtime/src/flow/inverse.rs`): ψ⁻¹ and φ⁻¹ undo
 //! ψ and φ to (at least) the integrator's order, and the start φ ∘ k0⁻¹ ∘ ψ⁻¹ of a target misses
 //! it by a term of second order in the deformation.
 
 use cbd_protocol::*;
-use cbd_runtime::inverse_flow::Direction;
+use cbd_runtime::flow::inverse::Direction;
 use cbd_runtime::inverse_kinematics::nominal_position;
 use cbd_runtime::Calibrator;
 use cbd_tests::{lcg, model_blob, reference_blob};

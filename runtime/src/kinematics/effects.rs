@@ -497,8 +497,8 @@ pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 pub(crate) mod tests {
     extern crate std;
     use super::*;
+    use crate::flow::query_derivatives::nominal_hessian;
     use crate::kinematics::forward_kinematics;
-    use crate::query_derivatives::nominal_hessian;
     use cbd_protocol::DhConvention;
     use cbd_protocol::{DhChain, DhJoint, Effects, Transform};
     use heapless::Vec as HVec;
