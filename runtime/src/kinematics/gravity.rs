@@ -13,7 +13,7 @@
 //!
 //! f64 through `libm`, no fused multiply-add, no panic path.
 
-use crate::kinematics::effects::{add_scaled, at, at2, dot, gravity_vector, sorted3, Chain, Order, V3, ZERO};
+use crate::kinematics::chain::{add_scaled, at, at2, dot, gravity_vector, sorted3, Chain, Order, V3, ZERO};
 use cbd_protocol::{GravityModel, NominalModel, MAX_JOINTS as NJ};
 
 /// The gravity torques τ = ∇V and their derivatives (V(q) = Σ_k g·(m_k o_k(q) + R_k(q) s_k)), joint order.

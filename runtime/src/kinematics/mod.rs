@@ -3,6 +3,7 @@
 //! (`effects`, with the gravity torques of a mass model in `gravity`), and the dispatch between
 //! them here.
 
+mod chain;
 pub mod effects;
 pub mod gravity;
 pub mod rigid;
