@@ -67,6 +67,8 @@ pub enum Error {
     /// A `--effect` specification of `cbd simulate` that does not parse.
     #[error(transparent)]
     EffectSpec(#[from] crate::simulate::effects::EffectSpecError),
+    #[error(transparent)]
+    Diagnose(#[from] crate::diagnose::DiagnoseError),
     /// A failure of a module that still reports its errors as text (diagnosis, effect specs).
     #[error("{0}")]
     Message(String),

@@ -86,7 +86,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     settings.verbose = false;
     let fitter = crate::cli::compare::cbd_fitter(&settings);
     let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
-    let d = diagnose(&nominal, &data, test.as_ref(), cbd, &options)?;
+    let d = diagnose(&nominal, &data, test.as_ref(), cbd, &options).map_err(|e| e.to_string())?;
     let model_file = match &args.model.model {
         Some(path) => Some(crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?),
         None => None,

@@ -74,35 +74,50 @@ pub struct RawLinkMoment {
     first_moment: Vec<f64>,
 }
 
+/// A `[gravity]` or `[[effects]]` value that is not valid: `field` names it (`[[effects]] entry 2`,
+/// `[gravity] link_masses`), `message` says what is wrong. The model file reader adds the file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct FieldError {
+    pub field: String,
+    pub message: String,
+}
+
+impl FieldError {
+    fn new(field: impl Into<String>, message: impl Into<String>) -> FieldError {
+        FieldError { field: field.into(), message: message.into() }
+    }
+}
+
+/// How an error names one `[[effects]]` entry (1-based, file order).
+fn effects_entry(entry: usize) -> String {
+    format!("[[effects]] entry {entry}")
+}
+
 /// The `[[gravity.link_moments]]` entries as effects (joint units per `rad_per_unit`).
-fn link_moments(raw: &[RawLinkMoment], n: usize, planar: bool, revolute: &[bool], rad_per_unit: f64) -> Result<Vec<Effect>, String> {
+fn link_moments(raw: &[RawLinkMoment], n: usize, planar: bool, revolute: &[bool], rad_per_unit: f64) -> Result<Vec<Effect>, FieldError> {
     let mut out = Vec::new();
     for (k, m) in raw.iter().enumerate() {
         let entry = k + 1;
+        let at = format!("[[gravity.link_moments]] entry {entry}");
         let named = |what: &str, value: usize| {
             if value == 0 || value > n {
-                Err(format!("[[gravity.link_moments]] entry {entry}: {what} = {value}, the model has {n} (1 to {n})"))
+                Err(FieldError::new(&at, format!("{what} = {value}, the model has {n} (1 to {n})")))
             } else {
                 Ok(value - 1)
             }
         };
         let (joint, link) = (named("joint", m.joint)?, named("link", m.link)?);
         if link < joint {
-            return Err(format!(
-                "[[gravity.link_moments]] entry {entry}: link = {} is before joint = {}; only links after a joint load it",
-                m.link, m.joint
-            ));
+            return Err(FieldError::new(&at, format!("link = {} is before joint = {}; only links after a joint load it", m.link, m.joint)));
         }
         let want = if planar { 2 } else { 3 };
         if m.first_moment.len() != want {
-            return Err(format!(
-                "[[gravity.link_moments]] entry {entry}: first_moment has {} entries; this model needs {want}",
-                m.first_moment.len()
-            ));
+            return Err(FieldError::new(&at, format!("first_moment has {} entries; this model needs {want}", m.first_moment.len())));
         }
         let mut values = vec![("mass", m.mass)];
         values.extend(m.first_moment.iter().map(|v| ("first_moment", *v)));
-        check_finite(entry, &values).map_err(|e| e.replace("[[effects]]", "[[gravity.link_moments]]"))?;
+        check_finite(&at, &values)?;
         // A revolute joint deflects by an angle (the gauge c_j = 1 angle unit per mass·length).
         let unit = if revolute[joint] { rad_per_unit } else { 1.0 };
         let mut first_moment = [0.0; 3];
@@ -124,20 +139,20 @@ pub enum RawEffect {
     LinkBending { link: usize, compliance: f64 },
 }
 
-fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, String> {
+fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, FieldError> {
     if value == 0 || value > n {
-        return Err(format!("[[effects]] entry {entry}: {what} = {value}, the model has {n} (1 to {n})"));
+        return Err(FieldError::new(effects_entry(entry), format!("{what} = {value}, the model has {n} (1 to {n})")));
     }
     Ok((value - 1) as u8)
 }
 
 /// Finite and within the importer's magnitude bound (squares must stay finite downstream).
-fn check_finite(entry: usize, values: &[(&str, f64)]) -> Result<(), String> {
+fn check_finite(at: &str, values: &[(&str, f64)]) -> Result<(), FieldError> {
     use crate::data::csv_import::MAX_MAGNITUDE;
     match values.iter().find(|(_, v)| !v.is_finite()) {
-        Some((name, v)) => Err(format!("[[effects]] entry {entry}: {name} = {v} is not finite")),
+        Some((name, v)) => Err(FieldError::new(at, format!("{name} = {v} is not finite"))),
         None => match values.iter().find(|(_, v)| v.abs() > MAX_MAGNITUDE) {
-            Some((name, v)) => Err(format!("[[effects]] entry {entry}: {name} = {v:e} is beyond ±{MAX_MAGNITUDE:e}")),
+            Some((name, v)) => Err(FieldError::new(at, format!("{name} = {v:e} is beyond ±{MAX_MAGNITUDE:e}"))),
             None => Ok(()),
         },
     }
@@ -146,7 +161,7 @@ fn check_finite(entry: usize, values: &[(&str, f64)]) -> Result<(), String> {
 /// Puts the file's `[gravity]` and `[[effects]]` into `nominal` (lengths already in the model's
 /// unit, which is the file's; `rad_per_unit` converts the file's angles). Errors name the entry
 /// and the field.
-pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: f64, nominal: &mut NominalModel) -> Result<(), String> {
+pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: f64, nominal: &mut NominalModel) -> Result<(), FieldError> {
     let n = nominal.n_joints();
     let planar = matches!(nominal, NominalModel::PlanarChain { .. });
     let revolute: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
@@ -155,11 +170,11 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
         if let Some(d) = &g.direction {
             let want = if planar { 2 } else { 3 };
             if d.len() != want {
-                return Err(format!("[gravity] direction has {} entries; this model needs {want}", d.len()));
+                return Err(FieldError::new("[gravity] direction", format!("{} entries; this model needs {want}", d.len())));
             }
             let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt();
             if !(norm.is_finite() && norm > 0.0) {
-                return Err(format!("[gravity] direction = {d:?} has no direction"));
+                return Err(FieldError::new("[gravity] direction", format!("{d:?} has no direction")));
             }
             let mut unit = [0.0; 3];
             for (u, v) in unit.iter_mut().zip(d) {
@@ -169,12 +184,13 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
         }
         if let Some(masses) = &g.link_masses {
             if masses.len() != n {
-                return Err(format!("[gravity] link_masses has {} entries; the model has {n} links", masses.len()));
+                return Err(FieldError::new("[gravity] link_masses", format!("{} entries; the model has {n} links", masses.len())));
             }
             if let Some((k, m)) = masses.iter().enumerate().find(|(_, m)| !(m.is_finite() && **m >= 0.0)) {
-                return Err(format!("[gravity] link_masses[{}] = {m}: needs a finite mass ≥ 0", k + 1));
+                return Err(FieldError::new(format!("[gravity] link_masses[{}]", k + 1), format!("{m} is not a finite mass ≥ 0")));
             }
-            target.gravity.link_masses = heapless::Vec::from_slice(masses).map_err(|_| "[gravity] link_masses: too many".to_string())?;
+            target.gravity.link_masses =
+                heapless::Vec::from_slice(masses).map_err(|_| FieldError::new("[gravity] link_masses", "too many"))?;
         }
     }
     let moments = match gravity.and_then(|g| g.link_moments.as_deref()) {
@@ -182,57 +198,63 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
         None => Vec::new(),
     };
     if moments.len() + effects.len() > MAX_EFFECTS {
-        return Err(format!(
-            "{} [[effects]] and {} [[gravity.link_moments]] entries; at most {MAX_EFFECTS} in all are supported",
-            effects.len(),
-            moments.len()
+        return Err(FieldError::new(
+            "[[effects]]",
+            format!(
+                "{} entries and {} [[gravity.link_moments]] entries; at most {MAX_EFFECTS} in all are supported",
+                effects.len(),
+                moments.len()
+            ),
         ));
     }
     if effects.len() > MAX_EFFECTS {
-        return Err(format!("{} [[effects]] entries; at most {MAX_EFFECTS} are supported", effects.len()));
+        return Err(FieldError::new("[[effects]]", format!("{} entries; at most {MAX_EFFECTS} are supported", effects.len())));
     }
     for (k, raw) in effects.iter().enumerate() {
         let entry = k + 1;
         let effect = match *raw {
             RawEffect::EncoderScale { joint, scale } => {
-                check_finite(entry, &[("scale", scale)])?;
+                check_finite(&effects_entry(entry), &[("scale", scale)])?;
                 // δ = scale·q: a relative error of 100 % or more is not an encoder's scale error
                 // (it reverses or doubles every angle) but a wrong value or unit.
                 if scale.abs() >= 1.0 {
-                    return Err(format!("[[effects]] entry {entry}: scale = {scale:e}: an encoder scale error must lie within (-1, 1)"));
+                    return Err(FieldError::new(
+                        effects_entry(entry),
+                        format!("scale = {scale:e}: an encoder scale error must lie within (-1, 1)"),
+                    ));
                 }
                 Effect::EncoderScale { joint: check_index(entry, "joint", joint, n)?, scale }
             }
             RawEffect::Transmission { joint, harmonic, cos, sin } => {
-                check_finite(entry, &[("cos", cos), ("sin", sin)])?;
+                check_finite(&effects_entry(entry), &[("cos", cos), ("sin", sin)])?;
                 if !(1..=16).contains(&harmonic) {
-                    return Err(format!("[[effects]] entry {entry}: harmonic = {harmonic}, needs 1 to 16"));
+                    return Err(FieldError::new(effects_entry(entry), format!("harmonic = {harmonic}, needs 1 to 16")));
                 }
                 let joint = check_index(entry, "joint", joint, n)?;
                 if !revolute[joint as usize] {
-                    return Err(format!(
-                        "[[effects]] entry {entry}: joint {} is prismatic; a transmission harmonic needs a revolute joint",
-                        joint + 1
+                    return Err(FieldError::new(
+                        effects_entry(entry),
+                        format!("joint {} is prismatic; a transmission harmonic needs a revolute joint", joint + 1),
                     ));
                 }
                 Effect::Transmission { joint, harmonic, cos: cos * rad_per_unit, sin: sin * rad_per_unit }
             }
             RawEffect::GravityCompliance { joint, compliance } => {
-                check_finite(entry, &[("compliance", compliance)])?;
+                check_finite(&effects_entry(entry), &[("compliance", compliance)])?;
                 let joint = check_index(entry, "joint", joint, n)?;
                 // A revolute joint deflects by an angle, a prismatic one by a length.
                 let unit = if revolute[joint as usize] { rad_per_unit } else { 1.0 };
                 Effect::GravityCompliance { joint, compliance: compliance * unit }
             }
             RawEffect::LinkBending { link, compliance } => {
-                check_finite(entry, &[("compliance", compliance)])?;
+                check_finite(&effects_entry(entry), &[("compliance", compliance)])?;
                 Effect::LinkBending { link: check_index(entry, "link", link, n)?, compliance }
             }
         };
-        target.list.push(effect).map_err(|_| format!("[[effects]] entry {entry}: too many effects"))?;
+        target.list.push(effect).map_err(|_| FieldError::new(effects_entry(entry), "too many effects"))?;
     }
     for effect in moments {
-        target.list.push(effect).map_err(|_| "[[gravity.link_moments]]: too many effects".to_string())?;
+        target.list.push(effect).map_err(|_| FieldError::new("[[gravity.link_moments]]", "too many effects"))?;
     }
     Ok(())
 }
@@ -318,10 +340,11 @@ mod tests {
         NominalModel::DhChain(crate::simulate::six_joint::ur5_nominal())
     }
 
+    /// The sections of `text` applied to `nominal`; any error as its message.
     fn read(text: &str, nominal: &NominalModel, rad_per_unit: f64) -> Result<NominalModel, String> {
         let sections: Sections = toml::from_str(text).map_err(|e| e.to_string())?;
         let mut out = nominal.clone();
-        apply(sections.gravity.as_ref(), &sections.effects, rad_per_unit, &mut out)?;
+        apply(sections.gravity.as_ref(), &sections.effects, rad_per_unit, &mut out).map_err(|e| e.to_string())?;
         Ok(out)
     }
 

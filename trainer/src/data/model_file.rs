@@ -177,7 +177,11 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     } else {
         sections::planar(&raw.planar.expect("one section").lengths, path)?
     };
-    effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(model_err)?;
+    effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(|e| ImportError::Field {
+        file: file.clone(),
+        field: e.field,
+        message: e.message,
+    })?;
     if let Some(m) = &raw.measurements {
         if m.joints.len() != nominal.n_joints() {
             return Err(model_err(format!(
@@ -345,8 +349,8 @@ compliance = 0.5
             ("compliance = 0.01\n", "compliance = 0.01\nstiffness = 2\n", "stiffness"),
             ("type = \"link_bending\"", "type = \"wobble\"", "wobble"),
             ("scale = 1e-4", "scale = nan", "scale = NaN is not finite"),
-            ("direction = [0, 0, -2]", "direction = [0, -2]", "[gravity] direction has 2 entries"),
-            ("link_masses = [2.5, 1]", "link_masses = [2.5, -1]", "link_masses[2] = -1"),
+            ("direction = [0, 0, -2]", "direction = [0, -2]", "[gravity] direction: 2 entries"),
+            ("link_masses = [2.5, 1]", "link_masses = [2.5, -1]", "link_masses[2]: -1 is not a finite mass"),
             ("link = 2", "link = 0", "link = 0"),
             // Joint 2 of SMALL is prismatic: a transmission harmonic needs an angle.
             (

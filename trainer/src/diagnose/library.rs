@@ -204,7 +204,7 @@ fn effect_of(p: &Param, v: f64) -> Option<Effect> {
 }
 
 /// Adds `e` to `list`, merging it into an entry of the same type and joint (parameters add).
-fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>, e: Effect) -> Result<(), String> {
+fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>, e: Effect) -> Result<(), super::DiagnoseError> {
     for old in list.iter_mut() {
         match (old, e) {
             (Effect::EncoderScale { joint: a, scale }, Effect::EncoderScale { joint: b, scale: s }) if *a == b => {
@@ -239,12 +239,12 @@ fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>,
             _ => {}
         }
     }
-    list.push(e).map_err(|_| format!("more than {} effects", cbd_protocol::MAX_EFFECTS))
+    list.push(e).map_err(|_| super::DiagnoseError::TooManyEffects)
 }
 
 /// `model` changed by `values` of `params`: geometric changes written into the chain, effects
 /// merged into its effect list.
-pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<NominalModel, String> {
+pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<NominalModel, super::DiagnoseError> {
     let mut out = match model {
         NominalModel::DhChain(chain) => {
             let mut p = vec![0.0; parameter_count(chain.joints.len())];

@@ -139,8 +139,37 @@ pub struct Recommendation {
     pub effects_hurt: bool,
 }
 
+/// Why a diagnosis could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    #[error("diagnose needs at least 10 training rows, got {got}")]
+    TooFewRows { got: usize },
+    #[error("the model has {model} task coordinates, the data {train} (test {test})")]
+    TaskDimension { model: usize, train: usize, test: usize },
+    /// The found effects do not fit in one model's effect list.
+    #[error("more than {} effects", cbd_protocol::MAX_EFFECTS)]
+    TooManyEffects,
+    /// The nonparametric correction of a table row failed: `on` names the model it corrects.
+    #[error("CbD on {on}: {source}")]
+    Correction {
+        on: &'static str,
+        #[source]
+        source: Box<crate::Error>,
+    },
+}
+
+impl DiagnoseError {
+    fn on_effects(e: crate::Error) -> DiagnoseError {
+        DiagnoseError::Correction { on: "nominal + effects", source: Box::new(e) }
+    }
+
+    fn on_nominal(e: crate::Error) -> DiagnoseError {
+        DiagnoseError::Correction { on: "nominal", source: Box::new(e) }
+    }
+}
+
 /// RMS held-out error of `fit` on `base` over `folds` interleaved folds of `train`.
-fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measurements, folds: usize) -> Result<f64, String> {
+fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measurements, folds: usize) -> crate::Result<f64> {
     let (mut sse, mut count) = (0.0, 0usize);
     for fold in 0..folds {
         let (rest, held) = train.fold(folds, fold);
@@ -315,7 +344,7 @@ pub fn diagnose(
     test: Option<&Measurements>,
     cbd: Option<CorrectionFitter>,
     options: &DiagnoseOptions,
-) -> Result<Diagnosis, String> {
+) -> Result<Diagnosis, DiagnoseError> {
     let (train, test, held_out) = match test {
         Some(t) => (data.clone(), t.clone(), "test set"),
         None => {
@@ -324,11 +353,11 @@ pub fn diagnose(
         }
     };
     if train.len() < 10 {
-        return Err(format!("diagnose needs at least 10 training rows, got {}", train.len()));
+        return Err(DiagnoseError::TooFewRows { got: train.len() });
     }
     let m = given.task_dim();
     if train.task_dim != m || test.task_dim != m {
-        return Err(format!("the model has {m} task coordinates, the data {} (test {})", train.task_dim, test.task_dim));
+        return Err(DiagnoseError::TaskDimension { model: m, train: train.task_dim, test: test.task_dim });
     }
     let dh_form = crate::nominal::planar::as_dh(given);
     let model = &dh_form;
@@ -449,7 +478,7 @@ fn refine_and_prune(
     params: &[Param],
     selected: Vec<usize>,
     options: &DiagnoseOptions,
-) -> Result<Pruned, String> {
+) -> Result<Pruned, DiagnoseError> {
     let mut kept = selected;
     let mut dropped = Vec::new();
     let pruned = loop {
@@ -486,7 +515,7 @@ fn geometric_only_model(
     start: &[f64],
     train: &Measurements,
     options: &DiagnoseOptions,
-) -> Result<NominalModel, String> {
+) -> Result<NominalModel, DiagnoseError> {
     if !found.iter().any(|f| f.kind == GroupKind::Geometric) {
         return Ok(model.clone());
     }
@@ -508,7 +537,7 @@ fn held_out_table(
     train: &Measurements,
     test: &Measurements,
     cbd: Option<CorrectionFitter>,
-) -> Result<Vec<TableRow>, String> {
+) -> Result<Vec<TableRow>, DiagnoseError> {
     // The file's task dimension: a planar arm's DH form (`model`) is read in its two coordinates.
     let m = given.task_dim();
     let mut table = Vec::new();
@@ -521,9 +550,9 @@ fn held_out_table(
     push("nominal + effects", predict(with_effects, &test.joints, m));
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
-        let (on_effects, _) = fit_on(fit, with_effects, train).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
+        let (on_effects, _) = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?;
         push("nominal + effects + CbD", on_effects(&test.joints));
-        let (plain, _) = fit(given, train).map_err(|e| format!("CbD on nominal: {e}"))?;
+        let (plain, _) = fit(given, train).map_err(DiagnoseError::on_nominal)?;
         push("nominal + CbD", plain(&test.joints));
     }
     Ok(table)
@@ -537,9 +566,9 @@ fn recommend(
     with_effects: &NominalModel,
     train: &Measurements,
     folds: usize,
-) -> Result<Recommendation, String> {
-    let on_effects = cross_validated_rms(fit, with_effects, train, folds).map_err(|e| format!("CbD on nominal + effects: {e}"))?;
-    let plain = cross_validated_rms(fit, given, train, folds).map_err(|e| format!("CbD on nominal: {e}"))?;
+) -> Result<Recommendation, DiagnoseError> {
+    let on_effects = cross_validated_rms(fit, with_effects, train, folds).map_err(DiagnoseError::on_effects)?;
+    let plain = cross_validated_rms(fit, given, train, folds).map_err(DiagnoseError::on_nominal)?;
     let effects_hurt = plain < on_effects;
     Ok(Recommendation {
         cross_validation: vec![("nominal + effects + CbD".into(), on_effects), ("nominal + CbD".into(), plain)],

@@ -39,7 +39,13 @@ fn gauss_newton_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
 }
 
 /// Refines `start` values of `params` on `base` (parameters are changes to `base`).
-pub fn refine(base: &NominalModel, data: &Measurements, params: &[Param], start: &[f64], max_iterations: usize) -> Result<Refined, String> {
+pub fn refine(
+    base: &NominalModel,
+    data: &Measurements,
+    params: &[Param],
+    start: &[f64],
+    max_iterations: usize,
+) -> Result<Refined, super::DiagnoseError> {
     let mut values = start.to_vec();
     let mut model = apply(base, params, &values)?;
     let mut r = residual(&model, data);

@@ -230,7 +230,7 @@ pub fn plots(
     joint_names: &[String],
     joint_scale: &[f64],
     unit: &str,
-) -> Result<Vec<std::path::PathBuf>, String> {
+) -> crate::Result<Vec<std::path::PathBuf>> {
     use super::library::{apply, jacobian, predict};
     use crate::solver::least_squares::TruncatedSvd;
     let n = model_start.n_joints();

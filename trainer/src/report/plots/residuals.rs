@@ -98,15 +98,18 @@ pub fn residual_vs_joint(
     residuals: &[f64],
     residual_label: &str,
     effects: &[EffectCurve],
-) -> Result<Vec<PathBuf>, String> {
-    // Text errors: its one caller, `diagnose::report`, still reports errors as text.
+) -> crate::Result<Vec<PathBuf>> {
     let nj = joint_names.len();
     if nj == 0 || joints.len() != nj * residuals.len() || residuals.is_empty() {
-        return Err(format!("residual plot: {} joint values for {} residuals and {nj} joints", joints.len(), residuals.len()));
+        return Err(crate::Error::InvalidInput(format!(
+            "residual plot: {} joint values for {} residuals and {nj} joints",
+            joints.len(),
+            residuals.len()
+        )));
     }
     if let Some((name, j, _)) = effects.iter().find(|(_, j, _)| *j >= nj) {
-        return Err(format!("residual plot: effect `{name}` refers to joint {j} of {nj}"));
+        return Err(crate::Error::InvalidInput(format!("residual plot: effect `{name}` refers to joint {j} of {nj}")));
     }
     let size = (RESIDUAL_WIDTH, 40 + 420 * nj.div_ceil(2) as u32);
-    render(dir, "residual_vs_joint", size, &Residuals { joint_names, joints, residuals, residual_label, effects }).map_err(String::from)
+    render(dir, "residual_vs_joint", size, &Residuals { joint_names, joints, residuals, residual_label, effects })
 }
