@@ -69,9 +69,6 @@ pub enum Error {
     EffectSpec(#[from] crate::simulate::effects::EffectSpecError),
     #[error(transparent)]
     Diagnose(#[from] crate::diagnose::DiagnoseError),
-    /// A failure of a module that still reports its errors as text (diagnosis, effect specs).
-    #[error("{0}")]
-    Message(String),
     /// Any of the above, with what was being done: `--commanded: unknown simulated robot`.
     #[error("{context}: {source}")]
     Context {
@@ -106,13 +103,6 @@ impl Error {
 impl From<cbd_runtime::Error> for Error {
     fn from(e: cbd_runtime::Error) -> Error {
         Error::Runtime(e)
-    }
-}
-
-/// The modules that still speak in text (see [`Error::Message`]) meet this enum here.
-impl From<String> for Error {
-    fn from(message: String) -> Error {
-        Error::Message(message)
     }
 }
 
