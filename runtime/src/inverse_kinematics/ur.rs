@@ -200,28 +200,17 @@ pub fn nearest_to_hint(chain: &DhChain, target: &[f64; 3], hint: &[f64; 6]) -> O
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cbd_protocol::{DhJoint, Effects};
 
+    /// The UR5 table (`cbd_protocol::ur5`) with every θ offset set, a tool off the flange axis and
+    /// a rotated, shifted base: a UR-type chain the closed form must handle in general.
     fn ur5(theta_offset: f64) -> DhChain {
-        let j = |a, alpha: f64, d| DhJoint { kind: JointKind::Revolute, a, alpha, d, theta_offset };
-        use core::f64::consts::FRAC_PI_2;
-        let mut tool = Transform::IDENTITY;
-        tool.translation = [5.0, -3.0, 31.0];
-        DhChain {
-            convention: DhConvention::Standard,
-            joints: heapless::Vec::from_slice(&[
-                j(0.0, FRAC_PI_2, 89.159),
-                j(-425.0, 0.0, 0.0),
-                j(-392.25, 0.0, 0.0),
-                j(0.0, FRAC_PI_2, 109.15),
-                j(0.0, -FRAC_PI_2, 94.65),
-                j(0.0, 0.0, 82.3),
-            ])
-            .unwrap(),
-            base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 20.0, -50.0] },
-            tool,
-            effects: Effects::NONE,
+        let mut chain = cbd_protocol::ur5::chain();
+        for joint in chain.joints.iter_mut() {
+            joint.theta_offset = theta_offset;
         }
+        chain.tool.translation = [5.0, -3.0, 31.0];
+        chain.base = Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 20.0, -50.0] };
+        chain
     }
 
     fn pose_distance(a: &Pose, b: &Pose) -> f64 {

@@ -429,6 +429,34 @@ pub(crate) mod tests {
         err
     }
 
+    /// τ, Dτ and D²τ of `terms` at `q` against central differences of `potential` and of `terms`
+    /// itself (relative to 1 + max |τ|, within 1e-8).
+    pub(crate) fn check_gravity_terms(
+        name: &str,
+        q: &[f64],
+        potential: impl Fn(&[f64]) -> f64,
+        terms: impl Fn(&[f64], Order) -> GravityTerms,
+    ) {
+        let n = q.len();
+        let t = terms(q, Order::Second);
+        let scale = 1.0 + t.tau.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        for d in 0..n {
+            let v = fd(q, d, 1e-5, |x| [potential(x)]);
+            close(&format!("{name} tau {d}"), v[0], t.tau[d], scale, 1e-8);
+            let dt = fd(q, d, 1e-5, |x| terms(x, Order::Value).tau);
+            let ddt = fd(q, d, 1e-5, |x| {
+                let t = terms(x, Order::First).d_tau;
+                core::array::from_fn::<f64, 49, _>(|i| t[i / NJ][i % NJ])
+            });
+            for j in 0..n {
+                close(&format!("{name} dtau {j} {d}"), dt[j], t.d_tau[j][d], scale, 1e-8);
+                for e in 0..n {
+                    close(&format!("{name} d2tau {j} {e} {d}"), ddt[j * NJ + e], t.d2_tau[j][e][d], scale, 1e-8);
+                }
+            }
+        }
+    }
+
     #[test]
     fn gravity_torques_and_their_derivatives_match_finite_differences() {
         for (name, model) in models() {
@@ -436,23 +464,7 @@ pub(crate) mod tests {
             for seed in 1..4 {
                 let q = config(n, seed);
                 let q = &q[..n];
-                let t = gravity_terms(&model, q, Order::Second);
-                let scale = 1.0 + t.tau.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-                for d in 0..n {
-                    let v = fd(q, d, 1e-5, |x| [potential(&model, x)]);
-                    close(&format!("{name} tau {d}"), v[0], t.tau[d], scale, 1e-8);
-                    let dt = fd(q, d, 1e-5, |x| gravity_terms(&model, x, Order::Value).tau);
-                    let ddt = fd(q, d, 1e-5, |x| {
-                        let t = gravity_terms(&model, x, Order::First).d_tau;
-                        core::array::from_fn::<f64, 49, _>(|i| t[i / NJ][i % NJ])
-                    });
-                    for j in 0..n {
-                        close(&format!("{name} dtau {j} {d}"), dt[j], t.d_tau[j][d], scale, 1e-8);
-                        for e in 0..n {
-                            close(&format!("{name} d2tau {j} {e} {d}"), ddt[j * NJ + e], t.d2_tau[j][e][d], scale, 1e-8);
-                        }
-                    }
-                }
+                check_gravity_terms(name, q, |x| potential(&model, x), |x, order| gravity_terms(&model, x, order));
             }
         }
     }

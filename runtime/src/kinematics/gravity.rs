@@ -131,7 +131,7 @@ pub fn gravity_torques(model: &NominalModel, q: &[f64]) -> [f64; NJ] {
 mod tests {
     extern crate std;
     use super::*;
-    use crate::kinematics::effects::tests::{close, config, fd, models};
+    use crate::kinematics::effects::tests::{check_gravity_terms, close, config, fd, models};
     use std::format;
 
     /// A mass distribution off the link ends: m_k and s_k = m_k r_k, different per link.
@@ -168,21 +168,7 @@ mod tests {
                 // The first moments matter: the torques differ from those of the masses alone.
                 let alone = gravity_of(&Chain::of(&model, q), &g, |k| (moments(k).0, ZERO), Order::Value).tau;
                 assert!((0..n).any(|j| (alone[j] - t.tau[j]).abs() > 1e-3 * scale), "{name}: {alone:?} vs {:?}", t.tau);
-                for d in 0..n {
-                    let v = fd(q, d, 1e-5, |x| [potential_with_moments(&model, x)]);
-                    close(&format!("{name} tau {d}"), v[0], t.tau[d], scale, 1e-8);
-                    let dt = fd(q, d, 1e-5, |x| terms(x, Order::Value).tau);
-                    let ddt = fd(q, d, 1e-5, |x| {
-                        let t = terms(x, Order::First).d_tau;
-                        core::array::from_fn::<f64, 49, _>(|i| t[i / NJ][i % NJ])
-                    });
-                    for j in 0..n {
-                        close(&format!("{name} dtau {j} {d}"), dt[j], t.d_tau[j][d], scale, 1e-8);
-                        for e in 0..n {
-                            close(&format!("{name} d2tau {j} {e} {d}"), ddt[j * NJ + e], t.d2_tau[j][e][d], scale, 1e-8);
-                        }
-                    }
-                }
+                check_gravity_terms(name, q, |x| potential_with_moments(&model, x), &terms);
             }
         }
     }
