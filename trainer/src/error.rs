@@ -63,12 +63,14 @@ pub enum Error {
     #[error(transparent)]
     KernelRidge(#[from] crate::baselines::krr::KrrError),
     #[error(transparent)]
+    LeastSquares(#[from] crate::solver::least_squares::LeastSquaresError),
+    #[error(transparent)]
     DhCalibration(#[from] crate::baselines::dh_calibration::DhCalibrationError),
     /// A `--effect` specification of `cbd simulate` that does not parse.
     #[error(transparent)]
     EffectSpec(#[from] crate::simulate::effects::EffectSpecError),
     #[error(transparent)]
-    Diagnose(#[from] crate::diagnose::DiagnoseError),
+    Diagnose(#[from] crate::diagnose::error::DiagnoseError),
     /// Any of the above, with what was being done: `--commanded: unknown simulated robot`.
     #[error("{context}: {source}")]
     Context {

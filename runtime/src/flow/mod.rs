@@ -1,4 +1,4 @@
-//! The vector fields and the dynamics of DESIGN.md §2, for control points (eq. 17, 19) and
+//! The vector fields and the dynamics of docs/DESIGN.md §2, for control points (eq. 17, 19) and
 //! for a query configuration (eq. 20); beside them the query's derivatives (`query_derivatives`)
 //! and the inverse flows of compensation's start (`inverse`). One function computes each quantity; the trainer calls
 //! the same functions, so trainer and runtime integrate bit-identical discrete flows.

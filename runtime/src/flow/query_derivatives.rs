@@ -132,7 +132,7 @@ pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
 /// δk' = Dw δk − δJ v − J ∂_d v,  δJ' = (D²w δk) J + Dw δJ − δJ Dv − J ∂_d Dv.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn tangent_rates<S: Shape>(
+fn query_tangent_rates<S: Shape>(
     shape: S,
     direction: usize,
     jac: &[[Real; NJ]; MT],
@@ -248,7 +248,7 @@ fn query_rates<S: Shape>(
     {
         let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
-        tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
+        query_tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
     }
     Some(())
 }

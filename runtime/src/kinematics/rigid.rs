@@ -98,13 +98,18 @@ pub struct DhWalk {
     pub end_rotations: [[[f64; 3]; 3]; MAX_JOINTS],
     /// The base origin (start of link 0).
     pub start: [f64; 3],
+    /// Rotation (row-major rows) of the base frame, whose origin is `start`.
+    pub start_rotation: [[f64; 3]; 3],
     /// The tool point.
     pub tool: [f64; 3],
+    /// Rotation (row-major rows) of the tool frame, whose origin is `tool`.
+    pub tool_rotation: [[f64; 3]; 3],
 }
 
-/// The one DH frame walk: forward kinematics, its Hessian, the effects and the trainer's
-/// six-joint simulator all use it. Callers that do not read `ends` pay nothing for it (dead
-/// stores to a local are removed).
+/// The one DH frame walk: forward kinematics, its Hessian, the effects, and in the trainer the
+/// six-joint simulator, the injected effects, DH calibration's Jacobian and the URDF check all use
+/// it. Callers that do not read `ends` or the rotations pay nothing for them (dead stores to a local
+/// are removed).
 #[inline(always)]
 pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
     let mut frame = frame_of(&chain.base);
@@ -114,7 +119,9 @@ pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
         ends: [[0.0; 3]; MAX_JOINTS],
         end_rotations: [[[0.0; 3]; 3]; MAX_JOINTS],
         start: [frame[0][3], frame[1][3], frame[2][3]],
+        start_rotation: rotation_of(&frame),
         tool: [0.0; 3],
+        tool_rotation: [[0.0; 3]; 3],
     };
     let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut().zip(out.end_rotations.iter_mut()));
     for ((joint, x_i), ((axis, origin), (end, rotation))) in chain.joints.iter().zip(x).zip(slots) {
@@ -139,12 +146,16 @@ pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
             }
         }
         *end = [frame[0][3], frame[1][3], frame[2][3]];
-        *rotation =
-            [[frame[0][0], frame[0][1], frame[0][2]], [frame[1][0], frame[1][1], frame[1][2]], [frame[2][0], frame[2][1], frame[2][2]]];
+        *rotation = rotation_of(&frame);
     }
     frame = compose(&frame, &frame_of(&chain.tool));
     out.tool = [frame[0][3], frame[1][3], frame[2][3]];
+    out.tool_rotation = rotation_of(&frame);
     out
+}
+
+fn rotation_of(frame: &Frame) -> [[f64; 3]; 3] {
+    [[frame[0][0], frame[0][1], frame[0][2]], [frame[1][0], frame[1][1], frame[1][2]], [frame[2][0], frame[2][1], frame[2][2]]]
 }
 
 /// Joint axes z_i, points o_i on them and the tool point p, in the base frame, at joints `x`.

@@ -2,16 +2,18 @@
 //! Cartesian target into a joint command. The true tool error |real(q) − x| of 1000 random
 //! reachable targets x = real(q*) (q* random configurations of the simulator's range), for
 //! (a) the nominal model's inverse kinematics, (b) DH-calibrated compensation (the inverse
-//! kinematics of the calibrated chain; for the planar arm the link lengths, joint offsets and base
-//! position fitted by linear least squares), (c) kernel-ridge compensation by pose redefinition
+//! kinematics of the calibrated chain; for the planar arm the DH calibration of its planar form:
+//! link lengths, joint offsets, base position and yaw), (c) kernel-ridge compensation by pose redefinition
 //! (command the nominal IK of x', x' ← x' + x − krr(q), five times), (d) CbD compensation
 //! (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
 //! target: q* moved by up to 0.05 rad per joint (a controller's previous command).
 
+use super::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use super::krr::KernelRidge;
 use crate::data::Measurements;
 use crate::error::Error;
 use crate::kernels::hyperparameters::{choose_hyperparameters, SearchOptions};
+use crate::nominal::planar::as_planar_in_frame;
 use crate::report::stats::ErrorStats;
 use crate::simulate::{rr::RealRr, six_joint::SixJointRobot};
 use cbd_protocol::NominalModel;
@@ -66,9 +68,10 @@ impl SimulatedArm {
     }
 }
 
-/// The planar arm's parametric calibration: z = b + L1 e^{i q1} + L2 e^{i (q1 + q2)} with complex
-/// b (base), L1 = l1 e^{i o1}, L2 = l2 e^{i (o2)} (lengths and joint offsets), linear in its six
-/// real unknowns, fitted by least squares (normal equations).
+/// The planar arm's parametric calibration, z = b + l1 e^{i (q1 + o1)} + l2 e^{i (q1 + q2 + o2)}
+/// (complex base b, link lengths, link angle offsets): DH calibration of the arm's planar DH form
+/// ([`calibrate_dh`] with `planar_as_dh`: lengths, joint offsets, base x, y and yaw), read as a
+/// planar chain in its frame ([`as_planar_in_frame`]) for the closed-form inverse.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarCalibration {
     pub base: [f64; 2],
@@ -78,32 +81,18 @@ pub struct PlanarCalibration {
 }
 
 impl PlanarCalibration {
-    pub fn fit(data: &Measurements) -> Option<PlanarCalibration> {
-        // Unknowns (bx, by, L1re, L1im, L2re, L2im); rows x and y of every measurement.
-        let mut normal = [[0.0; 6]; 6];
-        let mut rhs = [0.0; 6];
-        for i in 0..data.len() {
-            let (q, y) = (data.joints(i), data.position(i));
-            let (a1, a12) = (q[0], q[0] + q[1]);
-            let rows = [
-                ([1.0, 0.0, a1.cos(), -a1.sin(), a12.cos(), -a12.sin()], y[0]),
-                ([0.0, 1.0, a1.sin(), a1.cos(), a12.sin(), a12.cos()], y[1]),
-            ];
-            for (row, value) in rows {
-                for r in 0..6 {
-                    rhs[r] += row[r] * value;
-                    for c in 0..6 {
-                        normal[r][c] += row[r] * row[c];
-                    }
-                }
-            }
+    /// `None` unless `nominal` is a two-link planar arm whose calibration succeeds.
+    pub fn fit(nominal: &NominalModel, data: &Measurements) -> Option<PlanarCalibration> {
+        if !matches!(nominal, NominalModel::PlanarChain { lengths, .. } if lengths.len() == 2) {
+            return None;
         }
-        let p = solve6(normal, rhs)?;
-        Some(PlanarCalibration {
-            base: [p[0], p[1]],
-            lengths: [p[2].hypot(p[3]), p[4].hypot(p[5])],
-            offsets: [p[3].atan2(p[2]), p[5].atan2(p[4])],
-        })
+        let options = DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() };
+        let fit = calibrate_dh(nominal, data, &options).ok()?;
+        let (chain, frame) = as_planar_in_frame(&fit.model)?;
+        let NominalModel::PlanarChain { lengths, .. } = chain else { return None };
+        // Link k's angle: yaw + Σ_{j ≤ k} (q_j + θ_offset_j).
+        let o1 = frame.yaw + frame.offsets[0];
+        Some(PlanarCalibration { base: frame.base, lengths: [lengths[0], lengths[1]], offsets: [o1, o1 + frame.offsets[1]] })
     }
 
     pub fn position(&self, q: &[f64]) -> [f64; 2] {
@@ -134,31 +123,6 @@ impl PlanarCalibration {
         }
         best.map(|(_, q)| q)
     }
-}
-
-/// Gaussian elimination with partial pivoting on a 6 × 6 system; `None` when singular.
-fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
-    for col in 0..6 {
-        let pivot = (col..6).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if !(a[pivot][col].abs() > 1e-300) {
-            return None;
-        }
-        a.swap(col, pivot);
-        b.swap(col, pivot);
-        for r in col + 1..6 {
-            let f = a[r][col] / a[col][col];
-            for c in col..6 {
-                a[r][c] -= f * a[col][c];
-            }
-            b[r] -= f * b[col];
-        }
-    }
-    let mut x = [0.0; 6];
-    for r in (0..6).rev() {
-        let s: f64 = (r + 1..6).map(|c| a[r][c] * x[c]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
-    Some(x)
 }
 
 /// The fitted corrections the commanded table compares.
@@ -351,17 +315,10 @@ pub fn fit_and_command(
     seed: u64,
 ) -> crate::Result<CommandedAccuracy> {
     let dh = match nominal {
-        NominalModel::DhChain(_) => {
-            super::dh_calibration::calibrate_dh(nominal, train, &super::dh_calibration::DhCalibrationOptions::default())
-                .ok()
-                .map(|f| f.model)
-        }
+        NominalModel::DhChain(_) => calibrate_dh(nominal, train, &DhCalibrationOptions::default()).ok().map(|f| f.model),
         NominalModel::PlanarChain { .. } => None,
     };
-    let planar = match nominal {
-        NominalModel::PlanarChain { lengths, .. } if lengths.len() == 2 => PlanarCalibration::fit(train),
-        _ => None,
-    };
+    let planar = PlanarCalibration::fit(nominal, train);
     let krr = choose_hyperparameters(nominal, train, search)
         .ok()
         .and_then(|h| KernelRidge::fit(nominal, train, h.kernel.clone(), h.ridge()).ok());
@@ -460,7 +417,8 @@ mod tests {
         for q in joints.chunks_exact(2) {
             data.push(q, &truth.position(q));
         }
-        let fit = PlanarCalibration::fit(&data).unwrap();
+        let nominal = NominalModel::planar(&[1.0, 0.5]).unwrap();
+        let fit = PlanarCalibration::fit(&nominal, &data).unwrap();
         for (a, b) in [fit.base, fit.lengths, fit.offsets].iter().flatten().zip([truth.base, truth.lengths, truth.offsets].iter().flatten())
         {
             assert!((a - b).abs() < 1e-12, "{fit:?}");

@@ -74,27 +74,18 @@ pub struct DhCalibration {
     pub stats: DhFitStats,
 }
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DhCalibrationError {
     /// Only DH chains have DH parameters.
+    #[error("DH calibration needs a DH chain as nominal model")]
     NotADhChain,
     /// Fewer measured coordinates than parameters would be meaningless.
+    #[error("DH calibration: {rows} measurements are too few")]
     TooFewMeasurements { rows: usize },
     /// The SVD of the Jacobian failed (non-finite data?).
-    Numerical(String),
+    #[error("DH calibration: {0}")]
+    Numerical(#[from] crate::solver::least_squares::LeastSquaresError),
 }
-
-impl std::fmt::Display for DhCalibrationError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            DhCalibrationError::NotADhChain => write!(f, "DH calibration needs a DH chain as nominal model"),
-            DhCalibrationError::TooFewMeasurements { rows } => write!(f, "DH calibration: {rows} measurements are too few"),
-            DhCalibrationError::Numerical(m) => write!(f, "DH calibration: {m}"),
-        }
-    }
-}
-
-impl std::error::Error for DhCalibrationError {}
 
 /// k − y over the data's `m = data.task_dim` coordinates (2 for a planar arm's DH form).
 fn residuals(chain: &DhChain, data: &Measurements, out: &mut [f64]) {
@@ -136,34 +127,38 @@ fn redundant_parameters(jac: &Mat<f64>, colnorm: &[f64], tol: f64) -> Vec<usize>
 /// ∂k/∂(DH rows, base translation, tool translation) at the chain's current parameters, into
 /// `jac` (`data.task_dim` rows per measurement); the base-rotation columns are left for the caller.
 fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut Mat<f64>) {
-    use crate::nominal::{cross, dh_frames, sub};
+    use crate::nominal::{cross, sub};
     use cbd_protocol::DhConvention;
+    use cbd_runtime::kinematics::rigid::dh_walk;
     let (n, m) = (chain.joints.len(), data.task_dim);
+    let column = |r: &[[f64; 3]; 3], c: usize| [r[0][c], r[1][c], r[2][c]];
     for row in 0..data.len() {
-        let frames = dh_frames(chain, data.joints(row));
-        let p = frames[n + 1].t;
+        let walk = dh_walk(chain, data.joints(row));
+        let p = walk.tool;
+        // Frame i (0 = base, i = after joint i): its rotation's column c and its origin.
+        let axis = |i: usize, c: usize| if i == 0 { column(&walk.start_rotation, c) } else { column(&walk.end_rotations[i - 1], c) };
+        let origin = |i: usize| if i == 0 { walk.start } else { walk.ends[i - 1] };
         let mut put = |col: usize, v: [f64; 3]| {
             for c in 0..m {
                 jac[(m * row + c, col)] = v[c];
             }
         };
         for i in 1..=n {
-            let (prev, cur) = (&frames[i - 1], &frames[i]);
             let base_col = 4 * (i - 1);
             match chain.convention {
                 // Rz(θ) Tz(d) about/along z_{i−1}; Tx(a) Rx(α) along/about x_i through o_i.
                 DhConvention::Standard => {
-                    put(base_col, cur.axis(0));
-                    put(base_col + 1, cross(cur.axis(0), sub(p, cur.t)));
-                    put(base_col + 2, prev.axis(2));
-                    put(base_col + 3, cross(prev.axis(2), sub(p, prev.t)));
+                    put(base_col, axis(i, 0));
+                    put(base_col + 1, cross(axis(i, 0), sub(p, origin(i))));
+                    put(base_col + 2, axis(i - 1, 2));
+                    put(base_col + 3, cross(axis(i - 1, 2), sub(p, origin(i - 1))));
                 }
                 // Rx(α) Tx(a) about/along x_{i−1} through o_{i−1}; Rz(θ) Tz(d) about/along z_i.
                 DhConvention::Modified => {
-                    put(base_col, prev.axis(0));
-                    put(base_col + 1, cross(prev.axis(0), sub(p, prev.t)));
-                    put(base_col + 2, cur.axis(2));
-                    put(base_col + 3, cross(cur.axis(2), sub(p, cur.t)));
+                    put(base_col, axis(i - 1, 0));
+                    put(base_col + 1, cross(axis(i - 1, 0), sub(p, origin(i - 1))));
+                    put(base_col + 2, axis(i, 2));
+                    put(base_col + 3, cross(axis(i, 2), sub(p, origin(i))));
                 }
             }
         }
@@ -173,7 +168,7 @@ fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut Mat<f64>) {
             e[k] = 1.0;
             put(o + k, e);
             // Tool translation is expressed in the last joint frame.
-            put(o + 6 + k, frames[n].axis(k));
+            put(o + 6 + k, axis(n, k));
         }
     }
 }
@@ -337,8 +332,7 @@ fn minimise(
                 colnorm[k] = 1.0;
             }
             // The scaled Jacobian J D⁻¹ = U Σ Vᵀ: λ_k = σ_k² are the eigenvalues of D⁻¹ JᵀJ D⁻¹.
-            let factored =
-                TruncatedSvd::with_scales(jac.as_ref(), colnorm.clone()).map_err(|e| DhCalibrationError::Numerical(e.to_string()))?;
+            let factored = TruncatedSvd::with_scales(jac.as_ref(), colnorm.clone())?;
             rank = (0..np).filter(|&k| factored.keeps(k, options.rank_tolerance)).count();
             null_dirs = reported_null_directions(&factored, options.rank_tolerance, out_of_plane);
             if mu < 0.0 {

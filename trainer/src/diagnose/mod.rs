@@ -6,6 +6,7 @@
 //! refinement with uncertainties (`refine`), dropping what is not significant or does not earn its
 //! place → held-out comparison and report (`report`).
 
+pub mod error;
 pub mod f_test;
 pub mod kinematics;
 pub mod library;
@@ -18,6 +19,7 @@ use crate::baselines::compare::{fit_on, CorrectionFitter};
 use crate::data::Measurements;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
+pub use error::DiagnoseError;
 use library::{candidate_groups, identifiable_columns, jacobian, predict, Group, GroupKind, LibraryOptions, Param};
 use selection::{forward_select, LinearProblem, Selection, SelectionOptions};
 use structure::{structure_tests, StructureOptions, StructureTest};
@@ -137,35 +139,6 @@ pub struct Recommendation {
     pub best: String,
     /// Naming the effects made the final model worse out of sample.
     pub effects_hurt: bool,
-}
-
-/// Why a diagnosis could not be made.
-#[derive(Debug, thiserror::Error)]
-pub enum DiagnoseError {
-    #[error("diagnose needs at least 10 training rows, got {got}")]
-    TooFewRows { got: usize },
-    #[error("the model has {model} task coordinates, the data {train} (test {test})")]
-    TaskDimension { model: usize, train: usize, test: usize },
-    /// The found effects do not fit in one model's effect list.
-    #[error("more than {} effects", cbd_protocol::MAX_EFFECTS)]
-    TooManyEffects,
-    /// The nonparametric correction of a table row failed: `on` names the model it corrects.
-    #[error("CbD on {on}: {source}")]
-    Correction {
-        on: &'static str,
-        #[source]
-        source: Box<crate::Error>,
-    },
-}
-
-impl DiagnoseError {
-    fn on_effects(e: crate::Error) -> DiagnoseError {
-        DiagnoseError::Correction { on: "nominal + effects", source: Box::new(e) }
-    }
-
-    fn on_nominal(e: crate::Error) -> DiagnoseError {
-        DiagnoseError::Correction { on: "nominal", source: Box::new(e) }
-    }
 }
 
 /// RMS held-out error of `fit` on `base` over `folds` interleaved folds of `train`.

@@ -1,5 +1,5 @@
 //! Kernels and hyperparameters: defaults, task-space normalisation, and the linearised
-//! (Gaussian-process) model of DESIGN.md §3.
+//! (Gaussian-process) model of docs/DESIGN.md §3.
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};

@@ -1,11 +1,12 @@
-//! Nominal models built from files: rigid-transform helpers, DH frames, and the conversion of a
-//! URDF joint chain into an equivalent standard Denavit–Hartenberg chain.
+//! Nominal models built from files: rigid-transform helpers, and the conversion of a URDF joint
+//! chain into an equivalent standard Denavit–Hartenberg chain. The DH frame walk itself is the
+//! runtime's (`cbd_runtime::kinematics::rigid::dh_walk`): one walk for the trainer and the controller.
 
 pub mod dh_parameters;
 pub mod planar;
 pub mod urdf;
 
-use cbd_protocol::{DhChain, DhConvention, JointKind, Transform};
+use cbd_protocol::Transform;
 
 /// A rigid transform as rotation (3×3, `r[row][col]`) and translation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -125,38 +126,6 @@ pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 pub(crate) fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn rot_z_trans_z(theta: f64, d: f64) -> Pose {
-    let (s, c) = theta.sin_cos();
-    Pose { r: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], t: [0.0, 0.0, d] }
-}
-
-fn trans_x_rot_x(a: f64, alpha: f64) -> Pose {
-    let (s, c) = alpha.sin_cos();
-    Pose { r: [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]], t: [a, 0.0, 0.0] }
-}
-
-/// The frames of a DH chain at configuration `q`: `out[0]` is the base frame, `out[i]` the frame
-/// after joint `i` (1-based), and the last entry the tool frame (so `n + 2` poses).
-/// For standard DH, joint `i` turns about z of `out[i-1]`; for modified DH about z of
-/// `out[i-1] ∘ Tx(a_i) Rx(α_i)`.
-pub fn dh_frames(chain: &DhChain, q: &[f64]) -> Vec<Pose> {
-    let mut frame = Pose::from_transform(&chain.base);
-    let mut out = vec![frame];
-    for (joint, &qi) in chain.joints.iter().zip(q) {
-        let (theta, d) = match joint.kind {
-            JointKind::Revolute => (qi + joint.theta_offset, joint.d),
-            JointKind::Prismatic => (joint.theta_offset, qi + joint.d),
-        };
-        frame = match chain.convention {
-            DhConvention::Standard => frame.compose(&rot_z_trans_z(theta, d)).compose(&trans_x_rot_x(joint.a, joint.alpha)),
-            DhConvention::Modified => frame.compose(&trans_x_rot_x(joint.a, joint.alpha)).compose(&rot_z_trans_z(theta, d)),
-        };
-        out.push(frame);
-    }
-    out.push(frame.compose(&Pose::from_transform(&chain.tool)));
-    out
 }
 
 #[cfg(test)]

@@ -271,11 +271,10 @@ mod tests {
                 assert!((fk.position[c] - reference.t[c]).abs() < 1e-9, "config {k}: {:?} vs {:?}", fk.position, reference.t);
             }
             // The whole tip frame, not only its position.
-            let frames = crate::nominal::dh_frames(&conv.chain, &q_mm);
-            let tip = frames.last().unwrap();
+            let tip = cbd_runtime::kinematics::rigid::dh_walk(&conv.chain, &q_mm).tool_rotation;
             for i in 0..3 {
                 for j in 0..3 {
-                    assert!((tip.r[i][j] - reference.r[i][j]).abs() < 1e-12);
+                    assert!((tip[i][j] - reference.r[i][j]).abs() < 1e-12);
                 }
             }
         }

@@ -1,14 +1,16 @@
 //! Physical effects injected into simulated measurements, implemented here independently of the
-//! runtime's `cbd_runtime::kinematics::effects` (own frame walk, gravity torques by differentiating the
-//! potential energy numerically): an independent check of what `cbd diagnose` finds and of what
+//! runtime's `cbd_runtime::kinematics::effects` (gravity torques by differentiating the potential
+//! energy numerically, effects composed here; only the rigid DH frames come from the runtime's one
+//! walk, `dh_walk`, itself checked against a URDF chain walk in `nominal::urdf`): an independent check of what `cbd diagnose` finds and of what
 //! the runtime evaluates. Also effects outside the diagnosis library (a localized bump, a dead
 //! zone, a thermal-like drift) for testing that they are reported as unexplained structure.
 //!
 //! Augmented kinematics (as `cbd_protocol::effects` defines it): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
 
-use crate::nominal::{dh_frames, dot, norm, scale, sub, Pose};
+use crate::nominal::{dot, norm, scale, sub, Pose};
 use cbd_protocol::{GravityModel, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::kinematics::rigid::dh_walk;
 
 /// One injected effect. `joint`/`link` are 0-based.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,7 +68,10 @@ pub struct EffectArm {
 /// DH: origins of frames 1..n (frame 0 = base); planar: ends of the links from the origin.
 fn link_points(rigid: &NominalModel, q: &[f64]) -> Vec<[f64; 3]> {
     match rigid {
-        NominalModel::DhChain(chain) => dh_frames(chain, q).iter().take(chain.joints.len() + 1).map(|f| f.t).collect(),
+        NominalModel::DhChain(chain) => {
+            let walk = dh_walk(chain, q);
+            std::iter::once(walk.start).chain(walk.ends.into_iter().take(chain.joints.len())).collect()
+        }
         NominalModel::PlanarChain { lengths, .. } => {
             let mut out = vec![[0.0; 3]];
             let (mut p, mut theta) = ([0.0; 3], 0.0);
@@ -85,7 +90,10 @@ fn link_points(rigid: &NominalModel, q: &[f64]) -> Vec<[f64; 3]> {
 /// rotated by q_1 + … + q_k about z (x along the link).
 fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Pose> {
     match rigid {
-        NominalModel::DhChain(chain) => dh_frames(chain, q).into_iter().skip(1).take(chain.joints.len()).collect(),
+        NominalModel::DhChain(chain) => {
+            let walk = dh_walk(chain, q);
+            walk.end_rotations.into_iter().zip(walk.ends).take(chain.joints.len()).map(|(r, t)| Pose { r, t }).collect()
+        }
         NominalModel::PlanarChain { lengths, .. } => {
             let (mut p, mut theta) = ([0.0; 3], 0.0);
             lengths

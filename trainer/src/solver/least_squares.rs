@@ -13,6 +13,14 @@ use faer::linalg::qr::no_pivoting::factor;
 use faer::linalg::{householder, triangular_solve};
 use faer::{Conj, Mat, MatRef, Par};
 
+/// A factorisation that failed: what the callers' errors carry as their source.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum LeastSquaresError {
+    /// faer's SVD did not converge (non-finite entries in A, typically).
+    #[error("SVD of the {rows} × {cols} matrix did not converge (non-finite entries?)")]
+    SvdNoConvergence { rows: usize, cols: usize },
+}
+
 /// A = Q R, Householder vectors below the diagonal of `qr`, R on and above it.
 pub struct QrLeastSquares {
     qr: Mat<f64>,
@@ -110,16 +118,16 @@ pub struct TruncatedSvd {
 
 impl TruncatedSvd {
     /// Columns scaled to unit norm (an all-zero column keeps scale `f64::MIN_POSITIVE`).
-    pub fn unit_columns(a: MatRef<'_, f64>) -> crate::Result<Self> {
+    pub fn unit_columns(a: MatRef<'_, f64>) -> Result<Self, LeastSquaresError> {
         let scale = (0..a.ncols()).map(|k| column_norm(a, k).max(f64::MIN_POSITIVE)).collect();
         Self::with_scales(a, scale)
     }
 
     /// Columns divided by `scale` (positive, one per column).
-    pub fn with_scales(a: MatRef<'_, f64>, scale: Vec<f64>) -> crate::Result<Self> {
+    pub fn with_scales(a: MatRef<'_, f64>, scale: Vec<f64>) -> Result<Self, LeastSquaresError> {
         assert_eq!(scale.len(), a.ncols(), "one scale per column");
         let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, k| a[(i, k)] / scale[k]);
-        let svd = scaled.thin_svd().map_err(|e| crate::Error::Numerical(format!("SVD did not converge: {e:?}")))?;
+        let svd = scaled.thin_svd().map_err(|_| LeastSquaresError::SvdNoConvergence { rows: a.nrows(), cols: a.ncols() })?;
         let sigma = (0..svd.S().dim()).map(|k| svd.S()[k]).collect();
         Ok(TruncatedSvd { scale, u: svd.U().to_owned(), sigma, v: svd.V().to_owned() })
     }

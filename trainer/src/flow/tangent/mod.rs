@@ -178,7 +178,7 @@ type FieldTangents = (Vec<Mat<f64>>, Vec<Mat<f64>>);
 /// `positions_only` only the k rows are formed (the last stage: its J and P rates reach nothing
 /// that is read), which skips the δDw and δDv products, two thirds of the GEMMs; otherwise the
 /// δDw and δDv blocks are returned too.
-fn tangent_rates(
+fn control_point_tangent_rates(
     cp: &ControlPoints,
     jk: &JointKernelMatrices,
     lin: &StageLinearisation,
@@ -364,7 +364,7 @@ impl TangentAlong {
                     let tan = initial_tangent(cp, d0, d1, |dir, p| fill_direction(directions.as_ref(), m, count, dir, p));
                     let mut out = Mat::zeros(rows, d1 - d0);
                     let tan = MatRef::from_column_major_slice(&tan, rows, d1 - d0);
-                    let fields = tangent_rates(cp, &jk, &lin, tan, out.as_mut(), false);
+                    let fields = control_point_tangent_rates(cp, &jk, &lin, tan, out.as_mut(), false);
                     fields.map(|f| (out, f))
                 })
                 .collect()
@@ -443,7 +443,7 @@ fn propagate(
                         momentum_rates(cp, &stages[0], y, ddw, ddv, out);
                     }
                     _ => {
-                        tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
+                        control_point_tangent_rates(cp, &jk, &stages[stage], y, out, stage + 1 == stages.len());
                     }
                 }
                 Ok(())
