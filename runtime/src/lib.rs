@@ -7,6 +7,13 @@
 //! let e = cal.evaluate(&[0.3, -1.2])?;
 //! let (y, dy) = (e.position(), e.jacobian());
 //! ```
+//!
+//! The controller's API is at the crate root: [`Calibrator`] (load, `evaluate`, `compensate`),
+//! [`Evaluation`], [`storage_len`], [`Error`]. The modules are the building blocks the trainer
+//! shares so that it optimises exactly what the controller evaluates (same code, same bits):
+//! `kinematics` (k0 and its derivatives), `kernel`, `flow` (eq. 17, 19, 20, the control points'
+//! integration, the query's derivatives, the inverse flows), `integrate`, `real`, and
+//! `inverse_kinematics` (the nominal closed forms compensation starts from).
 #![no_std]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
@@ -19,9 +26,7 @@ pub mod kernel;
 pub mod kinematics;
 pub mod real;
 
-pub use calibrator::{
-    initial_state, integrate_control_points, integrate_control_points_with_features, integrate_points, storage_len, Calibrator, Evaluation,
-};
+pub use calibrator::{storage_len, Calibrator, Evaluation};
 pub use cbd_protocol as protocol;
 pub use compensate::{CompensateOptions, Compensation};
 

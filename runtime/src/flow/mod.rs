@@ -1,12 +1,14 @@
 //! The vector fields and the dynamics of docs/DESIGN.md §2, for control points (eq. 17, 19) and
-//! for a query configuration (eq. 20); beside them the query's derivatives (`query_derivatives`)
-//! and the inverse flows of compensation's start (`inverse`). One function computes each quantity; the trainer calls
-//! the same functions, so trainer and runtime integrate bit-identical discrete flows.
+//! for a query configuration (eq. 20); beside them the control points' integration
+//! (`control_points`), the query's derivatives (`query_derivatives`) and the inverse flows of
+//! compensation's start (`inverse`). One function computes each quantity; the trainer calls the
+//! same functions, so trainer and runtime integrate bit-identical discrete flows.
 //!
 //! Layouts (row-major, all in internal units):
 //! - control-point state, per point: `k (m) | J (m×n) | P (m)`, [`Dims::state_len`] values;
 //! - trajectory sample, per point and stage: `k (m) | P (m) | u = Jᵀ P (n)`, [`Dims::sample_len`].
 
+pub mod control_points;
 pub mod inverse;
 pub mod query_derivatives;
 

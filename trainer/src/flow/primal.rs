@@ -95,7 +95,7 @@ impl ControlPoints {
         let block = state.len();
         let params = self.params();
         let rows_per_task = count.div_ceil(16).max(1);
-        cbd_runtime::integrate_points(
+        cbd_runtime::flow::control_points::integrate_points(
             self.dims,
             self.integrator,
             count,
