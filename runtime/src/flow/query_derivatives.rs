@@ -120,10 +120,10 @@ fn joint_sums<S: Shape, const HESSIAN: bool>(shape: S, samples: &[Real], rows: &
 }
 
 /// Second derivatives of the nominal forward kinematics at `x` (with effects, the augmented
-/// D²k0_aug of [`crate::kinematics::effects::hessian`]).
+/// D²k0_aug of [`crate::kinematics::effects_derivatives::hessian`]).
 pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
     if !model.effects().is_empty() {
-        return crate::kinematics::effects::hessian(model, x);
+        return crate::kinematics::effects_derivatives::hessian(model, x);
     }
     crate::kinematics::rigid_derivatives::hessian(model, x)
 }

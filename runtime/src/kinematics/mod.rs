@@ -1,10 +1,11 @@
 //! The nominal forward kinematics k0 and its derivatives, in the model's own units: the rigid DH
 //! chain beside its derivatives (`rigid`, `rigid_derivatives`), the physical effects on top of it
-//! (`effects`, with the gravity torques of a mass model in `gravity`), and the dispatch between
-//! them here.
+//! beside theirs (`effects`, `effects_derivatives`, with the gravity torques of a mass model in
+//! `gravity`), and the dispatch between them here.
 
 mod chain;
 pub mod effects;
+pub mod effects_derivatives;
 pub mod gravity;
 pub mod rigid;
 pub mod rigid_derivatives;
