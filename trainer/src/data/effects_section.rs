@@ -340,11 +340,11 @@ mod tests {
         NominalModel::DhChain(crate::simulate::six_joint::ur5_nominal())
     }
 
-    /// The sections of `text` applied to `nominal`; any error as its message.
-    fn read(text: &str, nominal: &NominalModel, rad_per_unit: f64) -> Result<NominalModel, String> {
-        let sections: Sections = toml::from_str(text).map_err(|e| e.to_string())?;
+    /// The sections of `text` applied to `nominal` (a TOML error or the sections' own).
+    fn read(text: &str, nominal: &NominalModel, rad_per_unit: f64) -> Result<NominalModel, Box<dyn std::error::Error>> {
+        let sections: Sections = toml::from_str(text)?;
         let mut out = nominal.clone();
-        apply(sections.gravity.as_ref(), &sections.effects, rad_per_unit, &mut out).map_err(|e| e.to_string())?;
+        apply(sections.gravity.as_ref(), &sections.effects, rad_per_unit, &mut out)?;
         Ok(out)
     }
 
@@ -403,7 +403,7 @@ mod tests {
             ("joint = 2\nlink = 3\nmasses = 1\nfirst_moment = [0, 0, 0]", "unknown field `masses`"),
         ];
         for (body, needle) in cases {
-            let err = read(&entry(body), &six(), 1.0).unwrap_err();
+            let err = read(&entry(body), &six(), 1.0).unwrap_err().to_string();
             assert!(err.contains(needle), "{body}: {err}");
         }
         assert!(read(&entry("joint = 2\nlink = 3\nmass = 1\nfirst_moment = [0, 0, 0]"), &six(), 1.0).is_ok());
