@@ -3,7 +3,8 @@
 //! Jacobian Dk1 (eq. 20 and [`crate::flow::query_derivatives`]) from a seed, typically the nominal
 //! model's inverse kinematics ([`crate::inverse_kinematics`]). Fixed cost, no heap, no panic.
 
-use crate::inverse_kinematics::{conditioning, damped_min_norm_step, matrices_of, padded_target};
+use crate::inverse_kinematics::fold::{fold_root, nominal_curvature, smallest_singular_pair};
+use crate::inverse_kinematics::{bounded_step, conditioning, damped_min_norm_direction, damped_min_norm_step, matrices_of, padded_target};
 use crate::{Calibrator, Error, Evaluation};
 use cbd_protocol::{MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 use nalgebra::{SMatrix, SVector};
@@ -27,6 +28,15 @@ pub struct CompensateOptions {
     /// ([`Calibrator::evaluate_transported`]). Cost in all: `iterations` evaluations with the exact
     /// Jacobian, `chord_steps + 1` position-only evaluations, and the start.
     pub chord_steps: usize,
+    /// Fold-aware exact steps: along the smallest singular pair (σ, u, v) of Dk1 the step is the
+    /// nearer root of σ t + ½ a t² = uᵀ r instead of Newton's uᵀ r / σ, with a = uᵀ D²k0[v, v]
+    /// the nominal model's curvature ([`crate::inverse_kinematics::fold`]; two evaluations of k0
+    /// per step, no extra evaluation of k1).
+    pub fold_steps: bool,
+    /// Keep the inverse-flow start only when its residual beats the seed's (one more
+    /// position-only evaluation, at the seed); otherwise the evaluations after the start's go to
+    /// Gauss–Newton from the seed. Ignored without `inverse_flow_start`.
+    pub start_guard: bool,
     /// Largest |k1(q) − target| (user units) counted as reached.
     pub tolerance: f64,
     /// Kernel support below which the command is flagged outside the calibrated region
@@ -41,24 +51,29 @@ pub struct CompensateOptions {
 pub const NOMINAL_ITERATIONS: usize = 8;
 
 impl CompensateOptions {
-    /// Eight Gauss–Newton steps from the seed, the inverse-flow start off. Measured over 2000
-    /// reachable targets (`steps_saved_by_the_inverse_flow_start` in tests/tests/compensate.rs):
-    /// the start saves about two steps on the bulk (six-joint test models: 99.9 % within 1e-9 of
-    /// the reach after three steps instead of five), not in the fold band of the reference RR
-    /// model (arm almost stretched out: 99.95 % after seven steps from the start, 100 % after
-    /// eight from the seed); and on a trained model whose momenta cancel (the RR demo's evidence
-    /// kernels) ψ⁻¹ and φ alone are far from k1's inverse, so the start is worse than the seed
-    /// (`cbd-trainer commanded` RR: commanded error 1.24e-8 against forward 1.02e-8 with the
-    /// start and seven steps). M7 (dp) cost at N = 256: 8.6 evaluations (BENCHMARKS.md
-    /// "Compensation"). Tolerance 1e-9 of the model's task scale (the RMS radius of its training positions, a
+    /// The inverse-flow start and three fold-aware Gauss–Newton steps (`fold_steps`), no guard,
+    /// no chord steps. Measured over 2000 reachable targets per model
+    /// (`steps_saved_by_the_inverse_flow_start` in tests/tests/compensate.rs): 100 % within 1e-9
+    /// of the reach on the reference RR model (fold band included: the fold-aware step removes the
+    /// halving per step there) and on the three six-joint test models; eight plain steps from the
+    /// seed, the former default, also reach 100 % but cost twice as much. M7 (dp) cost at N = 256:
+    /// about 4.6 evaluations (start ≈ 0.9, three evaluations with the exact Jacobian, one
+    /// position-only; BENCHMARKS.md "Compensation"). On a trained model whose momenta cancel (the
+    /// RR demo's evidence kernels) k1's evaluation is itself noisy at the 1e-9 level and the start
+    /// is farther from k1's inverse than the seed: `cbd-trainer commanded` RR gives commanded
+    /// error 1.10e-8 (forward 1.02e-8, bound 1.2×) against 1.05e-8 with the former default. Not
+    /// guarded (`start_guard` hands the remaining steps to the seed, too few there: 1.1e-6).
+    /// Tolerance 1e-9 of the model's task scale (the RMS radius of its training positions, a
     /// length of the arm's size); extrapolation below support 0.05 (as `cbd eval`); singular
     /// below conditioning 1e-6.
     pub fn for_model(cal: &Calibrator<'_>) -> CompensateOptions {
         CompensateOptions {
-            inverse_flow_start: false,
-            iterations: 8,
+            inverse_flow_start: true,
+            iterations: 3,
             start_corrections: 0,
             chord_steps: 0,
+            fold_steps: true,
+            start_guard: false,
             tolerance: 1e-9 * cal.model.normalisation.task_scale,
             extrapolation_threshold: 0.05,
             singular_conditioning: 1e-6,
@@ -159,6 +174,20 @@ impl<'a> Calibrator<'a> {
         }
         let mut best = Iterate { q, residual: f64::INFINITY, support: 0.0, conditioning: 0.0 };
         let mut query = [0.0; NJ];
+        // The guard: the seed's own residual (position only), which the start must beat.
+        let mut seed_q = SVector::<f64, NJ>::zeros();
+        for (dst, s) in seed_q.iter_mut().zip(seed.iter()) {
+            *dst = *s;
+        }
+        let mut seed_residual = f64::INFINITY;
+        if from_flows && options.start_guard {
+            let e = self.evaluate_transported(seed)?;
+            let (position, transported) = evaluation_matrices(&e, m, n);
+            seed_residual = (target_v - position).norm();
+            if seed_residual < best.residual {
+                best = Iterate { q: seed_q, residual: seed_residual, support: e.support(), conditioning: conditioning(&transported, m) };
+            }
+        }
         // Defect correction of the start: the inverse flows from the target moved by the miss.
         let mut moved_target = target_v;
         for _ in 0..if from_flows { options.start_corrections } else { 0 } {
@@ -200,8 +229,19 @@ impl<'a> Calibrator<'a> {
             if residual < best.residual {
                 best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&this_jacobian, m) };
             }
+            if step == 0 && seed_residual < residual {
+                // The start lost to the seed: the remaining evaluations go to the seed.
+                q = seed_q;
+                continue;
+            }
             if step < evaluations {
-                if let Some(dq) = damped_min_norm_step(&jacobian, &r, m, scale, |d| self.model.nominal.is_revolute(d)) {
+                let revolute = |d| self.model.nominal.is_revolute(d);
+                let dq = if exact && options.fold_steps {
+                    self.fold_step(&q, &jacobian, &r, m, n, scale).and_then(|dq| bounded_step(dq, revolute))
+                } else {
+                    damped_min_norm_step(&jacobian, &r, m, scale, revolute)
+                };
+                if let Some(dq) = dq {
                     q += dq;
                 }
             }
@@ -219,6 +259,31 @@ impl<'a> Calibrator<'a> {
             support: best.support,
             conditioning: best.conditioning,
         })
+    }
+}
+
+impl Calibrator<'_> {
+    /// The damped minimum-norm step with its component along Dk1's smallest right singular
+    /// vector v replaced by the nearer root of the quadratic model along it
+    /// ([`crate::inverse_kinematics::fold`]), before the revolute bound.
+    fn fold_step(
+        &self,
+        q: &SVector<f64, NJ>,
+        jacobian: &SMatrix<f64, MT, NJ>,
+        r: &SVector<f64, MT>,
+        m: usize,
+        n: usize,
+        scale: f64,
+    ) -> Option<SVector<f64, NJ>> {
+        let mut dq = damped_min_norm_direction(jacobian, r, m, scale)?;
+        if let Some((sigma, u, v)) = smallest_singular_pair(jacobian, m) {
+            let curvature = nominal_curvature(&self.model.nominal, q, &u, &v, m, n);
+            let rho = u.dot(r);
+            if let (true, Some(t)) = (curvature.is_finite(), fold_root(sigma, curvature, rho)) {
+                dq += v * (t - v.dot(&dq));
+            }
+        }
+        Some(dq)
     }
 }
 

@@ -253,27 +253,42 @@ fn steps_saved_by_the_inverse_flow_start() {
             .collect();
         eprintln!("{name}: {count} targets, residual / reach (median, p99, p99.9, max), fraction within 1e-9");
         let mut configs: Vec<(String, cbd_runtime::CompensateOptions)> = Vec::new();
-        for start in [false, true] {
-            for iterations in 0..=8 {
-                let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
-                (o.inverse_flow_start, o.iterations, o.chord_steps, o.start_corrections) = (start, iterations, 0, 0);
-                configs.push((format!("{} + {iterations} full", if start { "flows" } else { "seed " }), o));
-            }
-            for (iterations, chord) in [(1, 1), (2, 1), (2, 2), (3, 1), (5, 1), (5, 2), (6, 1)] {
-                let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
-                (o.inverse_flow_start, o.iterations, o.chord_steps, o.start_corrections) = (start, iterations, chord, 0);
-                configs.push((format!("{} + {iterations} full + {chord} chord", if start { "flows" } else { "seed " }), o));
-            }
-            if start {
-                for (corrections, iterations, chord) in
-                    [(1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 2, 0), (1, 2, 1), (1, 4, 0), (1, 5, 0), (1, 6, 0)]
-                {
-                    let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
-                    (o.inverse_flow_start, o.iterations, o.chord_steps, o.start_corrections) = (true, iterations, chord, corrections);
-                    configs.push((format!("flows x{} + {iterations} full + {chord} chord", corrections + 1), o));
+        let config = |(start, guard): (bool, bool), fold: bool, corrections: usize, iterations: usize, chord: usize| {
+            let mut o = cbd_runtime::CompensateOptions::for_model(&cal);
+            (o.inverse_flow_start, o.start_guard, o.fold_steps) = (start, guard, fold);
+            (o.iterations, o.chord_steps, o.start_corrections) = (iterations, chord, corrections);
+            let from = match (start, corrections) {
+                (false, _) => "seed ".to_string(),
+                (true, 0) => "flows".to_string(),
+                (true, c) => format!("flows x{}", c + 1),
+            } + if guard { " guarded" } else { "" };
+            let label = format!(
+                "{from}{} + {iterations} full{}",
+                if fold { " fold" } else { "" },
+                if chord > 0 { format!(" + {chord} chord") } else { String::new() }
+            );
+            (label, o)
+        };
+        for fold in [false, true] {
+            for start in [(false, false), (true, false), (true, true)] {
+                for iterations in 0..=8 {
+                    configs.push(config(start, fold, 0, iterations, 0));
+                }
+                for (iterations, chord) in [(1, 1), (2, 1), (2, 2), (3, 1), (5, 1), (5, 2), (6, 1)] {
+                    configs.push(config(start, fold, 0, iterations, chord));
+                }
+                if start == (true, false) {
+                    for (corrections, iterations, chord) in
+                        [(1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 2, 0), (1, 2, 1), (1, 4, 0), (1, 5, 0), (1, 6, 0)]
+                    {
+                        configs.push(config(start, fold, corrections, iterations, chord));
+                    }
                 }
             }
         }
+        // `CBD_STEPS_CONFIG='fold + 2|fold + 3'` (say): only the variants whose label contains one of them.
+        let filter = std::env::var("CBD_STEPS_CONFIG").ok();
+        configs.retain(|(label, _)| filter.as_deref().is_none_or(|f| f.split('|').any(|f| label.contains(f))));
         for (label, options) in configs {
             let mut q = vec![0.0; n];
             let mut r: Vec<f64> =
@@ -281,7 +296,7 @@ fn steps_saved_by_the_inverse_flow_start() {
             r.sort_by(f64::total_cmp);
             let at = |p: f64| r[((p * count as f64) as usize).min(count - 1)];
             let within = r.iter().filter(|v| **v <= 1e-9).count() as f64 / count as f64;
-            eprintln!("  {label:<28} {:9.2e} {:9.2e} {:9.2e} {:9.2e}  {:.4}", at(0.5), at(0.99), at(0.999), r[count - 1], within);
+            eprintln!("  {label:<36} {:9.2e} {:9.2e} {:9.2e} {:9.2e}  {:.4}", at(0.5), at(0.99), at(0.999), r[count - 1], within);
         }
     }
 }

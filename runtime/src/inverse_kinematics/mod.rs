@@ -5,6 +5,7 @@
 //! [`ur`]: UR-type six-joint arm, the eight solutions); otherwise a fixed number of damped
 //! Gauss–Newton steps on k0 from a caller's seed ([`nominal_position`]). No heap, no panic, fixed cost.
 
+pub mod fold;
 pub mod planar;
 pub mod ur;
 
@@ -34,6 +35,16 @@ pub fn damped_min_norm_step(
     scale: f64,
     revolute: impl Fn(usize) -> bool,
 ) -> Option<SVector<f64, NJ>> {
+    bounded_step(damped_min_norm_direction(jacobian, residual, m, scale)?, revolute)
+}
+
+/// [`damped_min_norm_step`] before its revolute components are bounded.
+pub fn damped_min_norm_direction(
+    jacobian: &SMatrix<f64, MT, NJ>,
+    residual: &SVector<f64, MT>,
+    m: usize,
+    scale: f64,
+) -> Option<SVector<f64, NJ>> {
     let m = m.clamp(1, MT);
     let gram = jacobian * jacobian.transpose();
     let mean_eigenvalue = gram.trace() / m as f64;
@@ -46,7 +57,12 @@ pub fn damped_min_norm_step(
         system[(a, a)] += if a < m { damping_sq } else { 1.0 };
     }
     let u = system.cholesky()?.solve(residual);
-    let mut step = jacobian.transpose() * u;
+    Some(jacobian.transpose() * u)
+}
+
+/// `step` with its revolute components scaled together so that none exceeds
+/// [`MAX_REVOLUTE_STEP`]; `None` unless every component is finite.
+pub fn bounded_step(mut step: SVector<f64, NJ>, revolute: impl Fn(usize) -> bool) -> Option<SVector<f64, NJ>> {
     let mut largest: f64 = 0.0;
     for (d, s) in step.iter().enumerate() {
         if revolute(d) {
