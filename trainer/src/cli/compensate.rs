@@ -33,6 +33,9 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Gauss–Newton steps on the calibrated model (fixed: the cost is the same for every target).
+    /// More than the runtime's default of 3 (`CompensateOptions::for_model`, sized for a control
+    /// cycle): on the host accuracy comes first, and trained models whose momenta cancel (the RR
+    /// demo's) need more than 3 steps from the inverse-flow start to reach their own precision.
     #[arg(long, default_value_t = 8)]
     pub iterations: usize,
     /// Largest residual (the file's length unit) counted as reached; default 1e-9 of the model's
