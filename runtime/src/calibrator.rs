@@ -138,7 +138,7 @@ impl<'a> Calibrator<'a> {
     /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint
     /// configuration `q` (see [`crate::flow::query_derivatives`]); also the paper's transported J(1).
     pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_query(q, true)
+        self.evaluate_query::<true>(q)
     }
 
     /// eq. (20) without tangents, cheaper: the calibrated position k1(ξ) and the paper's
@@ -146,6 +146,6 @@ impl<'a> Calibrator<'a> {
     /// [`Evaluation::jacobian`] and [`Evaluation::transported_jacobian`] hold J(1).
     /// The position is bit-identical to [`Calibrator::evaluate`]'s.
     pub fn evaluate_transported(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_query(q, false)
+        self.evaluate_query::<false>(q)
     }
 }

@@ -263,17 +263,22 @@ impl crate::Calibrator<'_> {
     /// eq. (20): the calibrated position k1(ξ) and the paper's transported J(1); with
     /// `exact_jacobian`, also the exact Jacobian Dk1(ξ) of the discrete flow (otherwise the
     /// Jacobian reported is J(1)). The position's arithmetic is the same either way.
-    pub(crate) fn evaluate_query(&mut self, q: &[f64], exact_jacobian: bool) -> Result<crate::Evaluation, crate::Error> {
+    /// `EXACT_JACOBIAN` is a compile-time switch, not an argument: with both `evaluate` and
+    /// `evaluate_transported` in one firmware (compensation calls both), a run-time flag kept
+    /// the tangent branches inside the per-point loop and cost the M7 (dp) 6 % and the f32 build
+    /// 27 % per `evaluate` (RR N = 256 Heun × 5; BENCHMARKS.md "Firmware (QEMU)").
+    pub(crate) fn evaluate_query<const EXACT_JACOBIAN: bool>(&mut self, q: &[f64]) -> Result<crate::Evaluation, crate::Error> {
         // The common shapes get loops unrolled at compile time; the arithmetic is the same.
         match (self.dims.m, self.dims.n) {
-            (2, 2) => self.evaluate_shaped(Fixed::<2, 2>, q, exact_jacobian),
-            (3, 6) => self.evaluate_shaped(Fixed::<3, 6>, q, exact_jacobian),
-            _ => self.evaluate_shaped(self.dims, q, exact_jacobian),
+            (2, 2) => self.evaluate_shaped::<_, EXACT_JACOBIAN>(Fixed::<2, 2>, q),
+            (3, 6) => self.evaluate_shaped::<_, EXACT_JACOBIAN>(Fixed::<3, 6>, q),
+            _ => self.evaluate_shaped::<_, EXACT_JACOBIAN>(self.dims, q),
         }
     }
 
     #[inline(always)]
-    fn evaluate_shaped<S: Shape>(&mut self, shape: S, q: &[f64], exact_jacobian: bool) -> Result<crate::Evaluation, crate::Error> {
+    fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(&mut self, shape: S, q: &[f64]) -> Result<crate::Evaluation, crate::Error> {
+        let exact_jacobian = EXACT_JACOBIAN;
         use crate::Error;
         let dims = shape.dims();
         let (m, n) = (dims.m, dims.n);
