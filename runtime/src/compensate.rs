@@ -57,7 +57,7 @@ impl CompensateOptions {
     /// of the reach on the reference RR model (fold band included: the fold-aware step removes the
     /// halving per step there) and on the three six-joint test models; eight plain steps from the
     /// seed, the former default, also reach 100 % but cost twice as much. M7 (dp) cost at N = 256:
-    /// about 4.6 evaluations (start ≈ 0.9, three evaluations with the exact Jacobian, one
+    /// about 4.8 evaluations (the start, three evaluations with the exact Jacobian, one
     /// position-only; BENCHMARKS.md "Compensation"). On a trained model whose momenta cancel (the
     /// RR demo's evidence kernels) k1's evaluation is itself noisy at the 1e-9 level and the start
     /// is farther from k1's inverse than the seed: `cbd-trainer commanded` RR gives commanded
