@@ -54,7 +54,9 @@ pub fn damped_min_norm_direction(
     // right-hand side is zero, so they contribute nothing to Δq).
     let mut system = gram;
     for a in 0..MT {
-        system[(a, a)] += if a < m { damping_sq } else { 1.0 };
+        if let Some(diagonal) = system.get_mut((a, a)) {
+            *diagonal += if a < m { damping_sq } else { 1.0 };
+        }
     }
     let u = system.cholesky()?.solve(residual);
     Some(jacobian.transpose() * u)
@@ -89,9 +91,10 @@ pub fn conditioning(jacobian: &SMatrix<f64, MT, NJ>, m: usize) -> f64 {
     if !(mean > 0.0) || !mean.is_finite() {
         return 0.0;
     }
+    let g = |a: usize, b: usize| gram.get((a, b)).copied().unwrap_or(0.0);
     let det = match m {
-        1 => gram[(0, 0)],
-        2 => gram[(0, 0)] * gram[(1, 1)] - gram[(0, 1)] * gram[(1, 0)],
+        1 => g(0, 0),
+        2 => g(0, 0) * g(1, 1) - g(0, 1) * g(1, 0),
         _ => gram.determinant(),
     };
     let geometric = libm::pow(det.max(0.0), 1.0 / m as f64);
@@ -203,9 +206,13 @@ pub(crate) fn matrices_of(
     let mut p = SVector::<f64, MT>::zeros();
     let mut j = SMatrix::<f64, MT, NJ>::zeros();
     for (a, (pa, row)) in position.iter().zip(jacobian.iter()).enumerate().take(m) {
-        p[a] = *pa;
+        if let Some(slot) = p.get_mut(a) {
+            *slot = *pa;
+        }
         for (d, v) in row.iter().enumerate().take(n) {
-            j[(a, d)] = *v;
+            if let Some(slot) = j.get_mut((a, d)) {
+                *slot = *v;
+            }
         }
     }
     (p, j)

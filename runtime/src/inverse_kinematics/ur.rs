@@ -38,11 +38,13 @@ fn mul(a: &Pose, b: &Pose) -> Pose {
 /// The inverse of a rigid transform: [Rᵀ | −Rᵀ t].
 fn inverse(t: &Pose) -> Pose {
     let mut out = IDENTITY;
-    for r in 0..3 {
-        for c in 0..3 {
-            out[r][c] = t[c][r];
+    for (r, out_r) in out.iter_mut().enumerate().take(3) {
+        // Row r of Rᵀ is column r of R; the translation −Σ_k R_kr t_k, summed over k in order.
+        let column = |row: &[f64; 4]| row.get(r).copied().unwrap_or(0.0);
+        for (o, t_c) in out_r.iter_mut().zip(t.iter()).take(3) {
+            *o = column(t_c);
         }
-        out[r][3] = -(0..3).map(|k| t[k][r] * t[k][3]).sum::<f64>();
+        out_r[3] = -t.iter().take(3).map(|t_k| column(t_k) * t_k[3]).sum::<f64>();
     }
     out
 }
