@@ -4,7 +4,7 @@
 //! model's inverse kinematics ([`crate::inverse_kinematics`]). Fixed cost, no heap, no panic.
 
 use crate::inverse_kinematics::fold::{fold_root, nominal_curvature, smallest_singular_pair};
-use crate::inverse_kinematics::{bounded_step, conditioning, damped_min_norm_direction, damped_min_norm_step, matrices_of, padded_target};
+use crate::inverse_kinematics::{bounded_step, conditioning, damped_min_norm_direction, matrices_of, padded_target};
 use crate::{Calibrator, Error, Evaluation};
 use cbd_protocol::{MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 use nalgebra::{SMatrix, SVector};
@@ -125,8 +125,9 @@ impl<'a> Calibrator<'a> {
     /// Writes to `out` the joint command q with k1(q) = `target`: from the inverse-flow start
     /// ([`Calibrator::inverse_flow_start`], `seed` choosing the nominal branch; the seed itself
     /// without `options.inverse_flow_start` or when the start fails), `options.iterations` damped
-    /// minimum-norm Gauss–Newton steps ([`damped_min_norm_step`]) on the exact Jacobian Dk1 and
-    /// `options.chord_steps` with the last one, q ← q + Dk1ᵀ (Dk1 Dk1ᵀ + λ² I)⁻¹ (target − k1(q)).
+    /// minimum-norm Gauss–Newton steps ([`crate::inverse_kinematics::damped_min_norm_step`],
+    /// fold-aware with `options.fold_steps`) on the exact Jacobian Dk1 and `options.chord_steps`
+    /// with the last one, q ← q + Dk1ᵀ (Dk1 Dk1ᵀ + λ² I)⁻¹ (target − k1(q)).
     /// With more joints than task coordinates (n > m) each step is the minimum-norm one, so the command stays near the seed
     /// (its orientation and branch). The iterate with the smallest residual is returned, with
     /// flags instead of an error when the target is not reached, Dk1 is singular there or the
@@ -235,13 +236,14 @@ impl<'a> Calibrator<'a> {
                 continue;
             }
             if step < evaluations {
-                let revolute = |d| self.model.nominal.is_revolute(d);
-                let dq = if exact && options.fold_steps {
-                    self.fold_step(&q, &jacobian, &r, m, n, scale).and_then(|dq| bounded_step(dq, revolute))
+                // The fold-aware direction on exact steps (chord steps reuse an old Jacobian, whose
+                // singular pair no longer sits at q), bounded like every Gauss–Newton step.
+                let direction = if exact && options.fold_steps {
+                    self.fold_step(&q, &jacobian, &r, m, n, scale)
                 } else {
-                    damped_min_norm_step(&jacobian, &r, m, scale, revolute)
+                    damped_min_norm_direction(&jacobian, &r, m, scale)
                 };
-                if let Some(dq) = dq {
+                if let Some(dq) = direction.and_then(|d| bounded_step(d, |j| self.model.nominal.is_revolute(j))) {
                     q += dq;
                 }
             }
