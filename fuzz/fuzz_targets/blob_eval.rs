@@ -9,7 +9,7 @@
 //! Loading and evaluation must return a value or a typed error; any panic is a bug.
 #![no_main]
 
-use cbd_protocol::{DecodeError, FORMAT_VERSION, HEADER_LEN, MAGIC, TRAILER_LEN};
+use cbd_protocol::{DecodeError, FORMAT_VERSION, HEADER_LEN, MAGIC, OLDEST_FORMAT_VERSION, TRAILER_LEN};
 use cbd_runtime::{Calibrator, Error};
 use libfuzzer_sys::fuzz_target;
 
@@ -20,7 +20,9 @@ fn reframe(data: &[u8]) -> Option<Vec<u8>> {
     let payload = data.get(HEADER_LEN..data.len().checked_sub(TRAILER_LEN)?)?;
     let mut blob = Vec::with_capacity(data.len());
     blob.extend_from_slice(&MAGIC);
-    blob.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    // The input's own version when this build reads it (format 5 adds a tail to the payload).
+    let version = u16::from_le_bytes([*data.get(4)?, *data.get(5)?]).clamp(OLDEST_FORMAT_VERSION, FORMAT_VERSION);
+    blob.extend_from_slice(&version.to_le_bytes());
     blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
     blob.extend_from_slice(payload);
     let crc = crc32(&blob);

@@ -6,7 +6,8 @@
 //! magic "CBDM" (4) | format version u16 (2) | payload length u32 (4) | payload | CRC-32 (4)
 //! ```
 //!
-//! The payload is a postcard encoding of [`Model`]. The CRC-32 (ISO-HDLC) covers everything
+//! The payload is a postcard encoding of [`Model`] (format 5: followed by the postcard encoding
+//! of its `Option<`[`FieldExpansion`]`>`; formats 2–4 end after the model). The CRC-32 (ISO-HDLC) covers everything
 //! before it. The large arrays (measurement configurations, momenta) are stored as raw
 //! little-endian `f64` bytes that the runtime reads in place, so a blob in flash is never copied.
 #![no_std]
@@ -15,6 +16,7 @@
 extern crate std;
 
 mod effects;
+mod expansion;
 mod limits;
 mod model;
 pub mod paper_rr;
@@ -22,6 +24,7 @@ pub mod ur5;
 mod validate;
 
 pub use effects::*;
+pub use expansion::*;
 pub use limits::*;
 pub use model::*;
 pub use validate::ModelError;
@@ -29,9 +32,13 @@ pub use validate::ModelError;
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
-/// Format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
-/// the same layout without it and load unchanged.
-pub const FORMAT_VERSION: u16 = 4;
+/// Format 5 appends the fields' expansions ([`FieldExpansion`]) after the format-4 payload;
+/// format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
+/// the same layout without it and load unchanged. [`encode`] writes format 4 when a model has no
+/// expansion (byte-identical to the encoders before format 5), format 5 when it has one.
+pub const FORMAT_VERSION: u16 = 5;
+/// The format of a model without an expansion.
+pub const FORMAT_WITHOUT_EXPANSION: u16 = 4;
 /// The oldest format this build reads (format 2 lacks the Hamiltonian momentum laws, formats 2
 /// and 3 the gravity moment effect).
 pub const OLDEST_FORMAT_VERSION: u16 = 2;
@@ -114,7 +121,8 @@ impl std::error::Error for DecodeError {}
 impl std::error::Error for EncodeError {}
 
 /// Encodes `model` into `out`, returning the number of bytes written.
-/// The model is validated first: an invalid model is never written.
+/// The model is validated first: an invalid model is never written. Without an expansion the blob
+/// is format 4 (the payload is the model), with one format 5 (the model, then `Some(expansion)`).
 pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     model.validate().map_err(EncodeError::Invalid)?;
     if out.len() < HEADER_LEN + TRAILER_LEN {
@@ -123,12 +131,17 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     let payload_end = {
         let (_, rest) = out.split_at_mut(HEADER_LEN);
         let room = rest.len() - TRAILER_LEN;
-        let written = postcard::to_slice(model, &mut rest[..room]).map_err(|_| EncodeError::BufferTooSmall)?;
-        HEADER_LEN + written.len()
+        let rest = &mut rest[..room];
+        let mut written = postcard::to_slice(model, &mut rest[..]).map_err(|_| EncodeError::BufferTooSmall)?.len();
+        if model.expansion.is_some() {
+            written += postcard::to_slice(&model.expansion, &mut rest[written..]).map_err(|_| EncodeError::BufferTooSmall)?.len();
+        }
+        HEADER_LEN + written
     };
+    let version = if model.expansion.is_some() { FORMAT_VERSION } else { FORMAT_WITHOUT_EXPANSION };
     let payload_len = (payload_end - HEADER_LEN) as u32;
     out[0..4].copy_from_slice(&MAGIC);
-    out[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out[4..6].copy_from_slice(&version.to_le_bytes());
     out[6..10].copy_from_slice(&payload_len.to_le_bytes());
     let crc = CRC32.checksum(&out[..payload_end]);
     out[payload_end..payload_end + TRAILER_LEN].copy_from_slice(&crc.to_le_bytes());
@@ -138,7 +151,8 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
 /// Encodes `model` into a new vector (std only).
 #[cfg(feature = "std")]
 pub fn encode_to_vec(model: &Model<'_>) -> Result<std::vec::Vec<u8>, EncodeError> {
-    let mut buf = std::vec![0u8; 4096 + model.points.byte_len() + model.momenta.byte_len()];
+    let expansion = model.expansion.as_ref().map_or(0, |e| 64 + e.joint_codes.len() + e.task_exponents.len() + e.weights.byte_len());
+    let mut buf = std::vec![0u8; 4096 + model.points.byte_len() + model.momenta.byte_len() + expansion];
     let len = encode(model, &mut buf)?;
     buf.truncate(len);
     Ok(buf)
@@ -176,7 +190,15 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
         return Err(DecodeError::ChecksumMismatch { stored, computed });
     }
     let payload = framed.get(HEADER_LEN..).ok_or(DecodeError::Payload)?;
-    let (model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| DecodeError::Payload)?;
+    let (mut model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| DecodeError::Payload)?;
+    let rest = if version >= 5 {
+        // Format 5: the expansion follows the model (`None` allowed, absence not).
+        let (expansion, rest): (Option<FieldExpansion<'_>>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
+        model.expansion = expansion;
+        rest
+    } else {
+        rest
+    };
     if !rest.is_empty() {
         return Err(DecodeError::Payload);
     }
@@ -196,3 +218,5 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_expansion;

@@ -4,6 +4,7 @@ use heapless::Vec as HVec;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::effects::Effects;
+use crate::expansion::FieldExpansion;
 use crate::limits::{MAX_JOINTS, MAX_TASK_DIM};
 
 /// A calibrated model: nominal kinematics, kernels, integrator, control points and momenta.
@@ -24,6 +25,11 @@ pub struct Model<'a> {
     /// Optimal initial momenta P0, `n_points × task_dim`, row-major, internal units.
     #[serde(borrow)]
     pub momenta: F64Slice<'a>,
+    /// The fields in their kernels' own basis (format 5), evaluated instead of the kernel form when
+    /// present; the kernel form above stays as the reference. Encoded after the format-4 payload
+    /// (see [`crate::encode`]), so it is skipped here.
+    #[serde(skip)]
+    pub expansion: Option<FieldExpansion<'a>>,
 }
 
 impl Model<'_> {

@@ -2,11 +2,11 @@ use super::*;
 extern crate std;
 use std::vec::Vec;
 
-fn le(values: &[f64]) -> Vec<u8> {
+pub(crate) fn le(values: &[f64]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
-fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a> {
+pub(crate) fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a> {
     Model {
         nominal: NominalModel::planar(&crate::paper_rr::LENGTHS).unwrap(),
         normalisation: Normalisation::IDENTITY,
@@ -18,6 +18,7 @@ fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a> {
         n_points: 3,
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
+        expansion: None,
     }
 }
 
@@ -239,7 +240,7 @@ fn a_blob_with_an_invalid_effect_does_not_decode() {
     let m = le(&[0.0; 6]);
     let mut model = sample_model(&p, &m);
     model.nominal.effects_mut().list.push(Effect::GravityCompliance { joint: 2, compliance: 1e-3 }).unwrap();
-    let blob = framed(&model, FORMAT_VERSION);
+    let blob = framed(&model, FORMAT_WITHOUT_EXPANSION);
     assert_eq!(
         decode(&blob),
         Err(DecodeError::Invalid(ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 }))
@@ -247,7 +248,7 @@ fn a_blob_with_an_invalid_effect_does_not_decode() {
 }
 
 /// A blob framed by hand with `version` in its header (encode always writes the current one).
-fn framed(model: &Model<'_>, version: u16) -> Vec<u8> {
+pub(crate) fn framed(model: &Model<'_>, version: u16) -> Vec<u8> {
     let payload = postcard::to_allocvec(model).unwrap();
     let mut blob = Vec::new();
     blob.extend_from_slice(&MAGIC);

@@ -1,7 +1,8 @@
 //! Consistency checks run on every encode and decode.
 
 use crate::effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
-use crate::limits::MAX_STEPS;
+use crate::expansion::{code_is_sin, code_order, FieldExpansion};
+use crate::limits::{MAX_EXPANSION_FEATURES, MAX_EXPANSION_ORDER, MAX_STEPS};
 use crate::model::*;
 
 /// What is wrong with a model, naming the field.
@@ -177,6 +178,54 @@ impl Model<'_> {
         dimension("momenta", n_points * m * 8, self.momenta.byte_len())?;
         finite("points", self.points.iter())?;
         finite("momenta", self.momenta.iter())?;
+        if let Some(e) = &self.expansion {
+            e.validate(self)?;
+        }
         Ok(())
+    }
+}
+
+impl FieldExpansion<'_> {
+    /// Checks the expansion against its model (whose other fields are valid): tolerance in (0, 1),
+    /// task radius > 0, at most [`MAX_EXPANSION_FEATURES`] functions per basis, r_V × n codes valid
+    /// for their axes (orders ≤ [`MAX_EXPANSION_ORDER`]; Gaussian axes: no sine bit; periodic axes:
+    /// no sin(0·x), a function that is identically zero), r_W × m exponents ≤ [`MAX_EXPANSION_ORDER`],
+    /// `stage_count × (r_V n + r_W m)` finite weights.
+    pub fn validate(&self, model: &Model<'_>) -> Result<(), ModelError> {
+        let (n, m) = (model.n_joints(), model.task_dim());
+        finite("expansion.tolerance", [self.tolerance])?;
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(ModelError::OutOfRange { field: "expansion.tolerance" });
+        }
+        positive("expansion.task_radius", self.task_radius)?;
+        if self.n_joint_features > MAX_EXPANSION_FEATURES {
+            return Err(ModelError::OutOfRange { field: "expansion.n_joint_features" });
+        }
+        if self.n_task_features > MAX_EXPANSION_FEATURES {
+            return Err(ModelError::OutOfRange { field: "expansion.n_task_features" });
+        }
+        let (r_v, r_w) = (self.n_joint_features as usize, self.n_task_features as usize);
+        dimension("expansion.joint_codes", r_v * n, self.joint_codes.len())?;
+        dimension("expansion.task_exponents", r_w * m, self.task_exponents.len())?;
+        dimension("expansion.weights", 8 * model.integrator.stage_count() * self.stage_len(n, m), self.weights.byte_len())?;
+        for (index, &code) in self.joint_codes.iter().enumerate() {
+            if code_order(code) > MAX_EXPANSION_ORDER {
+                return Err(ModelError::OutOfRangeAt { field: "expansion.joint_codes (order)", index });
+            }
+            let axis = model.joint_kernel.axes.get(index % n.max(1));
+            match axis {
+                Some(JointKernelAxis::Gaussian { .. }) if code_is_sin(code) => {
+                    return Err(ModelError::OutOfRangeAt { field: "expansion.joint_codes (sine on a Gaussian axis)", index });
+                }
+                Some(JointKernelAxis::Periodic { .. }) if code == 1 => {
+                    return Err(ModelError::OutOfRangeAt { field: "expansion.joint_codes (sin 0x)", index });
+                }
+                _ => {}
+            }
+        }
+        if let Some(index) = self.task_exponents.iter().position(|&a| a > MAX_EXPANSION_ORDER) {
+            return Err(ModelError::OutOfRangeAt { field: "expansion.task_exponents", index });
+        }
+        finite("expansion.weights", self.weights.iter())
     }
 }

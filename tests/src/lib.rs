@@ -22,6 +22,7 @@ pub fn reference_blob() -> Vec<u8> {
         n_points: 256,
         points: F64Slice::from_le_bytes(&x),
         momenta: F64Slice::from_le_bytes(&p),
+        expansion: None,
     };
     encode_to_vec(&model).expect("the reference model encodes")
 }
@@ -62,6 +63,7 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
         n_points: n_points as u32,
         points: F64Slice::from_le_bytes(&pb),
         momenta: F64Slice::from_le_bytes(&mb),
+        expansion: None,
     };
     encode_to_vec(&model).expect("the test model encodes")
 }

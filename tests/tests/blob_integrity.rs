@@ -4,7 +4,8 @@
 //!
 //! Frame: magic "CBDM" (4) | version u16 (2) | payload length u32 (4) | payload | CRC-32 (4).
 //! The expected error of a flip depends only on where it lands:
-//! magic → `BadMagic`, version → `UnsupportedVersion`, length → `Truncated` (declared longer) or
+//! magic → `BadMagic`, version → `UnsupportedVersion` (or `ChecksumMismatch` when the flip lands on
+//! another version this build reads: format 4's bit 0 gives format 5), length → `Truncated` (declared longer) or
 //! `TrailingBytes` (declared shorter), payload or CRC → `ChecksumMismatch` (CRC-32 detects every
 //! single-bit error).
 
@@ -143,11 +144,15 @@ fn every_bit_flip_is_rejected(blob: &[u8], stride: usize) {
     assert_eq!(damaged, blob);
     // Every class of field was exercised.
     assert_eq!(counts["BadMagic"], 32);
-    // 16 version bits; no single flip of format 4 lands on a readable format (2, 3), so all 16 are refused as versions.
-    assert_eq!(counts["UnsupportedVersion"], 16);
+    // 16 version bits: a flip that lands on a format this build reads (format 4's bit 0 gives 5) is
+    // caught by the checksum (the CRC covers the header); the others are refused as versions.
+    let own = u16::from_le_bytes([blob[4], blob[5]]);
+    let readable = (0..16).filter(|b| (cbd_protocol::OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&(own ^ (1 << b)))).count();
+    assert_eq!((own, readable), (FORMAT_WITHOUT_EXPANSION, 1));
+    assert_eq!(counts["UnsupportedVersion"], 16 - readable);
     assert_eq!(counts["Truncated"] + counts["TrailingBytes"], 32);
     assert!(counts["Truncated"] > 0 && counts["TrailingBytes"] > 0, "{counts:?}");
-    assert_eq!(counts["ChecksumMismatch"], 8 * (flipped_bytes - HEADER_LEN));
+    assert_eq!(counts["ChecksumMismatch"], 8 * (flipped_bytes - HEADER_LEN) + readable);
     if stride == 1 {
         assert_eq!(flipped_bytes, blob.len());
     }
@@ -203,16 +208,24 @@ fn wrong_version_or_magic_is_rejected_even_with_a_valid_checksum() {
         let crc = crc32(&b[..end]);
         b[end..].copy_from_slice(&crc.to_le_bytes());
     };
-    for version in (0..=u16::MAX).step_by(97).chain([0, 2, 256, u16::MAX]) {
-        if version == FORMAT_VERSION {
+    // The solver blob has no expansion: format 4.
+    let own = u16::from_le_bytes([blob[4], blob[5]]);
+    assert_eq!(own, FORMAT_WITHOUT_EXPANSION);
+    let hamiltonian = MomentumLaw::Hamiltonian.first_format();
+    for version in (0..=u16::MAX).step_by(97).chain([0, 2, 3, 5, 256, u16::MAX]) {
+        if (hamiltonian..=own).contains(&version) {
+            // Its own version, or an older one that holds the same model (format 3: no moments).
             continue;
         }
         let mut b = blob.clone();
         b[4..6].copy_from_slice(&version.to_le_bytes());
         reseal(&mut b);
-        // An older version this build reads cannot hold the solver blob's (Hamiltonian) momentum law.
-        let expected = if (cbd_protocol::OLDEST_FORMAT_VERSION..FORMAT_VERSION).contains(&version) {
+        // An older version this build reads cannot hold the solver blob's (Hamiltonian) momentum law;
+        // format 5 expects the expansion after the model, which a format-4 payload lacks.
+        let expected = if (cbd_protocol::OLDEST_FORMAT_VERSION..hamiltonian).contains(&version) {
             DecodeError::Invalid(cbd_protocol::ModelError::OutOfRange { field: "momentum_law (not in this blob's format version)" })
+        } else if (own..=FORMAT_VERSION).contains(&version) {
+            DecodeError::Payload
         } else {
             DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION }
         };

@@ -348,7 +348,8 @@ fn framed_without_validation(model: &Model<'_>) -> Vec<u8> {
     let payload = postcard::to_allocvec(model).unwrap();
     let mut blob = Vec::new();
     blob.extend_from_slice(&MAGIC);
-    blob.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    // Format 4: the payload is the model alone (no expansion follows).
+    blob.extend_from_slice(&FORMAT_WITHOUT_EXPANSION.to_le_bytes());
     blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
     blob.extend_from_slice(&payload);
     let crc = crc32(&blob);
@@ -383,6 +384,7 @@ fn blobs_with_out_of_range_effects_are_rejected() {
         n_points: 1,
         points: F64Slice::from_le_bytes(&points),
         momenta: F64Slice::from_le_bytes(&momenta),
+        expansion: None,
     };
     let expected = ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 };
     assert_eq!(encode_to_vec(&model), Err(EncodeError::Invalid(expected)));
@@ -439,6 +441,7 @@ fn random_effects_never_panic_in_the_calibrator() {
             n_points: 4,
             points: F64Slice::from_le_bytes(&pb),
             momenta: F64Slice::from_le_bytes(&mb),
+            expansion: None,
         };
         let mut storage = vec![0.0; 20_000];
         match encode_to_vec(&model) {

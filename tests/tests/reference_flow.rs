@@ -36,6 +36,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, method: Inte
         n_points,
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
+        expansion: None,
     }
 }
 

@@ -22,6 +22,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: 
         n_points,
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
+        expansion: None,
     }
 }
 
@@ -113,6 +114,7 @@ fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
         n_points: N as u32,
         points: F64Slice::from_le_bytes(&pb),
         momenta: F64Slice::from_le_bytes(&mb),
+        expansion: None,
     };
     encode_to_vec(&model).expect("encode 6-joint blob")
 }

@@ -25,6 +25,7 @@ pub(super) fn encode_checked(
         n_points: data.len() as u32,
         points: F64Slice::from_le_bytes(&points),
         momenta: F64Slice::from_le_bytes(&momenta),
+        expansion: None,
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(|e| FitError::Encode(e.to_string()))?;
     // Never hand out a blob the runtime does not reproduce.
