@@ -19,6 +19,7 @@
 
 pub mod calibrator;
 pub mod compensate;
+pub mod expansion;
 pub mod flow;
 pub mod integrate;
 pub mod inverse_kinematics;
