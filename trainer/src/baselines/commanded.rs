@@ -4,8 +4,9 @@
 //! (a) the nominal model's inverse kinematics, (b) DH-calibrated compensation (the inverse
 //! kinematics of the calibrated chain; for the planar arm the DH calibration of its planar form:
 //! link lengths, joint offsets, base position and yaw), (c) kernel-ridge compensation by pose redefinition
-//! (command the nominal IK of x', x' ← x' + x − krr(q), five times), (d) CbD compensation
-//! (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
+//! (command the nominal IK of x', x' ← x' + x − krr(q), five times), (c') the same on the
+//! DH-calibrated chain with kernel ridge on its residual (`dh+krr`; for the planar arm its
+//! DH form), (d) CbD compensation (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
 //! target: q* moved by up to 0.05 rad per joint (a controller's previous command).
 
 use super::dh_calibration::{calibrate_dh, DhCalibrationOptions};
@@ -133,6 +134,8 @@ pub struct Fitted<'a> {
     /// Planar parametric calibration (RR) — or `None`.
     pub planar: Option<PlanarCalibration>,
     pub krr: Option<&'a KernelRidge>,
+    /// Kernel ridge fitted on the residual of a DH-calibrated chain, with that chain.
+    pub dh_krr: Option<(&'a NominalModel, &'a KernelRidge)>,
     /// CbD's blobs by row name: `cbd` (fitted on the nominal model), `dh+cbd` (on the DH-calibrated chain).
     pub cbd: Vec<(&'a str, &'a [u8])>,
 }
@@ -140,7 +143,7 @@ pub struct Fitted<'a> {
 /// One method's true tool errors after commanding.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CommandedRow {
-    /// `nominal`, `dh`, `krr`, `cbd`, `dh+cbd`.
+    /// `nominal`, `dh`, `krr`, `dh+krr`, `cbd`, `dh+cbd`.
     pub name: String,
     pub stats: ErrorStats,
     /// For CbD rows: |k1(q*) − real(q*)| over the targets' configurations, its forward error there.
@@ -226,7 +229,8 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         calibrators
             .push((name, cbd_runtime::Calibrator::from_model(model, storage).map_err(|e| Error::from(e).context(name.to_string()))?));
     }
-    let mut names = vec!["nominal", "dh", "krr"];
+    let mut names = vec!["nominal", "dh", "krr", "dh+krr"];
+    let first_cbd = names.len();
     names.extend(calibrators.iter().map(|(name, _)| *name));
     let mut errors: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut not_reached = vec![0usize; names.len()];
@@ -261,30 +265,39 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
                 None => record(1, &q_nominal, false),
             }
         }
-        // (c) kernel ridge by pose redefinition: x' ← x' + (x − krr(q)).
-        if let Some(krr) = fitted.krr {
+        // (c) kernel ridge by pose redefinition: x' ← x' + (x − krr(q)), on the nominal model and
+        // (c') on the DH-calibrated chain.
+        let pose_redefinition = |model: &NominalModel, krr: &KernelRidge, start: &[f64]| -> (Vec<f64>, bool) {
             let mut shifted = x.clone();
-            let mut q = q_nominal.clone();
+            let mut q = start.to_vec();
             let mut ok = true;
             for _ in 0..POSE_REDEFINITION_ROUNDS {
-                let (qk, okk) = nominal_ik(nominal, &shifted, &q);
+                let (qk, okk) = nominal_ik(model, &shifted, &q);
                 q = qk;
                 ok = okk;
-                let predicted = krr.evaluate(nominal, &q).position;
+                let predicted = krr.evaluate(model, &q).position;
                 for (s, (target, p)) in shifted.iter_mut().zip(x.iter().zip(predicted)) {
                     *s += target - p;
                 }
             }
+            (q, ok)
+        };
+        if let Some(krr) = fitted.krr {
+            let (q, ok) = pose_redefinition(nominal, krr, &q_nominal);
             record(2, &q, ok);
+        }
+        if let Some((model, krr)) = fitted.dh_krr {
+            let (q, ok) = pose_redefinition(model, krr, &q_nominal);
+            record(3, &q, ok);
         }
         // (d) CbD compensation from the nominal IK.
         for (k, (name, cal)) in calibrators.iter_mut().enumerate() {
             let mut q = vec![0.0; n];
             let c = cal.compensate(&x, &q_nominal, &mut q).map_err(|e| Error::from(e).context(format!("{name}: compensate")))?;
-            record(3 + k, &q, c.reached);
-            residuals[3 + k].push(c.residual);
+            record(first_cbd + k, &q, c.reached);
+            residuals[first_cbd + k].push(c.residual);
             let e = cal.evaluate(q_star).map_err(|e| Error::from(e).context(format!("{name}: evaluate")))?;
-            forward[3 + k].push(distance(&e.position().iter().copied().collect::<Vec<_>>(), &x));
+            forward[first_cbd + k].push(distance(&e.position().iter().copied().collect::<Vec<_>>(), &x));
         }
     }
     let rows = names
@@ -303,8 +316,9 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
 }
 
 /// Fits every method on `train` (DH or the planar parametric fit, kernel ridge with evidence
-/// hyperparameters, CbD through `cbd_fit`, which returns a blob, on the nominal model and on the
-/// DH-calibrated chain) and runs [`commanded_accuracy`].
+/// hyperparameters on the nominal model and on the DH-calibrated chain — for the planar arm its DH
+/// form, as `cbd compare` — CbD through `cbd_fit`, which returns a blob, on the nominal model and on
+/// the DH-calibrated chain) and runs [`commanded_accuracy`].
 pub fn fit_and_command(
     arm: &SimulatedArm,
     nominal: &NominalModel,
@@ -319,9 +333,18 @@ pub fn fit_and_command(
         NominalModel::PlanarChain { .. } => None,
     };
     let planar = PlanarCalibration::fit(nominal, train);
-    let krr = choose_hyperparameters(nominal, train, search)
-        .ok()
-        .and_then(|h| KernelRidge::fit(nominal, train, h.kernel.clone(), h.ridge()).ok());
+    let krr_on = |model: &NominalModel| {
+        choose_hyperparameters(model, train, search).ok().and_then(|h| KernelRidge::fit(model, train, h.kernel.clone(), h.ridge()).ok())
+    };
+    let krr = krr_on(nominal);
+    // The chain `cbd compare`'s dh+krr row corrects: the DH fit, planar arms in their DH form.
+    let dh_for_krr = match &dh {
+        Some(model) => Some(model.clone()),
+        None => calibrate_dh(nominal, train, &DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() })
+            .ok()
+            .map(|f| f.model),
+    };
+    let dh_krr = dh_for_krr.as_ref().and_then(|model| krr_on(model).map(|k| (model, k)));
     let blob = cbd_fit(nominal, train)?;
     let dh_blob = match &dh {
         Some(model) => Some(cbd_fit(model, train)?),
@@ -331,7 +354,7 @@ pub fn fit_and_command(
     if let Some(b) = &dh_blob {
         cbd.push(("dh+cbd", b.as_slice()));
     }
-    let fitted = Fitted { nominal, dh: dh.as_ref(), planar, krr: krr.as_ref(), cbd };
+    let fitted = Fitted { nominal, dh: dh.as_ref(), planar, krr: krr.as_ref(), dh_krr: dh_krr.as_ref().map(|(m, k)| (*m, k)), cbd };
     commanded_accuracy(arm, &fitted, count, seed)
 }
 
@@ -385,7 +408,8 @@ mod tests {
         assert!(get(best) < get("dh"), "{best} {} vs dh {}", get(best), get("dh"));
         assert!(get("dh") < get("nominal"));
         let json = c.to_json();
-        for name in ["nominal", "dh", "krr", "cbd"] {
+        // Every forward method of `cbd compare` has a commanded row.
+        for name in ["nominal", "dh", "krr", "dh+krr", "cbd"] {
             assert!(json["methods"][name]["mean"].is_number(), "{name}");
         }
     }

@@ -61,6 +61,7 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts.max_iterations = settings.max_iterations;
     opts.method = settings.solver;
     opts.verbose = settings.verbose;
+    opts.representation = settings.representation;
     if let Some(t) = settings.threads {
         opts.threads = t;
     }
@@ -140,8 +141,10 @@ fn stall_warnings(fit: &CbdFit, h: &CbdHyperparameters, task_dim: usize, max_ite
         ));
     }
     if r.cancellation > 1e5 {
+        // The measure of what the runtime evaluates: the expansion's terms when the blob has one.
+        let what = if r.expansion.is_some() { "the expansion's terms" } else { "the momenta" };
         out.push(format!(
-            "the momenta cancel to 1 part in {:.1e} (nearly singular kernels): evaluate this model in f64: the runtime's f32 feature (about 7 significant digits) would lose about {:.0} digits to it",
+            "{what} cancel to 1 part in {:.1e} (nearly singular kernels): evaluate this model in f64: the runtime's f32 feature (about 7 significant digits) would lose about {:.0} digits to it",
             r.cancellation,
             r.cancellation.log10()
         ));

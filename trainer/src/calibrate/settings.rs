@@ -81,6 +81,8 @@ pub struct Settings {
     pub solver: SolverMethod,
     /// Threads for the fit; `None`: the solver's default (results never depend on it).
     pub threads: Option<usize>,
+    /// Points and momenta only, or also the fields in the kernels' own basis (docs/DESIGN.md §11).
+    pub representation: crate::expansion::Representation,
     pub verbose: bool,
 }
 
@@ -98,6 +100,7 @@ impl Default for Settings {
             max_iterations: 30,
             solver: SolverMethod::Auto,
             threads: None,
+            representation: crate::expansion::Representation::default(),
             verbose: false,
         }
     }

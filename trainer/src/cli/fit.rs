@@ -66,6 +66,10 @@ pub struct SolverArgs {
     /// eigenspace (O(N² r), r independent of N for smooth kernels); auto picks by problem size and spectrum.
     #[arg(long)]
     pub solver: Option<String>,
+    /// How the runtime evaluates the fields: auto (the kernels' own expansion when it is shorter
+    /// than the momenta or the momenta cancel), kernel (points and momenta only) or expansion.
+    #[arg(long, value_enum, default_value_t = crate::expansion::Representation::default())]
+    pub representation: crate::expansion::Representation,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -135,6 +139,7 @@ impl SolverArgs {
             s.solver = parse_solver(solver)?;
         }
         s.verbose = !self.quiet;
+        s.representation = self.representation;
         if self.no_divergence {
             s.law = cbd_protocol::MomentumLaw::HamiltonianWithoutDivergence;
         }

@@ -2,18 +2,22 @@
 
 use super::{CbdOptions, FitError};
 use crate::data::Measurements;
-use cbd_protocol::{f64_le_bytes, F64Slice, Model, NominalModel};
+use crate::expansion::ExpansionFit;
+use cbd_protocol::{f64_le_bytes, F64Slice, FieldExpansion, Model, NominalModel};
 
-/// The blob for `momenta` (all N·m, internal units) and the largest |runtime − trainer| at the
+/// The blob for `momenta` (all N·m, internal units) and the expansion, if any, and the largest |runtime − trainer| at the
 /// training points relative to the largest |position|.
 pub(super) fn encode_checked(
     nominal: &NominalModel,
     data: &Measurements,
     opts: &CbdOptions,
     momenta: &[f64],
+    expansion: Option<&ExpansionFit>,
     train_predictions: &[f64],
 ) -> Result<(Vec<u8>, f64), FitError> {
     let (points, momenta) = (f64_le_bytes(&data.joints), f64_le_bytes(momenta));
+    let task_exponents = expansion.map(|e| e.task_exponents()).unwrap_or_default();
+    let weights = expansion.map(|e| f64_le_bytes(&e.weights)).unwrap_or_default();
     let model = Model {
         nominal: nominal.clone(),
         normalisation: opts.normalisation.clone(),
@@ -25,7 +29,15 @@ pub(super) fn encode_checked(
         n_points: data.len() as u32,
         points: F64Slice::from_le_bytes(&points),
         momenta: F64Slice::from_le_bytes(&momenta),
-        expansion: None,
+        expansion: expansion.map(|e| FieldExpansion {
+            tolerance: e.tolerance,
+            task_radius: e.task_radius,
+            n_joint_features: e.joint.len() as u32,
+            joint_codes: &e.joint.codes,
+            n_task_features: e.task.len() as u32,
+            task_exponents: &task_exponents,
+            weights: F64Slice::from_le_bytes(&weights),
+        }),
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(|e| FitError::Encode(e.to_string()))?;
     // Never hand out a blob the runtime does not reproduce.

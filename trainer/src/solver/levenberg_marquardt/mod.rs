@@ -9,7 +9,7 @@
 
 mod encode;
 mod iterate;
-mod problem;
+pub(crate) mod problem;
 mod search_space;
 
 use super::regulariser::regulariser_matrix;
@@ -44,6 +44,8 @@ pub struct CbdOptions {
     pub method: SolverMethod,
     /// Print one line per iteration to stderr.
     pub verbose: bool,
+    /// Whether the blob also carries the fields in the kernels' own expansion (docs/DESIGN.md §11).
+    pub representation: crate::expansion::Representation,
 }
 
 impl CbdOptions {
@@ -65,6 +67,7 @@ impl CbdOptions {
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
             method: SolverMethod::Auto,
             verbose: false,
+            representation: crate::expansion::Representation::default(),
         }
     }
 }
@@ -119,8 +122,34 @@ pub struct FitReport {
     pub max_runtime_trainer_diff: f64,
     /// How much the momenta cancel in the linear response: max_i Σ_j |K_ij P_j| / max_i |Σ_j K_ij P_j|
     /// (K = K_lin; NaN in the eigenspace). Rounding in the runtime is amplified by about this much:
-    /// above ~1e5 the f32 runtime loses most of its 7 digits.
+    /// above ~1e5 the f32 runtime loses most of its 7 digits. Of the representation the runtime
+    /// evaluates: the expansion's terms A_ij w_j when the blob carries one.
     pub cancellation: f64,
+    /// The momenta's cancellation (the kernel form, the blob's reference), whichever is evaluated.
+    pub kernel_cancellation: f64,
+    /// "kernel" (points and momenta) or "expansion" (the fields in the kernels' own basis, §11).
+    pub representation: String,
+    /// The expansion the blob carries.
+    pub expansion: Option<ExpansionReport>,
+    /// Why the blob has no expansion (the scheme, the kernels' length, the choice), when it has none.
+    pub expansion_declined: Option<String>,
+}
+
+/// What the expansion is (docs/DESIGN.md §11).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ExpansionReport {
+    pub weights: usize,
+    pub joint_features: usize,
+    pub task_features: usize,
+    /// The prior weight each kernel's expansion drops, relative to its total.
+    pub tolerance: f64,
+    /// Task-space radius (internal units) the task expansion covers.
+    pub task_radius: f64,
+    /// Largest |weight| in prior standard deviations.
+    pub largest_whitened_weight: f64,
+    /// Largest |expansion − kernel form| at the training points, user units (truncation and the
+    /// momenta's rounding together).
+    pub kernel_form_difference: f64,
 }
 
 /// A fitted model: the blob and what it took.
@@ -213,18 +242,46 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     if opts.verbose {
         eprintln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
     }
-    let problem = Problem::new(&cp, target, opts.sigma, space);
+    let problem = Problem::new(&cp, target.clone(), opts.sigma, space);
     problem.timers.solve.set(seconds_basis);
     let mut recorder = iterate::Recorder::new(opts, start);
     let outcome = iterate::minimise(&problem, opts, linear_scheme, &mut recorder)?;
     recorder.finish(&outcome.stop_reason);
 
-    let k1 = outcome.current.flow.positions(cp.dims);
-    let train_predictions: Vec<f64> =
-        k1.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
-    let cancellation = if problem.space.basis.is_none() { cancellation_of(&problem.space.k_reg, &outcome.p) } else { f64::NAN };
+    let user = |k: &[f64]| -> Vec<f64> {
+        k.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect()
+    };
+    let kernel_predictions = user(&outcome.current.flow.positions(cp.dims));
+    let kernel_cancellation = if problem.space.basis.is_none() { cancellation_of(&problem.space.k_reg, &outcome.p) } else { f64::NAN };
     let momenta = problem.space.momenta_of(&outcome.p);
-    let (blob, max_runtime_trainer_diff) = encode::encode_checked(nominal, data, opts, &momenta, &train_predictions)?;
+    let (expansion, expansion_declined) = choose_expansion(&cp, opts, &target, linear_scheme, kernel_cancellation);
+    let (train_predictions, cancellation, expansion_report) = match &expansion {
+        Some(e) => {
+            let predictions = user(&e.positions);
+            let kernel_form_difference = predictions.iter().zip(&kernel_predictions).fold(0.0f64, |s, (a, b)| s.max((a - b).abs()));
+            let report = ExpansionReport {
+                weights: e.len(),
+                joint_features: e.joint.len(),
+                task_features: e.task.len(),
+                tolerance: e.tolerance,
+                task_radius: e.task_radius,
+                largest_whitened_weight: e.largest_whitened_weight,
+                kernel_form_difference,
+            };
+            (predictions, e.cancellation, Some(report))
+        }
+        None => (kernel_predictions, kernel_cancellation, None),
+    };
+    if opts.verbose {
+        match &expansion_report {
+            Some(e) => eprintln!(
+                "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), cancellation {:.1e} (momenta {:.1e})",
+                e.weights, e.joint_features, e.task_features, e.tolerance, cancellation, kernel_cancellation
+            ),
+            None => eprintln!("expansion: none ({})", expansion_declined.as_deref().unwrap_or("")),
+        }
+    }
+    let (blob, max_runtime_trainer_diff) = encode::encode_checked(nominal, data, opts, &momenta, expansion.as_ref(), &train_predictions)?;
     let timers = &problem.timers;
     Ok(CbdFit {
         blob,
@@ -245,8 +302,44 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             seconds_basis,
             max_runtime_trainer_diff,
             cancellation,
+            kernel_cancellation,
+            representation: if expansion.is_some() { "expansion" } else { "kernel" }.into(),
+            expansion: expansion_report,
+            expansion_declined,
         },
     })
+}
+
+/// The expansion the blob carries (docs/DESIGN.md §11), or why none: only the linear scheme
+/// (Euler × 1, Hamiltonian law) has one here; `Auto` takes it when it has no more weights than
+/// there are momenta, or when the momenta cancel beyond [`crate::expansion::CANCELLATION_LIMIT`].
+fn choose_expansion(
+    cp: &ControlPoints,
+    opts: &CbdOptions,
+    target: &[f64],
+    linear_scheme: bool,
+    kernel_cancellation: f64,
+) -> (Option<crate::expansion::ExpansionFit>, Option<String>) {
+    use crate::expansion::{fit_linear, Representation, CANCELLATION_LIMIT};
+    if opts.representation == Representation::Kernel {
+        return (None, Some("kernel form requested".into()));
+    }
+    if !linear_scheme || opts.law.joint_field_sign() > 0.0 {
+        return (None, Some("only the linear scheme (Euler × 1, Hamiltonian law) is written as an expansion".into()));
+    }
+    let momenta = cp.len() * cp.dims.m;
+    match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
+        Ok(e) if opts.representation == Representation::Expansion => (Some(e), None),
+        Ok(e) if e.len() <= momenta || kernel_cancellation > CANCELLATION_LIMIT => (Some(e), None),
+        Ok(e) => (
+            None,
+            Some(format!(
+                "the expansion has {} weights, more than the {momenta} momenta, which do not cancel ({kernel_cancellation:.1e})",
+                e.len()
+            )),
+        ),
+        Err(why) => (None, Some(why.to_string())),
+    }
 }
 
 /// The data's shape against the nominal model's, and enough rows to fit.

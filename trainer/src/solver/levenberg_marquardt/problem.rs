@@ -103,9 +103,10 @@ pub(super) fn model_energy(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, residual: &
     0.5 * r.iter().map(|v| v * v).sum::<f64>() + 0.5 * quad_form(k, trial)
 }
 
-/// max_i Σ_j |K_ij p_j| / max_i |Σ_j K_ij p_j| (see [`super::FitReport::cancellation`]).
-pub(super) fn cancellation_of(k: &Mat<f64>, p: &[f64]) -> f64 {
-    let (mut sum, mut abs) = (vec![0.0; p.len()], vec![0.0; p.len()]);
+/// max_i Σ_j |K_ij p_j| / max_i |Σ_j K_ij p_j| (see [`super::FitReport::cancellation`]); K may be
+/// rectangular (the expansion's design matrix and weights).
+pub fn cancellation_of(k: &Mat<f64>, p: &[f64]) -> f64 {
+    let (mut sum, mut abs) = (vec![0.0; k.nrows()], vec![0.0; k.nrows()]);
     for (j, pj) in p.iter().enumerate() {
         for ((s, a), kij) in sum.iter_mut().zip(abs.iter_mut()).zip(k.col(j).iter()) {
             *s += kij * pj;

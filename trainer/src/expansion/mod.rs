@@ -1,0 +1,139 @@
+//! CbD's fields in the kernels' own basis (docs/DESIGN.md §11, issue 25): the evidence prefers very
+//! flat kernels, and a flat kernel's field written as momenta at the N measured points cancels to
+//! 1 part in 1e5–1e12. The same field is a short series in the kernel's own expansion — Fourier
+//! modes with Bessel weights per periodic joint, the Gaussian's power series per task coordinate —
+//! whose weights can be solved directly, with every digit kept.
+//!
+//! weights (per-axis shares and variances) → basis (which functions) → solve (the weights).
+
+pub mod basis;
+pub mod solve;
+pub mod weights;
+
+use crate::flow::ControlPoints;
+use basis::{joint_axes, truncate, AxisSeries, Basis};
+use cbd_protocol::{JointKernel, TaskKernel};
+use solve::{apply, design, posterior_weights, prior_variances, LinearProblem};
+
+/// Which representation the blob's evaluation uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Representation {
+    /// The expansion when it is cheaper than the momenta, or when the momenta cancel (below).
+    Auto,
+    /// Points and momenta only (formats 2–4).
+    #[default]
+    Kernel,
+    /// The expansion whenever the kernels have one within the limits.
+    Expansion,
+}
+
+/// `Auto` takes the expansion over cheaper momenta when the momenta cancel beyond this
+/// (`FitReport::cancellation`): the f32 runtime would keep fewer than ~3 of its 7 digits.
+pub const CANCELLATION_LIMIT: f64 = 1e4;
+/// Weights above which the expansion is never used (the fit's QR is O(W² (N m + W))).
+pub const MAX_WEIGHTS: usize = 8192;
+
+/// The fitted linear model in the expansion.
+#[derive(Debug, Clone)]
+pub struct ExpansionFit {
+    pub tolerance: f64,
+    pub task_radius: f64,
+    pub joint: Basis,
+    pub task: Basis,
+    /// One stage's weights: r_V × n joint, then r_W × m task (the protocol's layout).
+    pub weights: Vec<f64>,
+    /// k1 at the training points, N × m, internal units.
+    pub positions: Vec<f64>,
+    /// max_i Σ_j |A_ij w_j| / max_i |Σ_j A_ij w_j|: how much the evaluated terms cancel.
+    pub cancellation: f64,
+    /// Largest |w| in prior standard deviations.
+    pub largest_whitened_weight: f64,
+}
+
+impl ExpansionFit {
+    pub fn len(&self) -> usize {
+        self.weights.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+    /// The protocol's exponents of the task basis.
+    pub fn task_exponents(&self) -> Vec<u8> {
+        solve::task_exponents(&self.task)
+    }
+}
+
+/// Why a model keeps the kernel form.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Declined {
+    /// The kernels need more terms than the protocol or [`MAX_WEIGHTS`] allow.
+    TooLong(String),
+    /// The whitened least-squares problem could not be solved.
+    Singular,
+}
+
+impl std::fmt::Display for Declined {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Declined::TooLong(why) => write!(f, "{why}"),
+            Declined::Singular => write!(f, "the weights' least-squares problem is singular"),
+        }
+    }
+}
+
+/// The truncation tolerance for noise σ (internal units) and a prior of `scale²` per coordinate:
+/// the dropped prior variance stays 100 × below σ² (the model cannot resolve less), no tighter
+/// than 1e-14 (f64 evaluation resolves the kernel to ~1e-16 of its total) and no looser than 1e-8.
+pub fn tolerance_for(sigma: f64, scale2: f64) -> f64 {
+    (0.01 * sigma * sigma / scale2).clamp(1e-14, 1e-8)
+}
+
+/// The radius a task expansion must cover: 1.25 × the farthest nominal position (room for queries
+/// beyond the measured ones and for the flow's displacement).
+pub fn task_radius_of(nominal: &[f64], m: usize) -> f64 {
+    1.25 * nominal.chunks_exact(m).map(|k| k.iter().map(|v| v * v).sum::<f64>().sqrt()).fold(0.0f64, f64::max).max(1e-3)
+}
+
+/// The linear (Euler × 1) model on `cp`'s points in the expansion of `joint_kernel` (blob units, γ > 0)
+/// and `task_kernel`, fitted to `target` (N × m, internal units) with noise `sigma`.
+pub fn fit_linear(
+    cp: &ControlPoints,
+    joint_kernel: &JointKernel,
+    task_kernel: &TaskKernel,
+    sigma: f64,
+    target: &[f64],
+) -> Result<ExpansionFit, Declined> {
+    let (m, n) = (cp.dims.m, cp.dims.n);
+    let count = cp.len();
+    let len = cp.dims.state_len();
+    let nominal = cp.nominal_positions();
+    let jacobians: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[m..m + m * n].to_vec()).collect();
+    let residual: Vec<f64> = target.iter().zip(&nominal).map(|(y, k)| y - k).collect();
+    let mean_j2 = jacobians.iter().map(|v| v * v).sum::<f64>() / (count * m).max(1) as f64;
+    let tolerance = tolerance_for(sigma, 1.0 + joint_kernel.gamma * mean_j2);
+    let ranges: Vec<f64> = (0..n).map(|d| 1.25 * cp.points.chunks_exact(n).map(|x| x[d].abs()).fold(0.0f64, f64::max).max(1e-3)).collect();
+    let joint = truncate(&joint_axes(joint_kernel, &ranges), tolerance).ok_or_else(|| {
+        Declined::TooLong(format!("the joint kernel needs orders above 63 or over 200000 modes at tolerance {tolerance:.0e}"))
+    })?;
+    let task_radius = task_radius_of(&nominal, m);
+    let task_axes = vec![AxisSeries::gaussian(task_radius / task_kernel.width); m];
+    let task = truncate(&task_axes, tolerance)
+        .ok_or_else(|| Declined::TooLong(format!("the task kernel needs orders above 63 at tolerance {tolerance:.0e}")))?;
+    let weights_len = joint.len() * n + task.len() * m;
+    if weights_len > MAX_WEIGHTS {
+        return Err(Declined::TooLong(format!("{weights_len} weights at tolerance {tolerance:.0e} (limit {MAX_WEIGHTS})")));
+    }
+    let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: &residual };
+    let a = design(&problem, joint_kernel, task_kernel, &joint, &task);
+    let variances = prior_variances(joint_kernel.gamma, n, m, &joint, &task);
+    let weights = posterior_weights(&a, &variances, sigma, &residual).ok_or(Declined::Singular)?;
+    let deformation = apply(&a, &weights);
+    let positions: Vec<f64> = nominal.iter().zip(&deformation).map(|(k, d)| k + d).collect();
+    let cancellation = crate::solver::levenberg_marquardt::problem::cancellation_of(&a, &weights);
+    let largest_whitened_weight = weights.iter().zip(&variances).map(|(w, v)| w.abs() / v.sqrt()).fold(0.0, f64::max);
+    Ok(ExpansionFit { tolerance, task_radius, joint, task, weights, positions, cancellation, largest_whitened_weight })
+}
+
+#[cfg(test)]
+mod tests;
