@@ -20,6 +20,24 @@ pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, inte
     features_len(n_points, n_joints) + trajectory + if load > query { load } else { query }
 }
 
+/// [`Real`] values of storage `model` needs: for the kernel form [`storage_len`]; for a model with an
+/// expansion (format 5, docs/DESIGN.md §11) the configurations' kernel features (`N × n × 2`, for
+/// [`Evaluation::support`]), the stage weights rounded once to [`Real`]
+/// (`stages × (r_V n + r_W m)`), the query's joint-basis rows (`r_V × (1 + n + n²)`) and the query's
+/// state with tangents and the integrator's scratch. No trajectory: nothing is integrated at load.
+pub fn storage_len_for(model: &Model<'_>) -> usize {
+    let (n_points, n, m) = (model.n_points as usize, model.n_joints(), model.task_dim());
+    match &model.expansion {
+        None => storage_len(n_points, n, m, model.integrator),
+        Some(e) => {
+            let dims = Dims { n, m };
+            let weights = model.integrator.stage_count() * e.stage_len(n, m);
+            let rows = e.n_joint_features as usize * crate::expansion::joint_row_len(n);
+            features_len(n_points, n) + weights + rows + crate::flow::query_derivatives::query_work_len(dims)
+        }
+    }
+}
+
 /// The calibrated position and Jacobian at one configuration, in the user's units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Evaluation {
@@ -65,12 +83,15 @@ pub struct Calibrator<'a> {
     /// The configurations' kernel features ([`crate::kernel::write_features`]), N × n × 2.
     pub(crate) features: &'a [Real],
     pub(crate) trajectory: &'a mut [Real],
+    /// With an expansion: its stage weights rounded once to [`Real`] (empty for the kernel form,
+    /// whose `trajectory` is then empty instead).
+    pub(crate) weights: &'a [Real],
     pub(crate) work: &'a mut [Real],
 }
 
 impl<'a> Calibrator<'a> {
-    /// Decodes and validates `blob`, then integrates the control points' trajectories into `storage`,
-    /// which must hold at least [`storage_len`] values for the model.
+    /// Decodes and validates `blob`, then integrates the control points' trajectories into `storage`
+    /// (with an expansion: copies its weights), which must hold at least [`storage_len_for`] values.
     pub fn load(blob: &'a [u8], storage: &'a mut [Real]) -> Result<Self, Error> {
         let model = decode(blob).map_err(Error::Blob)?;
         Self::from_model(model, storage)
@@ -81,9 +102,12 @@ impl<'a> Calibrator<'a> {
         model.validate().map_err(|e| Error::Blob(cbd_protocol::DecodeError::Invalid(e)))?;
         let dims = Dims { n: model.n_joints(), m: model.task_dim() };
         let n_points = model.n_points as usize;
-        let needed = storage_len(n_points, dims.n, dims.m, model.integrator);
+        let needed = storage_len_for(&model);
         if storage.len() < needed {
             return Err(Error::StorageTooSmall { needed, got: storage.len() });
+        }
+        if model.expansion.is_some() {
+            return Self::with_expansion(model, dims, storage.get_mut(..needed).ok_or(Error::Internal)?);
         }
         let traj_len = model.integrator.stage_count() * n_points * dims.sample_len();
         let (features, rest) = storage
@@ -93,20 +117,25 @@ impl<'a> Calibrator<'a> {
             .ok_or(Error::Internal)?;
         let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
         let features: &'a [Real] = Self::integrate_at_load(&model, dims, features, trajectory, work)?;
-        Ok(Calibrator { model, dims, features, trajectory, work })
+        Ok(Calibrator { model, dims, features, trajectory, weights: &[], work })
     }
 
-    /// Writes the kernel features of the configurations and the control points' trajectory;
-    /// `work` is scratch.
-    fn integrate_at_load<'f>(
-        model: &Model<'_>,
-        dims: Dims,
-        features: &'f mut [Real],
-        trajectory: &mut [Real],
-        work: &mut [Real],
-    ) -> Result<&'f [Real], Error> {
+    /// A model with an expansion: the configurations' kernel features (for the support) and the
+    /// weights rounded once to [`Real`]; the rest of `storage` is the queries' working space.
+    fn with_expansion(model: Model<'a>, dims: Dims, storage: &'a mut [Real]) -> Result<Self, Error> {
+        let e = model.expansion.as_ref().ok_or(Error::Internal)?;
         let n_points = model.n_points as usize;
-        // K_V's features of every configuration, from the blob's f64 values (unaligned bytes).
+        let (features, rest) = storage.split_at_mut_checked(features_len(n_points, dims.n)).ok_or(Error::Internal)?;
+        let (weights, work) = rest.split_at_mut_checked(e.weights.len()).ok_or(Error::Internal)?;
+        Self::write_features(&model, dims, features)?;
+        for (dst, src) in weights.iter_mut().zip(e.weights.iter()) {
+            *dst = src as Real;
+        }
+        Ok(Calibrator { model, dims, features, trajectory: &mut [], weights, work })
+    }
+
+    /// K_V's features of every configuration, from the blob's f64 values (unaligned bytes).
+    fn write_features(model: &Model<'_>, dims: Dims, features: &mut [Real]) -> Result<(), Error> {
         let n = dims.n;
         let mut points = model.points.iter();
         let (mut x, mut f) = ([0.0; MAX_JOINTS], [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS]);
@@ -119,6 +148,20 @@ impl<'a> Calibrator<'a> {
                 *dst = *src;
             }
         }
+        Ok(())
+    }
+
+    /// Writes the kernel features of the configurations and the control points' trajectory;
+    /// `work` is scratch.
+    fn integrate_at_load<'f>(
+        model: &Model<'_>,
+        dims: Dims,
+        features: &'f mut [Real],
+        trajectory: &mut [Real],
+        work: &mut [Real],
+    ) -> Result<&'f [Real], Error> {
+        let n_points = model.n_points as usize;
+        Self::write_features(model, dims, features)?;
         let state_len = n_points * dims.state_len();
         let (state, rest) = work.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
         initial_state(model, state)?;

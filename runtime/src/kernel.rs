@@ -90,6 +90,21 @@ pub fn joint_kernel_parts_n(
     kernel.gamma as Real * exp(exponent)
 }
 
+/// Σ_d f_d(x_d − x'_d) over at most `n` axes, K_V = γ e^{that} ([`joint_kernel_parts_n`]'s exponent, the same sum).
+#[inline(always)]
+pub fn joint_kernel_exponent_n(
+    kernel: &JointKernel,
+    n: usize,
+    fx: &[[Real; FEATURES_PER_JOINT]],
+    fxp: &[[Real; FEATURES_PER_JOINT]],
+) -> Real {
+    let mut exponent = 0.0;
+    for (axis, (a, b)) in kernel.axes.iter().zip(fx.iter().zip(fxp.iter())).take(n) {
+        exponent += axis_terms(axis, a, b).0;
+    }
+    exponent
+}
+
 /// f_d, f'_d and f''_d of one axis from the two configurations' features (the one place of the formula).
 #[inline(always)]
 fn axis_terms(axis: &JointKernelAxis, a: &[Real; FEATURES_PER_JOINT], b: &[Real; FEATURES_PER_JOINT]) -> (Real, Real, Real) {

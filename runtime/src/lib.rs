@@ -2,17 +2,18 @@
 //! controller: `#![no_std]`, no heap, fixed-step integration of eq. (20), position and Jacobian.
 //!
 //! ```ignore
-//! let mut storage = [0.0; 200_000]; // Real values (f64, or f32 with the `f32` feature), ≥ storage_len(N, n, m, integrator)
+//! let mut storage = [0.0; 200_000]; // Real values (f64, or f32 with the `f32` feature), ≥ storage_len_for(&model)
 //! let mut cal = Calibrator::load(BLOB, &mut storage)?;
 //! let e = cal.evaluate(&[0.3, -1.2])?;
 //! let (y, dy) = (e.position(), e.jacobian());
 //! ```
 //!
 //! The controller's API is at the crate root: [`Calibrator`] (load, `evaluate`, `compensate`),
-//! [`Evaluation`], [`storage_len`], [`Error`]. The modules are the building blocks the trainer
+//! [`Evaluation`], [`storage_len_for`] (and the kernel form's [`storage_len`]), [`Error`]. The modules are the building blocks the trainer
 //! shares so that it optimises exactly what the controller evaluates (same code, same bits):
 //! `kinematics` (k0 and its derivatives), `kernel`, `flow` (eq. 17, 19, 20, the control points'
-//! integration, the query's derivatives, the inverse flows), `integrate`, `real`, and
+//! integration, the query's derivatives, the inverse flows), `expansion` (format 5: the fields in
+//! their kernels' own basis, evaluated instead of the kernel form when the blob has them), `integrate`, `real`, and
 //! `inverse_kinematics` (the nominal closed forms compensation starts from).
 #![no_std]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
@@ -27,7 +28,7 @@ pub mod kernel;
 pub mod kinematics;
 pub mod real;
 
-pub use calibrator::{storage_len, Calibrator, Evaluation};
+pub use calibrator::{storage_len, storage_len_for, Calibrator, Evaluation};
 pub use cbd_protocol as protocol;
 pub use compensate::{CompensateOptions, Compensation};
 
@@ -36,7 +37,7 @@ pub use compensate::{CompensateOptions, Compensation};
 pub enum Error {
     /// The blob was rejected (frame, checksum, version or contents).
     Blob(cbd_protocol::DecodeError),
-    /// The caller's storage is smaller than [`storage_len`] for this model.
+    /// The caller's storage is smaller than [`storage_len_for`] this model.
     StorageTooSmall { needed: usize, got: usize },
     /// The query has the wrong number of joints.
     QueryDimension { expected: usize, found: usize },

@@ -67,3 +67,103 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
     };
     encode_to_vec(&model).expect("the test model encodes")
 }
+
+/// Joint codes of every product basis function of total degree ≤ `degree` (multi-indices h with
+/// Σ h_d ≤ degree, lexicographic; periodic axes cos and sin of each h > 0, Gaussian axes k = h).
+pub fn joint_codes(model: &Model<'_>, degree: u8) -> Vec<u8> {
+    let n = model.n_joints();
+    let mut out = Vec::new();
+    let mut h = vec![0u8; n];
+    loop {
+        if h.iter().map(|&v| v as u32).sum::<u32>() <= degree as u32 {
+            // Every choice of cos/sin on the periodic axes with h > 0.
+            let free: Vec<usize> =
+                (0..n).filter(|&d| h[d] > 0 && matches!(model.joint_kernel.axes[d], JointKernelAxis::Periodic { .. })).collect();
+            for mask in 0..(1u32 << free.len()) {
+                let mut code: Vec<u8> = h.iter().map(|&v| v << 1).collect();
+                for (i, &d) in free.iter().enumerate() {
+                    code[d] |= ((mask >> i) & 1) as u8;
+                }
+                out.extend_from_slice(&code);
+            }
+        }
+        // Next multi-index (odometer, each digit 0..=degree).
+        let mut d = n;
+        loop {
+            if d == 0 {
+                return out;
+            }
+            d -= 1;
+            if h[d] < degree {
+                h[d] += 1;
+                break;
+            }
+            h[d] = 0;
+        }
+    }
+}
+
+/// Task exponents of every monomial of total degree ≤ `degree` in m coordinates (lexicographic).
+pub fn task_exponents(m: usize, degree: u8) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut a = vec![0u8; m];
+    loop {
+        if a.iter().map(|&v| v as u32).sum::<u32>() <= degree as u32 {
+            out.extend_from_slice(&a);
+        }
+        let mut c = m;
+        loop {
+            if c == 0 {
+                return out;
+            }
+            c -= 1;
+            if a[c] < degree {
+                a[c] += 1;
+                break;
+            }
+            a[c] = 0;
+        }
+    }
+}
+
+/// The blob of [`model_blob`]'s model with an expansion: joint codes of total degree ≤
+/// `joint_degree`, task exponents of total degree ≤ `task_degree`, and weights of size `scale`
+/// from a fixed pseudo-random sequence, damped by 1 + degree.
+pub fn expansion_blob(
+    nominal: NominalModel,
+    n_points: usize,
+    integrator: Integrator,
+    prismatic_width: f64,
+    (joint_degree, task_degree): (u8, u8),
+    scale: f64,
+) -> Vec<u8> {
+    let base = model_blob(nominal, n_points, 0.01, integrator, prismatic_width);
+    let mut model = decode(&base).expect("the base model decodes");
+    let (n, m) = (model.n_joints(), model.task_dim());
+    let codes = joint_codes(&model, joint_degree);
+    let exponents = task_exponents(m, task_degree);
+    let (r_v, r_w) = (codes.len() / n, exponents.len() / m);
+    let mut s = 11u64;
+    let mut weights = Vec::new();
+    for _ in 0..integrator.stage_count() {
+        for f in 0..r_v {
+            let degree: u32 = codes[f * n..(f + 1) * n].iter().map(|c| (c >> 1) as u32).sum();
+            weights.extend((0..n).map(|_| scale * lcg(&mut s) / (1.0 + degree as f64)));
+        }
+        for g in 0..r_w {
+            let degree: u32 = exponents[g * m..(g + 1) * m].iter().map(|&a| a as u32).sum();
+            weights.extend((0..m).map(|_| scale * lcg(&mut s) / (1.0 + degree as f64)));
+        }
+    }
+    let wb = f64_le_bytes(&weights);
+    model.expansion = Some(FieldExpansion {
+        tolerance: 1e-9,
+        task_radius: 2.0,
+        n_joint_features: r_v as u32,
+        joint_codes: &codes,
+        n_task_features: r_w as u32,
+        task_exponents: &exponents,
+        weights: F64Slice::from_le_bytes(&wb),
+    });
+    encode_to_vec(&model).expect("the expansion model encodes")
+}

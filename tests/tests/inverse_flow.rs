@@ -19,7 +19,7 @@ fn distance(a: &[f64], b: &[f64]) -> f64 {
 /// Largest |ψ⁻¹(ψ(y)) − y| and |φ⁻¹(φ(x)) − x| over a few points, for one model.
 fn round_trip_errors(blob: &[u8]) -> (f64, f64) {
     let mut storage = vec![0.0; 200_000];
-    let cal = Calibrator::load(blob, &mut storage).unwrap();
+    let mut cal = Calibrator::load(blob, &mut storage).unwrap();
     let (mut task, mut joint) = (0.0f64, 0.0f64);
     let mut s = 3u64;
     for _ in 0..20 {
@@ -117,7 +117,7 @@ fn on_the_reference_model_the_start_is_far_nearer_than_the_nominal_seed() {
 fn wrong_lengths_are_errors() {
     let blob = reference_blob();
     let mut storage = vec![0.0; 100_000];
-    let cal = Calibrator::load(&blob, &mut storage).unwrap();
+    let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
     let mut out2 = [0.0; 2];
     assert!(cal.task_flow(&[0.1], Direction::Backward, &mut out2).is_err());
     assert!(cal.joint_flow(&[0.1, 0.2, 0.3], Direction::Forward, &mut out2).is_err());

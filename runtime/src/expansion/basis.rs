@@ -256,13 +256,13 @@ pub fn write_joint_basis(joint_kernel: &JointKernel, codes: &[u8], n: usize, x: 
     if n == 0 {
         return;
     }
-    for row in rows.chunks_exact_mut(row_len) {
+    for row in rows.chunks_exact_mut(row_len.max(1)) {
         if let Some(phi) = row.first_mut() {
             *phi = 1.0;
         }
     }
     for (d, (axis, &xd)) in joint_kernel.axes.iter().zip(x.iter()).enumerate().take(n) {
-        let order = axis_order(codes.chunks_exact(n).filter_map(|c| c.get(d)).map(|&c| code_order(c)));
+        let order = axis_order(codes.chunks_exact(n.max(1)).filter_map(|c| c.get(d)).map(|&c| code_order(c)));
         let (mut cos, mut sin) = ([0.0f64; ORDERS], [0.0f64; ORDERS]);
         let (u, inv_width) = match *axis {
             JointKernelAxis::Periodic { .. } => {
@@ -281,7 +281,12 @@ pub fn write_joint_basis(joint_kernel: &JointKernel, codes: &[u8], n: usize, x: 
                 (u, 1.0 / width)
             }
         };
-        for (row, code_row) in rows.chunks_exact_mut(row_len).zip(codes.chunks_exact(n)) {
+        // Rows and codes walked by splitting (a zip of two `chunks_exact` keeps a division-by-zero
+        // panic path the optimiser cannot remove).
+        let mut code_rows = codes;
+        for row in rows.chunks_exact_mut(row_len.max(1)) {
+            let Some((code_row, rest)) = code_rows.split_at_checked(n) else { break };
+            code_rows = rest;
             let code = code_row.get(d).copied().unwrap_or(0);
             let k = code_order(code) as usize;
             let (f0, f1, f2) = match *axis {
@@ -329,12 +334,12 @@ pub fn for_each_task_basis(
     let mut tables = [[0.0 as Real; ORDERS]; MT];
     for (c, ((u_c, table), y_c)) in u.iter_mut().zip(tables.iter_mut()).zip(y.iter()).enumerate().take(m) {
         *u_c = *y_c * inv_a;
-        let order = axis_order(exponents.chunks_exact(m).filter_map(|e| e.get(c)).copied());
+        let order = axis_order(exponents.chunks_exact(m.max(1)).filter_map(|e| e.get(c)).copied());
         hermite_table(*u_c, order, table);
     }
     let inv_a2 = inv_a * inv_a;
     let mut hess_rows = [[0.0 as Real; MT]; MT];
-    for (g, alpha) in exponents.chunks_exact(m).enumerate() {
+    for (g, alpha) in exponents.chunks_exact(m.max(1)).enumerate() {
         let (mut psi, mut grad, mut hess) = (1.0 as Real, [0.0 as Real; MT], [0.0 as Real; MT * MT]);
         for (c, ((a, table), u_c)) in alpha.iter().zip(tables.iter()).zip(u.iter()).enumerate() {
             let (f0, f1, f2) = hermite_factor(table, *a as usize, *u_c);
@@ -342,7 +347,7 @@ pub fn for_each_task_basis(
             multiply_factor(&mut psi, &mut grad, hess, m, c, [f0, f1 * inv_a, f2 * inv_a2]);
         }
         if hessian {
-            for (dst, src) in hess_rows.iter_mut().zip(hess.chunks_exact(m)) {
+            for (dst, src) in hess_rows.iter_mut().zip(hess.chunks_exact(m.max(1))) {
                 for (d, s) in dst.iter_mut().zip(src.iter()) {
                     *d = *s;
                 }

@@ -2,5 +2,6 @@
 //! functions (`basis`) and the fields' sums over them with a stage's weights (`fields`).
 
 pub mod basis;
+pub mod fields;
 
 pub use basis::{for_each_task_basis, joint_row_len, write_joint_basis};

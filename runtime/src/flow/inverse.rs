@@ -7,13 +7,18 @@
 //! this composition only to first order in the deformation: the start misses the target by a
 //! second-order term (measured in tests/tests/inverse_flow.rs) plus the scheme's discretisation
 //! error; Newton steps on k1 ([`crate::compensate`]) remove the rest. Fixed cost, no heap, no panic.
+//! With an expansion (format 5) the stages' fields come from its stage weights instead of the
+//! trajectory: w from the task basis at y, v from the joint basis at the moving x (written into
+//! the queries' working space, hence `&mut self`).
 
+use crate::expansion::fields::stage_weights;
+use crate::expansion::{joint_row_len, write_joint_basis};
 use crate::flow::{Fixed, Shape};
 use crate::integrate::integrate_checked;
 use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
 use crate::real::{exp, to_f64, Real};
 use crate::{Calibrator, Error};
-use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use cbd_protocol::{Integrator, JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// Which way a flow is integrated: from t = 0 to 1 (ψ, φ) or from t = 1 back to 0 (ψ⁻¹, φ⁻¹).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -83,6 +88,26 @@ fn joint_velocity<S: Shape>(shape: S, kernel: &JointKernel, x: &[Real], features
     v
 }
 
+/// Integrates `state` (at most [`NJ`] values) with the model's scheme, the rate of every stage given
+/// by `rate(stored stage, state, out)` — the stored stages reversed when backward.
+fn flow_along_stages(
+    integrator: Integrator,
+    direction: Direction,
+    state: &mut [Real],
+    mut rate: impl FnMut(usize, &[Real], &mut [Real]) -> Result<(), Error>,
+) -> Result<(), Error> {
+    let total = integrator.stage_count();
+    let mut scratch = [0.0 as Real; 3 * NJ];
+    integrate_checked(integrator.method, integrator.steps, state, &mut scratch, Error::Internal, |g, s, out| {
+        rate(stored_stage(direction, total, g), s, out)?;
+        if out.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::NonFiniteResult)
+        }
+    })
+}
+
 impl Calibrator<'_> {
     /// ψ(y) (forward) or ψ⁻¹(y) (backward): the task-space flow of w along the stored trajectory,
     /// `y` and `out` in user units (m values).
@@ -96,7 +121,7 @@ impl Calibrator<'_> {
 
     /// φ(x) (forward) or φ⁻¹(x) (backward): the joint-space flow of v along the stored
     /// trajectory, `x` and `out` joint configurations (n values).
-    pub fn joint_flow(&self, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+    pub fn joint_flow(&mut self, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
         match (self.dims.m, self.dims.n) {
             (2, 2) => self.joint_flow_shaped(Fixed::<2, 2>, x, direction, out),
             (3, 6) => self.joint_flow_shaped(Fixed::<3, 6>, x, direction, out),
@@ -118,11 +143,23 @@ impl Calibrator<'_> {
         }
         let kernel = self.model.task_kernel;
         let sign: Real = if direction == Direction::Forward { 1.0 } else { -1.0 };
-        self.flow_along_trajectory(state.get_mut(..m).ok_or(Error::Internal)?, direction, |samples, s, rate| {
-            let w = task_velocity(shape, &kernel, s, samples);
+        let block = self.model.n_points as usize * self.dims.sample_len();
+        let trajectory: &[Real] = self.trajectory;
+        let (weights, expansion) = (self.weights, self.model.expansion.as_ref());
+        let (stage_len, joint_len) = expansion.map_or((0, 0), |e| (e.stage_len(self.dims.n, m), e.n_joint_features as usize * self.dims.n));
+        let state = state.get_mut(..m).ok_or(Error::Internal)?;
+        flow_along_stages(self.model.integrator, direction, state, |stage, s, rate| {
+            let w = match expansion {
+                None => task_velocity(shape, &kernel, s, trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?),
+                Some(e) => {
+                    let (_, d) = stage_weights(weights, stage, stage_len, joint_len).ok_or(Error::Internal)?;
+                    crate::expansion::fields::task_velocity(shape, &kernel, e.task_exponents, d, s)
+                }
+            };
             for (r, w_a) in rate.iter_mut().zip(w.iter()) {
                 *r = sign * w_a;
             }
+            Ok(())
         })?;
         for ((dst, v), o) in out.iter_mut().zip(state.iter()).zip(norm.task_offset.iter()) {
             *dst = o + norm.task_scale * to_f64(*v);
@@ -135,8 +172,8 @@ impl Calibrator<'_> {
     }
 
     #[inline(always)]
-    fn joint_flow_shaped<S: Shape>(&self, shape: S, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
-        let n = self.dims.n;
+    fn joint_flow_shaped<S: Shape>(&mut self, shape: S, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        let (m, n) = (self.dims.m, self.dims.n);
         if x.len() != n || out.len() != n {
             return Err(Error::QueryDimension { expected: n, found: if x.len() != n { x.len() } else { out.len() } });
         }
@@ -147,11 +184,33 @@ impl Calibrator<'_> {
         let kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
         let features: &[Real] = self.features;
         let sign: Real = if direction == Direction::Forward { 1.0 } else { -1.0 };
-        self.flow_along_trajectory(state.get_mut(..n).ok_or(Error::Internal)?, direction, |samples, s, rate| {
-            let v = joint_velocity(shape, &kernel, s, features, samples);
+        let block = self.model.n_points as usize * self.dims.sample_len();
+        let trajectory: &[Real] = self.trajectory;
+        let (weights, expansion) = (self.weights, self.model.expansion.as_ref());
+        let (stage_len, joint_len) = expansion.map_or((0, 0), |e| (e.stage_len(n, m), e.n_joint_features as usize * n));
+        // The expansion's joint basis at the moving x goes to the queries' working space.
+        let rows_len = expansion.map_or(0, |e| e.n_joint_features as usize * joint_row_len(n));
+        let rows = self.work.get_mut(..rows_len).ok_or(Error::Internal)?;
+        let state = state.get_mut(..n).ok_or(Error::Internal)?;
+        flow_along_stages(self.model.integrator, direction, state, |stage, s, rate| {
+            let v = match expansion {
+                None => {
+                    joint_velocity(shape, &kernel, s, features, trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?)
+                }
+                Some(e) => {
+                    let (c, _) = stage_weights(weights, stage, stage_len, joint_len).ok_or(Error::Internal)?;
+                    let mut xx = [0.0; NJ];
+                    for (dst, src) in xx.iter_mut().zip(s).take(n) {
+                        *dst = to_f64(*src);
+                    }
+                    write_joint_basis(&self.model.joint_kernel, e.joint_codes, n, xx.get(..n).unwrap_or(&[]), rows, false);
+                    crate::expansion::fields::joint_velocity(shape, c, rows)
+                }
+            };
             for (r, v_a) in rate.iter_mut().zip(v.iter()) {
                 *r = sign * v_a;
             }
+            Ok(())
         })?;
         for (dst, v) in out.iter_mut().zip(state.iter()) {
             *dst = to_f64(*v);
@@ -163,35 +222,11 @@ impl Calibrator<'_> {
         }
     }
 
-    /// Integrates `state` (at most [`NJ`] values) with the model's scheme, the rate of every stage
-    /// given by `rate(samples, state, out)` from the stage's stored samples, reversed when backward.
-    fn flow_along_trajectory(
-        &self,
-        state: &mut [Real],
-        direction: Direction,
-        rate: impl Fn(&[Real], &[Real], &mut [Real]),
-    ) -> Result<(), Error> {
-        let block = self.model.n_points as usize * self.dims.sample_len();
-        let total = self.model.integrator.stage_count();
-        let trajectory: &[Real] = self.trajectory;
-        let mut scratch = [0.0 as Real; 3 * NJ];
-        integrate_checked(self.model.integrator.method, self.model.integrator.steps, state, &mut scratch, Error::Internal, |g, s, out| {
-            let stage = stored_stage(direction, total, g);
-            let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-            rate(samples, s, out);
-            if out.iter().all(|v| v.is_finite()) {
-                Ok(())
-            } else {
-                Err(Error::NonFiniteResult)
-            }
-        })
-    }
-
     /// k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹: the start of compensation. ψ⁻¹(target), then the nominal inverse
     /// kinematics of that point from `seed` (closed form where the nominal model has one, the
     /// seed's branch and orientation; otherwise `nominal_iterations` Gauss–Newton steps on k0 from
     /// the seed), then φ. Writes the start to `out` (n values).
-    pub fn inverse_flow_start(&self, target: &[f64], seed: &[f64], out: &mut [f64], nominal_iterations: usize) -> Result<(), Error> {
+    pub fn inverse_flow_start(&mut self, target: &[f64], seed: &[f64], out: &mut [f64], nominal_iterations: usize) -> Result<(), Error> {
         let (m, n) = (self.dims.m, self.dims.n);
         if seed.len() != n || out.len() != n {
             return Err(Error::QueryDimension { expected: n, found: if seed.len() != n { seed.len() } else { out.len() } });

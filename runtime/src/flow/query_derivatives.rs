@@ -80,21 +80,30 @@ pub fn write_kernel_rows<S: Shape>(
 
 /// v(ξ) = Σ_j K_V(ξ, x_j) u_j and Dv = Σ_j u_j ∇K_Vᵀ over one stage's samples from the kernel rows
 /// (the arithmetic of [`crate::flow::joint_field`]), and (HESSIAN) ∂_d Dv[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V.
+/// The u_j are the n values at `offset` of every `stride` values of `coefficients`: the samples'
+/// u = Jᵀ P (stride 2m + n, offset 2m) or an expansion's joint weights c_f (stride n, offset 0),
+/// the rows then the joint basis ([`crate::expansion::write_joint_basis`], the same layout).
 #[inline(always)]
-fn joint_sums<S: Shape, const HESSIAN: bool>(shape: S, samples: &[Real], rows: &[Real]) -> (JointField, JointHessian) {
-    let (m, n) = (shape.m(), shape.n());
+pub(crate) fn joint_sums<S: Shape, const HESSIAN: bool>(
+    shape: S,
+    coefficients: &[Real],
+    stride: usize,
+    offset: usize,
+    rows: &[Real],
+) -> (JointField, JointHessian) {
+    let n = shape.n();
     let mut f = JointField { v: [0.0; NJ], dv: [[0.0; NJ]; NJ] };
     let mut ddv = [[[0.0; NJ]; NJ]; NJ];
-    let (sample_len, row_len) = (2 * m + n, kernel_row_len(n));
+    let row_len = kernel_row_len(n);
     if n == 0 {
         return (f, ddv);
     }
     // Pairs by hand: a `zip` of two `chunks_exact` keeps a division-by-zero panic path (its length).
-    let mut sample_iter = samples.chunks_exact(sample_len.max(1));
+    let mut sample_iter = coefficients.chunks_exact(stride.max(1));
     for row in rows.chunks_exact(row_len.max(1)) {
         let Some(s) = sample_iter.next() else { break };
         let mut u = [0.0; NJ];
-        for (dst, src) in u.iter_mut().zip(s.iter().skip(2 * m)).take(n) {
+        for (dst, src) in u.iter_mut().zip(s.iter().skip(offset)).take(n) {
             *dst = *src;
         }
         let Some((k, rest)) = row.split_first() else { break };
@@ -216,17 +225,52 @@ fn unpack<S: Shape>(shape: S, state: &[Real]) -> ([Real; MT], [[Real; NJ]; MT]) 
     (k, jac)
 }
 
+/// Where a query's fields come from at each stage: the control points' stored trajectory with the
+/// query's kernel rows ([`KernelForm`]), or the stage's weights with the query's joint basis
+/// ([`crate::expansion::fields::ExpansionForm`]).
+pub(crate) trait StageFields {
+    /// w, Dw and (HESSIAN) Σ d ∂²ψ at the query's current k; v, Dv and (HESSIAN) ∂_d Dv at ξ.
+    fn fields<S: Shape, const HESSIAN: bool>(
+        &self,
+        shape: S,
+        stage: usize,
+        k: &[Real; MT],
+    ) -> Option<(TaskField, TaskHessian, JointField, JointHessian)>;
+}
+
+/// The kernel form: stage `stage` of the control points' trajectory (`block` values per stage) and
+/// the query's kernel rows ([`write_kernel_rows`]).
+pub(crate) struct KernelForm<'r> {
+    pub task_kernel: TaskKernel,
+    pub trajectory: &'r [Real],
+    pub block: usize,
+    pub rows: &'r [Real],
+}
+
+impl StageFields for KernelForm<'_> {
+    #[inline(always)]
+    fn fields<S: Shape, const HESSIAN: bool>(
+        &self,
+        shape: S,
+        stage: usize,
+        k: &[Real; MT],
+    ) -> Option<(TaskField, TaskHessian, JointField, JointHessian)> {
+        let samples = self.trajectory.get(stage * self.block..(stage + 1) * self.block)?;
+        let (m, n) = (shape.m(), shape.n());
+        let (tf, t) = if HESSIAN {
+            task_field_with_hessian(shape, &self.task_kernel, k, samples)
+        } else {
+            (task_field_shaped(shape, &self.task_kernel, k, samples), [[[0.0; MT]; MT]; MT])
+        };
+        let (jf, ddv) = joint_sums::<_, HESSIAN>(shape, samples, 2 * m + n, 2 * m, self.rows);
+        Some((tf, t, jf, ddv))
+    }
+}
+
 /// The query state's right-hand side at one stage: the primal rates (eq. 20, the arithmetic of the
 /// control points' flow) and, if `state` holds them, every direction's tangent rates.
 #[inline(always)]
-fn query_rates<S: Shape>(
-    shape: S,
-    task_kernel: &TaskKernel,
-    samples: &[Real],
-    kernel_rows: &[Real],
-    state: &[Real],
-    out: &mut [Real],
-) -> Option<()> {
+pub(crate) fn query_rates<S: Shape, F: StageFields>(shape: S, fields: &F, stage: usize, state: &[Real], out: &mut [Real]) -> Option<()> {
     let (m, n) = (shape.m(), shape.n());
     let q = m + m * n;
     let (primal, tangents) = state.split_at_checked(q)?;
@@ -235,13 +279,11 @@ fn query_rates<S: Shape>(
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     let s_jac = primal.get(m..)?;
     if tangents.is_empty() {
-        let tf = task_field_shaped(shape, task_kernel, &k, samples);
-        let (jf, _) = joint_sums::<_, false>(shape, samples, kernel_rows);
+        let (tf, _, jf, _) = fields.fields::<_, false>(shape, stage, &k)?;
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
         return Some(());
     }
-    let (tf, t) = task_field_with_hessian(shape, task_kernel, &k, samples);
-    let (jf, ddv) = joint_sums::<_, true>(shape, samples, kernel_rows);
+    let (tf, t, jf, ddv) = fields.fields::<_, true>(shape, stage, &k)?;
     position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
     for (d, ((tan, o), ddv_d)) in
         tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).zip(ddv.iter()).enumerate().take(n)
@@ -251,6 +293,21 @@ fn query_rates<S: Shape>(
         query_tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
     }
     Some(())
+}
+
+/// Integrates the query state `y` (with or without tangents) over the scheme's stages with the
+/// fields of `fields`.
+#[inline(always)]
+fn integrate_query<S: Shape, F: StageFields>(
+    shape: S,
+    integrator: cbd_protocol::Integrator,
+    fields: &F,
+    y: &mut [Real],
+    scratch: &mut [Real],
+) -> Result<(), crate::Error> {
+    crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, crate::Error::Internal, |stage, s, out| {
+        query_rates(shape, fields, stage, s, out).ok_or(crate::Error::Internal)
+    })
 }
 
 /// Values of working space a query needs besides the kernel rows: its state with tangents and the
@@ -292,14 +349,25 @@ impl crate::Calibrator<'_> {
             return Err(Error::NonFiniteQuery { index });
         }
         let n_points = self.model.n_points as usize;
-        // K_V(ξ, x_j), its gradient and Hessian do not change along the flow: once per query.
-        // Working space: the kernel rows, then the query state and the integrator's scratch
-        // (in storage rather than on the stack: no zeroing of the largest possible state per query).
-        let (rows, rest) = self.work.split_at_mut_checked(n_points * kernel_row_len(n)).ok_or(Error::Internal)?;
+        // K_V(ξ, x_j) (or the joint basis at ξ), its gradient and Hessian do not change along the
+        // flow: once per query. Working space: those rows, then the query state and the
+        // integrator's scratch (in storage rather than on the stack: no zeroing of the largest
+        // possible state per query).
+        let n_rows = self.model.expansion.as_ref().map_or(n_points, |e| e.n_joint_features as usize);
+        let (rows, rest) = self.work.split_at_mut_checked(n_rows * kernel_row_len(n)).ok_or(Error::Internal)?;
         let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
         joint_features(&self.model.joint_kernel, q, &mut fq);
-        let flow_kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
-        let support = write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian);
+        let support = match &self.model.expansion {
+            None => {
+                let flow_kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
+                crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian))
+                    / self.model.joint_kernel.gamma
+            }
+            Some(e) => {
+                crate::expansion::write_joint_basis(&self.model.joint_kernel, e.joint_codes, n, q, rows, exact_jacobian);
+                crate::real::to_f64(crate::expansion::fields::support(shape, &self.model.joint_kernel, &fq, self.features))
+            }
+        };
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
         let k0 = crate::kinematics::forward_kinematics(&self.model.nominal, q).normalised(norm);
@@ -337,27 +405,26 @@ impl crate::Calibrator<'_> {
                 }
             }
         }
-        let block = n_points * dims.sample_len();
-        let trajectory: &[Real] = self.trajectory;
+        let integrator = self.model.integrator;
         let task_kernel = self.model.task_kernel;
-        crate::integrate::integrate_checked(
-            self.model.integrator.method,
-            self.model.integrator.steps,
-            y,
-            scratch,
-            Error::Internal,
-            |stage, s, out| {
-                let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-                query_rates(shape, &task_kernel, samples, rows, s, out).ok_or(Error::Internal)
-            },
-        )?;
+        match &self.model.expansion {
+            None => {
+                let block = n_points * dims.sample_len();
+                let fields = KernelForm { task_kernel, trajectory: self.trajectory, block, rows };
+                integrate_query(shape, integrator, &fields, y, scratch)?;
+            }
+            Some(e) => {
+                let fields = crate::expansion::fields::ExpansionForm::new(shape, task_kernel, e, self.weights, rows);
+                integrate_query(shape, integrator, &fields, y, scratch)?;
+            }
+        }
         let mut out = crate::Evaluation {
             position: nalgebra::SMatrix::zeros(),
             jacobian: nalgebra::SMatrix::zeros(),
             transported_jacobian: nalgebra::SMatrix::zeros(),
             task_dim: m,
             n_joints: n,
-            support: crate::real::to_f64(support) / self.model.joint_kernel.gamma,
+            support,
         };
         let (primal, tangents) = y.split_at_checked(ql).ok_or(Error::Internal)?;
         let (y_k, y_jac) = primal.split_at_checked(m).ok_or(Error::Internal)?;
