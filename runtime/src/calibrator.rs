@@ -87,6 +87,8 @@ pub struct Calibrator<'a> {
     /// whose `trajectory` is then empty instead).
     pub(crate) weights: &'a [Real],
     pub(crate) work: &'a mut [Real],
+    /// [`crate::precision::evaluation_precision`] of the model, user units (computed at load).
+    pub(crate) precision: f64,
 }
 
 impl<'a> Calibrator<'a> {
@@ -117,7 +119,8 @@ impl<'a> Calibrator<'a> {
             .ok_or(Error::Internal)?;
         let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
         let features: &'a [Real] = Self::integrate_at_load(&model, dims, features, trajectory, work)?;
-        Ok(Calibrator { model, dims, features, trajectory, weights: &[], work })
+        let precision = crate::precision::evaluation_precision(&model);
+        Ok(Calibrator { model, dims, features, trajectory, weights: &[], work, precision })
     }
 
     /// A model with an expansion: the configurations' kernel features (for the support) and the
@@ -131,7 +134,8 @@ impl<'a> Calibrator<'a> {
         for (dst, src) in weights.iter_mut().zip(e.weights.iter()) {
             *dst = src as Real;
         }
-        Ok(Calibrator { model, dims, features, trajectory: &mut [], weights, work })
+        let precision = crate::precision::evaluation_precision(&model);
+        Ok(Calibrator { model, dims, features, trajectory: &mut [], weights, work, precision })
     }
 
     /// K_V's features of every configuration, from the blob's f64 values (unaligned bytes).
@@ -176,6 +180,12 @@ impl<'a> Calibrator<'a> {
     /// The model this calibrator evaluates.
     pub fn model(&self) -> &Model<'a> {
         &self.model
+    }
+
+    /// A bound on how far rounding alone moves one evaluated position, user units
+    /// ([`crate::precision::evaluation_precision`]): what this model, in this build's scalar, can resolve.
+    pub fn precision(&self) -> f64 {
+        self.precision
     }
 
     /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint

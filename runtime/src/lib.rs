@@ -26,6 +26,7 @@ pub mod integrate;
 pub mod inverse_kinematics;
 pub mod kernel;
 pub mod kinematics;
+pub mod precision;
 pub mod real;
 
 pub use calibrator::{storage_len, storage_len_for, Calibrator, Evaluation};

@@ -20,9 +20,9 @@ use solve::{apply, design, posterior_weights, prior_variances, LinearProblem};
 #[serde(rename_all = "lowercase")]
 pub enum Representation {
     /// The expansion when it is cheaper than the momenta, or when the momenta cancel (below).
+    #[default]
     Auto,
     /// Points and momenta only (formats 2–4).
-    #[default]
     Kernel,
     /// The expansion whenever the kernels have one within the limits.
     Expansion,
