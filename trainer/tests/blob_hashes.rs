@@ -118,8 +118,21 @@ fn ur5_example_blob_is_unchanged() {
     let ur5 = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5");
     let (model, data) = (format!("{ur5}/ur5.toml"), format!("{ur5}/train.csv"));
     let blob = cbd_blob("ur5", &["fit", "--quiet", "--model", &model, "--data", &data]);
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (72555, "f39495e9889128381c93cb5359e16d637aa660fc94db01987fd22f2ac11d057c"));
-    assert_eq!(sha256_hex(&as_format_3(&blob)), "879b3d13b2d7939b65485ab5dcd384f1b9a5cd1e159422046ddc2fc5450b4153", "payload changed");
+    // Re-pinned for issue 25: the expansion added (format 5); the kernel form is the former pin.
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (142269, "187d2b53cb1dcf68aa08f4438ba629cfef371d6f75196261e96b444a42f4c9d7"));
+    let mut model = cbd_protocol::decode(&blob).unwrap();
+    assert!(model.expansion.is_some());
+    model.expansion = None;
+    let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
+    assert_eq!(
+        (kernel_form.len(), sha256_hex(&kernel_form).as_str()),
+        (72555, "f39495e9889128381c93cb5359e16d637aa660fc94db01987fd22f2ac11d057c")
+    );
+    assert_eq!(
+        sha256_hex(&as_format_3(&kernel_form)),
+        "879b3d13b2d7939b65485ab5dcd384f1b9a5cd1e159422046ddc2fc5450b4153",
+        "payload changed"
+    );
 }
 
 #[test]

@@ -7,6 +7,7 @@
 //! weights (per-axis shares and variances) → basis (which functions) → solve (the weights).
 
 pub mod basis;
+pub mod flow_fit;
 pub mod solve;
 pub mod weights;
 
@@ -86,7 +87,7 @@ impl std::fmt::Display for Declined {
 /// the dropped prior variance stays 100 × below σ² (the model cannot resolve less), no tighter
 /// than 1e-14 (f64 evaluation resolves the kernel to ~1e-16 of its total) and no looser than 1e-8.
 pub fn tolerance_for(sigma: f64, scale2: f64) -> f64 {
-    (0.01 * sigma * sigma / scale2).clamp(1e-14, 1e-8)
+    (0.01 * sigma * sigma / scale2).clamp(1e-14, 1e-5)
 }
 
 /// The radius a task expansion must cover: 1.25 × the farthest nominal position (room for queries
@@ -137,3 +138,64 @@ pub fn fit_linear(
 
 #[cfg(test)]
 mod tests;
+
+/// A multi-step scheme's fields in the expansion, fitted in weight space ([`flow_fit`]): the linear
+/// model's bases and weights as the start on every stage, then Levenberg–Marquardt on the whitened
+/// per-stage weights. Returns the fit (all stages' weights), its iterations and whether it converged.
+pub fn fit_flow(
+    cp: &ControlPoints,
+    joint_kernel: &JointKernel,
+    task_kernel: &TaskKernel,
+    sigma: f64,
+    target: &[f64],
+    integrator: cbd_protocol::Integrator,
+    max_iterations: usize,
+    relative_tolerance: f64,
+    prediction_tolerance: f64,
+) -> Result<(ExpansionFit, usize, bool), Declined> {
+    let linear = fit_linear(cp, joint_kernel, task_kernel, sigma, target)?;
+    let (m, n, len) = (cp.dims.m, cp.dims.n, cp.dims.state_len());
+    let params = linear.len() * integrator.stage_count();
+    if params > MAX_WEIGHTS {
+        return Err(Declined::TooLong(format!("{params} weights over {} stages (limit {MAX_WEIGHTS})", integrator.stage_count())));
+    }
+    let initial: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[..m + m * n].to_vec()).collect();
+    let problem = flow_fit::StageProblem::new(
+        cp.dims,
+        &cp.points,
+        initial,
+        target,
+        joint_kernel,
+        task_kernel,
+        &linear.joint,
+        &linear.task,
+        sigma,
+        integrator,
+    );
+    // Two starts: the linear model on the first stage alone (its data fit exactly, a larger path
+    // energy) and the same fields on every stage (first-order equal, a smaller energy); the one
+    // with the lower energy goes on.
+    let start = [problem.first_stage_start(&linear.weights), problem.uniform_start(&linear.weights)]
+        .into_iter()
+        .filter_map(|z| problem.energy(&z).map(|e| (e, z)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, z)| z)
+        .ok_or(Declined::Singular)?;
+    let (z, positions, iterations, converged) =
+        flow_fit::minimise(&problem, start, max_iterations, relative_tolerance, prediction_tolerance).ok_or(Declined::Singular)?;
+    let weights = problem.weights_of(&z);
+    // The cancellation of the terms the runtime sums, on the linear design with the path's mean field.
+    let quadrature = flow_fit::quadrature(integrator);
+    let mean: Vec<f64> =
+        (0..linear.len()).map(|k| quadrature.iter().enumerate().map(|(s, q)| q * weights[s * linear.len() + k]).sum()).collect();
+    let nominal = cp.nominal_positions();
+    let jacobians: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[m..m + m * n].to_vec()).collect();
+    let lp = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: target };
+    let a = design(&lp, joint_kernel, task_kernel, &linear.joint, &linear.task);
+    let cancellation = crate::solver::levenberg_marquardt::problem::cancellation_of(&a, &mean);
+    let variances = prior_variances(joint_kernel.gamma, n, m, &linear.joint, &linear.task);
+    let largest_whitened_weight =
+        weights.iter().enumerate().map(|(k, w)| w.abs() / variances[k % variances.len()].sqrt()).fold(0.0, f64::max);
+    let fit = ExpansionFit { weights, positions, cancellation, largest_whitened_weight, ..linear };
+    Ok((fit, iterations, converged))
+}

@@ -8,6 +8,7 @@
 //! eigenspace (`SolverMethod`, `solver::subspace`), with damping that is a ball in momentum space.
 
 mod encode;
+mod flow_expansion;
 mod iterate;
 pub(crate) mod problem;
 mod search_space;
@@ -49,7 +50,8 @@ pub struct CbdOptions {
 }
 
 impl CbdOptions {
-    /// The paper's RR kernels (docs/DESIGN.md §6) with our default scheme (Euler × 2) and σ = 1e-6.
+    /// The paper's RR kernels (docs/DESIGN.md §6) with our default scheme (Euler × 2) and σ = 1e-6,
+    /// written as momenta (the kernel form).
     pub fn paper_rr() -> Self {
         CbdOptions {
             joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
@@ -67,7 +69,9 @@ impl CbdOptions {
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
             method: SolverMethod::Auto,
             verbose: false,
-            representation: crate::expansion::Representation::default(),
+            // The paper's method: the fields as momenta. The pipeline (`calibrate::options_for`)
+            // sets the user's choice, `auto` by default.
+            representation: crate::expansion::Representation::Kernel,
         }
     }
 }
@@ -235,6 +239,15 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     // One Euler step of a Hamiltonian law is solved in closed form, (K_lin + σ² I)⁻¹ r: one Cholesky
     // of all N·m momenta, exact, where an eigenspace would drop the directions between σ² and its cutoff.
     let closed_form = linear_scheme && opts.law.joint_field_sign() < 0.0 && opts.method == SolverMethod::Auto;
+    // Multi-step schemes in weight space when the expansion serves (flow_expansion), else the
+    // kernel form's iterations below.
+    let mut declined_flow = None;
+    if !linear_scheme {
+        match flow_expansion::fit(nominal, data, opts, &cp, &target, start)? {
+            Ok(fit) => return Ok(fit),
+            Err(why) => declined_flow = Some(why),
+        }
+    }
     let t0 = Instant::now();
     let space = SearchSpace::new(opts.method, regulariser_matrix(&cp), closed_form);
     let seconds_basis = t0.elapsed().as_secs_f64();
@@ -254,7 +267,10 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let kernel_predictions = user(&outcome.current.flow.positions(cp.dims));
     let kernel_cancellation = if problem.space.basis.is_none() { cancellation_of(&problem.space.k_reg, &outcome.p) } else { f64::NAN };
     let momenta = problem.space.momenta_of(&outcome.p);
-    let (expansion, expansion_declined) = choose_expansion(&cp, opts, &target, linear_scheme, kernel_cancellation);
+    let (expansion, expansion_declined) = match declined_flow {
+        Some(why) => (None, Some(why)),
+        None => choose_expansion(&cp, opts, &target, linear_scheme, kernel_cancellation),
+    };
     let (train_predictions, cancellation, expansion_report) = match &expansion {
         Some(e) => {
             let predictions = user(&e.positions);
@@ -325,7 +341,7 @@ fn choose_expansion(
         return (None, Some("kernel form requested".into()));
     }
     if !linear_scheme || opts.law.joint_field_sign() > 0.0 {
-        return (None, Some("only the linear scheme (Euler × 1, Hamiltonian law) is written as an expansion".into()));
+        return (None, Some("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into()));
     }
     let momenta = cp.len() * cp.dims.m;
     match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
