@@ -27,7 +27,7 @@ mod tests;
 
 use cbd_runtime::protocol::{decode, DecodeError, FORMAT_VERSION, MAX_JOINTS, MAX_TASK_DIM, OLDEST_FORMAT_VERSION};
 use cbd_runtime::real::Real;
-use cbd_runtime::{storage_len, Calibrator, Error};
+use cbd_runtime::{storage_len_for, Calibrator, Error};
 use core::ffi::{c_char, c_void};
 use core::mem::{align_of, size_of};
 
@@ -129,9 +129,9 @@ const LOADED: u32 = 0x4342_444C;
 /// Bytes of storage before the runtime's values: the handle, rounded up to the alignment.
 const HEAD: usize = size_of::<CbdCalibrator>().div_ceil(CBD_STORAGE_ALIGN) * CBD_STORAGE_ALIGN;
 
-/// Storage bytes for a decoded model's sizes.
-fn storage_bytes(n_points: usize, n_joints: usize, task_dim: usize, integrator: cbd_runtime::protocol::Integrator) -> Option<usize> {
-    storage_len(n_points, n_joints, task_dim, integrator).checked_mul(size_of::<Real>())?.checked_add(HEAD)
+/// Storage bytes for a decoded model ([`storage_len_for`]: the kernel form or the expansion).
+fn storage_bytes(model: &cbd_runtime::protocol::Model<'_>) -> Option<usize> {
+    storage_len_for(model).checked_mul(size_of::<Real>())?.checked_add(HEAD)
 }
 
 /// `len` bytes at `ptr` as a slice (`ptr` non-null; an empty slice for `len == 0`).
@@ -162,7 +162,7 @@ pub unsafe extern "C" fn cbd_storage_size(blob: *const u8, blob_len: usize, byte
         Ok(model) => model,
         Err(e) => return e.into(),
     };
-    match storage_bytes(model.n_points as usize, model.n_joints(), model.task_dim(), model.integrator) {
+    match storage_bytes(&model) {
         Some(b) => {
             *bytes_out = b;
             CBD_OK
