@@ -95,13 +95,15 @@ CbdStatus cbd_storage_size(const uint8_t *blob,
                            size_t *bytes_out);
 
 // Decodes and checks the blob (frame, checksum, version, contents) and integrates the model's
-// control points into `storage`; on success writes into `*calibrator` a handle that points into
-// `storage`. On failure `*calibrator` is set to NULL.
+// control points into `storage` (a format-5 blob with the fields' expansion: copies its weights
+// instead); on success writes into `*calibrator` a handle that points into `storage`. On failure
+// `*calibrator` is set to NULL.
 //
 // `storage` must be aligned to `CBD_STORAGE_ALIGN` bytes and hold at least `cbd_storage_size`
 // bytes; the blob and the storage must stay valid and unchanged while the handle is used (the
 // model's arrays are read from the blob in place, e.g. from flash). Loading takes the time of
-// integrating every control point; evaluation afterwards is allocation-free and bounded.
+// integrating every control point (an expansion: of copying its weights); evaluation afterwards
+// is allocation-free and bounded.
 //
 // Returns `CBD_OK`, `CBD_ERR_NULL_POINTER`, `CBD_ERR_MISALIGNED`, `CBD_ERR_STORAGE_TOO_SMALL`,
 // the blob's error (`CBD_ERR_TRUNCATED` … `CBD_ERR_INVALID_MODEL`) or `CBD_ERR_DIVERGED`.

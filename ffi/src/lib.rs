@@ -27,7 +27,7 @@ mod tests;
 
 use cbd_runtime::protocol::{decode, DecodeError, FORMAT_VERSION, MAX_JOINTS, MAX_TASK_DIM, OLDEST_FORMAT_VERSION};
 use cbd_runtime::real::Real;
-use cbd_runtime::{storage_len, Calibrator, Error};
+use cbd_runtime::{storage_len_for, Calibrator, Error};
 use core::ffi::{c_char, c_void};
 use core::mem::{align_of, size_of};
 
@@ -129,9 +129,9 @@ const LOADED: u32 = 0x4342_444C;
 /// Bytes of storage before the runtime's values: the handle, rounded up to the alignment.
 const HEAD: usize = size_of::<CbdCalibrator>().div_ceil(CBD_STORAGE_ALIGN) * CBD_STORAGE_ALIGN;
 
-/// Storage bytes for a decoded model's sizes.
-fn storage_bytes(n_points: usize, n_joints: usize, task_dim: usize, integrator: cbd_runtime::protocol::Integrator) -> Option<usize> {
-    storage_len(n_points, n_joints, task_dim, integrator).checked_mul(size_of::<Real>())?.checked_add(HEAD)
+/// Storage bytes for a decoded model ([`storage_len_for`]: the kernel form or the expansion).
+fn storage_bytes(model: &cbd_runtime::protocol::Model<'_>) -> Option<usize> {
+    storage_len_for(model).checked_mul(size_of::<Real>())?.checked_add(HEAD)
 }
 
 /// `len` bytes at `ptr` as a slice (`ptr` non-null; an empty slice for `len == 0`).
@@ -162,7 +162,7 @@ pub unsafe extern "C" fn cbd_storage_size(blob: *const u8, blob_len: usize, byte
         Ok(model) => model,
         Err(e) => return e.into(),
     };
-    match storage_bytes(model.n_points as usize, model.n_joints(), model.task_dim(), model.integrator) {
+    match storage_bytes(&model) {
         Some(b) => {
             *bytes_out = b;
             CBD_OK
@@ -172,13 +172,15 @@ pub unsafe extern "C" fn cbd_storage_size(blob: *const u8, blob_len: usize, byte
 }
 
 /// Decodes and checks the blob (frame, checksum, version, contents) and integrates the model's
-/// control points into `storage`; on success writes into `*calibrator` a handle that points into
-/// `storage`. On failure `*calibrator` is set to NULL.
+/// control points into `storage` (a format-5 blob with the fields' expansion: copies its weights
+/// instead); on success writes into `*calibrator` a handle that points into `storage`. On failure
+/// `*calibrator` is set to NULL.
 ///
 /// `storage` must be aligned to `CBD_STORAGE_ALIGN` bytes and hold at least `cbd_storage_size`
 /// bytes; the blob and the storage must stay valid and unchanged while the handle is used (the
 /// model's arrays are read from the blob in place, e.g. from flash). Loading takes the time of
-/// integrating every control point; evaluation afterwards is allocation-free and bounded.
+/// integrating every control point (an expansion: of copying its weights); evaluation afterwards
+/// is allocation-free and bounded.
 ///
 /// Returns `CBD_OK`, `CBD_ERR_NULL_POINTER`, `CBD_ERR_MISALIGNED`, `CBD_ERR_STORAGE_TOO_SMALL`,
 /// the blob's error (`CBD_ERR_TRUNCATED` … `CBD_ERR_INVALID_MODEL`) or `CBD_ERR_DIVERGED`.

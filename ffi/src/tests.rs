@@ -50,14 +50,14 @@ fn load(blob: &[u8], storage: &mut [u64], bytes: usize) -> (CbdStatus, *mut CbdC
 
 #[test]
 fn results_are_the_runtimes_bits() {
-    for blob in [blobs::rr_reference_blob(), blobs::six_effects_blob()] {
+    for blob in [blobs::rr_reference_blob(), blobs::six_effects_blob(), blobs::rr_ws_blob(), blobs::six_ws_blob()] {
         let (mut storage, bytes) = storage_for(&blob);
         let (s, h) = load(&blob, &mut storage, bytes);
         assert_eq!(s, CBD_OK);
         let (n, m) = unsafe { (cbd_n_joints(h), cbd_task_dim(h)) };
         let model = decode(&blob).unwrap();
         assert_eq!((n, m), (model.n_joints(), model.task_dim()));
-        let mut reals = vec![0.0 as Real; storage_len(model.n_points as usize, n, m, model.integrator)];
+        let mut reals = vec![0.0 as Real; storage_len_for(&model)];
         let mut cal = Calibrator::load(&blob, &mut reals).unwrap();
         let mut q = vec![0.0; n];
         for i in 0..shared::COUNT {
@@ -167,7 +167,7 @@ fn compensate_gives_the_runtimes_bits_and_its_errors() {
     let (s, h) = load(&blob, &mut storage, bytes);
     assert_eq!(s, CBD_OK);
     let model = decode(&blob).unwrap();
-    let mut reals = vec![0.0 as Real; storage_len(model.n_points as usize, 2, 2, model.integrator)];
+    let mut reals = vec![0.0 as Real; storage_len_for(&model)];
     let mut cal = Calibrator::load(&blob, &mut reals).unwrap();
     let (target, seed) = ([0.9, 0.6], [0.3, 1.0]);
     let (mut command, mut residual, mut flags) = ([0.0; 2], 0.0, 0u32);

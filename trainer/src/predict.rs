@@ -8,7 +8,7 @@ use cbd_runtime::Calibrator;
 pub fn evaluate_blob(blob: &[u8], joints: &[f64]) -> Result<Vec<f64>> {
     let model = cbd_protocol::decode(blob)?;
     let (n, m) = (model.n_joints(), model.task_dim());
-    let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, n, m, model.integrator)];
+    let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = Calibrator::from_model(model, &mut storage)?;
     if joints.len() % n != 0 {
         return Err(Error::InvalidInput(format!("configurations have {} values, not a multiple of {n} joints", joints.len())));

@@ -21,7 +21,7 @@
 //! deterministic; only the timings depend on the machine. With `--strict` the exit status is 2 when
 //! any deadline was missed (a host OS is no real-time system: expect misses on a busy machine).
 
-use cbd_runtime::{storage_len, Calibrator};
+use cbd_runtime::{storage_len_for, Calibrator};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -82,7 +82,7 @@ fn run(args: &Args) -> Result<bool, String> {
     };
     let model = cbd_protocol::decode(&blob).map_err(|e| e.to_string())?;
     let n = model.n_joints();
-    let len = storage_len(model.n_points as usize, n, model.task_dim(), model.integrator);
+    let len = storage_len_for(&model);
     // All allocation happens before the loop: the loop itself, like the firmware, allocates nothing.
     let mut storage = vec![0.0; len];
     let load_start = Instant::now();

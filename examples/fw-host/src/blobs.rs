@@ -118,3 +118,102 @@ fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
     };
     encode_to_vec(&model).expect("encode 6-joint blob")
 }
+
+/// Joint codes of every product basis function of total degree ≤ `degree` (multi-indices h with
+/// Σ h_d ≤ degree, lexicographic; cos and sin of each h > 0 on the periodic axes; all axes periodic).
+fn periodic_codes(n: usize, degree: u8) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut h = vec![0u8; n];
+    loop {
+        if h.iter().map(|&v| v as u32).sum::<u32>() <= degree as u32 {
+            let free: Vec<usize> = (0..n).filter(|&d| h[d] > 0).collect();
+            for mask in 0..(1u32 << free.len()) {
+                let mut code: Vec<u8> = h.iter().map(|&v| v << 1).collect();
+                for (i, &d) in free.iter().enumerate() {
+                    code[d] |= ((mask >> i) & 1) as u8;
+                }
+                out.extend_from_slice(&code);
+            }
+        }
+        if !odometer(&mut h, degree) {
+            return out;
+        }
+    }
+}
+
+/// Exponents of every monomial of total degree ≤ `degree` in m coordinates (lexicographic).
+fn monomial_exponents(m: usize, degree: u8) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut a = vec![0u8; m];
+    loop {
+        if a.iter().map(|&v| v as u32).sum::<u32>() <= degree as u32 {
+            out.extend_from_slice(&a);
+        }
+        if !odometer(&mut a, degree) {
+            return out;
+        }
+    }
+}
+
+/// The next multi-index with digits 0..=max (false after the last).
+fn odometer(digits: &mut [u8], max: u8) -> bool {
+    for d in digits.iter_mut().rev() {
+        if *d < max {
+            *d += 1;
+            return true;
+        }
+        *d = 0;
+    }
+    false
+}
+
+/// `model` with an expansion (format 5, docs/DESIGN.md §11) of joint degree ≤ `joint_degree`,
+/// task degree ≤ `task_degree` and weights of size `scale` (damped by 1 + degree) from `seed`'s
+/// pseudo-random sequence: the evaluation's cost and bits do not depend on the values.
+fn with_expansion(model: &Model<'_>, (joint_degree, task_degree): (u8, u8), scale: f64, seed: u32) -> Vec<u8> {
+    let (n, m) = (model.n_joints(), model.task_dim());
+    let codes = periodic_codes(n, joint_degree);
+    let exponents = monomial_exponents(m, task_degree);
+    let (r_v, r_w) = (codes.len() / n, exponents.len() / m);
+    let mut rng = Lcg(seed);
+    let mut weights = Vec::new();
+    for _ in 0..model.integrator.stage_count() {
+        for f in 0..r_v {
+            let degree: u32 = codes[f * n..(f + 1) * n].iter().map(|c| (c >> 1) as u32).sum();
+            weights.extend((0..n).map(|_| scale * rng.symmetric() / (1.0 + degree as f64)));
+        }
+        for g in 0..r_w {
+            let degree: u32 = exponents[g * m..(g + 1) * m].iter().map(|&a| a as u32).sum();
+            weights.extend((0..m).map(|_| scale * rng.symmetric() / (1.0 + degree as f64)));
+        }
+    }
+    let wb = f64_le_bytes(&weights);
+    let mut model = model.clone();
+    model.expansion = Some(FieldExpansion {
+        tolerance: 1e-9,
+        task_radius: 2.0,
+        n_joint_features: r_v as u32,
+        joint_codes: &codes,
+        n_task_features: r_w as u32,
+        task_exponents: &exponents,
+        weights: F64Slice::from_le_bytes(&wb),
+    });
+    encode_to_vec(&model).expect("encode expansion blob")
+}
+
+/// RR arm in the kernels' own basis: the 8 × 8 grid's kernel form (the reference) and an expansion
+/// of 113 joint functions (degree ≤ 7) and 28 task functions (degree ≤ 6), Euler × 1.
+pub fn rr_ws_blob() -> Vec<u8> {
+    let base = rr_grid_blob(8, 0x0000_0064, Integrator { method: IntegratorMethod::Euler, steps: 1 });
+    let model = decode(&base).expect("RR grid blob");
+    with_expansion(&model, (7, 6), 1e-3, 0x0000_0777)
+}
+
+/// The 6-joint model ([`six_joint_blob`]'s chain and points) in the kernels' own basis: 85 joint
+/// functions (degree ≤ 2) and 35 task functions (degree ≤ 4), Heun × 2.
+pub fn six_ws_blob() -> Vec<u8> {
+    let base = six_joint_blob();
+    let mut model = decode(&base).expect("6-joint blob");
+    model.integrator = Integrator { method: IntegratorMethod::Heun, steps: 2 };
+    with_expansion(&model, (2, 4), 1e-3, 0x0006_0777)
+}

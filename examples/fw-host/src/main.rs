@@ -1,10 +1,11 @@
 //! Host side of the firmware check (issue 5).
 //!
 //! ```text
-//! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, six-effects.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2)
+//! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, six-effects.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2),
+//!                                  # rr-ws.blob (Euler × 1), six-ws.blob (Heun × 2): the fields in the kernels' own basis (format 5)
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
 //! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
-//! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len blob_bytes
+//! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len_for blob_bytes
 //! cbd-fw-host time BLOB            # host ns per evaluation (exact and transported Jacobian)
 //! cbd-fw-host accuracy BLOB CSV    # position error against measured rows (joints…, position…)
 //! ```
@@ -12,14 +13,14 @@
 //! Blobs are deterministic: the same bytes on every run and machine.
 
 use cbd_protocol::*;
-use cbd_runtime::{storage_len, Calibrator};
+use cbd_runtime::{storage_len_for, Calibrator};
 use std::path::Path;
 use std::process::ExitCode;
 
 mod blobs;
 #[path = "../../firmware/src/shared.rs"]
 mod shared;
-use blobs::{rr_grid_blob, rr_reference_blob, six_effects_blob, six_joint_blob, DEMO_SCHEME};
+use blobs::{rr_grid_blob, rr_reference_blob, rr_ws_blob, six_effects_blob, six_joint_blob, six_ws_blob, DEMO_SCHEME};
 
 fn make_blobs(out_dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
@@ -30,6 +31,8 @@ fn make_blobs(out_dir: &Path) -> Result<(), String> {
         ("rr64.blob", rr_grid_blob(8, 0x0000_0064, DEMO_SCHEME)),
         ("rr256.blob", rr_grid_blob(16, 0x0000_0100, DEMO_SCHEME)),
         ("rr1024.blob", rr_grid_blob(32, 0x0000_0400, DEMO_SCHEME)),
+        ("rr-ws.blob", rr_ws_blob()),
+        ("six-ws.blob", six_ws_blob()),
     ] {
         let path = out_dir.join(name);
         std::fs::write(&path, &blob).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -44,7 +47,7 @@ fn read_blob(path: &Path) -> Result<Vec<u8>, String> {
 
 fn needed_storage(blob: &[u8]) -> Result<(Model<'_>, usize), String> {
     let model = decode(blob).map_err(|e| e.to_string())?;
-    let len = storage_len(model.n_points as usize, model.n_joints(), model.task_dim(), model.integrator);
+    let len = storage_len_for(&model);
     Ok((model, len))
 }
 

@@ -252,6 +252,17 @@ fn axis_order(orders: impl Iterator<Item = u8>) -> usize {
 /// F, F', F'' is computed in f64 and rounded once; the products are formed axis by axis in [`Real`]
 /// (one table of 2 × 64 f64 on the stack at a time).
 pub fn write_joint_basis(joint_kernel: &JointKernel, codes: &[u8], n: usize, x: &[f64], rows: &mut [Real], hessian: bool) {
+    // One instance per case: the flag's branch stays out of the per-row loop.
+    if hessian {
+        joint_basis::<true>(joint_kernel, codes, n, x, rows)
+    } else {
+        joint_basis::<false>(joint_kernel, codes, n, x, rows)
+    }
+}
+
+/// [`write_joint_basis`] with the Hessian switch at compile time.
+fn joint_basis<const HESSIAN: bool>(joint_kernel: &JointKernel, codes: &[u8], n: usize, x: &[f64], rows: &mut [Real]) {
+    let hessian = HESSIAN;
     let row_len = joint_row_len(n);
     if n == 0 {
         return;
@@ -317,15 +328,33 @@ pub fn write_joint_basis(joint_kernel: &JointKernel, codes: &[u8], n: usize, x: 
 /// r_W = `exponents.len() / m`. Computed in [`Real`]: per coordinate one exp and the power
 /// recurrence (one table of 64 values per coordinate on the stack), then per function the product
 /// of its m factors.
-#[inline]
+#[inline(always)]
 pub fn for_each_task_basis(
     task_kernel: &TaskKernel,
     exponents: &[u8],
     m: usize,
     y: &[Real],
     hessian: bool,
+    each: impl FnMut(usize, Real, &[Real; MT], &[[Real; MT]; MT]),
+) {
+    // Inlined, so a constant flag picks one instance: its branch stays out of the per-function loop.
+    if hessian {
+        task_basis::<true>(task_kernel, exponents, m, y, each)
+    } else {
+        task_basis::<false>(task_kernel, exponents, m, y, each)
+    }
+}
+
+/// [`for_each_task_basis`] with the Hessian switch at compile time.
+#[inline(always)]
+fn task_basis<const HESSIAN: bool>(
+    task_kernel: &TaskKernel,
+    exponents: &[u8],
+    m: usize,
+    y: &[Real],
     mut each: impl FnMut(usize, Real, &[Real; MT], &[[Real; MT]; MT]),
 ) {
+    let hessian = HESSIAN;
     if m == 0 || m > MT {
         return;
     }

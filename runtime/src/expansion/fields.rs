@@ -8,7 +8,7 @@ use crate::flow::query_derivatives::{joint_sums, JointHessian, StageFields};
 use crate::flow::{JointField, Shape, TaskField, TaskHessian};
 use crate::kernel::{joint_kernel_exponent_n, FEATURES_PER_JOINT};
 use crate::real::{exp, Real};
-use cbd_protocol::{FieldExpansion, JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
+use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// w(k) = Σ_g ψ_g(k) d_g, Dw[a][b] = Σ_g d_g[a] ∂_b ψ_g and (HESSIAN) T[a][c][b] = Σ_g d_g[a] ∂_c ∂_b ψ_g,
 /// `d` the stage's task weights (r_W × m).
@@ -69,44 +69,25 @@ pub fn support<S: Shape>(shape: S, kernel: &JointKernel, fq: &[[Real; FEATURES_P
     exp(best)
 }
 
-/// An expansion's fields at a query: its stage weights (rounded once to [`Real`] at load) and the
-/// query's joint-basis rows ([`crate::expansion::write_joint_basis`]).
-pub(crate) struct ExpansionForm<'r> {
-    task_kernel: TaskKernel,
-    exponents: &'r [u8],
-    weights: &'r [Real],
-    stage_len: usize,
-    joint_len: usize,
-    rows: &'r [Real],
+/// An expansion's fields at one stage: the stage's joint weights c (r_V × n) and task weights d
+/// (r_W × m), rounded once to [`Real`] at load, and the query's joint-basis rows
+/// ([`crate::expansion::write_joint_basis`]).
+pub(crate) struct ExpansionStage<'r> {
+    pub task_kernel: &'r TaskKernel,
+    pub exponents: &'r [u8],
+    pub c: &'r [Real],
+    pub d: &'r [Real],
+    pub rows: &'r [Real],
 }
 
-impl<'r> ExpansionForm<'r> {
-    pub(crate) fn new<S: Shape>(shape: S, task_kernel: TaskKernel, e: &FieldExpansion<'r>, weights: &'r [Real], rows: &'r [Real]) -> Self {
-        let (m, n) = (shape.m(), shape.n());
-        ExpansionForm {
-            task_kernel,
-            exponents: e.task_exponents,
-            weights,
-            stage_len: e.stage_len(n, m),
-            joint_len: e.n_joint_features as usize * n,
-            rows,
-        }
-    }
-}
-
-impl StageFields for ExpansionForm<'_> {
+impl StageFields for ExpansionStage<'_> {
     #[inline(always)]
-    fn fields<S: Shape, const HESSIAN: bool>(
-        &self,
-        shape: S,
-        stage: usize,
-        k: &[Real; MT],
-    ) -> Option<(TaskField, TaskHessian, JointField, JointHessian)> {
-        let (c, d) = stage_weights(self.weights, stage, self.stage_len, self.joint_len)?;
-        let n = shape.n();
-        let (tf, t) = task_sums::<_, HESSIAN>(shape, &self.task_kernel, self.exponents, d, k);
-        let (jf, ddv) = joint_sums::<_, HESSIAN>(shape, c, n, 0, self.rows);
-        Some((tf, t, jf, ddv))
+    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, k: &[Real; MT]) -> (TaskField, TaskHessian) {
+        task_sums::<_, HESSIAN>(shape, self.task_kernel, self.exponents, self.d, k)
+    }
+    #[inline(always)]
+    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S) -> (JointField, JointHessian) {
+        joint_sums::<_, HESSIAN>(shape, self.c, shape.n(), 0, self.rows)
     }
 }
 

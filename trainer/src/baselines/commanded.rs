@@ -221,7 +221,7 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
     let mut models = Vec::new();
     for (name, blob) in &fitted.cbd {
         let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(*name))?;
-        storages.push(vec![0.0; cbd_runtime::storage_len(model.n_points as usize, model.n_joints(), model.task_dim(), model.integrator)]);
+        storages.push(vec![0.0; cbd_runtime::storage_len_for(&model)]);
         models.push((*name, model));
     }
     let mut calibrators = Vec::new();

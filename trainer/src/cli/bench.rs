@@ -243,7 +243,7 @@ fn time_per_query(queries: &[f64], rounds: usize, mut f: impl FnMut(&[f64]) -> f
 
 fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench, String> {
     let model = cbd_protocol::decode(blob).map_err(|e| e.to_string())?;
-    let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, 2, 2, model.integrator)];
+    let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| e.to_string())?;
     let nominal = rr::nominal();
     let queries = configurations(Sampling::Uniform { count: 500, seed: 11 }, 2);

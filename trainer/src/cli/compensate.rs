@@ -147,13 +147,13 @@ pub fn compensate_all(
     tolerance: Option<f64>,
 ) -> Result<Vec<CommandRow>, String> {
     let model = cbd_protocol::decode(blob).map_err(|e| e.to_string())?;
-    let (n, m) = (model.n_joints(), model.task_dim());
+    let n = model.n_joints();
     let nominal: NominalModel = model.nominal.clone();
     let hints: Vec<Vec<f64>> = match seeds {
         Some(s) => s.to_vec(),
         None => targets.iter().map(|t| nearest_training_configuration(&model, t)).collect(),
     };
-    let mut storage = vec![0.0; cbd_runtime::storage_len(model.n_points as usize, n, m, model.integrator)];
+    let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| e.to_string())?;
     let mut options = CompensateOptions::for_model(&cal);
     options.iterations = iterations;
