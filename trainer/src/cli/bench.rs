@@ -87,6 +87,9 @@ impl FitBench {
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EvalBench {
+    /// Which model: the paper's kernels (the fit rows' blobs) or the demo's (evidence kernels).
+    #[serde(default)]
+    pub model: String,
     pub n: usize,
     pub ns: f64,
     pub nominal_ns: f64,
@@ -259,7 +262,20 @@ fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench, String> {
         let e = krr.evaluate(&nominal, q);
         e.position[0] + e.jacobian[0][0]
     });
-    Ok(EvalBench { n, ns, nominal_ns, krr_ns, ratio_to_nominal: ns / nominal_ns, ratio_to_krr: ns / krr_ns })
+    let model = String::new();
+    Ok(EvalBench { model, n, ns, nominal_ns, krr_ns, ratio_to_nominal: ns / nominal_ns, ratio_to_krr: ns / krr_ns })
+}
+
+/// The demo's model (`cbd demo`: the RR grid of 16 × 16, kernels by CbD's evidence, the pipeline's
+/// representation and scheme) timed as [`eval_one`] does.
+fn eval_demo() -> Result<EvalBench, String> {
+    let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: 16 }, 2));
+    let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
+    let c = crate::calibrate::calibrate(&rr::nominal(), &train, &settings).map_err(|e| e.to_string())?;
+    let mut e = eval_one(256, &c.fit.blob)?;
+    let i = c.options.integrator;
+    e.model = format!("demo ({}, {:?} × {})", c.fit.report.representation, i.method, i.steps).to_lowercase();
+    Ok(e)
 }
 
 pub fn run(args: BenchArgs) -> Result<(), String> {
@@ -304,8 +320,15 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         report.fit.push(fit);
         let blob = std::fs::read(&blob_path).map_err(|e| format!("{}: {e}", blob_path.display()))?;
         let _ = std::fs::remove_file(&blob_path);
-        let e = eval_one(n, &blob)?;
+        let mut e = eval_one(n, &blob)?;
+        e.model = "paper (kernel, euler × 2)".into();
         eprintln!("  evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.ns, e.ratio_to_nominal, e.ratio_to_krr);
+        report.eval.push(e);
+    }
+    if !args.sizes.is_empty() {
+        eprintln!("the demo's model (N = 256, evidence kernels) …");
+        let e = eval_demo()?;
+        eprintln!("  {}: evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.model, e.ns, e.ratio_to_nominal, e.ratio_to_krr);
         report.eval.push(e);
     }
     if !args.no_ur5 {
@@ -395,11 +418,12 @@ fn markdown(r: &BenchReport) -> String {
     s += "\nEvaluation, one core, median of 7 rounds over 500 random configurations: the runtime's `Calibrator::evaluate` (position and exact\n";
     s += "Jacobian of the calibrated model), the nominal forward kinematics (position and Jacobian), and the kernel-ridge peer fitted on the\n";
     s += "same grid (position and Jacobian; its kernel from the same precomputed cos/sin feature table, one `exp` per training point).\n";
-    s += "\n| N | runtime eval ns | nominal FK ns | kernel ridge ns | ratio to nominal | ratio to kernel ridge |\n|---|---|---|---|---|---|\n";
+    s += "The last row is the demo's model (`cbd demo`: kernels from CbD's evidence, the pipeline's representation and scheme).\n";
+    s += "\n| model | N | runtime eval ns | nominal FK ns | kernel ridge ns | ratio to nominal | ratio to kernel ridge |\n|---|---|---|---|---|---|---|\n";
     for e in &r.eval {
         s += &format!(
-            "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} |\n",
-            e.n, e.ns, e.nominal_ns, e.krr_ns, e.ratio_to_nominal, e.ratio_to_krr
+            "| {} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} |\n",
+            e.model, e.n, e.ns, e.nominal_ns, e.krr_ns, e.ratio_to_nominal, e.ratio_to_krr
         );
     }
     if !r.evidence.is_empty() {
@@ -429,7 +453,7 @@ fn markdown(r: &BenchReport) -> String {
     if rr.len() >= 2 {
         let fit_exp = exponent(&rr.iter().map(|f| (f.n as f64, f.seconds)).collect::<Vec<_>>());
         let mem_exp = exponent(&rr.iter().map(|f| (f.n as f64, f.peak_mib)).collect::<Vec<_>>());
-        let eval_exp = exponent(&r.eval.iter().map(|e| (e.n as f64, e.ns)).collect::<Vec<_>>());
+        let eval_exp = exponent(&r.eval.iter().filter(|e| !e.model.starts_with("demo")).map(|e| (e.n as f64, e.ns)).collect::<Vec<_>>());
         s += &format!("\nMeasured growth on the RR rows (least-squares exponent of N): fit time N^{fit_exp:.2}, peak memory N^{mem_exp:.2}, evaluation time N^{eval_exp:.2}");
         let (a, b) = (rr[rr.len() - 2], rr[rr.len() - 1]);
         let local = |x: f64, y: f64| (y / x).ln() / (b.n as f64 / a.n as f64).ln();
