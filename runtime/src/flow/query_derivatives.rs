@@ -226,9 +226,9 @@ fn unpack<S: Shape>(shape: S, state: &[Real]) -> ([Real; MT], [[Real; NJ]; MT]) 
 
 /// Where a query's fields come from at one stage, `stage` the stage's data and `rows` the query's
 /// rows: the control points' samples with the kernel rows ([`KernelForm`]), or the stage's weights
-/// with the joint-basis rows ([`crate::expansion::fields::ExpansionForm`]), both resolved by the
-/// integration's closure (a source resolving its own stage cost the M4's f32 RR Heun × 5 evaluate
-/// 27 %: 487k against 385k instructions).
+/// with the joint-basis rows ([`crate::expansion::fields::ExpansionForm`]), both resolved in the
+/// integration's closure as before the expansion (measured: arrangements that moved that work
+/// changed the optimiser's inlining and cost the M4's f32 RR Heun × 5 evaluate up to 27 %).
 pub(crate) trait StageFields {
     /// w, Dw and (HESSIAN) Σ d ∂²ψ (or Σ P ∂²K_W) at the query's current k.
     fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, stage: &[Real], k: &[Real]) -> (TaskField, TaskHessian);
