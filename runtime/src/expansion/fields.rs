@@ -11,8 +11,8 @@ use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// w(k) = Σ_g ψ_g(k) d_g, Dw[a][b] = Σ_g d_g[a] ∂_b ψ_g and (HESSIAN) T[a][c][b] = Σ_g d_g[a] ∂_c ∂_b ψ_g,
-/// `d` the stage's task weights (r_W × m).
-#[inline(always)]
+/// `d` the stage's task weights (r_W × m). Out of line, as the kernel form's task field.
+#[inline(never)]
 pub fn task_sums<S: Shape, const HESSIAN: bool>(
     shape: S,
     kernel: &TaskKernel,
@@ -69,25 +69,25 @@ pub fn support<S: Shape>(shape: S, kernel: &JointKernel, fq: &[[Real; FEATURES_P
     exp(best)
 }
 
-/// An expansion's fields at one stage: the stage's joint weights c (r_V × n) and task weights d
-/// (r_W × m), rounded once to [`Real`] at load, and the query's joint-basis rows
-/// ([`crate::expansion::write_joint_basis`]).
-pub(crate) struct ExpansionStage<'r> {
-    pub task_kernel: &'r TaskKernel,
+/// An expansion's fields: a stage's data are its weights, c (r_V × n) then d (r_W × m), rounded
+/// once to [`Real`] at load; the rows the query's joint basis ([`crate::expansion::write_joint_basis`]).
+pub(crate) struct ExpansionForm<'r> {
+    pub task_kernel: TaskKernel,
     pub exponents: &'r [u8],
-    pub c: &'r [Real],
-    pub d: &'r [Real],
-    pub rows: &'r [Real],
+    /// r_V n: where d starts in a stage's weights.
+    pub joint_len: usize,
 }
 
-impl StageFields for ExpansionStage<'_> {
+impl StageFields for ExpansionForm<'_> {
     #[inline(always)]
-    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, k: &[Real; MT]) -> (TaskField, TaskHessian) {
-        task_sums::<_, HESSIAN>(shape, self.task_kernel, self.exponents, self.d, k)
+    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, weights: &[Real], k: &[Real]) -> (TaskField, TaskHessian) {
+        let d = weights.get(self.joint_len..).unwrap_or(&[]);
+        task_sums::<_, HESSIAN>(shape, &self.task_kernel, self.exponents, d, k)
     }
     #[inline(always)]
-    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S) -> (JointField, JointHessian) {
-        joint_sums::<_, HESSIAN>(shape, self.c, shape.n(), 0, self.rows)
+    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S, weights: &[Real], rows: &[Real]) -> (JointField, JointHessian) {
+        let c = weights.get(..self.joint_len).unwrap_or(&[]);
+        joint_sums::<_, HESSIAN>(shape, c, shape.n(), 0, rows)
     }
 }
 

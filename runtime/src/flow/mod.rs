@@ -131,6 +131,18 @@ pub fn task_field_shaped<S: Shape>(shape: S, kernel: &TaskKernel, k: &[Real], sa
     task_sums::<_, false>(shape, kernel, k, samples).0
 }
 
+/// [`task_field_shaped`] and (HESSIAN) [`task_field_with_hessian`] as one generic call
+/// (bit-identical to both; zeros for the Hessian without HESSIAN).
+#[inline(always)]
+pub fn task_field_sums<S: Shape, const HESSIAN: bool>(
+    shape: S,
+    kernel: &TaskKernel,
+    k: &[Real],
+    samples: &[Real],
+) -> (TaskField, TaskHessian) {
+    task_sums::<_, HESSIAN>(shape, kernel, k, samples)
+}
+
 /// [`task_field`] (bit-identical) and, in the same pass, Σ_j P_j ∂²K_W(k, k_j).
 pub fn task_field_with_hessian<S: Shape>(shape: S, kernel: &TaskKernel, k: &[Real], samples: &[Real]) -> (TaskField, TaskHessian) {
     task_sums::<_, true>(shape, kernel, k, samples)

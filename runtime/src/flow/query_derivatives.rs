@@ -13,10 +13,8 @@
 //! and Dk1(ξ)[:, d] = δk_d(1) exactly for the discrete flow (the tangent of a fixed-step explicit
 //! scheme is the same scheme applied to the tangent system).
 
-use crate::expansion::fields::{stage_weights, ExpansionStage};
-use crate::flow::{
-    position_rates_shaped, task_field_shaped, task_field_with_hessian, Dims, Fixed, JointField, Shape, TaskField, TaskHessian,
-};
+use crate::expansion::fields::ExpansionForm;
+use crate::flow::{position_rates_shaped, task_field_sums, Dims, Fixed, JointField, Shape, TaskField, TaskHessian};
 use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
 use crate::real::Real;
 use cbd_protocol::{JointKernel, NominalModel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
@@ -226,44 +224,62 @@ fn unpack<S: Shape>(shape: S, state: &[Real]) -> ([Real; MT], [[Real; NJ]; MT]) 
     (k, jac)
 }
 
-/// Where a query's fields come from at one stage: the control points' stored samples of the stage
-/// with the query's kernel rows ([`KernelStage`]), or the stage's weights with the query's joint
-/// basis ([`crate::expansion::fields::ExpansionStage`]).
+/// Where a query's fields come from at one stage, `stage` the stage's data and `rows` the query's
+/// rows: the control points' samples with the kernel rows ([`KernelForm`]), or the stage's weights
+/// with the joint-basis rows ([`crate::expansion::fields::ExpansionForm`]), both resolved in the
+/// integration's closure as before the expansion (measured: arrangements that moved that work
+/// changed the optimiser's inlining and cost the M4's f32 RR Heun × 5 evaluate up to 27 %).
 pub(crate) trait StageFields {
     /// w, Dw and (HESSIAN) Σ d ∂²ψ (or Σ P ∂²K_W) at the query's current k.
-    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, k: &[Real; MT]) -> (TaskField, TaskHessian);
+    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, stage: &[Real], k: &[Real]) -> (TaskField, TaskHessian);
     /// v, Dv and (HESSIAN) ∂_d Dv at ξ.
-    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S) -> (JointField, JointHessian);
+    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S, stage: &[Real], rows: &[Real]) -> (JointField, JointHessian);
 }
 
-/// The kernel form at one stage: the control points' samples (k, P, u per point) and the query's
-/// kernel rows ([`write_kernel_rows`]).
-pub(crate) struct KernelStage<'r> {
-    pub task_kernel: &'r TaskKernel,
-    pub samples: &'r [Real],
-    pub rows: &'r [Real],
+/// The task field of the kernel form at one stage ([`crate::flow::task_field_sums`]). Inlined on
+/// bare-metal targets and out of line elsewhere, as measured (same bits either way): on the host
+/// (x86-64) inlined into the query's rates its per-point sums left the registers (RR Heun × 5
+/// evaluate 41 µs against 31 µs); on the Cortex-M out of line cost 5 % (M7 dp) and 27 % (M4 f32).
+#[cfg_attr(target_os = "none", inline(always))]
+#[cfg_attr(not(target_os = "none"), inline(never))]
+fn kernel_task_field<S: Shape, const HESSIAN: bool>(
+    shape: S,
+    kernel: &TaskKernel,
+    k: &[Real],
+    samples: &[Real],
+) -> (TaskField, TaskHessian) {
+    task_field_sums::<_, HESSIAN>(shape, kernel, k, samples)
 }
 
-impl StageFields for KernelStage<'_> {
+/// The kernel form: a stage's data are the control points' samples (k, P, u per point), the rows
+/// the query's kernel rows ([`write_kernel_rows`]).
+pub(crate) struct KernelForm {
+    pub task_kernel: TaskKernel,
+}
+
+impl StageFields for KernelForm {
     #[inline(always)]
-    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, k: &[Real; MT]) -> (TaskField, TaskHessian) {
-        if HESSIAN {
-            task_field_with_hessian(shape, self.task_kernel, k, self.samples)
-        } else {
-            (task_field_shaped(shape, self.task_kernel, k, self.samples), [[[0.0; MT]; MT]; MT])
-        }
+    fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, samples: &[Real], k: &[Real]) -> (TaskField, TaskHessian) {
+        kernel_task_field::<_, HESSIAN>(shape, &self.task_kernel, k, samples)
     }
     #[inline(always)]
-    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S) -> (JointField, JointHessian) {
+    fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S, samples: &[Real], rows: &[Real]) -> (JointField, JointHessian) {
         let (m, n) = (shape.m(), shape.n());
-        joint_sums::<_, HESSIAN>(shape, self.samples, 2 * m + n, 2 * m, self.rows)
+        joint_sums::<_, HESSIAN>(shape, samples, 2 * m + n, 2 * m, rows)
     }
 }
 
 /// The query state's right-hand side at one stage: the primal rates (eq. 20, the arithmetic of the
 /// control points' flow) and, if `state` holds them, every direction's tangent rates.
 #[inline(always)]
-pub(crate) fn query_rates<S: Shape, F: StageFields>(shape: S, fields: &F, state: &[Real], out: &mut [Real]) -> Option<()> {
+pub(crate) fn query_rates<S: Shape, F: StageFields>(
+    shape: S,
+    form: &F,
+    stage: &[Real],
+    rows: &[Real],
+    state: &[Real],
+    out: &mut [Real],
+) -> Option<()> {
     let (m, n) = (shape.m(), shape.n());
     let q = m + m * n;
     let (primal, tangents) = state.split_at_checked(q)?;
@@ -272,13 +288,13 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(shape: S, fields: &F, state:
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     let s_jac = primal.get(m..)?;
     if tangents.is_empty() {
-        let (tf, _) = fields.task::<_, false>(shape, &k);
-        let (jf, _) = fields.joint::<_, false>(shape);
+        let (tf, _) = form.task::<_, false>(shape, stage, &k);
+        let (jf, _) = form.joint::<_, false>(shape, stage, rows);
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
         return Some(());
     }
-    let (tf, t) = fields.task::<_, true>(shape, &k);
-    let (jf, ddv) = fields.joint::<_, true>(shape);
+    let (tf, t) = form.task::<_, true>(shape, stage, &k);
+    let (jf, ddv) = form.joint::<_, true>(shape, stage, rows);
     position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
     for (d, ((tan, o), ddv_d)) in
         tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).zip(ddv.iter()).enumerate().take(n)
@@ -288,6 +304,47 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(shape: S, fields: &F, state:
         query_tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
     }
     Some(())
+}
+
+/// The expansion's joint basis at ξ into `rows` and the support (out of line, like both integrations:
+/// the kernel form's code stays as it was).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn expansion_rows<S: Shape>(
+    shape: S,
+    kernel: &JointKernel,
+    codes: &[u8],
+    q: &[f64],
+    fq: &[[Real; FEATURES_PER_JOINT]; NJ],
+    features: &[Real],
+    rows: &mut [Real],
+    hessian: bool,
+) -> f64 {
+    crate::expansion::write_joint_basis(kernel, codes, shape.n(), q, rows, hessian);
+    crate::real::to_f64(crate::expansion::fields::support(shape, kernel, fq, features))
+}
+
+/// The query's integration with the expansion's stage fields (the kernel form's loop, with the
+/// stage's weights c, d in place of its samples).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn integrate_expansion<S: Shape>(
+    shape: S,
+    integrator: cbd_protocol::Integrator,
+    task_kernel: TaskKernel,
+    e: &cbd_protocol::FieldExpansion<'_>,
+    weights: &[Real],
+    rows: &[Real],
+    y: &mut [Real],
+    scratch: &mut [Real],
+) -> Result<(), crate::Error> {
+    let (m, n) = (shape.m(), shape.n());
+    let stage_len = e.stage_len(n, m);
+    let form = ExpansionForm { task_kernel, exponents: e.task_exponents, joint_len: e.n_joint_features as usize * n };
+    crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, crate::Error::Internal, |stage, s, out| {
+        let w = weights.get(stage * stage_len..(stage + 1) * stage_len).ok_or(crate::Error::Internal)?;
+        query_rates(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
+    })
 }
 
 /// Values of working space a query needs besides the kernel rows: its state with tangents and the
@@ -343,10 +400,7 @@ impl crate::Calibrator<'_> {
                 crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian))
                     / self.model.joint_kernel.gamma
             }
-            Some(e) => {
-                crate::expansion::write_joint_basis(&self.model.joint_kernel, e.joint_codes, n, q, rows, exact_jacobian);
-                crate::real::to_f64(crate::expansion::fields::support(shape, &self.model.joint_kernel, &fq, self.features))
-            }
+            Some(e) => expansion_rows(shape, &self.model.joint_kernel, e.joint_codes, q, &fq, self.features, rows, exact_jacobian),
         };
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
@@ -387,28 +441,17 @@ impl crate::Calibrator<'_> {
         }
         let integrator = self.model.integrator;
         let task_kernel = self.model.task_kernel;
-        // The stage's data resolved in the closure, as before the expansion, and the rates from it
-        // (one instance per form): a generic integration helper with the source resolving its own
-        // stage cost the f32 RR Heun × 5 evaluate on the M4 27 % (487k against 384k instructions).
-        let method_steps = (integrator.method, integrator.steps);
+        // One integration per form, each with its stage data resolved in its closure.
         match &self.model.expansion {
             None => {
-                let block = n_points * dims.sample_len();
-                let trajectory: &[Real] = self.trajectory;
-                crate::integrate::integrate_checked(method_steps.0, method_steps.1, y, scratch, Error::Internal, |stage, s, out| {
+                let (trajectory, block): (&[Real], usize) = (self.trajectory, n_points * dims.sample_len());
+                let form = KernelForm { task_kernel };
+                crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, Error::Internal, |stage, s, out| {
                     let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-                    query_rates(shape, &KernelStage { task_kernel: &task_kernel, samples, rows }, s, out).ok_or(Error::Internal)
+                    query_rates(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
                 })?;
             }
-            Some(e) => {
-                let (weights, exponents) = (self.weights, e.task_exponents);
-                let (stage_len, joint_len) = (e.stage_len(n, m), e.n_joint_features as usize * n);
-                crate::integrate::integrate_checked(method_steps.0, method_steps.1, y, scratch, Error::Internal, |stage, s, out| {
-                    let (c, d) = stage_weights(weights, stage, stage_len, joint_len).ok_or(Error::Internal)?;
-                    let fields = ExpansionStage { task_kernel: &task_kernel, exponents, c, d, rows };
-                    query_rates(shape, &fields, s, out).ok_or(Error::Internal)
-                })?;
-            }
+            Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.weights, rows, y, scratch)?,
         }
         let mut out = crate::Evaluation {
             position: nalgebra::SMatrix::zeros(),
