@@ -267,14 +267,12 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         }
         // (c) kernel ridge by pose redefinition: x' ← x' + (x − krr(q)), on the nominal model and
         // (c') on the DH-calibrated chain.
-        let pose_redefinition = |model: &NominalModel, krr: &KernelRidge, start: &[f64]| -> (Vec<f64>, bool) {
+        let pose_redefinition = |model: &NominalModel, krr: &KernelRidge, ik: &dyn Fn(&[f64], &[f64]) -> (Vec<f64>, bool)| {
             let mut shifted = x.clone();
-            let mut q = start.to_vec();
+            let mut q = q_nominal.clone();
             let mut ok = true;
             for _ in 0..POSE_REDEFINITION_ROUNDS {
-                let (qk, okk) = nominal_ik(model, &shifted, &q);
-                q = qk;
-                ok = okk;
+                (q, ok) = ik(&shifted, &q);
                 let predicted = krr.evaluate(model, &q).position;
                 for (s, (target, p)) in shifted.iter_mut().zip(x.iter().zip(predicted)) {
                     *s += target - p;
@@ -283,11 +281,18 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
             (q, ok)
         };
         if let Some(krr) = fitted.krr {
-            let (q, ok) = pose_redefinition(nominal, krr, &q_nominal);
+            let (q, ok) = pose_redefinition(nominal, krr, &|target, hint| nominal_ik(nominal, target, hint));
             record(2, &q, ok);
         }
         if let Some((model, krr)) = fitted.dh_krr {
-            let (q, ok) = pose_redefinition(model, krr, &q_nominal);
+            // The chain's own inverse: the planar arm's closed form in its frame, else the DH chain's.
+            let (q, ok) = match &fitted.planar {
+                Some(p) if fitted.dh.is_none() => pose_redefinition(model, krr, &|target, hint| match p.inverse(target, hint) {
+                    Some(q) => (q.to_vec(), true),
+                    None => (hint.to_vec(), false),
+                }),
+                _ => pose_redefinition(model, krr, &|target, hint| nominal_ik(model, target, hint)),
+            };
             record(3, &q, ok);
         }
         // (d) CbD compensation from the nominal IK.
