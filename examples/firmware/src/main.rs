@@ -31,7 +31,7 @@ include!(concat!(env!("OUT_DIR"), "/storage_len.rs"));
 /// The model, in flash; the runtime reads its arrays in place.
 static BLOB: &[u8] = include_bytes!(env!("CBD_BLOB_PATH"));
 
-/// All the RAM the runtime uses: `storage_len(…)` values of the evaluation scalar (f64, or f32
+/// All the RAM the runtime uses: `storage_len_for(model)` values of the evaluation scalar (f64, or f32
 /// with the feature `f32`): kernel features, the control points' trajectories, working space.
 static mut STORAGE: [Real; STORAGE_LEN] = [0.0; STORAGE_LEN];
 
