@@ -90,15 +90,24 @@ fn demo_blob_is_unchanged() {
     }
     // The blob is written before the test configurations are evaluated: their count does not enter it.
     let blob = cbd_blob("demo", &["demo", "--quiet", "--test-points", "1"]);
-    // Re-pinned for issue 25: the demo's fields are written in the kernels' own expansion (format 5,
-    // docs/DESIGN.md §11), and with the expansion multi-step schemes train, so the scheme's
-    // cross-validation now chooses Euler × 2 (held-out RMS 2.886e-8 against 2.931e-8 for Euler × 1):
-    // per-stage weights, the kernel form holding the linearised model's momenta. (The former pin,
-    // Euler × 1 momenta only: 8334 bytes, 64681780….)
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (17472, "58f727250d777b4ef9fab1bf765d50f0878eb3b2865f59ce3bf6816b1c55fce5"));
-    let model = cbd_protocol::decode(&blob).unwrap();
-    assert_eq!(model.integrator, cbd_protocol::Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 2 });
+    // Re-pinned for issue 25: the demo's model now also carries its fields in the kernels' own
+    // expansion (format 5, docs/DESIGN.md §11) …
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (13184, "5e5f05dad2227246b5503b0e4d9f68beb187f72bdd5247f87f40611aadf12e56"));
+    // … and its kernel form is byte for byte the former pin: without the expansion it encodes to the
+    // format-4 blob pinned before, whose payload was the format-3 pin.
+    let mut model = cbd_protocol::decode(&blob).unwrap();
     assert!(model.expansion.is_some());
+    model.expansion = None;
+    let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
+    assert_eq!(
+        (kernel_form.len(), sha256_hex(&kernel_form).as_str()),
+        (8334, "64681780d2914adca9e7c50569e033312724f51aabe0265faf3cfbe4abc94820")
+    );
+    assert_eq!(
+        sha256_hex(&as_format_3(&kernel_form)),
+        "8672f4262492ad09f55712277d16d36e8c3820f4109ff7154b5344efe0bb9b08",
+        "payload changed"
+    );
 }
 
 #[test]

@@ -61,7 +61,11 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts.max_iterations = settings.max_iterations;
     opts.method = settings.solver;
     opts.verbose = settings.verbose;
-    opts.representation = settings.representation;
+    // The paper's reproduction keeps the paper's form, momenta, unless asked otherwise.
+    opts.representation = match (settings.source, settings.representation) {
+        (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
+        (_, r) => r,
+    };
     if let Some(t) = settings.threads {
         opts.threads = t;
     }

@@ -8,6 +8,11 @@ use crate::kernels::evidence::CbdHyperparameters;
 use crate::solver::{fit_cbd, DENSE_MAX_UNKNOWNS};
 use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
 
+/// A scheme with more steps is chosen only when its held-out RMS error is lower by more than this
+/// fraction (issue 25: with the expansion both schemes train; on the RR benchmark Euler × 2 was
+/// 1.5 % (noise-free) and 0.3 % (σ = 1e-4) ahead, at twice the evaluation cost).
+pub const MORE_STEPS_MARGIN: f64 = 0.05;
+
 /// The scheme and how it was chosen.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SchemeChoice {
@@ -91,9 +96,10 @@ pub fn choose_scheme(
         let rms = if count > 0 { (sse / count as f64).sqrt() } else { f64::INFINITY };
         cross_validation.push((integrator, rms));
     }
-    // Fewest steps among the best: a tie goes to the cheaper runtime.
+    // Fewest steps unless more are clearly better: every further stage costs the controller one
+    // more evaluation of the fields, and held-out errors a few % apart are within the folds' noise.
     let best = cross_validation.iter().fold(None::<(Integrator, f64)>, |b, &(i, e)| match b {
-        Some((_, be)) if !(e < be) => b,
+        Some((_, be)) if !(e < (1.0 - MORE_STEPS_MARGIN) * be) => b,
         _ => Some((i, e)),
     });
     let integrator = best.map_or(candidates[0], |(i, _)| i);
