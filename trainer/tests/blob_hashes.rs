@@ -83,6 +83,17 @@ fn cbd_blob(name: &str, args: &[&str]) -> Vec<u8> {
     std::fs::read(&out).unwrap()
 }
 
+/// A format-5 blob's kernel form (the blob without its expansion, encoded again) is the format-4
+/// pin `(len, sha)`, whose payload is the format-3 pin `format_3`.
+fn assert_kernel_form(blob: &[u8], len: usize, sha: &str, format_3: &str) {
+    let mut model = cbd_protocol::decode(blob).unwrap();
+    assert!(model.expansion.is_some());
+    model.expansion = None;
+    let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
+    assert_eq!((kernel_form.len(), sha256_hex(&kernel_form).as_str()), (len, sha));
+    assert_eq!(sha256_hex(&as_format_3(&kernel_form)), format_3, "payload changed");
+}
+
 #[test]
 fn demo_blob_is_unchanged() {
     if !same_float_kernels_as_the_pins() {
@@ -95,18 +106,11 @@ fn demo_blob_is_unchanged() {
     assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (13184, "5e5f05dad2227246b5503b0e4d9f68beb187f72bdd5247f87f40611aadf12e56"));
     // … and its kernel form is byte for byte the former pin: without the expansion it encodes to the
     // format-4 blob pinned before, whose payload was the format-3 pin.
-    let mut model = cbd_protocol::decode(&blob).unwrap();
-    assert!(model.expansion.is_some());
-    model.expansion = None;
-    let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
-    assert_eq!(
-        (kernel_form.len(), sha256_hex(&kernel_form).as_str()),
-        (8334, "64681780d2914adca9e7c50569e033312724f51aabe0265faf3cfbe4abc94820")
-    );
-    assert_eq!(
-        sha256_hex(&as_format_3(&kernel_form)),
+    assert_kernel_form(
+        &blob,
+        8334,
+        "64681780d2914adca9e7c50569e033312724f51aabe0265faf3cfbe4abc94820",
         "8672f4262492ad09f55712277d16d36e8c3820f4109ff7154b5344efe0bb9b08",
-        "payload changed"
     );
 }
 
@@ -120,18 +124,11 @@ fn ur5_example_blob_is_unchanged() {
     let blob = cbd_blob("ur5", &["fit", "--quiet", "--model", &model, "--data", &data]);
     // Re-pinned for issue 25: the expansion added (format 5); the kernel form is the former pin.
     assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (142269, "187d2b53cb1dcf68aa08f4438ba629cfef371d6f75196261e96b444a42f4c9d7"));
-    let mut model = cbd_protocol::decode(&blob).unwrap();
-    assert!(model.expansion.is_some());
-    model.expansion = None;
-    let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
-    assert_eq!(
-        (kernel_form.len(), sha256_hex(&kernel_form).as_str()),
-        (72555, "f39495e9889128381c93cb5359e16d637aa660fc94db01987fd22f2ac11d057c")
-    );
-    assert_eq!(
-        sha256_hex(&as_format_3(&kernel_form)),
+    assert_kernel_form(
+        &blob,
+        72555,
+        "f39495e9889128381c93cb5359e16d637aa660fc94db01987fd22f2ac11d057c",
         "879b3d13b2d7939b65485ab5dcd384f1b9a5cd1e159422046ddc2fc5450b4153",
-        "payload changed"
     );
 }
 

@@ -99,16 +99,8 @@ pub(super) fn fit(
         cancellation: e.cancellation,
         kernel_cancellation,
         representation: "expansion".into(),
-        expansion: Some(ExpansionReport {
-            weights: e.len(),
-            joint_features: e.joint.len(),
-            task_features: e.task.len(),
-            tolerance: e.tolerance,
-            task_radius: e.task_radius,
-            largest_whitened_weight: e.largest_whitened_weight,
-            // The kernel form holds the linearised model, not this flow: no like-for-like figure.
-            kernel_form_difference: f64::NAN,
-        }),
+        // The kernel form holds the linearised model, not this flow: no like-for-like difference.
+        expansion: Some(ExpansionReport::of(&e, f64::NAN)),
         expansion_declined: None,
     };
     if opts.verbose {

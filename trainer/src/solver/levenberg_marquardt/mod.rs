@@ -156,6 +156,20 @@ pub struct ExpansionReport {
     pub kernel_form_difference: f64,
 }
 
+impl ExpansionReport {
+    pub fn of(e: &crate::expansion::ExpansionFit, kernel_form_difference: f64) -> Self {
+        ExpansionReport {
+            weights: e.len(),
+            joint_features: e.joint.len(),
+            task_features: e.task.len(),
+            tolerance: e.tolerance,
+            task_radius: e.task_radius,
+            largest_whitened_weight: e.largest_whitened_weight,
+            kernel_form_difference,
+        }
+    }
+}
+
 /// A fitted model: the blob and what it took.
 #[derive(Debug, Clone)]
 pub struct CbdFit {
@@ -275,16 +289,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         Some(e) => {
             let predictions = user(&e.positions);
             let kernel_form_difference = predictions.iter().zip(&kernel_predictions).fold(0.0f64, |s, (a, b)| s.max((a - b).abs()));
-            let report = ExpansionReport {
-                weights: e.len(),
-                joint_features: e.joint.len(),
-                task_features: e.task.len(),
-                tolerance: e.tolerance,
-                task_radius: e.task_radius,
-                largest_whitened_weight: e.largest_whitened_weight,
-                kernel_form_difference,
-            };
-            (predictions, e.cancellation, Some(report))
+            (predictions, e.cancellation, Some(ExpansionReport::of(e, kernel_form_difference)))
         }
         None => (kernel_predictions, kernel_cancellation, None),
     };
