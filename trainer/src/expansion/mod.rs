@@ -140,20 +140,22 @@ pub fn fit_linear(
 mod tests;
 
 /// A multi-step scheme's fields in the expansion, fitted in weight space ([`flow_fit`]): the linear
-/// model's bases and weights as the start on every stage, then Levenberg–Marquardt on the whitened
-/// per-stage weights. Returns the fit (all stages' weights), its iterations and whether it converged.
+/// model's bases and weights (`linear`, from [`fit_linear`]) as the start, then Levenberg–Marquardt on
+/// the whitened per-stage weights. Returns the fit (all stages' weights), its iterations and whether it
+/// converged.
+#[allow(clippy::too_many_arguments)]
 pub fn fit_flow(
     cp: &ControlPoints,
     joint_kernel: &JointKernel,
     task_kernel: &TaskKernel,
     sigma: f64,
     target: &[f64],
+    linear: ExpansionFit,
     integrator: cbd_protocol::Integrator,
     max_iterations: usize,
     relative_tolerance: f64,
     prediction_tolerance: f64,
 ) -> Result<(ExpansionFit, usize, bool), Declined> {
-    let linear = fit_linear(cp, joint_kernel, task_kernel, sigma, target)?;
     let (m, n, len) = (cp.dims.m, cp.dims.n, cp.dims.state_len());
     let params = linear.len() * integrator.stage_count();
     if params > MAX_WEIGHTS {

@@ -7,7 +7,7 @@ use super::encode::encode_checked;
 use super::problem::cancellation_of;
 use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
 use crate::data::Measurements;
-use crate::expansion::{fit_flow, Representation, CANCELLATION_LIMIT};
+use crate::expansion::{fit_flow, fit_linear, Representation, CANCELLATION_LIMIT};
 use crate::flow::ControlPoints;
 use crate::solver::regulariser::regulariser_matrix;
 use crate::solver::step::solve_regularised;
@@ -41,12 +41,25 @@ pub(super) fn fit(
     let residual: Vec<f64> = target.iter().zip(&nominal_positions).map(|(y, k)| y - k).collect();
     let momenta = solve_regularised(&k_reg, opts.sigma, &residual, FIXED_SPLIT).ok_or(FitError::Singular { iteration: 0, damping: 0.0 })?;
     let kernel_cancellation = cancellation_of(&k_reg, &momenta);
+    // The linear model's expansion first: the flow starts from it, and `auto` decides on its length.
+    let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
+        Ok(l) => l,
+        Err(why) => return Ok(Err(why.to_string())),
+    };
+    if opts.representation == Representation::Auto && linear.len() > cp.len() * m && kernel_cancellation <= CANCELLATION_LIMIT {
+        return Ok(Err(format!(
+            "the expansion has {} weights a stage, more than the {} momenta, which do not cancel ({kernel_cancellation:.1e})",
+            linear.len(),
+            cp.len() * m
+        )));
+    }
     let (e, iterations, converged) = match fit_flow(
         cp,
         &opts.joint_kernel,
         &opts.task_kernel,
         opts.sigma,
         target,
+        linear,
         opts.integrator,
         opts.max_iterations,
         opts.relative_tolerance,
@@ -55,13 +68,6 @@ pub(super) fn fit(
         Ok(r) => r,
         Err(why) => return Ok(Err(why.to_string())),
     };
-    let one_stage = e.len() / opts.integrator.stage_count();
-    if opts.representation == Representation::Auto && one_stage > cp.len() * m && kernel_cancellation <= CANCELLATION_LIMIT {
-        return Ok(Err(format!(
-            "the expansion has {one_stage} weights a stage, more than the {} momenta, which do not cancel ({kernel_cancellation:.1e})",
-            cp.len() * m
-        )));
-    }
     let norm = &opts.normalisation;
     let user = |k: &[f64]| -> Vec<f64> {
         k.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect()
