@@ -270,7 +270,9 @@ impl<'a> Calibrator<'a> {
         }
         Ok(Compensation {
             residual: best.residual,
-            reached: best.residual <= options.tolerance,
+            // A residual that overflowed is never reached, whatever the tolerance (a model whose
+            // precision bound is infinite resolves nothing).
+            reached: best.residual.is_finite() && best.residual <= options.tolerance,
             singular: !(best.conditioning >= options.singular_conditioning),
             extrapolating: !(best.support >= options.extrapolation_threshold),
             support: best.support,
