@@ -37,6 +37,8 @@ pub struct StageProblem<'a> {
     pub integrator: Integrator,
     /// Prior variance of each weight of one stage (the protocol's layout).
     variances: Vec<f64>,
+    /// θ_p = z_p · whitening[p] for every weight of every stage: √(λ_p / q_s).
+    whitening: Vec<f64>,
     exponents: Vec<u8>,
 }
 
@@ -67,7 +69,22 @@ impl<'a> StageProblem<'a> {
     ) -> Self {
         let variances = prior_variances(joint_kernel.gamma, dims.n, dims.m, joint, task);
         let exponents = task_exponents(task);
-        StageProblem { dims, points, initial, target, joint_kernel, task_kernel, joint, task, sigma, integrator, variances, exponents }
+        let whitening = quadrature(integrator).iter().flat_map(|q| variances.iter().map(move |v| (v / q).sqrt())).collect();
+        StageProblem {
+            dims,
+            points,
+            initial,
+            target,
+            joint_kernel,
+            task_kernel,
+            joint,
+            task,
+            sigma,
+            integrator,
+            variances,
+            whitening,
+            exponents,
+        }
     }
 
     /// Weights of one stage.
@@ -77,9 +94,7 @@ impl<'a> StageProblem<'a> {
 
     /// θ (all stages, the protocol's layout) from whitened z.
     pub fn weights_of(&self, z: &[f64]) -> Vec<f64> {
-        let q = quadrature(self.integrator);
-        let w = self.stage_len();
-        z.iter().enumerate().map(|(k, zk)| zk * (self.variances[k % w] / q[k / w]).sqrt()).collect()
+        z.iter().zip(&self.whitening).map(|(zk, s)| zk * s).collect()
     }
 
     /// Whitened z with the same weights θ on every stage.
@@ -107,12 +122,9 @@ impl<'a> StageProblem<'a> {
         let (m, n) = (self.dims.m, self.dims.n);
         let theta = self.weights_of(z);
         let params = if tangent { z.len() } else { 0 };
-        let q = quadrature(self.integrator);
-        let w = self.stage_len();
-        let scale: Vec<f64> = (0..z.len()).map(|k| (self.variances[k % w] / q[k / w]).sqrt()).collect();
         let count = self.points.len() / n;
         let per_point: Vec<Option<(Vec<f64>, Vec<f64>)>> =
-            (0..count).into_par_iter().map(|i| self.integrate_point(i, &theta, &scale, params)).collect();
+            (0..count).into_par_iter().map(|i| self.integrate_point(i, &theta, &self.whitening, params)).collect();
         let mut positions = Vec::with_capacity(count * m);
         let mut jac = tangent.then(|| Mat::zeros(count * m, params));
         for (i, r) in per_point.into_iter().enumerate() {
@@ -170,7 +182,7 @@ impl<'a> StageProblem<'a> {
     ) {
         let (m, n) = (self.dims.m, self.dims.n);
         let ql = m + m * n;
-        let (r_v, r_w) = (self.joint.len(), self.task.len());
+        let r_v = self.joint.len();
         let row_len = joint_row_len(n);
         let (k, jac) = (&s[..m], &s[m..ql]);
         // v, Dv from the joint rows; w, Dw, D²w from the task basis at k.
@@ -258,7 +270,6 @@ impl<'a> StageProblem<'a> {
                 }
             }
         }
-        let _ = r_w;
     }
 }
 
@@ -368,8 +379,7 @@ mod tests {
                 MomentumLaw::Hamiltonian,
                 integrator,
             );
-            let (m, n, len) = (2, 2, cp.dims.state_len());
-            let initial: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[..m + m * n].to_vec()).collect();
+            let initial = cp.nominal_kinematics();
             let joint = truncate(&joint_axes(&kernel, &[4.0, 4.0]), 1e-6).unwrap();
             let task = truncate(&vec![AxisSeries::gaussian(1.8 / 1.5); 2], 1e-6).unwrap();
             let target = vec![0.0; 14];

@@ -107,9 +107,8 @@ pub fn fit_linear(
 ) -> Result<ExpansionFit, Declined> {
     let (m, n) = (cp.dims.m, cp.dims.n);
     let count = cp.len();
-    let len = cp.dims.state_len();
     let nominal = cp.nominal_positions();
-    let jacobians: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[m..m + m * n].to_vec()).collect();
+    let jacobians = cp.nominal_jacobians();
     let residual: Vec<f64> = target.iter().zip(&nominal).map(|(y, k)| y - k).collect();
     let mean_j2 = jacobians.iter().map(|v| v * v).sum::<f64>() / (count * m).max(1) as f64;
     let tolerance = tolerance_for(sigma, 1.0 + joint_kernel.gamma * mean_j2);
@@ -156,12 +155,12 @@ pub fn fit_flow(
     relative_tolerance: f64,
     prediction_tolerance: f64,
 ) -> Result<(ExpansionFit, usize, bool), Declined> {
-    let (m, n, len) = (cp.dims.m, cp.dims.n, cp.dims.state_len());
+    let (m, n) = (cp.dims.m, cp.dims.n);
     let params = linear.len() * integrator.stage_count();
     if params > MAX_WEIGHTS {
         return Err(Declined::TooLong(format!("{params} weights over {} stages (limit {MAX_WEIGHTS})", integrator.stage_count())));
     }
-    let initial: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[..m + m * n].to_vec()).collect();
+    let initial = cp.nominal_kinematics();
     let problem = flow_fit::StageProblem::new(
         cp.dims,
         &cp.points,
@@ -191,7 +190,7 @@ pub fn fit_flow(
     let mean: Vec<f64> =
         (0..linear.len()).map(|k| quadrature.iter().enumerate().map(|(s, q)| q * weights[s * linear.len() + k]).sum()).collect();
     let nominal = cp.nominal_positions();
-    let jacobians: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[m..m + m * n].to_vec()).collect();
+    let jacobians = cp.nominal_jacobians();
     let lp = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: target };
     let a = design(&lp, joint_kernel, task_kernel, &linear.joint, &linear.task);
     let cancellation = crate::solver::levenberg_marquardt::problem::cancellation_of(&a, &mean);

@@ -30,9 +30,9 @@ fn the_expansions_covariance_is_the_kernel_matrix() {
     for (b, gamma, width, tolerance) in [([0.004, 0.1], 0.02, 2.2, 1e-13), ([0.3, 0.8], 1.5, 1.0, 1e-12), ([1.0, 1.0], 8.0, 1.03, 1e-10)] {
         let cp = rr_points(40, b, gamma, width);
         let kernel = JointKernel { gamma, axes: cp.joint_kernel.axes.clone() };
-        let (m, n, len) = (2, 2, cp.dims.state_len());
+        let (m, n) = (2, 2);
         let nominal = cp.nominal_positions();
-        let jacobians: Vec<f64> = cp.initial.chunks_exact(len).flat_map(|s| s[m..m + m * n].to_vec()).collect();
+        let jacobians = cp.nominal_jacobians();
         let zero = vec![0.0; nominal.len()];
         let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: &zero };
         let joint = truncate(&joint_axes(&kernel, &[4.0, 4.0]), tolerance).unwrap();

@@ -77,6 +77,18 @@ impl ControlPoints {
         self.initial.chunks_exact(len).flat_map(|s| s[..m].to_vec()).collect()
     }
 
+    /// Dk0(x_i) in internal units, N × m × n (row-major per point).
+    pub fn nominal_jacobians(&self) -> Vec<f64> {
+        let (m, n, len) = (self.dims.m, self.dims.n, self.dims.state_len());
+        self.initial.chunks_exact(len).flat_map(|s| s[m..m + m * n].to_vec()).collect()
+    }
+
+    /// (k0, Dk0)(x_i) in internal units, N × (m + m n): the initial state without the momenta.
+    pub fn nominal_kinematics(&self) -> Vec<f64> {
+        let (m, n, len) = (self.dims.m, self.dims.n, self.dims.state_len());
+        self.initial.chunks_exact(len).flat_map(|s| s[..m + m * n].to_vec()).collect()
+    }
+
     /// Integrates from initial momenta `p0` (N × m) with the runtime's scheme: the runtime's
     /// integration loop and rates (from the kernel-feature table, as a loaded model does), each
     /// stage's rows split across the current rayon pool (bit-identical to the runtime's one pass).
