@@ -61,6 +61,7 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts.max_iterations = settings.max_iterations;
     opts.method = settings.solver;
     opts.verbose = settings.verbose;
+    opts.memory_budget = settings.memory_budget;
     // The paper's reproduction keeps the paper's form, momenta, unless asked otherwise.
     opts.representation = match (settings.source, settings.representation) {
         (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,

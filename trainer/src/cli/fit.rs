@@ -218,8 +218,13 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         eprintln!("warning: {w}");
     }
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);
-    crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?;
     let mut settings = args.solver.settings()?;
+    // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
+    // the solver checks only if it falls back to the kernel form.
+    if settings.representation == crate::expansion::Representation::Kernel {
+        crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?;
+    }
+    settings.memory_budget = crate::cli::memory::available_bytes();
     settings.dh_first = args.dh_first;
     let calibration = crate::calibrate::calibrate(&nominal, &data, &settings).map_err(|e| format!("{}: {e}", args.data.display()))?;
     print_calibration(&calibration, args.solver.quiet);
