@@ -86,7 +86,13 @@ impl Comparison {
                 "redundant_at_nominal": d.redundant_at_nominal, "converged": d.converged,
             })),
             "hyperparameters": { "krr": hyper(&self.krr_hyperparameters), "dh+krr": hyper(&self.dh_krr_hyperparameters) },
+            "warnings": self.warnings(),
         })
+    }
+
+    /// What the reader must not miss: a DH fit that stopped at its iteration limit.
+    pub fn warnings(&self) -> Vec<String> {
+        self.dh.iter().filter(|d| !d.converged).map(dh_not_converged).collect()
     }
 
     /// A plain-text table, one line per method. Errors in fixed point with four decimals, or — when
@@ -110,6 +116,14 @@ impl Comparison {
         }
         out
     }
+}
+
+/// The warning for a DH fit that stopped at its iteration limit.
+pub fn dh_not_converged(d: &DhFitStats) -> String {
+    format!(
+        "DH calibration stopped at its iteration limit ({} iterations) without converging: training RMS error {:.4e} (from {:.4e}); every model built on that chain (dh, dh+krr, dh+cbd) inherits it",
+        d.iterations, d.final_rms, d.initial_rms
+    )
 }
 
 /// [`compare_peers`] from files: the model file, and training and test CSVs read with the model
@@ -346,6 +360,20 @@ mod tests {
         assert!(small.contains("1.292e-5") && small.contains("1.083e-1") && !small.contains("0.0000"), "{small}");
         let large = table(vec![row("nominal", 3.25), row("cbd", 0.0876)]);
         assert!(large.contains("3.2500") && large.contains("0.0876"), "{large}");
+    }
+
+    /// Issue 26: a DH fit at its iteration limit said only "200 iterations" in the text output.
+    #[test]
+    fn a_dh_fit_at_its_iteration_limit_is_a_warning() {
+        let robot = SixJointRobot::ur5_like(21);
+        let train = robot.measure(&random_configurations(60, 22), 23);
+        let options = DhCalibrationOptions { max_iterations: 1, ..DhCalibrationOptions::default() };
+        let stats = calibrate_dh(&robot.nominal, &train, &options).unwrap().stats;
+        assert!(!stats.converged);
+        let c = Comparison { rows: vec![], dh: Some(stats), krr_hyperparameters: None, dh_krr_hyperparameters: None };
+        let w = c.warnings();
+        assert!(w.len() == 1 && w[0].contains("iteration limit (1 iterations)"), "{w:?}");
+        assert_eq!(c.to_json()["warnings"][0], serde_json::json!(w[0]));
     }
 
     /// Issue 14: a planar model gets DH calibration (base, joint offsets, lengths) and the hybrids.

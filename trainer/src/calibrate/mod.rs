@@ -128,7 +128,10 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings);
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
     let fit = fit_cbd(&base, data, &options)?;
-    let warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
+    let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
+    if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
+        warnings.insert(0, crate::baselines::compare::dh_not_converged(d));
+    }
     Ok(Calibration { base, dh, hyperparameters, evidence, scheme, options, fit, warnings })
 }
 
