@@ -25,3 +25,22 @@ fn few_rows_in_dh_and_planar_fits() {
     let two = head(&dir, &grid, "p2.csv", 2);
     fails_with(&cbd(&dir, &["fit", "--data", &two, "--out", "x.blob"]), &["p2.csv", "2", "at least 3"]);
 }
+
+/// Item 4: a URDF of 30 000 nested elements (210 KB) overflowed the stack (abort). Now refused
+/// with the URDF's name, line and column.
+#[test]
+fn deeply_nested_urdf_is_refused() {
+    let dir = scratch("deep-urdf");
+    let n = 30_000;
+    write(&dir, "deep.urdf", format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(n), "</a>".repeat(n)));
+    let model = write(
+        &dir,
+        "deep.toml",
+        "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"deep.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n",
+    );
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    fails_with(
+        &cbd(&dir, &["fit", "--model", &model, "--data", &grid, "--out", "d.blob"]),
+        &["deep.urdf", "line 1", "nested more than 64 deep"],
+    );
+}
