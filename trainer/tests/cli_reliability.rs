@@ -44,3 +44,89 @@ fn deeply_nested_urdf_is_refused() {
         &["deep.urdf", "line 1", "nested more than 64 deep"],
     );
 }
+
+/// Item 5: `--plots DIR` wrote through a symbolic link named like a figure (the linked file became
+/// an SVG) and blocked forever on a FIFO of that name. Each figure is now written as every output
+/// is: the link and the FIFO are refused (exit 1) and left as they were.
+#[test]
+fn plots_never_write_through_links_or_into_fifos() {
+    let dir = scratch("plots-special");
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--max-iterations", "1", "--quiet"]));
+    std::fs::create_dir(dir.join("pl")).unwrap();
+    write(&dir, "keep.txt", "keep");
+    std::os::unix::fs::symlink("../keep.txt", dir.join("pl/error_histogram.svg")).unwrap();
+    let eval = |plots: &str| cbd(&dir, &["eval", "--blob", "a.blob", "--data", &grid, "--plots", plots]);
+    fails_with(&eval("pl"), &["pl/error_histogram.svg", "symbolic link"]);
+    assert_eq!(std::fs::read_to_string(dir.join("keep.txt")).unwrap(), "keep");
+    std::fs::remove_file(dir.join("pl/error_histogram.svg")).unwrap();
+    assert!(std::process::Command::new("mkfifo").arg(dir.join("pl/error_heatmaps.png")).status().unwrap().success());
+    // A FIFO nobody reads would block a writer forever: the test fails by timeout if it does.
+    fails_with(&eval("pl"), &["pl/error_heatmaps.png", "FIFO"]);
+    std::fs::remove_file(dir.join("pl/error_heatmaps.png")).unwrap();
+    let out = eval("pl");
+    succeeds(&out);
+    assert!(std::fs::read(dir.join("pl/error_heatmaps.png")).unwrap().starts_with(b"\x89PNG"));
+    // A file where the directory goes is refused before the evaluation.
+    fails_with(&eval(&grid), &["g4.csv", "not a directory", "--plots"]);
+}
+
+/// Item 6: an output path equal to an input silently replaced the input. Every command now refuses,
+/// naming the flag of the input, before any work, and the input is unchanged; a hard link to an
+/// input is the same file; two outputs on one path are refused too.
+#[test]
+fn an_output_never_replaces_an_input() {
+    let dir = scratch("output-is-input");
+    let grid = rr_grid(&dir, "tr.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--max-iterations", "1", "--quiet"]));
+    write(&dir, "t.csv", "x,y\n1.2,0.3\n");
+    write(&dir, "d.json", "{\"nominal\": {\"mean\": 1, \"median\": 1, \"p99\": 1, \"max\": 1}}");
+    std::fs::hard_link(dir.join("tr.csv"), dir.join("hard.csv")).unwrap();
+    let before: Vec<Vec<u8>> = ["tr.csv", "a.blob", "t.csv", "d.json"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect();
+    for (args, needles) in [
+        (vec!["fit", "--data", "tr.csv", "--out", "tr.csv"], vec!["tr.csv: is also an input (--data)"]),
+        (vec!["fit", "--data", "tr.csv", "--out", "hard.csv"], vec!["hard.csv: is also an input (--data)"]),
+        (vec!["fit", "--data", "tr.csv", "--out", "x.blob", "--json", "x.blob"], vec!["x.blob: is given to both --out and --json"]),
+        (vec!["eval", "--blob", "a.blob", "--data", "tr.csv", "--json", "a.blob"], vec!["a.blob: is also an input (--blob)"]),
+        (vec!["compensate", "--blob", "a.blob", "--targets", "t.csv", "--out", "t.csv"], vec!["t.csv: is also an input (--targets)"]),
+        (vec!["report", "--json", "d.json", "--out", "d.json"], vec!["d.json: is also an input (--json)"]),
+        (vec!["diagnose", "--data", "tr.csv", "--json", "tr.csv"], vec!["tr.csv: is also an input (--data)"]),
+        (vec!["compare", "--model", "m.toml", "--train", "tr.csv", "--test", "tr.csv", "--json", "tr.csv"], vec!["is also an input"]),
+    ] {
+        write(&dir, "m.toml", PLANAR_RR_MODEL);
+        let err = fails_with(&cbd(&dir, &args), &needles);
+        assert!(!err.contains("hyperparameters") && !err.contains("fitted"), "{args:?}: work ran before the check:\n{err}");
+    }
+    let after: Vec<Vec<u8>> = ["tr.csv", "a.blob", "t.csv", "d.json"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect();
+    assert!(before == after, "an input changed");
+}
+
+/// Item 7: an interrupted write left its hidden temporary file (`.NAME.tmpPID-0`, 76 MB on a large
+/// simulation). The data is now written to an unnamed file that gets its name only when complete:
+/// `simulate` killed at any moment leaves no hidden file, and the output is absent or whole.
+#[test]
+fn an_interrupted_write_leaves_no_hidden_file() {
+    let dir = scratch("interrupted-write");
+    for delay_ms in [100u64, 300, 500, 700, 900, 1100, 1400] {
+        let _ = std::fs::remove_file(dir.join("big.csv"));
+        let mut child = std::process::Command::new(CBD)
+            .args(["simulate", "--sampling", "uniform", "--count", "1500000", "--out", "big.csv"])
+            .current_dir(&dir)
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let _ = child.wait();
+        let hidden: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with('.'))
+            .collect();
+        assert!(hidden.is_empty(), "killed after {delay_ms} ms: {hidden:?}");
+        if let Ok(text) = std::fs::read_to_string(dir.join("big.csv")) {
+            assert_eq!(text.lines().count(), 1_500_001, "killed after {delay_ms} ms: a partial output");
+        }
+    }
+}

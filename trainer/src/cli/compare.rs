@@ -56,8 +56,12 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
 }
 
 pub fn run(args: CompareArgs) -> Result<(), String> {
-    if let Some(path) = &args.json {
-        crate::cli::check_output(path)?;
+    crate::io::check_paths(
+        &[("--model", Some(&args.model)), ("--train", Some(&args.train)), ("--test", Some(&args.test))],
+        &[("--json", args.json.as_deref())],
+    )?;
+    if let Some(dir) = &args.plots {
+        crate::io::check_output_dir("--plots", dir)?;
     }
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.

@@ -174,10 +174,15 @@ pub fn compensate_all(
 }
 
 pub fn run(args: CompensateArgs) -> Result<(), String> {
-    crate::cli::check_output(&args.out)?;
-    if let Some(path) = &args.json {
-        crate::cli::check_output(path)?;
-    }
+    crate::io::check_paths(
+        &[
+            ("--model", args.model.model.as_deref()),
+            ("--blob", Some(&args.blob)),
+            ("--targets", Some(&args.targets)),
+            ("--seeds", args.seeds.as_deref()),
+        ],
+        &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
+    )?;
     if args.iterations == 0 || args.iterations > 64 {
         return Err(format!("--iterations must be between 1 and 64, got {}", args.iterations));
     }

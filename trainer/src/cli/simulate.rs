@@ -40,7 +40,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<(), String> {
-    crate::cli::check_output(&args.out)?;
+    crate::io::check_paths(&[], &[("--out", Some(&args.out))])?;
     if let Some(noise) = args.noise {
         if !(noise >= 0.0 && noise.is_finite()) {
             return Err(format!("--noise must be a finite non-negative number, got {noise}"));

@@ -83,6 +83,7 @@ impl ImportedMeasurements {
 pub fn read_measurements(path: impl AsRef<Path>, spec: &ColumnSpec) -> Result<ImportedMeasurements, ImportError> {
     let path = path.as_ref();
     let file = std::fs::File::open(path).map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
+    crate::io::note_input("a measurement file", path);
     read_measurements_from(file, path, spec)
 }
 

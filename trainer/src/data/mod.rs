@@ -64,6 +64,7 @@ pub const MAX_URDF_BYTES: u64 = 8 << 20;
 pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Result<Vec<u8>> {
     use std::io::Read;
     let file = std::fs::File::open(path).map_err(|e| crate::Error::io(path, e))?;
+    crate::io::note_input(&format!("the {what}"), path);
     let mut bytes = Vec::new();
     file.take(cap + 1).read_to_end(&mut bytes).map_err(|e| crate::Error::io(path, e))?;
     if bytes.len() as u64 > cap {

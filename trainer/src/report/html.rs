@@ -352,6 +352,7 @@ pub fn collect_figures(dir: &Path) -> crate::Result<Vec<Figure>> {
     paths
         .into_iter()
         .map(|p| {
+            crate::io::note_input("a figure of --plots", &p);
             let png = std::fs::read(&p).map_err(|e| crate::Error::io(&p, e))?;
             if !png.starts_with(b"\x89PNG\r\n\x1a\n") {
                 return Err(crate::Error::Path { path: p, reason: "not a PNG file".into() });
@@ -365,6 +366,7 @@ pub fn collect_figures(dir: &Path) -> crate::Result<Vec<Figure>> {
 /// `out`. The length unit is the JSON's `unit` / `length_unit` when present, else `unit`.
 /// Returns the number of figures embedded.
 pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str) -> crate::Result<usize> {
+    crate::io::note_input("--json", json_path);
     let text = std::fs::read_to_string(json_path).map_err(|e| crate::Error::io(json_path, e))?;
     let json: Value = serde_json::from_str(&text).map_err(|e| crate::Error::Json {
         path: json_path.to_path_buf(),
