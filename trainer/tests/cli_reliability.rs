@@ -130,3 +130,25 @@ fn an_interrupted_write_leaves_no_hidden_file() {
         }
     }
 }
+
+/// Item 10: 100 MB of NUL bytes took 619 MB and echoed the whole "header" to stderr; a 300 MB
+/// field gave 300 MB of stderr. Binary data and overlong lines are refused before the CSV reader
+/// holds them (here under a 400 MB address-space limit), every message quotes at most an excerpt.
+#[test]
+fn csv_reading_is_capped_and_quotes_only_excerpts() {
+    let dir = scratch("csv-caps");
+    std::fs::File::create(dir.join("nul.csv")).unwrap().set_len(100_000_000).unwrap();
+    let err =
+        fails_with(&cbd_limited(&dir, 400_000, &["fit", "--data", "nul.csv", "--out", "n.blob"]), &["nul.csv:1", "NUL", "not CSV text"]);
+    assert!(err.len() < 200, "{err}");
+    let field = "1".repeat(70_000_000);
+    write(&dir, "long.csv", format!("q1,q2,x,y\n{field},2,3,4\n"));
+    let err = fails_with(&cbd_limited(&dir, 600_000, &["eval", "--blob", "none.blob", "--data", "long.csv"]), &["long.csv:2", "64 KiB"]);
+    assert!(err.len() < 200, "{err}");
+    write(&dir, "word.csv", format!("q1,q2,x,y\n{},2,3,4\n", "z".repeat(60_000)));
+    let err = fails_with(
+        &cbd(&dir, &["fit", "--data", "word.csv", "--out", "n.blob"]),
+        &["word.csv:2", "column 'q1'", "not a number", "(60000 bytes)"],
+    );
+    assert!(err.len() < 200, "{err}");
+}

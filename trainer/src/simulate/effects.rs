@@ -315,16 +315,20 @@ pub struct EffectSpecError {
 /// (compliance), link_bending (link, compliance), bump (centre=a;b;..., width, dx, dy, dz),
 /// dead_zone (width), thermal (dx, dy, dz per row).
 pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
-    let bad = |reason: String| EffectSpecError { spec: spec.to_string(), reason };
+    let bad = |reason: String| EffectSpecError { spec: crate::error::excerpt_of(spec, 120), reason };
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     let mut kv = std::collections::BTreeMap::new();
     for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
-        let (k, v) = part.split_once('=').ok_or_else(|| bad(format!("`{part}` is not key=value")))?;
+        let (k, v) = part.split_once('=').ok_or_else(|| bad(format!("`{}` is not key=value", crate::error::excerpt(part))))?;
         kv.insert(k.trim().to_string(), v.trim().to_string());
     }
     let num = |k: &str, default: Option<f64>| -> Result<f64, EffectSpecError> {
         match kv.get(k) {
-            Some(v) => v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad(format!("{k}={v} is not a finite number"))),
+            Some(v) => v
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| bad(format!("{k}={} is not a finite number", crate::error::excerpt(v)))),
             None => default.ok_or_else(|| bad(format!("missing {k}="))),
         }
     };
@@ -356,7 +360,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
                 .get("centre")
                 .ok_or_else(|| bad(format!("missing centre=q1;q2;...")))?
                 .split(';')
-                .map(|v| v.trim().parse::<f64>().map_err(|_| bad(format!("bad centre value `{v}`"))))
+                .map(|v| v.trim().parse::<f64>().map_err(|_| bad(format!("bad centre value `{}`", crate::error::excerpt(v)))))
                 .collect();
             let centre = centre?;
             if centre.len() != n_joints {
