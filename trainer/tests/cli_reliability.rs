@@ -152,3 +152,65 @@ fn csv_reading_is_capped_and_quotes_only_excerpts() {
     );
     assert!(err.len() < 200, "{err}");
 }
+
+/// A copy of the blob at `from` whose last momentum is `value`: checksum and fields valid, the
+/// model damaged (positions of about `value` times the arm's size).
+fn damaged_blob(dir: &std::path::Path, from: &str, to: &str, value: f64) -> String {
+    let blob = std::fs::read(dir.join(from)).unwrap();
+    let mut model = cbd_protocol::decode(&blob).unwrap();
+    let mut momenta: Vec<f64> = model.momenta.iter().collect();
+    *momenta.last_mut().unwrap() = value;
+    let bytes = cbd_protocol::f64_le_bytes(&momenta);
+    model.momenta = cbd_protocol::F64Slice::from_le_bytes(&bytes);
+    write(dir, to, cbd_protocol::encode_to_vec(&model).unwrap())
+}
+
+/// Item 8: `compensate` on a checksum-valid but damaged blob (one `eval` refuses) exited 0 with
+/// `residual median NaN`, commands of −2.17e217 and JSON nulls; `eval` blamed a data line. Both
+/// now refuse the blob itself, before any target or row, and write nothing.
+#[test]
+fn a_damaged_blob_is_refused_by_eval_and_compensate() {
+    let dir = scratch("damaged-blob");
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--representation", "kernel", "--quiet"]));
+    let bad = damaged_blob(&dir, "a.blob", "bad.blob", 1e150);
+    write(&dir, "t.csv", "x,y\n1.2,0.3\n0.5,0.5\n");
+    let needles = ["bad.blob", "at its own training configuration", "the blob is damaged"];
+    fails_with(&cbd(&dir, &["eval", "--blob", &bad, "--data", &grid]), &needles);
+    fails_with(&cbd(&dir, &["compensate", "--blob", &bad, "--targets", "t.csv", "--out", "c.csv", "--json", "c.json"]), &needles);
+    assert!(!dir.join("c.csv").exists() && !dir.join("c.json").exists());
+    // The undamaged blob still compensates.
+    succeeds(&cbd(&dir, &["compensate", "--blob", "a.blob", "--targets", "t.csv", "--out", "c.csv"]));
+}
+
+/// Item 9: seeds of 1e200 were accepted and echoed, a target row with more fields than the header
+/// was accepted, and a finite but huge target was blamed on the inverse kinematics ("row 0", no
+/// line). Targets and seeds are now read as measurement files are: file, line and column.
+#[test]
+fn compensate_validates_targets_and_seeds_like_measurements() {
+    let dir = scratch("compensate-inputs");
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--quiet"]));
+    write(&dir, "t.csv", "x,y\n1.2,0.3\n");
+    write(&dir, "s.csv", "q1,q2\n1e200,0\n");
+    let compensate = |targets: &str, seeds: Option<&str>| {
+        let mut args = vec!["compensate", "--blob", "a.blob", "--targets", targets, "--out", "c.csv"];
+        args.extend(seeds.map(|s| ["--seeds", s]).into_iter().flatten());
+        cbd(&dir, &args)
+    };
+    fails_with(&compensate("t.csv", Some("s.csv")), &["s.csv:2: column 'q1'", "1e200 rad is outside the joint's range"]);
+    write(&dir, "wide.csv", "x,y\n1.2,0.3,7\n");
+    fails_with(&compensate("wide.csv", None), &["wide.csv:2: 3 fields; the header has 2"]);
+    write(&dir, "huge.csv", "x,y\n0.5,0.5\n1e300,0\n");
+    let err = fails_with(&compensate("huge.csv", None), &["huge.csv:3: column 'x'", "within ±1e100"]);
+    assert!(!err.contains("row ") && !err.contains("inverse kinematics"), "{err}");
+    // Without --model the arm is the built-in RR arm, and the message says so.
+    let six = cbd(&dir, &["simulate", "--robot", "six", "--sampling", "uniform", "--count", "30", "--out", "six.csv"]);
+    succeeds(&six);
+    succeeds(&cbd(&dir, &["fit", "--model", &ur5_model(), "--data", "six.csv", "--out", "six.blob", "--quiet"]));
+    fails_with(&compensate_with_blob(&dir, "six.blob"), &["six.blob", "the built-in RR arm (no --model given)"]);
+}
+
+fn compensate_with_blob(dir: &std::path::Path, blob: &str) -> std::process::Output {
+    cbd(dir, &["compensate", "--blob", blob, "--targets", "t.csv", "--out", "c.csv"])
+}

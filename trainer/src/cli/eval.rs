@@ -63,6 +63,7 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     let m = model.task_dim();
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    crate::predict::check_calibrator(&mut cal).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     let mut predicted = Vec::with_capacity(data.positions.len());
     let mut nominal_pred = Vec::with_capacity(data.positions.len());
     let mut far = 0;

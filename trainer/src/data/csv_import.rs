@@ -157,11 +157,14 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
         row.convert(&record, line, &mut q, &mut y)?;
-        let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
-        match seen.get(&key) {
-            Some(&first) => repeats.push((first, data.len())),
-            None => {
-                seen.insert(key, data.len());
+        // A repeat is a configuration measured twice: a file of targets or seeds alone has none.
+        if n > 0 && m > 0 {
+            let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
+            match seen.get(&key) {
+                Some(&first) => repeats.push((first, data.len())),
+                None => {
+                    seen.insert(key, data.len());
+                }
             }
         }
         data.push(&q, &y);
