@@ -18,14 +18,15 @@ pub fn check_calibrator(cal: &mut Calibrator) -> std::result::Result<(), String>
     let count = points.len() / n;
     let step = count.div_ceil(CHECKED_CONFIGURATIONS).max(1);
     for (k, q) in points.chunks_exact(n).enumerate().step_by(step) {
-        let position: Vec<f64> =
-            match cal.evaluate(q) {
-                Ok(e) => e.position().iter().copied().collect(),
-                Err(e) => return Err(format!(
+        let position: Vec<f64> = match cal.evaluate(q) {
+            Ok(e) => e.position().iter().copied().collect(),
+            Err(e) => {
+                return Err(format!(
                     "the model cannot be evaluated at its own training configuration {} of {count}: {e}: the blob is damaged; fit it again",
                     k + 1
-                )),
-            };
+                ))
+            }
+        };
         if let Some(v) = position.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
             return Err(format!(
                 "the model evaluates to {v:.3e} at its own training configuration {} of {count}, beyond ±{MAX_MAGNITUDE:e}: the blob is damaged; fit it again",

@@ -214,3 +214,27 @@ fn compensate_validates_targets_and_seeds_like_measurements() {
 fn compensate_with_blob(dir: &std::path::Path, blob: &str) -> std::process::Output {
     cbd(dir, &["compensate", "--blob", blob, "--targets", "t.csv", "--out", "c.csv"])
 }
+
+/// Item 11: `simulate` accepted what the importers refuse (`--noise 1e300`, effect sizes of 1e300,
+/// `encoder_scale … scale=1e300`, `dead_zone … width=-1`) and wrote CSVs `cbd` could not read back.
+/// Its arguments now obey the importers' limits, and what it writes, `fit` reads.
+#[test]
+fn simulate_writes_only_what_cbd_reads_back() {
+    let dir = scratch("simulate-limits");
+    for (args, needle) in [
+        (vec!["--noise", "1e300"], "--noise must be a number in [0, 1e100]"),
+        (vec!["--effect", "transmission:joint=1,harmonic=1,cos=1e300"], "cos = 1e300 is beyond ±1e100"),
+        (vec!["--effect", "encoder_scale:joint=1,scale=1e300"], "scale = 1e300 is beyond ±1e100"),
+        (vec!["--effect", "dead_zone:joint=1,width=-1"], "width = -1 must not be negative"),
+        (vec!["--sampling", "uniform", "--count", "1000", "--effect", "thermal:dx=1e98"], "beyond the ±1e100 `cbd` reads back"),
+    ] {
+        let mut all = vec!["simulate", "--out", "s.csv"];
+        all.extend(args);
+        fails_with(&cbd(&dir, &all), &[needle]);
+        assert!(!dir.join("s.csv").exists());
+    }
+    // At the edge of the limits the CSV reads back.
+    succeeds(&cbd(&dir, &["simulate", "--grid", "4", "--noise", "1e90", "--out", "s.csv"]));
+    let out = cbd(&dir, &["eval", "--blob", "none.blob", "--data", "s.csv"]);
+    fails_with(&out, &["none.blob"]);
+}
