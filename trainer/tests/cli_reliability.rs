@@ -238,3 +238,22 @@ fn simulate_writes_only_what_cbd_reads_back() {
     let out = cbd(&dir, &["eval", "--blob", "none.blob", "--data", "s.csv"]);
     fails_with(&out, &["none.blob"]);
 }
+
+/// Item 12: `report --json` on `{}` exited 0 with an empty page; `compare --commanded foo` was
+/// refused only after all six fits. Both are refused up front now.
+#[test]
+fn report_on_nothing_and_an_unknown_commanded_arm_are_refused_up_front() {
+    let dir = scratch("report-commanded");
+    write(&dir, "d.json", "{}");
+    fails_with(&cbd(&dir, &["report", "--json", "d.json", "--out", "r.html"]), &["d.json: nothing to report"]);
+    assert!(!dir.join("r.html").exists());
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    let model = write(&dir, "rr.toml", PLANAR_RR_MODEL);
+    let out = cbd(&dir, &["compare", "--model", &model, "--train", &grid, "--test", &grid, "--commanded", "foo"]);
+    let err = fails_with(&out, &["--commanded", "foo"]);
+    assert!(out.stdout.is_empty() && !err.contains("hyperparameters"), "the fits ran first:\n{}", String::from_utf8_lossy(&out.stdout));
+    fails_with(
+        &cbd(&dir, &["compare", "--model", &model, "--train", &grid, "--test", &grid, "--commanded", "six"]),
+        &["--commanded six", "6 joints"],
+    );
+}

@@ -76,6 +76,9 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     for w in warnings {
         eprintln!("warning: {w}");
     }
+    if let Some(robot) = &args.commanded {
+        crate::baselines::commanded::commanded_arm(robot, &inputs.nominal)?;
+    }
     // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
     let train = &inputs.train.measurements;
     crate::cli::memory::check_fit_of(&args.train, train, "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)")?;

@@ -168,6 +168,15 @@ pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str)
     let top = json
         .as_object()
         .ok_or_else(|| crate::Error::Path { path: source.into(), reason: "expected a JSON object at the top level".into() })?;
+    // Every field but a list is shown (in a table or section of its own): none, no page.
+    if !top.iter().any(|(k, v)| !v.is_array() || k == "joint_widths") {
+        return Err(crate::Error::Path {
+            path: source.into(),
+            reason:
+                "nothing to report: the JSON object has no field a report shows (expected the --json of cbd demo, compare, eval or fit)"
+                    .into(),
+        });
+    }
     let mut out = String::new();
     let kind = if top.contains_key("methods") { "method comparison" } else { "calibration run" };
     let _ = writeln!(
@@ -395,6 +404,16 @@ mod tests {
         {
             assert_eq!(base64(plain.as_bytes()), coded);
         }
+    }
+
+    /// Issue 27 item 12: `report --json` on `{}` wrote an empty page with exit 0.
+    #[test]
+    fn an_object_with_nothing_to_show_is_refused() {
+        for empty in [serde_json::json!({}), serde_json::json!({"log": [1, 2]})] {
+            let e = render_report(&empty, "d.json", &[], "m").unwrap_err().to_string();
+            assert!(e.starts_with("d.json: nothing to report"), "{e}");
+        }
+        assert!(render_report(&serde_json::json!({"rows": 3}), "d.json", &[], "m").is_ok());
     }
 
     #[test]
