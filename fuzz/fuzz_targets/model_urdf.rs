@@ -17,7 +17,7 @@ use std::path::Path;
 const MAX_INPUT: usize = 1 << 16;
 
 fn check_urdf(text: &str, flags: u8) {
-    let Ok(robot) = urdf_rs::read_from_string(text) else { return };
+    let Ok(robot) = cbd_trainer::nominal::urdf::parse(text) else { return };
     let names: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
     let (Some(first), Some(last)) = (names.first(), names.last()) else { return };
     let scale = if flags & 2 != 0 { 1000.0 } else { 1.0 };

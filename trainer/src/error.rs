@@ -116,3 +116,66 @@ impl From<Error> for String {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Most characters of a file's (or the command line's) text quoted in a message.
+pub const EXCERPT_CHARS: usize = 40;
+
+/// `text` as a message quotes it: at most [`EXCERPT_CHARS`] characters, control characters escaped
+/// (a NUL as `\u{0}`), and the whole length when cut. A field of 300 MB is quoted by its start, not
+/// echoed to the terminal whole.
+pub fn excerpt(text: &str) -> String {
+    excerpt_of(text, EXCERPT_CHARS)
+}
+
+/// [`excerpt`] with room for `chars` characters (a parser's message that quotes the file).
+pub fn excerpt_of(text: &str, chars: usize) -> String {
+    let escape = |c: char| -> String {
+        if c.is_control() {
+            c.escape_default().collect()
+        } else {
+            c.to_string()
+        }
+    };
+    let mut out: String = text.chars().take(chars).map(escape).collect();
+    if text.chars().nth(chars).is_some() {
+        out.push_str(&format!("… ({} bytes)", text.len()));
+    }
+    out
+}
+
+/// The longest error line `cbd` prints, in bytes.
+pub const MAX_MESSAGE_BYTES: usize = 1000;
+
+/// `message` as the one line `cbd` prints: line breaks and other control characters become
+/// spaces, and a message over [`MAX_MESSAGE_BYTES`] keeps its start (the file, line and column)
+/// and says how long it was. Quoting is bounded where it happens ([`excerpt`]); this is the last
+/// guard for messages of other libraries (TOML, URDF, JSON parsers).
+pub fn one_line(message: &str) -> String {
+    let flat: String = message.split(|c: char| c.is_control()).map(str::trim).filter(|p| !p.is_empty()).collect::<Vec<_>>().join(" ");
+    if flat.len() <= MAX_MESSAGE_BYTES {
+        return flat;
+    }
+    let mut cut = MAX_MESSAGE_BYTES - 40;
+    while !flat.is_char_boundary(cut) {
+        cut -= 1;
+    }
+    format!("{}… ({} bytes in all)", &flat[..cut], flat.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 27 item 10: a 300 MB field was echoed whole to stderr; NUL bytes went out raw.
+    #[test]
+    fn messages_quote_short_excerpts_on_one_line() {
+        assert_eq!(excerpt("1.4x"), "1.4x");
+        let long = "\0".repeat(1 << 20);
+        let e = excerpt(&long);
+        assert!(e.starts_with("\\u{0}\\u{0}") && e.ends_with("… (1048576 bytes)") && e.len() < 300, "{e}");
+        let m = one_line(&format!("a.toml: TOML parse error at line 5\n  |\n5 | {}\n", "x".repeat(5000)));
+        assert!(m.starts_with("a.toml: TOML parse error at line 5 | 5 | xxx") && m.len() <= MAX_MESSAGE_BYTES + 40, "{m}");
+        assert!(!m.contains('\n') && m.ends_with("bytes in all)"));
+        assert_eq!(one_line("plain"), "plain");
+    }
+}

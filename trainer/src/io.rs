@@ -1,8 +1,9 @@
 //! Writing output files: atomically (a reader or an interrupted writer never sees a truncated file),
-//! only over regular files or new paths, and `-` for standard output.
+//! only over regular files or new paths, never over a file the run reads, and `-` for standard output.
 
 use crate::error::{Error, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 /// The output path that means standard output.
 pub const STDOUT: &str = "-";
@@ -18,22 +19,16 @@ pub fn is_stdout(path: &Path) -> bool {
 /// or a new path is accepted; `-` writes to standard output.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
     if is_stdout(path) {
         let mut out = std::io::stdout().lock();
         return out.write_all(bytes).and_then(|()| out.flush()).map_err(Error::Stdout);
     }
     check_existing_output(path)?;
+    refuse_input(path)?;
     let dir = output_dir(path);
     let name = path.file_name().ok_or_else(|| Error::Path { path: path.to_path_buf(), reason: "not a file path".into() })?;
-    let unique = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(".{}.tmp{}-{unique}", name.to_string_lossy(), std::process::id()));
-    let written = std::fs::File::create_new(&tmp).and_then(|mut f| {
-        f.write_all(bytes)?;
-        f.sync_all()
-    });
-    let result = written.and_then(|()| std::fs::rename(&tmp, path));
+    let tmp = temporary_name(dir, name);
+    let result = write_unnamed(dir, &tmp, bytes).unwrap_or_else(|| write_named(&tmp, bytes)).and_then(|()| std::fs::rename(&tmp, path));
     match result {
         Ok(()) => {
             // Make the rename itself durable where the platform allows.
@@ -46,6 +41,143 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
             let _ = std::fs::remove_file(&tmp);
             Err(Error::io(path, e))
         }
+    }
+}
+
+/// A hidden name beside the output, unique to this process and write.
+fn temporary_name(dir: &Path, name: &std::ffi::OsStr) -> PathBuf {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let unique = COUNTER.fetch_add(1, Ordering::Relaxed);
+    dir.join(format!(".{}.tmp{}-{unique}", name.to_string_lossy(), std::process::id()))
+}
+
+/// Writes `bytes` to a new file at `tmp` and syncs it.
+fn write_named(tmp: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut f = std::fs::File::create_new(tmp)?;
+    f.write_all(bytes)?;
+    f.sync_all()
+}
+
+/// Writes and syncs `bytes` in an unnamed file of `dir` (Linux `O_TMPFILE`) and only then gives it
+/// the name `tmp`: a process killed while writing (a 76 MB simulation takes a while) leaves no
+/// hidden file behind, since a file without a name is freed with the process. `None` where the
+/// kernel or file system has no unnamed files (the caller writes a named one).
+#[cfg(target_os = "linux")]
+fn write_unnamed(dir: &Path, tmp: &Path, bytes: &[u8]) -> Option<std::io::Result<()>> {
+    use std::io::Write;
+    use std::os::unix::ffi::OsStrExt;
+    use std::os::unix::fs::OpenOptionsExt;
+    use std::os::unix::io::AsRawFd;
+    let mut f = std::fs::OpenOptions::new().write(true).custom_flags(libc::O_TMPFILE).mode(0o666).open(dir).ok()?;
+    let written = f.write_all(bytes).and_then(|()| f.sync_all());
+    Some(written.and_then(|()| {
+        let fd_path = std::ffi::CString::new(format!("/proc/self/fd/{}", f.as_raw_fd())).map_err(std::io::Error::other)?;
+        let name = std::ffi::CString::new(tmp.as_os_str().as_bytes()).map_err(std::io::Error::other)?;
+        // SAFETY: both are NUL-terminated paths that outlive the call; linkat only reads them.
+        let linked = unsafe { libc::linkat(libc::AT_FDCWD, fd_path.as_ptr(), libc::AT_FDCWD, name.as_ptr(), libc::AT_SYMLINK_FOLLOW) };
+        if linked == 0 {
+            Ok(())
+        } else {
+            Err(std::io::Error::last_os_error())
+        }
+    }))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn write_unnamed(_: &Path, _: &Path, _: &[u8]) -> Option<std::io::Result<()>> {
+    None
+}
+
+/// A file the run reads: device and inode (the same file under another name or a hard link is
+/// still that file) and how the command line named it.
+struct Input {
+    id: (u64, u64),
+    name: String,
+}
+
+/// Every input noted so far ([`note_input`]).
+static INPUTS: Mutex<Vec<Input>> = Mutex::new(Vec::new());
+
+#[cfg(unix)]
+fn file_id(path: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+}
+
+#[cfg(not(unix))]
+fn file_id(path: &Path) -> Option<(u64, u64)> {
+    let _ = path;
+    None
+}
+
+/// Notes `path` as an input of this run, `name` (a flag, or what the file is) naming it in
+/// messages: no output of the run may replace it ([`write_atomically`] refuses to).
+pub fn note_input(name: &str, path: &Path) {
+    let Some(id) = file_id(path) else { return };
+    let mut inputs = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
+    if !inputs.iter().any(|i| i.id == id) {
+        inputs.push(Input { id, name: name.to_string() });
+    }
+}
+
+/// An output at `path` would replace a file the run reads: refused, naming the input.
+fn refuse_input(path: &Path) -> Result<()> {
+    let Some(id) = file_id(path) else { return Ok(()) };
+    let inputs = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
+    match inputs.iter().find(|i| i.id == id) {
+        Some(input) => Err(Error::Path {
+            path: path.to_path_buf(),
+            reason: format!("is also an input ({}); writing there would replace it: give the output another path", input.name),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// A command's paths, checked before any work: each output can be written ([`check_output`]), is
+/// none of the inputs (which are noted for the writes to come: each figure under `--plots` is held
+/// to the same rule) and is not another output's file. Each path comes with its flag.
+pub fn check_paths(inputs: &[(&str, Option<&Path>)], outputs: &[(&str, Option<&Path>)]) -> Result<()> {
+    for (flag, path) in inputs {
+        if let Some(path) = path {
+            note_input(flag, path);
+        }
+    }
+    let outputs: Vec<(&str, &Path)> = outputs.iter().filter_map(|(flag, path)| path.map(|p| (*flag, p))).collect();
+    for (k, (flag, path)) in outputs.iter().enumerate() {
+        check_output(path)?;
+        refuse_input(path)?;
+        if let Some((other, _)) = outputs[..k].iter().find(|(_, earlier)| same_output(earlier, path)) {
+            return Err(Error::Path {
+                path: path.to_path_buf(),
+                reason: format!("is given to both {other} and {flag}; give each output its own path"),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Whether two output paths name the same destination: both standard output, the same existing
+/// file, or the same path once made absolute.
+fn same_output(a: &Path, b: &Path) -> bool {
+    if is_stdout(a) || is_stdout(b) {
+        return is_stdout(a) && is_stdout(b);
+    }
+    match (file_id(a), file_id(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => std::path::absolute(a).ok() == std::path::absolute(b).ok(),
+    }
+}
+
+/// A directory the run writes figures into (`--plots`): missing (it is created) or a directory.
+pub fn check_output_dir(flag: &str, dir: &Path) -> Result<()> {
+    match std::fs::metadata(dir) {
+        Ok(meta) if !meta.is_dir() => Err(Error::Path {
+            path: dir.to_path_buf(),
+            reason: format!("is not a directory ({flag} names the directory figures are written into)"),
+        }),
+        _ => Ok(()),
     }
 }
 
@@ -116,5 +248,52 @@ pub fn check_output(path: &Path) -> Result<()> {
             Ok(())
         }
         Err(e) => Err(Error::Path { path: path.to_path_buf(), reason: format!("the directory {} is not writable: {e}", dir.display()) }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("cbd-io-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// Issue 27 item 7: the data goes to an unnamed file first; the directory then holds the output
+    /// only, replaced whole.
+    #[test]
+    fn atomic_write_leaves_only_the_output() {
+        let dir = scratch("atomic");
+        let out = dir.join("a.txt");
+        write_atomically(&out, b"first").unwrap();
+        write_atomically(&out, b"second").unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"second");
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("a.txt")]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Issue 27 item 6: an output that is an input (the same file by any name) or another output is refused.
+    #[test]
+    fn outputs_are_neither_inputs_nor_each_other() {
+        let dir = scratch("inputs");
+        let (data, link) = (dir.join("data.csv"), dir.join("link.csv"));
+        std::fs::write(&data, b"q1,q2,x,y\n").unwrap();
+        std::fs::hard_link(&data, &link).unwrap();
+        let e = check_paths(&[("--data", Some(&data))], &[("--out", Some(&link))]).unwrap_err().to_string();
+        assert!(e.contains("link.csv: is also an input (--data)"), "{e}");
+        // Noted inputs hold for later writes too (each figure of --plots).
+        assert!(write_atomically(&data, b"x").unwrap_err().to_string().contains("is also an input"));
+        assert_eq!(std::fs::read(&data).unwrap(), b"q1,q2,x,y\n");
+        let new = dir.join("new.blob");
+        let e = check_paths(&[], &[("--out", Some(&new)), ("--json", Some(&dir.join(".").join("new.blob")))]).unwrap_err().to_string();
+        assert!(e.contains("is given to both --out and --json"), "{e}");
+        let dash = Path::new(STDOUT);
+        assert!(check_paths(&[], &[("--out", Some(dash)), ("--json", Some(dash))]).is_err());
+        assert!(check_paths(&[("--data", Some(&data))], &[("--out", Some(&new)), ("--json", None)]).is_ok());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -3,6 +3,40 @@
 use crate::error::{Error, Result};
 use cbd_runtime::Calibrator;
 
+/// Most of a model's own training configurations [`check_calibrator`] evaluates.
+const CHECKED_CONFIGURATIONS: usize = 64;
+
+/// A blob can pass its checksum and every field check and still be damaged (or built by hand):
+/// momenta so large that the calibrated positions overflow. Such a model is refused before it is
+/// used: at up to 64 of its own training configurations (evenly spaced) every calibrated position
+/// must be finite and within ±1e100 in the model's unit, the bound every imported measurement
+/// obeys (a model that fits its data predicts near them). The message names the configuration.
+pub fn check_calibrator(cal: &mut Calibrator) -> std::result::Result<(), String> {
+    use crate::data::csv_import::MAX_MAGNITUDE;
+    let n = cal.model().n_joints().max(1);
+    let points: Vec<f64> = cal.model().points.iter().collect();
+    let count = points.len() / n;
+    let step = count.div_ceil(CHECKED_CONFIGURATIONS).max(1);
+    for (k, q) in points.chunks_exact(n).enumerate().step_by(step) {
+        let position: Vec<f64> = match cal.evaluate(q) {
+            Ok(e) => e.position().iter().copied().collect(),
+            Err(e) => {
+                return Err(format!(
+                    "the model cannot be evaluated at its own training configuration {} of {count}: {e}: the blob is damaged; fit it again",
+                    k + 1
+                ))
+            }
+        };
+        if let Some(v) = position.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
+            return Err(format!(
+                "the model evaluates to {v:.3e} at its own training configuration {} of {count}, beyond ±{MAX_MAGNITUDE:e}: the blob is damaged; fit it again",
+                k + 1
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Loads `blob` with the runtime and evaluates it at every configuration of `joints`
 /// (row-major); returns positions (row-major, user units).
 pub fn evaluate_blob(blob: &[u8], joints: &[f64]) -> Result<Vec<f64>> {

@@ -365,14 +365,9 @@ pub fn fit_and_command(
 
 /// `cbd compare --commanded <robot>`: the table for the arm `cbd simulate --robot <robot>`
 /// measures, CbD fitted with `settings`; prints it and returns it for the JSON.
-pub fn run_for_compare(
-    robot: &str,
-    nominal: &NominalModel,
-    train: &Measurements,
-    search: &SearchOptions,
-    settings: &crate::calibrate::Settings,
-    unit: &str,
-) -> crate::Result<CommandedAccuracy> {
+/// The simulated arm `--commanded robot` names, checked against the model file's arm: `compare`
+/// calls it before any fit (an unknown name was refused only after all six fits).
+pub fn commanded_arm(robot: &str, nominal: &NominalModel) -> crate::Result<SimulatedArm> {
     let arm = SimulatedArm::named(robot).map_err(|e| e.context("--commanded"))?;
     if arm.n_joints() != nominal.n_joints() {
         return Err(Error::InvalidInput(format!(
@@ -381,6 +376,18 @@ pub fn run_for_compare(
             nominal.n_joints()
         )));
     }
+    Ok(arm)
+}
+
+pub fn run_for_compare(
+    robot: &str,
+    nominal: &NominalModel,
+    train: &Measurements,
+    search: &SearchOptions,
+    settings: &crate::calibrate::Settings,
+    unit: &str,
+) -> crate::Result<CommandedAccuracy> {
+    let arm = commanded_arm(robot, nominal)?;
     let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
         crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
     };

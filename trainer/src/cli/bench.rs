@@ -171,7 +171,7 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
     let settings =
         crate::calibrate::Settings { source: crate::calibrate::HyperparameterSource::PaperRr, steps: Some(2), ..Default::default() };
     let fit = crate::calibrate::calibrate(&rr::nominal(), &train, &settings).map_err(|e| e.to_string())?.fit;
-    std::fs::write(blob_out, &fit.blob).map_err(|e| format!("{}: {e}", blob_out.display()))?;
+    crate::io::write_atomically(blob_out, &fit.blob)?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
     Ok(FitBench::of("rr", n, &fit.report, 0.0, crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean))
 }
@@ -290,6 +290,8 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         println!("{}", serde_json::to_string(&fit).map_err(|e| e.to_string())?);
         return Ok(());
     }
+    // `--markdown` is edited in place: an output, and read only to keep its other sections.
+    crate::io::check_paths(&[], &[("--json", args.json.as_deref()), ("--markdown", args.markdown.as_deref())])?;
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut report = BenchReport {
         machine: machine(),

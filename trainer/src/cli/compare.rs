@@ -56,8 +56,12 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
 }
 
 pub fn run(args: CompareArgs) -> Result<(), String> {
-    if let Some(path) = &args.json {
-        crate::cli::check_output(path)?;
+    crate::io::check_paths(
+        &[("--model", Some(&args.model)), ("--train", Some(&args.train)), ("--test", Some(&args.test))],
+        &[("--json", args.json.as_deref())],
+    )?;
+    if let Some(dir) = &args.plots {
+        crate::io::check_output_dir("--plots", dir)?;
     }
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.
@@ -71,6 +75,9 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     }
     for w in warnings {
         eprintln!("warning: {w}");
+    }
+    if let Some(robot) = &args.commanded {
+        crate::baselines::commanded::commanded_arm(robot, &inputs.nominal)?;
     }
     // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
     let train = &inputs.train.measurements;

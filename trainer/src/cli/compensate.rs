@@ -47,41 +47,24 @@ pub struct CompensateArgs {
 /// Steps of the nominal inverse kinematics that makes the seed of every row.
 const NOMINAL_IK_ITERATIONS: usize = 8;
 
-/// Reads the named numeric columns of a CSV file (header line first). Errors name the file, the
-/// line and the column. Blank lines are skipped.
-pub fn read_columns(path: &Path, columns: &[String], scales: &[f64]) -> Result<Vec<Vec<f64>>, String> {
-    let bytes = crate::data::read_capped(path, 1 << 30, "CSV file")?;
-    let text = String::from_utf8(bytes).map_err(|e| format!("{}: not UTF-8 text: {e}", path.display()))?;
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) =
-        lines.next().ok_or_else(|| format!("{}: empty file (expected a header line with {})", path.display(), columns.join(", ")))?;
-    let names: Vec<&str> = header.split(',').map(|s| s.trim().trim_matches('"')).collect();
-    let mut index = Vec::with_capacity(columns.len());
-    for c in columns {
-        let i = names.iter().position(|n| n == c).ok_or_else(|| {
-            format!("{}:1: no column `{c}` (the header has {}; expected {})", path.display(), names.join(", "), columns.join(", "))
-        })?;
-        index.push(i);
-    }
-    let mut rows = Vec::new();
-    for (i, line) in lines {
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        let mut row = Vec::with_capacity(columns.len());
-        for ((c, &k), scale) in columns.iter().zip(&index).zip(scales) {
-            let field =
-                fields.get(k).ok_or_else(|| format!("{}:{}: column `{c}` is missing ({} fields)", path.display(), i + 1, fields.len()))?;
-            let v: f64 = field.parse().map_err(|_| format!("{}:{}: column `{c}`: `{field}` is not a number", path.display(), i + 1))?;
-            if !v.is_finite() {
-                return Err(format!("{}:{}: column `{c}`: `{field}` is not finite", path.display(), i + 1));
-            }
-            row.push(v * scale);
-        }
-        rows.push(row);
-    }
-    if rows.is_empty() {
-        return Err(format!("{}: no data rows", path.display()));
-    }
-    Ok(rows)
+/// The columns of a file of targets: `spec`'s positions alone, at least one row.
+fn targets_spec(spec: &ColumnSpec) -> ColumnSpec {
+    ColumnSpec { joint_columns: Vec::new(), joint_kinds: Vec::new(), joint_limits: Vec::new(), min_rows: 1, ..spec.clone() }
+}
+
+/// The columns of a file of seeds: `spec`'s joints alone (in their ranges), at least one row.
+fn seeds_spec(spec: &ColumnSpec) -> ColumnSpec {
+    ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() }
+}
+
+/// The rows of `path` read as measurement files are (`csv_import`: the size and line caps, the
+/// field count, numbers finite and within ±1e100 in the model's unit, joints in their ranges,
+/// errors naming the file, line and column), in the model's units, with their file lines.
+fn read_rows(path: &Path, spec: &ColumnSpec) -> Result<(Vec<Vec<f64>>, Vec<u64>), String> {
+    let imported = crate::data::csv_import::read_measurements(path, spec).map_err(|e| e.to_string())?;
+    let data = &imported.measurements;
+    let row = |i: usize| if data.n_joints > 0 { data.joints(i).to_vec() } else { data.position(i).to_vec() };
+    Ok(((0..data.len()).map(row).collect(), imported.lines))
 }
 
 /// Per joint column: the factor from the file's unit to the model's (radians or model length).
@@ -136,17 +119,35 @@ pub struct CommandRow {
     pub compensation: Compensation,
 }
 
+/// Why [`compensate_all`] failed: the model (the blob's fault) or one target row (0-based in
+/// `targets`; the caller names its file line).
+#[derive(Debug, Clone, PartialEq)]
+pub enum CompensateError {
+    Model(String),
+    Row { row: usize, message: String },
+}
+
+impl std::fmt::Display for CompensateError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CompensateError::Model(message) => write!(f, "{message}"),
+            CompensateError::Row { row, message } => write!(f, "row {row}: {message}"),
+        }
+    }
+}
+
 /// Compensates every target (model units): seed from `seeds` (or [`nearest_training_configuration`]),
 /// nominal IK of the target from it ([`nominal_position`]), then `Calibrator::compensate_with`.
-/// Errors name the row (0-based index into `targets`).
+/// A blob whose model is unusable ([`crate::predict::check_calibrator`]) is refused before any
+/// target, and a row whose command or residual is not finite is an error, never a NaN in the output.
 pub fn compensate_all(
     blob: &[u8],
     targets: &[Vec<f64>],
     seeds: Option<&[Vec<f64>]>,
     iterations: usize,
     tolerance: Option<f64>,
-) -> Result<Vec<CommandRow>, String> {
-    let model = cbd_protocol::decode(blob).map_err(|e| e.to_string())?;
+) -> Result<Vec<CommandRow>, CompensateError> {
+    let model = cbd_protocol::decode(blob).map_err(|e| CompensateError::Model(e.to_string()))?;
     let n = model.n_joints();
     let nominal: NominalModel = model.nominal.clone();
     let hints: Vec<Vec<f64>> = match seeds {
@@ -154,7 +155,8 @@ pub fn compensate_all(
         None => targets.iter().map(|t| nearest_training_configuration(&model, t)).collect(),
     };
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
-    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| e.to_string())?;
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| CompensateError::Model(e.to_string()))?;
+    crate::predict::check_calibrator(&mut cal).map_err(CompensateError::Model)?;
     let mut options = CompensateOptions::for_model(&cal);
     options.iterations = iterations;
     if let Some(t) = tolerance {
@@ -163,21 +165,33 @@ pub fn compensate_all(
     let scale = cal.model().normalisation.task_scale;
     let mut out = Vec::with_capacity(targets.len());
     for (row, (target, hint)) in targets.iter().zip(&hints).enumerate() {
+        let at = |message: String| CompensateError::Row { row, message };
         let mut seed = vec![0.0; n];
         nominal_position(&nominal, target, hint, &mut seed, NOMINAL_IK_ITERATIONS, scale)
-            .ok_or_else(|| format!("row {row}: the nominal inverse kinematics failed (target or seed not finite)"))?;
+            .ok_or_else(|| at("the nominal inverse kinematics failed (target or seed not finite)".into()))?;
         let mut joints = vec![0.0; n];
-        let compensation = cal.compensate_with(target, &seed, &mut joints, &options).map_err(|e| format!("row {row}: {e}"))?;
+        let compensation = cal.compensate_with(target, &seed, &mut joints, &options).map_err(|e| at(e.to_string()))?;
+        if !(compensation.residual.is_finite() && joints.iter().all(|v| v.is_finite())) {
+            return Err(at(format!(
+                "the compensation is not finite (residual {:e}): the model cannot be used at this target",
+                compensation.residual
+            )));
+        }
         out.push(CommandRow { joints, compensation });
     }
     Ok(out)
 }
 
 pub fn run(args: CompensateArgs) -> Result<(), String> {
-    crate::cli::check_output(&args.out)?;
-    if let Some(path) = &args.json {
-        crate::cli::check_output(path)?;
-    }
+    crate::io::check_paths(
+        &[
+            ("--model", args.model.model.as_deref()),
+            ("--blob", Some(&args.blob)),
+            ("--targets", Some(&args.targets)),
+            ("--seeds", args.seeds.as_deref()),
+        ],
+        &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
+    )?;
     if args.iterations == 0 || args.iterations > 64 {
         return Err(format!("--iterations must be between 1 and 64, got {}", args.iterations));
     }
@@ -190,8 +204,9 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     if model.n_joints() != nominal.n_joints() || model.task_dim() != nominal.task_dim() {
+        let arm = if args.model.model.is_some() { "the model file's arm" } else { "the built-in RR arm (no --model given)" };
         return Err(format!(
-            "{}: the model has {} joints and {}-D positions, but the model file's arm has {} joints and {}-D positions",
+            "{}: the model has {} joints and {}-D positions, but {arm} has {} joints and {}-D positions",
             args.blob.display(),
             model.n_joints(),
             model.task_dim(),
@@ -200,10 +215,10 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
         ));
     }
     let length = spec.length_unit.factor_to(spec.model_length_unit);
-    let targets = read_columns(&args.targets, &spec.position_columns, &vec![length; spec.position_columns.len()])?;
+    let (targets, target_lines) = read_rows(&args.targets, &targets_spec(&spec))?;
     let seeds = match &args.seeds {
         Some(path) => {
-            let seeds = read_columns(path, &spec.joint_columns, &joint_scales(&spec))?;
+            let (seeds, _) = read_rows(path, &seeds_spec(&spec))?;
             if seeds.len() != targets.len() {
                 return Err(format!(
                     "{}: {} seed rows for {} target rows in {} (one seed per target)",
@@ -218,8 +233,10 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
         None => None,
     };
     let tolerance = args.tolerance.map(|t| t * length);
-    let rows = compensate_all(&blob, &targets, seeds.as_deref(), args.iterations, tolerance)
-        .map_err(|e| format!("{}: {e}", args.targets.display()))?;
+    let rows = compensate_all(&blob, &targets, seeds.as_deref(), args.iterations, tolerance).map_err(|e| match e {
+        CompensateError::Model(message) => format!("{}: {message}", args.blob.display()),
+        CompensateError::Row { row, message } => format!("{}:{}: {message}", args.targets.display(), target_lines[row]),
+    })?;
     let (joint_scale, unit) = (joint_scales(&spec), spec.length_unit.name());
     let mut text = format!("{},residual,flags\n", spec.joint_columns.join(","));
     for r in &rows {
@@ -261,25 +278,27 @@ mod tests {
         path
     }
 
+    /// Issue 27 item 9: targets and seeds are read as measurement files are (the old reader took
+    /// seeds of 1e200, extra fields and targets beyond ±1e100); errors name the file, line and column.
     #[test]
-    fn bad_csv_input_names_the_file_line_and_column() {
-        let cols = vec!["x".to_string(), "y".to_string()];
-        let p = file("a.csv", "x,y\n0.5,0.1\n0.5,abc\n");
-        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
-        assert!(e.ends_with("a.csv:3: column `y`: `abc` is not a number"), "{e}");
-        let p = file("b.csv", "x,z\n0.5,1\n");
-        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
-        assert!(e.contains("b.csv:1: no column `y`"), "{e}");
-        let p = file("c.csv", "x,y\n0.5\n");
-        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
-        assert!(e.contains("c.csv:2: column `y` is missing"), "{e}");
-        let p = file("d.csv", "x,y\n0.5,inf\n");
-        let e = read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err();
-        assert!(e.contains("d.csv:2: column `y`: `inf` is not finite"), "{e}");
-        let p = file("e.csv", "x,y\n");
-        assert!(read_columns(&p, &cols, &[1.0, 1.0]).unwrap_err().contains("no data rows"));
-        let p = file("f.csv", "x,y\n1,2\n\n3,4\n");
-        assert_eq!(read_columns(&p, &cols, &[2.0, 1.0]).unwrap(), vec![vec![2.0, 2.0], vec![6.0, 4.0]]);
+    fn targets_and_seeds_are_read_with_the_importers_rules() {
+        let (_, spec) = load_nominal(&ModelArgs { model: None }).unwrap();
+        let targets = |name: &str, text: &str| read_rows(&file(name, text), &targets_spec(&spec));
+        let seeds = |name: &str, text: &str| read_rows(&file(name, text), &seeds_spec(&spec));
+        let e = targets("a.csv", "x,y\n0.5,0.1\n0.5,abc\n").unwrap_err();
+        assert!(e.ends_with("a.csv:3: column 'y': not a number: 'abc'"), "{e}");
+        assert!(targets("b.csv", "x,z\n0.5,1\n").unwrap_err().contains("b.csv:1: column 'y': no such column"));
+        assert!(targets("c.csv", "x,y\n0.5\n").unwrap_err().contains("c.csv:2: 1 fields; the header has 2"));
+        assert!(targets("d.csv", "x,y\n0.5,inf\n").unwrap_err().contains("d.csv:2: column 'y': not a finite number: 'inf'"));
+        assert!(targets("e.csv", "x,y\n").unwrap_err().contains("0 data rows"));
+        assert!(targets("g.csv", "x,y\n1,2,3\n").unwrap_err().contains("g.csv:2: 3 fields; the header has 2"));
+        assert!(targets("h.csv", "x,y\n1e300,0\n")
+            .unwrap_err()
+            .contains("h.csv:2: column 'x': '1e300' m is 1e300 m; values must stay within ±1e100"));
+        assert!(seeds("i.csv", "q1,q2\n1e200,0\n").unwrap_err().contains("i.csv:2: column 'q1': 1e200 rad is outside the joint's range"));
+        let (rows, lines) = targets("f.csv", "x,y\n1,2\n\n3,4\n3,4\n").unwrap();
+        assert_eq!((rows, lines), (vec![vec![1.0, 2.0], vec![3.0, 4.0], vec![3.0, 4.0]], vec![2, 4, 5]));
+        assert_eq!(seeds("s.csv", "q2,q1\n0.5,0.25\n").unwrap().0, vec![vec![0.25, 0.5]]);
     }
 
     #[test]

@@ -64,7 +64,10 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     if args.test_points == 0 {
         return Err("--test-points must be at least 1".into());
     }
-    crate::cli::check_output(&args.out)?;
+    crate::io::check_paths(&[], &[("--out", Some(&args.out)), ("--json", args.json.as_deref())])?;
+    if let Some(dir) = &args.plots {
+        crate::io::check_output_dir("--plots", dir)?;
+    }
     let nominal = rr::nominal();
     let real = rr::RealRr::default();
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));

@@ -57,8 +57,12 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     if args.write_model.is_some() && args.model.model.is_none() {
         return Err("--write-model needs --model (the file the corrections are written into)".into());
     }
-    for path in [&args.json, &args.write_model].into_iter().flatten() {
-        crate::cli::check_output(path)?;
+    crate::io::check_paths(
+        &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data)), ("--test", args.test.as_deref())],
+        &[("--json", args.json.as_deref()), ("--write-model", args.write_model.as_deref())],
+    )?;
+    if let Some(dir) = &args.plots {
+        crate::io::check_output_dir("--plots", dir)?;
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let read = |path: &PathBuf| -> Result<crate::data::Measurements, String> {

@@ -31,8 +31,12 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     if !(0.0..=1.0).contains(&t) {
         return Err(format!("--extrapolation-threshold must be a number in [0, 1], got {t}"));
     }
-    if let Some(path) = &args.json {
-        crate::cli::check_output(path)?;
+    crate::io::check_paths(
+        &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
+        &[("--json", args.json.as_deref())],
+    )?;
+    if let Some(dir) = &args.plots {
+        crate::io::check_output_dir("--plots", dir)?;
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
@@ -59,6 +63,7 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     let m = model.task_dim();
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    crate::predict::check_calibrator(&mut cal).map_err(|e| format!("{}: {e}", args.blob.display()))?;
     let mut predicted = Vec::with_capacity(data.positions.len());
     let mut nominal_pred = Vec::with_capacity(data.positions.len());
     let mut far = 0;

@@ -205,10 +205,10 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     if args.max_rows.is_some_and(|k| k < 2) {
         return Err("--max-rows must be at least 2".into());
     }
-    crate::cli::check_output(&args.out)?;
-    if let Some(path) = &args.json {
-        crate::cli::check_output(path)?;
-    }
+    crate::io::check_paths(
+        &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data))],
+        &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
+    )?;
     let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     for w in imported.warnings(&args.data) {

@@ -20,7 +20,7 @@ pub struct ReportArgs {
 }
 
 pub fn run(args: ReportArgs) -> Result<(), String> {
-    crate::cli::check_output(&args.out)?;
+    crate::io::check_paths(&[("--json", Some(&args.json))], &[("--out", Some(&args.out))])?;
     let figures = crate::report::html::write_report(&args.json, args.plots.as_deref(), &args.out, &args.unit)?;
     println!("report written to {} ({figures} figures embedded)", args.out.display());
     Ok(())

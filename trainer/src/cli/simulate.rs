@@ -1,5 +1,6 @@
 //! `cbd simulate`: measurements of a simulated "real" robot, as CSV.
 
+use crate::data::csv_import::MAX_MAGNITUDE;
 use crate::simulate::{add_noise, configurations, rr, Sampling};
 use std::path::PathBuf;
 
@@ -40,10 +41,13 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<(), String> {
-    crate::cli::check_output(&args.out)?;
+    crate::io::check_paths(&[], &[("--out", Some(&args.out))])?;
     if let Some(noise) = args.noise {
-        if !(noise >= 0.0 && noise.is_finite()) {
-            return Err(format!("--noise must be a finite non-negative number, got {noise}"));
+        // The importers' bound: a CSV that `cbd` writes, `cbd` reads back.
+        if !(noise >= 0.0 && noise <= MAX_MAGNITUDE) {
+            return Err(format!(
+                "--noise must be a number in [0, {MAX_MAGNITUDE:e}] (the bound every imported value obeys), got {noise:e}"
+            ));
         }
     }
     if args.sampling == "grid" && args.grid < 2 {
@@ -72,6 +76,7 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
         effect_arm(rigid, &args.effects)?.measure(&joints, 0.0, 0)
     };
     add_noise(&mut data.positions, args.noise.unwrap_or(0.0), args.seed.wrapping_add(0x5eed));
+    check_readable(&data)?;
     let mut text = String::from("q1,q2,x,y\n");
     for i in 0..data.len() {
         let (q, y) = (data.joints(i), data.position(i));
@@ -98,6 +103,7 @@ fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
         let rigid = cbd_protocol::NominalModel::DhChain(robot.real.clone());
         effect_arm(rigid, &args.effects)?.measure(&joints, robot.noise_std, args.seed.wrapping_add(0x5eed))
     };
+    check_readable(&data)?;
     let mut text = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
     for i in 0..data.len() {
         let q: Vec<String> = data.joints(i).iter().map(|v| format!("{:?}", v.to_degrees())).collect();
@@ -107,6 +113,20 @@ fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
     crate::cli::write_atomically(&args.out, text.as_bytes())?;
     eprintln!("wrote {} measurements of the simulated six-joint arm to {}", data.len(), args.out.display());
     Ok(())
+}
+
+/// Refuses to write positions the importers would refuse to read back (beyond ±1e100: noise and
+/// effects that are each in range can still add up, a thermal drift over many rows), naming the row.
+fn check_readable(data: &crate::data::Measurements) -> Result<(), String> {
+    let m = data.task_dim.max(1);
+    match data.positions.iter().position(|v| !(v.abs() <= MAX_MAGNITUDE)) {
+        Some(k) => Err(format!(
+            "the simulated position of row {} reaches {:.3e}, beyond the ±{MAX_MAGNITUDE:e} `cbd` reads back: lower --noise or the --effect sizes",
+            k / m + 1,
+            data.positions[k]
+        )),
+        None => Ok(()),
+    }
 }
 
 /// The rigid "real" geometry plus the `--effect` specs (undeclared: only the CSV carries them).

@@ -62,10 +62,14 @@ pub struct ImportedMeasurements {
 }
 
 impl ImportedMeasurements {
-    /// Human-readable warnings (duplicate configurations), one per entry.
+    /// Human-readable warnings (duplicate configurations): one per entry for the first
+    /// [`DUPLICATES_LISTED`], then one line counting the rest (a file of 100 000 repeated rows
+    /// gave 99 999 lines).
     pub fn warnings(&self, file: &Path) -> Vec<String> {
-        self.duplicates
+        let mut out: Vec<String> = self
+            .duplicates
             .iter()
+            .take(DUPLICATES_LISTED)
             .map(|d| {
                 format!(
                     "{}:{}: joint configuration repeats line {} (positions {:.3e} apart)",
@@ -75,19 +79,34 @@ impl ImportedMeasurements {
                     d.distance
                 )
             })
-            .collect()
+            .collect();
+        let rest = self.duplicates.len().saturating_sub(DUPLICATES_LISTED);
+        if rest > 0 {
+            let farthest = self.duplicates.iter().map(|d| d.distance).fold(0.0, f64::max);
+            out.push(format!(
+                "{}: {rest} more rows repeat an earlier joint configuration ({} in all, positions at most {farthest:.3e} apart); all are kept",
+                file.display(),
+                self.duplicates.len()
+            ));
+        }
+        out
     }
 }
+
+/// Repeated configurations warned about one by one; the rest are counted on one line.
+pub const DUPLICATES_LISTED: usize = 5;
 
 /// Reads measurements from a CSV file with a header row.
 pub fn read_measurements(path: impl AsRef<Path>, spec: &ColumnSpec) -> Result<ImportedMeasurements, ImportError> {
     let path = path.as_ref();
     let file = std::fs::File::open(path).map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
+    crate::io::note_input("a measurement file", path);
     read_measurements_from(file, path, spec)
 }
 
 /// As [`read_measurements`], from any reader; `path` names the source in errors.
 pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &ColumnSpec) -> Result<ImportedMeasurements, ImportError> {
+    use std::io::Read;
     let err = CsvErrors { file: path };
     if spec.joint_columns.len() != spec.joint_kinds.len() || spec.joint_limits.len() != spec.joint_kinds.len() {
         return Err(err.at(
@@ -97,8 +116,14 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         ));
     }
     let mut bytes = Vec::new();
-    let mut reader = reader;
-    reader.read_to_end(&mut bytes).map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
+    reader
+        .take(MAX_CSV_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| ImportError::Io { file: path.to_path_buf(), message: e.to_string() })?;
+    if bytes.len() as u64 > MAX_CSV_BYTES {
+        return Err(err.at(None, None, format!("larger than {} MiB, the most a measurement file may be", MAX_CSV_BYTES >> 20)));
+    }
+    check_text(&bytes, err)?;
     // Records come in file order, so one cursor counts each byte's newline once: linear in the file.
     let lines_seen = std::cell::RefCell::new(LineCounter::new(&bytes));
     let line_of = |pos: &csv::Position| lines_seen.borrow_mut().line_at(pos.byte());
@@ -132,11 +157,14 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
         row.convert(&record, line, &mut q, &mut y)?;
-        let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
-        match seen.get(&key) {
-            Some(&first) => repeats.push((first, data.len())),
-            None => {
-                seen.insert(key, data.len());
+        // A repeat is a configuration measured twice: a file of targets or seeds alone has none.
+        if n > 0 && m > 0 {
+            let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
+            match seen.get(&key) {
+                Some(&first) => repeats.push((first, data.len())),
+                None => {
+                    seen.insert(key, data.len());
+                }
             }
         }
         data.push(&q, &y);
@@ -147,6 +175,37 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     }
     let duplicates = check_repeats(&data, &lines, &repeats, spec, err)?;
     Ok(ImportedMeasurements { measurements: data, lines, duplicates })
+}
+
+/// Largest measurement file read: 10⁷ rows of ten values; more would not fit a fit's memory anyway.
+pub const MAX_CSV_BYTES: u64 = 1 << 30;
+
+/// Longest line of a measurement file: a row of ten numbers is a few hundred bytes, a header of
+/// long column names a few kilobytes.
+pub const MAX_LINE_BYTES: usize = 64 << 10;
+
+/// Refuses what is not CSV text before the CSV reader holds it as fields: a NUL byte (binary data)
+/// or a line over [`MAX_LINE_BYTES`] (100 MB of NULs made one 100 MB field, 619 MB in all, and a
+/// message quoting it whole). Names the line, and the column of a NUL.
+fn check_text(bytes: &[u8], err: CsvErrors<'_>) -> Result<(), ImportError> {
+    for (k, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let number = k as u64 + 1;
+        if let Some(column) = line.iter().position(|&b| b == 0) {
+            return Err(err.at(Some(number), None, format!("byte {} is NUL: binary data, not CSV text", column + 1)));
+        }
+        if line.len() > MAX_LINE_BYTES {
+            return Err(err.at(
+                Some(number),
+                None,
+                format!(
+                    "the line is {} bytes long, more than the {} KiB a CSV line may be (not a measurement file?)",
+                    line.len(),
+                    MAX_LINE_BYTES >> 10
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Builds the CSV errors of one file.
@@ -181,11 +240,7 @@ impl<'a> RowReader<'a> {
             let hits: Vec<usize> = header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
             match hits.as_slice() {
                 [i] => Ok(*i),
-                [] => Err(err.at(
-                    Some(1),
-                    Some(name),
-                    format!("no such column in the header (columns: {})", header.iter().collect::<Vec<_>>().join(", ")),
-                )),
+                [] => Err(err.at(Some(1), Some(name), format!("no such column in the header (columns: {})", header_excerpt(header)))),
                 _ => Err(err.at(Some(1), Some(name), "column name appears more than once in the header".into())),
             }
         };
@@ -217,7 +272,7 @@ impl<'a> RowReader<'a> {
                     Some(name),
                     format!(
                         "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
-                        &record[idx],
+                        crate::error::excerpt(&record[idx]),
                         short(lo / f),
                         short(hi / f)
                     ),
@@ -241,9 +296,10 @@ impl<'a> RowReader<'a> {
         if text.is_empty() {
             return Err(self.err.at(Some(line), Some(name), "missing value".into()));
         }
-        let v: f64 = text.parse().map_err(|_| self.err.at(Some(line), Some(name), format!("not a number: '{text}'")))?;
+        let quoted = || crate::error::excerpt(text);
+        let v: f64 = text.parse().map_err(|_| self.err.at(Some(line), Some(name), format!("not a number: '{}'", quoted())))?;
         if !v.is_finite() {
-            return Err(self.err.at(Some(line), Some(name), format!("not a finite number: '{text}'")));
+            return Err(self.err.at(Some(line), Some(name), format!("not a finite number: '{}'", quoted())));
         }
         Ok(v)
     }
@@ -270,7 +326,7 @@ impl<'a> RowReader<'a> {
             Some(name),
             format!(
                 "'{}' {unit} is {in_model}; values must stay within ±{MAX_MAGNITUDE:e} in the model's unit (wrong unit or column?)",
-                &record[idx]
+                crate::error::excerpt(&record[idx])
             ),
         ))
     }
@@ -341,6 +397,15 @@ impl<'a> LineCounter<'a> {
         self.pos = end;
         1 + self.newlines
     }
+}
+
+/// The header's column names for a message: each an excerpt, at most the first 20.
+fn header_excerpt(header: &csv::StringRecord) -> String {
+    let mut names: Vec<String> = header.iter().take(20).map(crate::error::excerpt).collect();
+    if header.len() > 20 {
+        names.push(format!("… {} columns in all", header.len()));
+    }
+    names.join(", ")
 }
 
 /// A limit converted back to the file's unit, without the conversion's rounding noise.
@@ -479,6 +544,39 @@ mod tests {
         assert!((r.duplicates[0].distance - 1e-6).abs() < 1e-12);
         let w = r.warnings(Path::new("meas.csv"));
         assert_eq!(w, vec!["meas.csv:4: joint configuration repeats line 2 (positions 1.000e-6 apart)".to_string()]);
+    }
+
+    /// Messages, issue 27: one warning per repeated row (99 998 lines for a 100 k-row file); the
+    /// first few are listed, the rest counted on one line.
+    #[test]
+    fn many_duplicates_are_summarised() {
+        let text = format!("q1,s2,x,y,z\n{}", "1,2,3,4,5\n".repeat(1000));
+        let w = read(&text).unwrap().warnings(Path::new("meas.csv"));
+        assert_eq!(w.len(), DUPLICATES_LISTED + 1, "{w:?}");
+        assert_eq!(
+            w[DUPLICATES_LISTED],
+            "meas.csv: 994 more rows repeat an earlier joint configuration (999 in all, positions at most 0.000e0 apart); all are kept"
+        );
+    }
+
+    /// Issue 27 item 10: 100 MB of NUL bytes became one 100 MB header field (619 MB RSS) echoed whole
+    /// in the error; a 300 MB field gave 300 MB of stderr. Binary data and overlong lines are refused
+    /// before the CSV reader, and every quoted field is an excerpt.
+    #[test]
+    fn binary_data_and_overlong_lines_are_refused_and_fields_quoted_short() {
+        let (line, _, msg) = csv_err(&"\0".repeat(1 << 20));
+        assert_eq!((line, msg.as_str()), (Some(1), "byte 1 is NUL: binary data, not CSV text"));
+        let (line, _, msg) = csv_err(&format!("q1,s2,x,y,z\n1,2,3,4,5\n1,{},3,4,5\n", "9".repeat(MAX_LINE_BYTES)));
+        assert!(line == Some(3) && msg.contains("65544 bytes long, more than the 64 KiB"), "{msg}");
+        let field = "x".repeat(5000);
+        let (_, _, msg) = csv_err(&format!("q1,s2,x,y,z\n1,2,{field},4,5\n"));
+        assert!(msg.len() < 120 && msg.contains("… (5000 bytes)"), "{msg}");
+        let header = (0..500).map(|k| format!("c{k}{}", "y".repeat(100))).collect::<Vec<_>>().join(",");
+        let (_, _, msg) = csv_err(&format!("{header}\n"));
+        assert!(msg.len() < 2000 && msg.contains("500 columns in all"), "{}", msg.len());
+        let mut big = std::io::Read::chain(&b"q1,s2,x,y,z\n"[..], std::io::repeat(b'\n'));
+        let e = read_measurements_from(&mut big, Path::new("endless.csv"), &spec()).unwrap_err().to_string();
+        assert!(e.contains("larger than 1024 MiB"), "{e}");
     }
 
     #[test]

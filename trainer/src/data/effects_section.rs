@@ -148,14 +148,30 @@ fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, F
 
 /// Finite and within the importer's magnitude bound (squares must stay finite downstream).
 fn check_finite(at: &str, values: &[(&str, f64)]) -> Result<(), FieldError> {
+    values.iter().try_for_each(|(name, v)| check_effect_value(name, *v)).map_err(|message| FieldError::new(at, message))
+}
+
+/// One value of an effect, in a model file or a simulation's `--effect`: finite and within the
+/// importer's bound ±1e100, so that what `cbd simulate` injects a model file could declare.
+pub fn check_effect_value(name: &str, v: f64) -> Result<(), String> {
     use crate::data::csv_import::MAX_MAGNITUDE;
-    match values.iter().find(|(_, v)| !v.is_finite()) {
-        Some((name, v)) => Err(FieldError::new(at, format!("{name} = {v} is not finite"))),
-        None => match values.iter().find(|(_, v)| v.abs() > MAX_MAGNITUDE) {
-            Some((name, v)) => Err(FieldError::new(at, format!("{name} = {v:e} is beyond ±{MAX_MAGNITUDE:e}"))),
-            None => Ok(()),
-        },
+    if !v.is_finite() {
+        Err(format!("{name} = {v} is not finite"))
+    } else if v.abs() > MAX_MAGNITUDE {
+        Err(format!("{name} = {v:e} is beyond ±{MAX_MAGNITUDE:e}"))
+    } else {
+        Ok(())
     }
+}
+
+/// An encoder scale error δ = scale·q: a relative error of 100 % or more is not an encoder's scale
+/// error (it reverses or doubles every angle) but a wrong value or unit.
+pub fn check_encoder_scale(scale: f64) -> Result<(), String> {
+    check_effect_value("scale", scale)?;
+    if scale.abs() >= 1.0 {
+        return Err(format!("scale = {scale:e}: an encoder scale error must lie within (-1, 1)"));
+    }
+    Ok(())
 }
 
 /// Puts the file's `[gravity]` and `[[effects]]` into `nominal` (lengths already in the model's
@@ -214,15 +230,7 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
         let entry = k + 1;
         let effect = match *raw {
             RawEffect::EncoderScale { joint, scale } => {
-                check_finite(&effects_entry(entry), &[("scale", scale)])?;
-                // δ = scale·q: a relative error of 100 % or more is not an encoder's scale error
-                // (it reverses or doubles every angle) but a wrong value or unit.
-                if scale.abs() >= 1.0 {
-                    return Err(FieldError::new(
-                        effects_entry(entry),
-                        format!("scale = {scale:e}: an encoder scale error must lie within (-1, 1)"),
-                    ));
-                }
+                check_encoder_scale(scale).map_err(|message| FieldError::new(effects_entry(entry), message))?;
                 Effect::EncoderScale { joint: check_index(entry, "joint", joint, n)?, scale }
             }
             RawEffect::Transmission { joint, harmonic, cos, sin } => {

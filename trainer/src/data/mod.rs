@@ -1,7 +1,8 @@
 //! Measurement data: joint configurations and measured positions.
 
 /// N measured pairs (x_i, y_i): joint configurations (`n` per row) and positions (`m` per row),
-/// in the nominal model's units (radians / length unit of the model).
+/// in the nominal model's units (radians / length unit of the model). A file of targets alone
+/// (`cbd compensate --targets`) has n = 0, one of seeds alone m = 0.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Measurements {
     pub n_joints: usize,
@@ -17,7 +18,11 @@ impl Measurements {
         Measurements { n_joints, task_dim, joints: Vec::new(), positions: Vec::new() }
     }
     pub fn len(&self) -> usize {
-        self.joints.len() / self.n_joints.max(1)
+        if self.n_joints > 0 {
+            self.joints.len() / self.n_joints
+        } else {
+            self.positions.len() / self.task_dim.max(1)
+        }
     }
     pub fn is_empty(&self) -> bool {
         self.len() == 0
@@ -64,6 +69,7 @@ pub const MAX_URDF_BYTES: u64 = 8 << 20;
 pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Result<Vec<u8>> {
     use std::io::Read;
     let file = std::fs::File::open(path).map_err(|e| crate::Error::io(path, e))?;
+    crate::io::note_input(&format!("the {what}"), path);
     let mut bytes = Vec::new();
     file.take(cap + 1).read_to_end(&mut bytes).map_err(|e| crate::Error::io(path, e))?;
     if bytes.len() as u64 > cap {

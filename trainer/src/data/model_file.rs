@@ -159,10 +159,25 @@ pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError>
     parse_model_file(&text, path)
 }
 
+/// The TOML parser's error on one line: where (line and column of its span) and what, the
+/// message's quotes of the file cut to excerpts (a 1 MiB line is not echoed).
+fn toml_message(e: &toml::de::Error, text: &str) -> String {
+    let what = e.message().trim_end().split('\n').map(|line| crate::error::excerpt_of(line, 200)).collect::<Vec<_>>().join("; ");
+    match e.span() {
+        Some(span) => {
+            let before = &text.as_bytes()[..span.start.min(text.len())];
+            let line = 1 + before.iter().filter(|&&b| b == b'\n').count();
+            let column = 1 + before.iter().rev().take_while(|&&b| b != b'\n').count();
+            format!("TOML parse error at line {line}, column {column}: {what}")
+        }
+        None => format!("TOML parse error: {what}"),
+    }
+}
+
 /// Parses model-file text; `path` names it in errors and anchors a relative URDF path.
 pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportError> {
     let file = path.to_path_buf();
-    let raw: RawModelFile = toml::from_str(text).map_err(|e| ImportError::Toml { file: file.clone(), message: e.to_string() })?;
+    let raw: RawModelFile = toml::from_str(text).map_err(|e| ImportError::Toml { file: file.clone(), message: toml_message(&e, text) })?;
     let model_err = |message: String| ImportError::Model { file: file.clone(), message };
     let _ = &raw.description;
     let deg = raw.angle_unit.radians();

@@ -14,6 +14,43 @@ use super::{add, cross, dot, norm, scale, sub, Pose};
 use crate::error::{Error, Result};
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, MAX_JOINTS};
 
+/// Deepest element nesting a URDF may have. A robot description nests about six deep (robot >
+/// link > visual > geometry > mesh); the reader urdf-rs uses recurses once per level, so 30 000
+/// nested elements overflowed the stack and aborted the process.
+pub const MAX_URDF_DEPTH: usize = 64;
+
+/// Parses a URDF document. Nesting deeper than [`MAX_URDF_DEPTH`] is refused first, with the line
+/// and column where it goes too deep, by a streaming (non-recursive) pass over the XML events.
+pub fn parse(text: &str) -> Result<urdf_rs::Robot> {
+    check_nesting(text)?;
+    urdf_rs::read_from_string(text).map_err(|e| Error::Urdf(e.to_string()))
+}
+
+/// The nesting check of [`parse`]. Malformed XML is left to urdf-rs, whose message names the fault.
+fn check_nesting(text: &str) -> Result<()> {
+    use xml::reader::{EventReader, XmlEvent};
+    let mut reader = EventReader::from_str(text);
+    let mut depth = 0usize;
+    loop {
+        match reader.next() {
+            Ok(XmlEvent::StartElement { .. }) => {
+                depth += 1;
+                if depth > MAX_URDF_DEPTH {
+                    let at = xml::common::Position::position(&reader);
+                    return Err(Error::Urdf(format!(
+                        "line {}, column {}: elements nested more than {MAX_URDF_DEPTH} deep (a robot description nests about 6)",
+                        at.row + 1,
+                        at.column + 1
+                    )));
+                }
+            }
+            Ok(XmlEvent::EndElement { .. }) => depth = depth.saturating_sub(1),
+            Ok(XmlEvent::EndDocument) | Err(_) => return Ok(()),
+            Ok(_) => {}
+        }
+    }
+}
+
 /// A URDF chain converted to DH: the chain (lengths multiplied by `length_scale`) and the URDF
 /// names of its movable joints, in the order of the joint values.
 #[derive(Debug, Clone, PartialEq)]
@@ -226,6 +263,19 @@ mod tests {
     use super::*;
     use cbd_protocol::NominalModel;
     use cbd_runtime::kinematics::forward_kinematics;
+
+    /// Issue 27 item 4: 30 000 nested elements (210 KB) overflowed the stack inside urdf-rs's
+    /// recursive reader (abort). The nesting is now checked first, without recursion.
+    #[test]
+    fn deeply_nested_urdf_is_refused_with_its_line_and_column() {
+        let n = 30_000;
+        let deep = format!("<robot name=\"r\">\n{}{}</robot>", "<a>".repeat(n), "</a>".repeat(n));
+        let e = parse(&deep).unwrap_err().to_string();
+        assert!(e.contains("line 2, column 190") && e.contains("nested more than 64 deep"), "{e}");
+        assert!(parse(TEST_URDF).is_ok());
+        // Malformed XML is urdf-rs's to name.
+        assert!(parse("<robot name=\"r\"><link name=\"a\"></robot>").is_err());
+    }
 
     /// Issue 17 item 8: a 200k-deep URDF did not finish in 120 s (a search through all joints
     /// for every link on the path). The walk is now linear.

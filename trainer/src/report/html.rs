@@ -168,6 +168,15 @@ pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str)
     let top = json
         .as_object()
         .ok_or_else(|| crate::Error::Path { path: source.into(), reason: "expected a JSON object at the top level".into() })?;
+    // Every field but a list is shown (in a table or section of its own): none, no page.
+    if !top.iter().any(|(k, v)| !v.is_array() || k == "joint_widths") {
+        return Err(crate::Error::Path {
+            path: source.into(),
+            reason:
+                "nothing to report: the JSON object has no field a report shows (expected the --json of cbd demo, compare, eval or fit)"
+                    .into(),
+        });
+    }
     let mut out = String::new();
     let kind = if top.contains_key("methods") { "method comparison" } else { "calibration run" };
     let _ = writeln!(
@@ -352,6 +361,7 @@ pub fn collect_figures(dir: &Path) -> crate::Result<Vec<Figure>> {
     paths
         .into_iter()
         .map(|p| {
+            crate::io::note_input("a figure of --plots", &p);
             let png = std::fs::read(&p).map_err(|e| crate::Error::io(&p, e))?;
             if !png.starts_with(b"\x89PNG\r\n\x1a\n") {
                 return Err(crate::Error::Path { path: p, reason: "not a PNG file".into() });
@@ -365,6 +375,7 @@ pub fn collect_figures(dir: &Path) -> crate::Result<Vec<Figure>> {
 /// `out`. The length unit is the JSON's `unit` / `length_unit` when present, else `unit`.
 /// Returns the number of figures embedded.
 pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str) -> crate::Result<usize> {
+    crate::io::note_input("--json", json_path);
     let text = std::fs::read_to_string(json_path).map_err(|e| crate::Error::io(json_path, e))?;
     let json: Value = serde_json::from_str(&text).map_err(|e| crate::Error::Json {
         path: json_path.to_path_buf(),
@@ -393,6 +404,16 @@ mod tests {
         {
             assert_eq!(base64(plain.as_bytes()), coded);
         }
+    }
+
+    /// Issue 27 item 12: `report --json` on `{}` wrote an empty page with exit 0.
+    #[test]
+    fn an_object_with_nothing_to_show_is_refused() {
+        for empty in [serde_json::json!({}), serde_json::json!({"log": [1, 2]})] {
+            let e = render_report(&empty, "d.json", &[], "m").unwrap_err().to_string();
+            assert!(e.starts_with("d.json: nothing to report"), "{e}");
+        }
+        assert!(render_report(&serde_json::json!({"rows": 3}), "d.json", &[], "m").is_ok());
     }
 
     #[test]

@@ -315,17 +315,33 @@ pub struct EffectSpecError {
 /// (compliance), link_bending (link, compliance), bump (centre=a;b;..., width, dx, dy, dz),
 /// dead_zone (width), thermal (dx, dy, dz per row).
 pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
-    let bad = |reason: String| EffectSpecError { spec: spec.to_string(), reason };
+    use crate::data::effects_section::{check_effect_value, check_encoder_scale};
+    let bad = |reason: String| EffectSpecError { spec: crate::error::excerpt_of(spec, 120), reason };
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     let mut kv = std::collections::BTreeMap::new();
     for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
-        let (k, v) = part.split_once('=').ok_or_else(|| bad(format!("`{part}` is not key=value")))?;
+        let (k, v) = part.split_once('=').ok_or_else(|| bad(format!("`{}` is not key=value", crate::error::excerpt(part))))?;
         kv.insert(k.trim().to_string(), v.trim().to_string());
     }
     let num = |k: &str, default: Option<f64>| -> Result<f64, EffectSpecError> {
         match kv.get(k) {
-            Some(v) => v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad(format!("{k}={v} is not a finite number"))),
+            Some(v) => {
+                let x = v.parse::<f64>().ok().filter(|x| x.is_finite());
+                let x = x.ok_or_else(|| bad(format!("{k}={} is not a finite number", crate::error::excerpt(v))))?;
+                // The model file's bound on effect values: what is injected could be declared.
+                check_effect_value(k, x).map_err(bad)?;
+                Ok(x)
+            }
             None => default.ok_or_else(|| bad(format!("missing {k}="))),
+        }
+    };
+    // A width is a distance: positive for a bump's, not negative for a dead zone's.
+    let width = |positive: bool| -> Result<f64, EffectSpecError> {
+        let w = num("width", None)?;
+        match (positive, w) {
+            (true, w) if w <= 0.0 => Err(bad(format!("width = {w} must be positive"))),
+            (false, w) if w < 0.0 => Err(bad(format!("width = {w} must not be negative"))),
+            _ => Ok(w),
         }
     };
     let index = |k: &str| -> Result<usize, EffectSpecError> {
@@ -336,7 +352,11 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
         Ok(v as usize - 1)
     };
     let effect = match kind {
-        "encoder_scale" => InjectedEffect::EncoderScale { joint: index("joint")?, scale: num("scale", None)? },
+        "encoder_scale" => {
+            let scale = num("scale", None)?;
+            check_encoder_scale(scale).map_err(bad)?;
+            InjectedEffect::EncoderScale { joint: index("joint")?, scale }
+        }
         "transmission" => {
             let h = num("harmonic", None)?;
             if h.fract() != 0.0 || !(1.0..=16.0).contains(&h) {
@@ -356,7 +376,11 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
                 .get("centre")
                 .ok_or_else(|| bad(format!("missing centre=q1;q2;...")))?
                 .split(';')
-                .map(|v| v.trim().parse::<f64>().map_err(|_| bad(format!("bad centre value `{v}`"))))
+                .map(|v| {
+                    let x = v.trim().parse::<f64>().ok().filter(|x| x.is_finite());
+                    let x = x.ok_or_else(|| bad(format!("bad centre value `{}`", crate::error::excerpt(v))))?;
+                    check_effect_value("centre", x).map(|()| x).map_err(bad)
+                })
                 .collect();
             let centre = centre?;
             if centre.len() != n_joints {
@@ -364,11 +388,11 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
             }
             InjectedEffect::Bump {
                 centre,
-                width: num("width", None)?,
+                width: width(true)?,
                 amplitude: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?],
             }
         }
-        "dead_zone" => InjectedEffect::DeadZone { joint: index("joint")?, width: num("width", None)? },
+        "dead_zone" => InjectedEffect::DeadZone { joint: index("joint")?, width: width(false)? },
         "thermal" => InjectedEffect::ThermalDrift { per_row: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?] },
         other => {
             return Err(bad(format!(
@@ -434,5 +458,24 @@ mod tests {
         assert!(parse_effect("wobble:joint=1", 2).is_err());
         let b = parse_effect("bump:centre=1;2,width=0.3,dy=0.01", 2).unwrap();
         assert!(!b.in_library());
+    }
+
+    /// Issue 27 item 11: `cbd simulate` injected what a model file may not declare (effect sizes of
+    /// 1e300, `encoder_scale` 1e300, a dead zone of width −1) and wrote CSVs `cbd` cannot read.
+    #[test]
+    fn injected_effects_obey_the_model_files_limits() {
+        for (spec, reason) in [
+            ("transmission:joint=1,harmonic=1,cos=1e300", "cos = 1e300 is beyond ±1e100"),
+            ("encoder_scale:joint=1,scale=1e300", "scale = 1e300 is beyond ±1e100"),
+            ("encoder_scale:joint=1,scale=1.5", "an encoder scale error must lie within (-1, 1)"),
+            ("dead_zone:joint=1,width=-1", "width = -1 must not be negative"),
+            ("bump:centre=1;2,width=0,dy=0.01", "width = 0 must be positive"),
+            ("bump:centre=1e300;2,width=1,dy=0.01", "centre = 1e300 is beyond ±1e100"),
+            ("thermal:dx=1e101", "dx = 1e101 is beyond ±1e100"),
+        ] {
+            let e = parse_effect(spec, 2).unwrap_err().to_string();
+            assert!(e.contains(reason), "{spec}: {e}");
+        }
+        assert!(parse_effect("dead_zone:joint=1,width=0", 2).is_ok());
     }
 }

@@ -123,13 +123,18 @@ impl TruncatedSvd {
         Self::with_scales(a, scale)
     }
 
-    /// Columns divided by `scale` (positive, one per column).
+    /// Columns divided by `scale` (positive, one per column). A matrix with fewer rows than
+    /// columns (fewer measured coordinates than parameters) is factored as itself padded with zero
+    /// rows: the same AᵀA, and a singular value (zero for the directions the rows do not see) and a
+    /// right singular vector for every column, which callers index by parameter.
     pub fn with_scales(a: MatRef<'_, f64>, scale: Vec<f64>) -> Result<Self, LeastSquaresError> {
         assert_eq!(scale.len(), a.ncols(), "one scale per column");
-        let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, k| a[(i, k)] / scale[k]);
-        let svd = scaled.thin_svd().map_err(|_| LeastSquaresError::SvdNoConvergence { rows: a.nrows(), cols: a.ncols() })?;
+        let (rows, cols) = (a.nrows(), a.ncols());
+        let scaled = Mat::from_fn(rows.max(cols), cols, |i, k| if i < rows { a[(i, k)] / scale[k] } else { 0.0 });
+        let svd = scaled.thin_svd().map_err(|_| LeastSquaresError::SvdNoConvergence { rows, cols })?;
         let sigma = (0..svd.S().dim()).map(|k| svd.S()[k]).collect();
-        Ok(TruncatedSvd { scale, u: svd.U().to_owned(), sigma, v: svd.V().to_owned() })
+        // The padding rows of U meet only zeros of a right-hand side: drop them.
+        Ok(TruncatedSvd { scale, u: svd.U().subrows(0, rows).to_owned(), sigma, v: svd.V().to_owned() })
     }
 
     /// The column scales D.
@@ -293,6 +298,30 @@ mod tests {
                 assert!((ggg[(i, j)] - g[(i, j)]).abs() < 1e-9 * (1.0 + g[(i, j)].abs()));
             }
         }
+    }
+
+    /// Issue 27 item 1: fewer rows than columns (a DH fit on 10 three-coordinate rows has 30
+    /// residuals for 33 parameters) indexed past the thin SVD's min(rows, cols) singular values.
+    /// Every column now has a direction; those the rows cannot see are zero and never kept.
+    #[test]
+    fn wide_matrix_has_a_direction_per_column() {
+        let (rows, cols) = (4, 7);
+        let a = Mat::from_fn(rows, cols, |i, j| ((i * 5 + j * 3) % 11) as f64 / 11.0 + if i == j { 1.0 } else { 0.0 });
+        let svd = TruncatedSvd::unit_columns(a.as_ref()).unwrap();
+        assert_eq!(svd.eigenvalues().len(), cols);
+        let kept = (0..cols).filter(|&k| svd.keeps(k, 1e-12)).count();
+        assert_eq!(kept, rows);
+        assert!((0..cols).all(|k| svd.direction(k).len() == cols));
+        // The minimum-norm solution reproduces b exactly (A has full row rank).
+        let b: Vec<f64> = (0..rows).map(|i| (i as f64).cos()).collect();
+        let x = svd.solve(&b, 1e-12);
+        for i in 0..rows {
+            let fitted: f64 = (0..cols).map(|j| a[(i, j)] * x[j]).sum();
+            assert!((fitted - b[i]).abs() < 1e-12, "{fitted} vs {}", b[i]);
+        }
+        let (step, _) = svd.damped_step(&b, 0.0, 1e-12);
+        assert_eq!(step.len(), cols);
+        assert_eq!(svd.gram_pseudo_inverse(1e-12).len(), cols * cols);
     }
 
     /// With μ → 0 the damped step is the Gauss–Newton step −x of the truncated solve (residual r =

@@ -58,7 +58,7 @@ pub(super) fn urdf_chain(u: &RawUrdf, length_unit: LengthUnit, path: &Path) -> R
     let urdf_err = |message: String| ImportError::Urdf { file: urdf_path.clone(), message };
     let bytes = crate::data::read_capped(&urdf_path, crate::data::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(e.without_path()))?;
     let text = String::from_utf8(bytes).map_err(|e| urdf_err(format!("not UTF-8 text: {e}")))?;
-    let robot = urdf_rs::read_from_string(&text).map_err(|e| urdf_err(e.to_string()))?;
+    let robot = crate::nominal::urdf::parse(&text).map_err(|e| urdf_err(e.to_string()))?;
     let scale = LengthUnit::M.factor_to(length_unit);
     let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|e| urdf_err(e.to_string()))?;
     Ok((NominalModel::DhChain(conv.chain), conv.joint_names))

@@ -1,5 +1,6 @@
 //! What every figure shares: fonts, rendering to PNG and SVG, colours, tick labels, the legend.
 
+use image::ImageEncoder;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -29,25 +30,33 @@ pub(super) trait Figure {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> crate::Result<()>;
 }
 
-/// Draws `fig` to `dir/stem.png` and `dir/stem.svg`.
+/// Draws `fig` to `dir/stem.png` and `dir/stem.svg`. Both are drawn in memory and written as
+/// every output is (`crate::io::write_atomically`): never through a symbolic link or into a FIFO
+/// that holds a figure's name, never over a file the run reads, never half-written.
 pub(super) fn render<F: Figure>(dir: &Path, stem: &str, size: (u32, u32), fig: &F) -> crate::Result<Vec<PathBuf>> {
     ensure_font();
     std::fs::create_dir_all(dir).map_err(|e| crate::Error::io(dir, e))?;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
-    {
-        let root = BitMapBackend::new(&png, size).into_drawing_area();
-        root.fill(&WHITE).map_err(pe)?;
-        fig.draw(&root).map_err(|e| e.context(png.display().to_string()))?;
-        root.present().map_err(|e| crate::Error::Plot(format!("{}: {e}", png.display())))?;
-    }
-    {
-        let root = SVGBackend::new(&svg, size).into_drawing_area();
-        root.fill(&WHITE).map_err(pe)?;
-        fig.draw(&root).map_err(|e| e.context(svg.display().to_string()))?;
-        root.present().map_err(|e| crate::Error::Plot(format!("{}: {e}", svg.display())))?;
-    }
+    let png_bytes = render_png(size, fig).map_err(|e| e.context(png.display().to_string()))?;
+    crate::io::write_atomically(&png, &png_bytes)?;
+    let svg_text = render_svg_string(size, fig).map_err(|e| e.context(svg.display().to_string()))?;
+    crate::io::write_atomically(&svg, svg_text.as_bytes())?;
     Ok(vec![png, svg])
+}
+
+/// Draws `fig` as a PNG file's bytes (RGB, as the bitmap backend saves it).
+fn render_png<F: Figure>(size: (u32, u32), fig: &F) -> crate::Result<Vec<u8>> {
+    let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        fig.draw(&root)?;
+        root.present().map_err(pe)?;
+    }
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png).write_image(&rgb, size.0, size.1, image::ColorType::Rgb8).map_err(pe)?;
+    Ok(png)
 }
 
 /// Draws `fig` as an SVG document in memory (for inline use in HTML).

@@ -1,0 +1,259 @@
+//! Issue 27 ("no input crashes `cbd`, no output destroys a file, no damaged model is used"): one
+//! test per item, through the real binary.
+
+mod cli_support;
+
+use cli_support::*;
+
+/// Item 1: a DH or planar fit on fewer measured coordinates than parameters indexed past the thin
+/// SVD (`index out of bounds: the len is 30 but the index is 30`). Now fitted (rank-deficient DH,
+/// minimum norm); two rows are refused as too few.
+#[test]
+fn few_rows_in_dh_and_planar_fits() {
+    let dir = scratch("few-rows");
+    let ur10 = ur5_head(&dir, "ur10.csv", 10);
+    let model = ur5_model();
+    let err = succeeds(&cbd(&dir, &["fit", "--dh-first", "--model", &model, "--data", &ur10, "--out", "x.blob", "--quiet"]));
+    assert!(err.contains("DH calibration") && err.contains("rank"), "{err}");
+    succeeds(&cbd(&dir, &["compare", "--model", &model, "--train", &ur10, "--test", &ur10]));
+    let planar = write(&dir, "rr.toml", PLANAR_RR_MODEL);
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    for rows in [8, 3] {
+        let few = head(&dir, &grid, &format!("p{rows}.csv"), rows);
+        succeeds(&cbd(&dir, &["compare", "--model", &planar, "--train", &few, "--test", &few]));
+    }
+    let two = head(&dir, &grid, "p2.csv", 2);
+    fails_with(&cbd(&dir, &["fit", "--data", &two, "--out", "x.blob"]), &["p2.csv", "2", "at least 3"]);
+}
+
+/// Item 4: a URDF of 30 000 nested elements (210 KB) overflowed the stack (abort). Now refused
+/// with the URDF's name, line and column.
+#[test]
+fn deeply_nested_urdf_is_refused() {
+    let dir = scratch("deep-urdf");
+    let n = 30_000;
+    write(&dir, "deep.urdf", format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(n), "</a>".repeat(n)));
+    let model = write(
+        &dir,
+        "deep.toml",
+        "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"deep.urdf\"\nbase_link = \"a\"\ntip_link = \"b\"\n",
+    );
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    fails_with(
+        &cbd(&dir, &["fit", "--model", &model, "--data", &grid, "--out", "d.blob"]),
+        &["deep.urdf", "line 1", "nested more than 64 deep"],
+    );
+}
+
+/// Item 5: `--plots DIR` wrote through a symbolic link named like a figure (the linked file became
+/// an SVG) and blocked forever on a FIFO of that name. Each figure is now written as every output
+/// is: the link and the FIFO are refused (exit 1) and left as they were.
+#[test]
+fn plots_never_write_through_links_or_into_fifos() {
+    let dir = scratch("plots-special");
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--max-iterations", "1", "--quiet"]));
+    std::fs::create_dir(dir.join("pl")).unwrap();
+    write(&dir, "keep.txt", "keep");
+    std::os::unix::fs::symlink("../keep.txt", dir.join("pl/error_histogram.svg")).unwrap();
+    let eval = |plots: &str| cbd(&dir, &["eval", "--blob", "a.blob", "--data", &grid, "--plots", plots]);
+    fails_with(&eval("pl"), &["pl/error_histogram.svg", "symbolic link"]);
+    assert_eq!(std::fs::read_to_string(dir.join("keep.txt")).unwrap(), "keep");
+    std::fs::remove_file(dir.join("pl/error_histogram.svg")).unwrap();
+    assert!(std::process::Command::new("mkfifo").arg(dir.join("pl/error_heatmaps.png")).status().unwrap().success());
+    // A FIFO nobody reads would block a writer forever: the test fails by timeout if it does.
+    fails_with(&eval("pl"), &["pl/error_heatmaps.png", "FIFO"]);
+    std::fs::remove_file(dir.join("pl/error_heatmaps.png")).unwrap();
+    let out = eval("pl");
+    succeeds(&out);
+    assert!(std::fs::read(dir.join("pl/error_heatmaps.png")).unwrap().starts_with(b"\x89PNG"));
+    // A file where the directory goes is refused before the evaluation.
+    fails_with(&eval(&grid), &["g4.csv", "not a directory", "--plots"]);
+}
+
+/// Item 6: an output path equal to an input silently replaced the input. Every command now refuses,
+/// naming the flag of the input, before any work, and the input is unchanged; a hard link to an
+/// input is the same file; two outputs on one path are refused too.
+#[test]
+fn an_output_never_replaces_an_input() {
+    let dir = scratch("output-is-input");
+    let grid = rr_grid(&dir, "tr.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--max-iterations", "1", "--quiet"]));
+    write(&dir, "t.csv", "x,y\n1.2,0.3\n");
+    write(&dir, "d.json", "{\"nominal\": {\"mean\": 1, \"median\": 1, \"p99\": 1, \"max\": 1}}");
+    std::fs::hard_link(dir.join("tr.csv"), dir.join("hard.csv")).unwrap();
+    let before: Vec<Vec<u8>> = ["tr.csv", "a.blob", "t.csv", "d.json"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect();
+    for (args, needles) in [
+        (vec!["fit", "--data", "tr.csv", "--out", "tr.csv"], vec!["tr.csv: is also an input (--data)"]),
+        (vec!["fit", "--data", "tr.csv", "--out", "hard.csv"], vec!["hard.csv: is also an input (--data)"]),
+        (vec!["fit", "--data", "tr.csv", "--out", "x.blob", "--json", "x.blob"], vec!["x.blob: is given to both --out and --json"]),
+        (vec!["eval", "--blob", "a.blob", "--data", "tr.csv", "--json", "a.blob"], vec!["a.blob: is also an input (--blob)"]),
+        (vec!["compensate", "--blob", "a.blob", "--targets", "t.csv", "--out", "t.csv"], vec!["t.csv: is also an input (--targets)"]),
+        (vec!["report", "--json", "d.json", "--out", "d.json"], vec!["d.json: is also an input (--json)"]),
+        (vec!["diagnose", "--data", "tr.csv", "--json", "tr.csv"], vec!["tr.csv: is also an input (--data)"]),
+        (vec!["compare", "--model", "m.toml", "--train", "tr.csv", "--test", "tr.csv", "--json", "tr.csv"], vec!["is also an input"]),
+    ] {
+        write(&dir, "m.toml", PLANAR_RR_MODEL);
+        let err = fails_with(&cbd(&dir, &args), &needles);
+        assert!(!err.contains("hyperparameters") && !err.contains("fitted"), "{args:?}: work ran before the check:\n{err}");
+    }
+    let after: Vec<Vec<u8>> = ["tr.csv", "a.blob", "t.csv", "d.json"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect();
+    assert!(before == after, "an input changed");
+}
+
+/// Item 7: an interrupted write left its hidden temporary file (`.NAME.tmpPID-0`, 76 MB on a large
+/// simulation). The data is now written to an unnamed file that gets its name only when complete:
+/// `simulate` killed at any moment leaves no hidden file, and the output is absent or whole.
+#[test]
+fn an_interrupted_write_leaves_no_hidden_file() {
+    let dir = scratch("interrupted-write");
+    for delay_ms in [100u64, 300, 500, 700, 900, 1100, 1400] {
+        let _ = std::fs::remove_file(dir.join("big.csv"));
+        let mut child = std::process::Command::new(CBD)
+            .args(["simulate", "--sampling", "uniform", "--count", "1500000", "--out", "big.csv"])
+            .current_dir(&dir)
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let _ = child.wait();
+        let hidden: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with('.'))
+            .collect();
+        assert!(hidden.is_empty(), "killed after {delay_ms} ms: {hidden:?}");
+        if let Ok(text) = std::fs::read_to_string(dir.join("big.csv")) {
+            assert_eq!(text.lines().count(), 1_500_001, "killed after {delay_ms} ms: a partial output");
+        }
+    }
+}
+
+/// Item 10: 100 MB of NUL bytes took 619 MB and echoed the whole "header" to stderr; a 300 MB
+/// field gave 300 MB of stderr. Binary data and overlong lines are refused before the CSV reader
+/// holds them (here under a 400 MB address-space limit), every message quotes at most an excerpt.
+#[test]
+fn csv_reading_is_capped_and_quotes_only_excerpts() {
+    let dir = scratch("csv-caps");
+    std::fs::File::create(dir.join("nul.csv")).unwrap().set_len(100_000_000).unwrap();
+    let err =
+        fails_with(&cbd_limited(&dir, 400_000, &["fit", "--data", "nul.csv", "--out", "n.blob"]), &["nul.csv:1", "NUL", "not CSV text"]);
+    assert!(err.len() < 200, "{err}");
+    let field = "1".repeat(70_000_000);
+    write(&dir, "long.csv", format!("q1,q2,x,y\n{field},2,3,4\n"));
+    let err = fails_with(&cbd_limited(&dir, 600_000, &["eval", "--blob", "none.blob", "--data", "long.csv"]), &["long.csv:2", "64 KiB"]);
+    assert!(err.len() < 200, "{err}");
+    write(&dir, "word.csv", format!("q1,q2,x,y\n{},2,3,4\n", "z".repeat(60_000)));
+    let err = fails_with(
+        &cbd(&dir, &["fit", "--data", "word.csv", "--out", "n.blob"]),
+        &["word.csv:2", "column 'q1'", "not a number", "(60000 bytes)"],
+    );
+    assert!(err.len() < 200, "{err}");
+}
+
+/// A copy of the blob at `from` whose last momentum is `value`: checksum and fields valid, the
+/// model damaged (positions of about `value` times the arm's size).
+fn damaged_blob(dir: &std::path::Path, from: &str, to: &str, value: f64) -> String {
+    let blob = std::fs::read(dir.join(from)).unwrap();
+    let mut model = cbd_protocol::decode(&blob).unwrap();
+    let mut momenta: Vec<f64> = model.momenta.iter().collect();
+    *momenta.last_mut().unwrap() = value;
+    let bytes = cbd_protocol::f64_le_bytes(&momenta);
+    model.momenta = cbd_protocol::F64Slice::from_le_bytes(&bytes);
+    write(dir, to, cbd_protocol::encode_to_vec(&model).unwrap())
+}
+
+/// Item 8: `compensate` on a checksum-valid but damaged blob (one `eval` refuses) exited 0 with
+/// `residual median NaN`, commands of −2.17e217 and JSON nulls; `eval` blamed a data line. Both
+/// now refuse the blob itself, before any target or row, and write nothing.
+#[test]
+fn a_damaged_blob_is_refused_by_eval_and_compensate() {
+    let dir = scratch("damaged-blob");
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--representation", "kernel", "--quiet"]));
+    let bad = damaged_blob(&dir, "a.blob", "bad.blob", 1e150);
+    write(&dir, "t.csv", "x,y\n1.2,0.3\n0.5,0.5\n");
+    let needles = ["bad.blob", "at its own training configuration", "the blob is damaged"];
+    fails_with(&cbd(&dir, &["eval", "--blob", &bad, "--data", &grid]), &needles);
+    fails_with(&cbd(&dir, &["compensate", "--blob", &bad, "--targets", "t.csv", "--out", "c.csv", "--json", "c.json"]), &needles);
+    assert!(!dir.join("c.csv").exists() && !dir.join("c.json").exists());
+    // The undamaged blob still compensates.
+    succeeds(&cbd(&dir, &["compensate", "--blob", "a.blob", "--targets", "t.csv", "--out", "c.csv"]));
+}
+
+/// Item 9: seeds of 1e200 were accepted and echoed, a target row with more fields than the header
+/// was accepted, and a finite but huge target was blamed on the inverse kinematics ("row 0", no
+/// line). Targets and seeds are now read as measurement files are: file, line and column.
+#[test]
+fn compensate_validates_targets_and_seeds_like_measurements() {
+    let dir = scratch("compensate-inputs");
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    succeeds(&cbd(&dir, &["fit", "--data", &grid, "--out", "a.blob", "--quiet"]));
+    write(&dir, "t.csv", "x,y\n1.2,0.3\n");
+    write(&dir, "s.csv", "q1,q2\n1e200,0\n");
+    let compensate = |targets: &str, seeds: Option<&str>| {
+        let mut args = vec!["compensate", "--blob", "a.blob", "--targets", targets, "--out", "c.csv"];
+        args.extend(seeds.map(|s| ["--seeds", s]).into_iter().flatten());
+        cbd(&dir, &args)
+    };
+    fails_with(&compensate("t.csv", Some("s.csv")), &["s.csv:2: column 'q1'", "1e200 rad is outside the joint's range"]);
+    write(&dir, "wide.csv", "x,y\n1.2,0.3,7\n");
+    fails_with(&compensate("wide.csv", None), &["wide.csv:2: 3 fields; the header has 2"]);
+    write(&dir, "huge.csv", "x,y\n0.5,0.5\n1e300,0\n");
+    let err = fails_with(&compensate("huge.csv", None), &["huge.csv:3: column 'x'", "within ±1e100"]);
+    assert!(!err.contains("row ") && !err.contains("inverse kinematics"), "{err}");
+    // Without --model the arm is the built-in RR arm, and the message says so.
+    let six = cbd(&dir, &["simulate", "--robot", "six", "--sampling", "uniform", "--count", "30", "--out", "six.csv"]);
+    succeeds(&six);
+    succeeds(&cbd(&dir, &["fit", "--model", &ur5_model(), "--data", "six.csv", "--out", "six.blob", "--quiet"]));
+    fails_with(&compensate_with_blob(&dir, "six.blob"), &["six.blob", "the built-in RR arm (no --model given)"]);
+}
+
+fn compensate_with_blob(dir: &std::path::Path, blob: &str) -> std::process::Output {
+    cbd(dir, &["compensate", "--blob", blob, "--targets", "t.csv", "--out", "c.csv"])
+}
+
+/// Item 11: `simulate` accepted what the importers refuse (`--noise 1e300`, effect sizes of 1e300,
+/// `encoder_scale … scale=1e300`, `dead_zone … width=-1`) and wrote CSVs `cbd` could not read back.
+/// Its arguments now obey the importers' limits, and what it writes, `fit` reads.
+#[test]
+fn simulate_writes_only_what_cbd_reads_back() {
+    let dir = scratch("simulate-limits");
+    for (args, needle) in [
+        (vec!["--noise", "1e300"], "--noise must be a number in [0, 1e100]"),
+        (vec!["--effect", "transmission:joint=1,harmonic=1,cos=1e300"], "cos = 1e300 is beyond ±1e100"),
+        (vec!["--effect", "encoder_scale:joint=1,scale=1e300"], "scale = 1e300 is beyond ±1e100"),
+        (vec!["--effect", "dead_zone:joint=1,width=-1"], "width = -1 must not be negative"),
+        (vec!["--sampling", "uniform", "--count", "1000", "--effect", "thermal:dx=1e98"], "beyond the ±1e100 `cbd` reads back"),
+    ] {
+        let mut all = vec!["simulate", "--out", "s.csv"];
+        all.extend(args);
+        fails_with(&cbd(&dir, &all), &[needle]);
+        assert!(!dir.join("s.csv").exists());
+    }
+    // At the edge of the limits the CSV reads back.
+    succeeds(&cbd(&dir, &["simulate", "--grid", "4", "--noise", "1e90", "--out", "s.csv"]));
+    let out = cbd(&dir, &["eval", "--blob", "none.blob", "--data", "s.csv"]);
+    fails_with(&out, &["none.blob"]);
+}
+
+/// Item 12: `report --json` on `{}` exited 0 with an empty page; `compare --commanded foo` was
+/// refused only after all six fits. Both are refused up front now.
+#[test]
+fn report_on_nothing_and_an_unknown_commanded_arm_are_refused_up_front() {
+    let dir = scratch("report-commanded");
+    write(&dir, "d.json", "{}");
+    fails_with(&cbd(&dir, &["report", "--json", "d.json", "--out", "r.html"]), &["d.json: nothing to report"]);
+    assert!(!dir.join("r.html").exists());
+    let grid = rr_grid(&dir, "g4.csv", 4);
+    let model = write(&dir, "rr.toml", PLANAR_RR_MODEL);
+    let out = cbd(&dir, &["compare", "--model", &model, "--train", &grid, "--test", &grid, "--commanded", "foo"]);
+    let err = fails_with(&out, &["--commanded", "foo"]);
+    assert!(out.stdout.is_empty() && !err.contains("hyperparameters"), "the fits ran first:\n{}", String::from_utf8_lossy(&out.stdout));
+    fails_with(
+        &cbd(&dir, &["compare", "--model", &model, "--train", &grid, "--test", &grid, "--commanded", "six"]),
+        &["--commanded six", "6 joints"],
+    );
+}

@@ -1,0 +1,90 @@
+//! Running the built `cbd` binary in a scratch directory, for the CLI-level test files.
+#![allow(dead_code)] // each test file uses its own part
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub const CBD: &str = env!("CARGO_BIN_EXE_cbd");
+
+pub fn ur5_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/ur5")
+}
+
+/// A fresh scratch directory per test.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cbd-cli-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn cbd(dir: &Path, args: &[&str]) -> Output {
+    Command::new(CBD).args(args).current_dir(dir).output().expect("run cbd")
+}
+
+/// `cbd` under an address-space limit of `kib` KiB (`ulimit -v`).
+pub fn cbd_limited(dir: &Path, kib: u64, args: &[&str]) -> Output {
+    let quoted: Vec<String> = args.iter().map(|a| format!("'{}'", a.replace('\'', "'\\''"))).collect();
+    Command::new("sh")
+        .args(["-c", &format!("ulimit -v {kib} && exec {CBD} {}", quoted.join(" "))])
+        .current_dir(dir)
+        .output()
+        .expect("run cbd under ulimit")
+}
+
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Exit code 1, no panic, an `error:` line, and every needle in stderr.
+#[track_caller]
+pub fn fails_with(out: &Output, needles: &[&str]) -> String {
+    let err = stderr(out);
+    assert!(!err.contains("panicked"), "panic:\n{err}");
+    assert_eq!(out.status.code(), Some(1), "exit code; stderr:\n{err}");
+    assert!(err.lines().any(|l| l.starts_with("error: ")), "no `error:` line:\n{err}");
+    for n in needles {
+        assert!(err.contains(n), "stderr lacks {n:?}:\n{err}");
+    }
+    err
+}
+
+/// Exit code 0; returns stderr.
+#[track_caller]
+pub fn succeeds(out: &Output) -> String {
+    let err = stderr(out);
+    assert!(out.status.success(), "exit {:?}; stderr:\n{err}", out.status.code());
+    err
+}
+
+pub fn write(dir: &Path, name: &str, bytes: impl AsRef<[u8]>) -> String {
+    std::fs::write(dir.join(name), bytes).unwrap();
+    name.to_string()
+}
+
+/// The first `rows` data rows of the UR5 example's training file (header kept).
+pub fn ur5_head(dir: &Path, name: &str, rows: usize) -> String {
+    let text = std::fs::read_to_string(ur5_dir().join("train.csv")).unwrap();
+    let head: Vec<&str> = text.lines().take(rows + 1).collect();
+    write(dir, name, head.join("\n") + "\n")
+}
+
+pub fn ur5_model() -> String {
+    ur5_dir().join("ur5.toml").to_str().unwrap().to_string()
+}
+
+/// A planar two-link model file (l = 1, 0.5 m; columns q1, q2, x, y).
+pub const PLANAR_RR_MODEL: &str = "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = [1.0, 0.5]\n[measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\n";
+
+/// `cbd simulate --grid k` into `name`.
+pub fn rr_grid(dir: &Path, name: &str, per_axis: usize) -> String {
+    succeeds(&cbd(dir, &["simulate", "--grid", &per_axis.to_string(), "--out", name]));
+    name.to_string()
+}
+
+/// The first `rows` data rows of CSV file `from` (in `dir`) as `name`.
+pub fn head(dir: &Path, from: &str, name: &str, rows: usize) -> String {
+    let text = std::fs::read_to_string(dir.join(from)).unwrap();
+    let head: Vec<&str> = text.lines().take(rows + 1).collect();
+    write(dir, name, head.join("\n") + "\n")
+}
