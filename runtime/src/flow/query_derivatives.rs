@@ -136,13 +136,44 @@ pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
     crate::kinematics::rigid_derivatives::hessian(model, x)
 }
 
-/// The rates of one direction's tangent (δk, δJ) given the stage's fields:
-/// δk' = Dw δk − δJ v − J ∂_d v,  δJ' = (D²w δk) J + Dw δJ − δJ Dv − J ∂_d Dv.
+/// The rate of one direction's tangent position given the stage's fields:
+/// δk' = Dw δk − δJ v − J ∂_d v (first derivatives of the fields only).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn query_tangent_rates<S: Shape>(
+fn query_tangent_position_rate<S: Shape>(
     shape: S,
     direction: usize,
+    jac: &[[Real; NJ]; MT],
+    tf: &TaskField,
+    jf: &JointField,
+    dk: &[Real; MT],
+    djac: &[[Real; NJ]; MT],
+    out_dk: &mut [Real],
+) {
+    let (m, n) = (shape.m(), shape.n());
+    // ∂_d v = Dv[:, d]
+    let mut dv_d = [0.0; NJ];
+    for (dst, dv_f) in dv_d.iter_mut().zip(jf.dv.iter()).take(n) {
+        *dst = dv_f.get(direction).copied().unwrap_or(0.0);
+    }
+    for ((o_k, dw_a), (jac_a, djac_a)) in out_dk.iter_mut().zip(tf.dw.iter()).zip(jac.iter().zip(djac.iter())).take(m) {
+        let mut r = 0.0;
+        for (w, d) in dw_a.iter().zip(dk.iter()).take(m) {
+            r += w * d;
+        }
+        for ((dj, j), (v, dvd)) in djac_a.iter().zip(jac_a.iter()).zip(jf.v.iter().zip(dv_d.iter())).take(n) {
+            r -= dj * v + j * dvd;
+        }
+        *o_k = r;
+    }
+}
+
+/// The rate of one direction's tangent Jacobian given the stage's fields and their second derivatives:
+/// δJ' = (D²w δk) J + Dw δJ − δJ Dv − J ∂_d Dv.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn query_tangent_jacobian_rate<S: Shape>(
+    shape: S,
     jac: &[[Real; NJ]; MT],
     tf: &TaskField,
     t: &TaskHessian,
@@ -150,7 +181,6 @@ fn query_tangent_rates<S: Shape>(
     ddv_d: &[[Real; NJ]; NJ],
     dk: &[Real; MT],
     djac: &[[Real; NJ]; MT],
-    out_dk: &mut [Real],
     out_djac: &mut [Real],
 ) {
     let (m, n) = (shape.m(), shape.n());
@@ -168,22 +198,8 @@ fn query_tangent_rates<S: Shape>(
             *v = r;
         }
     }
-    // ∂_d v = Dv[:, d]
-    let mut dv_d = [0.0; NJ];
-    for (dst, dv_f) in dv_d.iter_mut().zip(jf.dv.iter()).take(n) {
-        *dst = dv_f.get(direction).copied().unwrap_or(0.0);
-    }
-    let rows =
-        out_dk.iter_mut().zip(out_djac.chunks_exact_mut(n.max(1))).zip(tf.dw.iter().zip(d2w.iter())).zip(jac.iter().zip(djac.iter()));
-    for (((o_k, o_jac), (dw_a, d2w_a)), (jac_a, djac_a)) in rows.take(m) {
-        let mut r = 0.0;
-        for (w, d) in dw_a.iter().zip(dk.iter()).take(m) {
-            r += w * d;
-        }
-        for ((dj, j), (v, dvd)) in djac_a.iter().zip(jac_a.iter()).zip(jf.v.iter().zip(dv_d.iter())).take(n) {
-            r -= dj * v + j * dvd;
-        }
-        *o_k = r;
+    let rows = out_djac.chunks_exact_mut(n.max(1)).zip(tf.dw.iter().zip(d2w.iter())).zip(jac.iter().zip(djac.iter()));
+    for ((o_jac, (dw_a, d2w_a)), (jac_a, djac_a)) in rows.take(m) {
         let mut acc = [0.0; NJ];
         for ((d2, w), (jac_c, djac_c)) in d2w_a.iter().zip(dw_a.iter()).zip(jac.iter().zip(djac.iter())).take(m) {
             for (o, (jce, djce)) in acc.iter_mut().zip(jac_c.iter().zip(djac_c.iter())).take(n) {
@@ -271,8 +287,13 @@ impl StageFields for KernelForm {
 
 /// The query state's right-hand side at one stage: the primal rates (eq. 20, the arithmetic of the
 /// control points' flow) and, if `state` holds them, every direction's tangent rates.
+///
+/// `LAST`: the integration's last stage, whose δJ rates only move δJ(1), which nothing reads (the
+/// exact Jacobian is δk(1), the transported one the primal J(1)): the fields' second derivatives
+/// (task Hessian T, ∂_d Dv) are not computed and the δJ rates are written as zeros. Every other rate
+/// is computed by the same arithmetic as on the other stages, so δk(1), k(1) and J(1) keep their bits.
 #[inline(always)]
-pub(crate) fn query_rates<S: Shape, F: StageFields>(
+pub(crate) fn query_rates<S: Shape, F: StageFields, const LAST: bool>(
     shape: S,
     form: &F,
     stage: &[Real],
@@ -287,10 +308,16 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
     let (k, jac) = unpack(shape, primal);
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     let s_jac = primal.get(m..)?;
-    if tangents.is_empty() {
+    if tangents.is_empty() || LAST {
         let (tf, _) = form.task::<_, false>(shape, stage, &k);
         let (jf, _) = form.joint::<_, false>(shape, stage, rows);
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
+        for (d, (tan, o)) in tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).enumerate().take(n) {
+            let (t_k, t_jac) = unpack(shape, tan);
+            let (o_k, o_jac) = o.split_at_mut_checked(m)?;
+            query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
+            o_jac.fill(0.0);
+        }
         return Some(());
     }
     let (tf, t) = form.task::<_, true>(shape, stage, &k);
@@ -301,7 +328,8 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
     {
         let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
-        query_tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
+        query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
+        query_tangent_jacobian_rate(shape, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_jac);
     }
     Some(())
 }
@@ -341,9 +369,14 @@ fn integrate_expansion<S: Shape>(
     let (m, n) = (shape.m(), shape.n());
     let stage_len = e.stage_len(n, m);
     let form = ExpansionForm { task_kernel, exponents: e.task_exponents, joint_len: e.n_joint_features as usize * n };
+    let last = integrator.stage_count().saturating_sub(1);
     crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, crate::Error::Internal, |stage, s, out| {
         let w = weights.get(stage * stage_len..(stage + 1) * stage_len).ok_or(crate::Error::Internal)?;
-        query_rates(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
+        if stage == last {
+            query_rates::<_, _, true>(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
+        } else {
+            query_rates::<_, _, false>(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
+        }
     })
 }
 
@@ -394,13 +427,16 @@ impl crate::Calibrator<'_> {
         let (rows, rest) = self.work.split_at_mut_checked(n_rows * kernel_row_len(n)).ok_or(Error::Internal)?;
         let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
         joint_features(&self.model.joint_kernel, q, &mut fq);
+        // The rows' second derivatives feed only the δJ rates of the stages before the last
+        // ([`query_rates`]): with one stage (Euler × 1) nothing reads them.
+        let row_hessians = exact_jacobian && self.model.integrator.stage_count() > 1;
         let support = match &self.model.expansion {
             None => {
                 let flow_kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
-                crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian))
+                crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, row_hessians))
                     / self.model.joint_kernel.gamma
             }
-            Some(e) => expansion_rows(shape, &self.model.joint_kernel, e.joint_codes, q, &fq, self.features, rows, exact_jacobian),
+            Some(e) => expansion_rows(shape, &self.model.joint_kernel, e.joint_codes, q, &fq, self.features, rows, row_hessians),
         };
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
@@ -446,9 +482,14 @@ impl crate::Calibrator<'_> {
             None => {
                 let (trajectory, block): (&[Real], usize) = (self.trajectory, n_points * dims.sample_len());
                 let form = KernelForm { task_kernel };
+                let last = integrator.stage_count().saturating_sub(1);
                 crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, Error::Internal, |stage, s, out| {
                     let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-                    query_rates(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
+                    if stage == last {
+                        query_rates::<_, _, true>(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
+                    } else {
+                        query_rates::<_, _, false>(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
+                    }
                 })?;
             }
             Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.weights, rows, y, scratch)?,
@@ -492,3 +533,6 @@ impl crate::Calibrator<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;
