@@ -342,13 +342,14 @@ fn expansion_rows<S: Shape>(
     shape: S,
     kernel: &JointKernel,
     codes: &[u8],
+    orders: &[u8; NJ],
     q: &[f64],
     fq: &[[Real; FEATURES_PER_JOINT]; NJ],
     features: &[Real],
     rows: &mut [Real],
     hessian: bool,
 ) -> f64 {
-    crate::expansion::write_joint_basis(kernel, codes, shape.n(), q, rows, hessian);
+    crate::expansion::write_joint_basis_with_orders(kernel, codes, orders, shape.n(), q, rows, hessian);
     crate::real::to_f64(crate::expansion::fields::support(shape, kernel, fq, features))
 }
 
@@ -361,6 +362,7 @@ fn integrate_expansion<S: Shape>(
     integrator: cbd_protocol::Integrator,
     task_kernel: TaskKernel,
     e: &cbd_protocol::FieldExpansion<'_>,
+    task_orders: [u8; MT],
     weights: &[Real],
     rows: &[Real],
     y: &mut [Real],
@@ -368,7 +370,7 @@ fn integrate_expansion<S: Shape>(
 ) -> Result<(), crate::Error> {
     let (m, n) = (shape.m(), shape.n());
     let stage_len = e.stage_len(n, m);
-    let form = ExpansionForm { task_kernel, exponents: e.task_exponents, joint_len: e.n_joint_features as usize * n };
+    let form = ExpansionForm { task_kernel, exponents: e.task_exponents, orders: task_orders, joint_len: e.n_joint_features as usize * n };
     let last = integrator.stage_count().saturating_sub(1);
     crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, crate::Error::Internal, |stage, s, out| {
         let w = weights.get(stage * stage_len..(stage + 1) * stage_len).ok_or(crate::Error::Internal)?;
@@ -436,7 +438,17 @@ impl crate::Calibrator<'_> {
                 crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, row_hessians))
                     / self.model.joint_kernel.gamma
             }
-            Some(e) => expansion_rows(shape, &self.model.joint_kernel, e.joint_codes, q, &fq, self.features, rows, row_hessians),
+            Some(e) => expansion_rows(
+                shape,
+                &self.model.joint_kernel,
+                e.joint_codes,
+                &self.orders.joint,
+                q,
+                &fq,
+                self.features,
+                rows,
+                row_hessians,
+            ),
         };
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
@@ -492,7 +504,7 @@ impl crate::Calibrator<'_> {
                     }
                 })?;
             }
-            Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.weights, rows, y, scratch)?,
+            Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.orders.task, self.weights, rows, y, scratch)?,
         }
         let mut out = crate::Evaluation {
             position: nalgebra::SMatrix::zeros(),

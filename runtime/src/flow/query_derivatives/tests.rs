@@ -154,7 +154,13 @@ fn check_shape<S: Shape>(shape: S) {
     let schemes = [(IntegratorMethod::Euler, 1), (IntegratorMethod::Euler, 2), (IntegratorMethod::Heun, 2), (IntegratorMethod::Rk4, 1)];
 
     let e = expansion(m, n, x);
-    let form = ExpansionForm { task_kernel: TaskKernel { width: 1.3 }, exponents: &e.exponents[..e.r_w * m], joint_len: e.r_v * n };
+    let exponents = &e.exponents[..e.r_w * m];
+    let form = ExpansionForm {
+        task_kernel: TaskKernel { width: 1.3 },
+        exponents,
+        orders: crate::expansion::task_orders(exponents, m),
+        joint_len: e.r_v * n,
+    };
     let stage = &e.weights[..e.r_v * n + e.r_w * m];
     let rows = &e.rows[..e.r_v * joint_row_len(n)];
     let (samples, len, kernel_rows) = kernel_form(m, n, x);
