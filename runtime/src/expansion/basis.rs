@@ -235,7 +235,7 @@ fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess:
         for (h_row, g_e) in h_rows.by_ref().zip(grad.iter()).take(d) {
             let Some((left, right)) = h_row.split_at_mut_checked(d) else { break };
             for h in left.iter_mut() {
-                *h = *h * f0;
+                *h *= f0;
             }
             if let Some(h) = right.first_mut() {
                 *h = g_e * f1;
@@ -252,7 +252,7 @@ fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess:
     }
     if let Some((left, right)) = grad.split_at_mut_checked(d) {
         for g in left.iter_mut() {
-            *g = *g * f0;
+            *g *= f0;
         }
         if let Some(g) = right.first_mut() {
             *g = p * f1;
