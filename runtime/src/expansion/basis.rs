@@ -6,6 +6,7 @@
 
 use core::ops::{Add, Mul, Neg, Sub};
 
+use crate::flow::Shape;
 use crate::real::Real;
 use cbd_protocol::{code_order, JointKernel, JointKernelAxis, TaskKernel, MAX_EXPANSION_ORDER, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
@@ -210,11 +211,11 @@ fn hermite_factors<T: Scalar>(u: T, order: usize, mut each: impl FnMut(usize, T,
 }
 
 /// Multiplies factor `f` = (F, F', F'') of axis d into a product basis function's running value,
-/// gradient and (HESSIAN, row-major n×n) Hessian: the product rule, axis by axis. Before the call
+/// gradient and (HESSIAN, row-major, rows of `stride`) Hessian: the product rule, axis by axis. Before the call
 /// the entries of axes below d hold the product of factors 0..d; after it those of axes up to d.
 /// The first factor (d = 0) is written as it is: the product before it is 1, and 1 · F = F exactly.
 #[inline(always)]
-fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess: &mut [Real], n: usize, d: usize, f: [Real; 3]) {
+fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess: &mut [Real], stride: usize, d: usize, f: [Real; 3]) {
     let [f0, f1, f2] = f;
     if d == 0 {
         *phi = f0;
@@ -231,7 +232,7 @@ fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess:
     let p = *phi;
     if HESSIAN {
         // ∂_e ∂_e' (φ F) = F ∂_e ∂_e' φ (e, e' < d); ∂_e ∂_d = F' ∂_e φ; ∂_d ∂_d = F'' φ.
-        let mut h_rows = hess.chunks_exact_mut(n.max(1));
+        let mut h_rows = hess.chunks_exact_mut(stride.max(1));
         for (h_row, g_e) in h_rows.by_ref().zip(grad.iter()).take(d) {
             let Some((left, right)) = h_row.split_at_mut_checked(d) else { break };
             for h in left.iter_mut() {
@@ -304,75 +305,166 @@ pub fn write_joint_basis_with_orders(
     rows: &mut [Real],
     hessian: bool,
 ) {
-    // One instance per case: the flags' branches stay out of the per-row loop.
-    let small = (orders.iter().copied().max().unwrap_or(0) as usize) < SMALL_ORDERS;
-    match (hessian, small) {
-        (true, true) => joint_basis::<true, { 2 * SMALL_ORDERS }>(joint_kernel, codes, orders, n, x, rows),
-        (true, false) => joint_basis::<true, { 2 * ORDERS }>(joint_kernel, codes, orders, n, x, rows),
-        (false, true) => joint_basis::<false, { 2 * SMALL_ORDERS }>(joint_kernel, codes, orders, n, x, rows),
-        (false, false) => joint_basis::<false, { 2 * ORDERS }>(joint_kernel, codes, orders, n, x, rows),
-    }
+    write_joint_basis_shaped(crate::flow::Dims { n, m: 0 }, joint_kernel, codes, orders, x, rows, hessian)
 }
 
-/// [`write_joint_basis_with_orders`] with the Hessian switch at compile time and tables of `CODES`
-/// codes (every code of every axis below it).
-fn joint_basis<const HESSIAN: bool, const CODES: usize>(
+/// [`write_joint_basis_with_orders`] (bit-identical) with the loops shaped by `shape` (its n).
+#[inline(always)]
+pub(crate) fn write_joint_basis_shaped<S: Shape>(
+    shape: S,
     joint_kernel: &JointKernel,
     codes: &[u8],
     orders: &[u8; NJ],
+    x: &[f64],
+    rows: &mut [Real],
+    hessian: bool,
+) {
+    // One instance per case: the flags' branches stay out of the per-row loop. Orders below
+    // SMALL_ORDERS (the common case): every axis's tables at once, each row formed in registers,
+    // for two and six joints with n known at compile time; higher orders: one axis at a time.
+    let small = (orders.iter().copied().max().unwrap_or(0) as usize) < SMALL_ORDERS;
+    let n = shape.n();
+    match (hessian, small, n) {
+        (true, true, 2) => joint_basis_rows::<true, 2, true>(2, joint_kernel, codes, orders, x, rows),
+        (true, true, 6) => joint_basis_rows::<true, 6, true>(6, joint_kernel, codes, orders, x, rows),
+        (true, true, _) => joint_basis_rows::<true, NJ, false>(n, joint_kernel, codes, orders, x, rows),
+        (false, true, 2) => joint_basis_rows::<false, 2, true>(2, joint_kernel, codes, orders, x, rows),
+        (false, true, 6) => joint_basis_rows::<false, 6, true>(6, joint_kernel, codes, orders, x, rows),
+        (false, true, _) => joint_basis_rows::<false, NJ, false>(n, joint_kernel, codes, orders, x, rows),
+        (true, false, _) => joint_basis_axes::<true>(n, joint_kernel, codes, orders, x, rows),
+        (false, false, _) => joint_basis_axes::<false>(n, joint_kernel, codes, orders, x, rows),
+    }
+}
+
+/// Codes `h << 1 | s` of orders below SMALL_ORDERS.
+const SMALL_CODES: usize = 2 * SMALL_ORDERS;
+
+/// The factors F, F', F'' (HESSIAN) of every code of one axis up to `order` (≤ CODES/2 − 1) at x_d,
+/// computed in f64 and rounded once to [`Real`]; entries above are left as they are.
+#[inline(always)]
+fn axis_factors<const HESSIAN: bool, const CODES: usize>(
+    axis: &JointKernelAxis,
+    xd: f64,
+    order: usize,
+    f0s: &mut [Real; CODES],
+    f1s: &mut [Real; CODES],
+    f2s: &mut [Real; CODES],
+) {
+    let mut set = |code: usize, f0: f64, f1: f64, f2: f64| {
+        if let (Some(d0), Some(d1), Some(d2)) = (f0s.get_mut(code), f1s.get_mut(code), f2s.get_mut(code)) {
+            (*d0, *d1) = (f0 as Real, f1 as Real);
+            if HESSIAN {
+                *d2 = f2 as Real;
+            }
+        }
+    };
+    match *axis {
+        // cos hx: (cos, −h sin, −h² cos); sin hx: (sin, h cos, −h² sin), harmonics by
+        // cos((h+1)x) = cos hx cos x − sin hx sin x, sin((h+1)x) = sin hx cos x + cos hx sin x.
+        JointKernelAxis::Periodic { .. } => {
+            let (s1, c1) = libm::sincos(xd);
+            let (mut c, mut s) = (1.0, 0.0);
+            for k in 0..=order {
+                let h = k as f64;
+                set(2 * k, c, -h * s, -(h * h) * c);
+                set(2 * k + 1, s, h * c, -(h * h) * s);
+                (c, s) = (c * c1 - s * s1, s * c1 + c * s1);
+            }
+        }
+        // The Hermite function of u = x/ℓ; its derivatives in x are those in u over ℓ, ℓ².
+        // (Gaussian codes have no sine bit; both entries hold the factor, as the order does.)
+        JointKernelAxis::Gaussian { width } => {
+            let u = xd / width;
+            let inv_width = 1.0 / width;
+            hermite_factors(u, order, |k, f0, f1, f2| {
+                let (f1, f2) = (f1 * inv_width, f2 * (inv_width * inv_width));
+                set(2 * k, f0, f1, f2);
+                set(2 * k + 1, f0, f1, f2);
+            });
+        }
+    }
+}
+
+/// The joint basis with every axis's factor tables at once (orders below SMALL_ORDERS): each row's
+/// product, gradient and (HESSIAN) Hessian formed axis by axis in registers, then written once.
+/// `EXACT`: n is AXES (loops unrolled); otherwise n ≤ AXES at run time.
+#[inline(never)]
+fn joint_basis_rows<const HESSIAN: bool, const AXES: usize, const EXACT: bool>(
     n: usize,
+    joint_kernel: &JointKernel,
+    codes: &[u8],
+    orders: &[u8; NJ],
     x: &[f64],
     rows: &mut [Real],
 ) {
+    let n = if EXACT { AXES } else { n.min(AXES) };
     let row_len = joint_row_len(n);
     if n == 0 {
         return;
     }
-    // Per code `h << 1 | s`: F, F', F'' of the current axis. One set of tables for every axis: a code
-    // of axis d is at most 2 order_d + 1, and those entries are written for axis d before its rows.
-    let (mut f0s, mut f1s, mut f2s) = ([0.0 as Real; CODES], [0.0 as Real; CODES], [0.0 as Real; CODES]);
-    for (d, ((axis, &xd), &order)) in joint_kernel.axes.iter().zip(x.iter()).zip(orders.iter()).enumerate().take(n) {
-        let order = (order as usize).min(CODES / 2 - 1);
-        let mut set = |code: usize, f0: f64, f1: f64, f2: f64| {
-            if let (Some(d0), Some(d1), Some(d2)) = (f0s.get_mut(code), f1s.get_mut(code), f2s.get_mut(code)) {
-                (*d0, *d1) = (f0 as Real, f1 as Real);
-                if HESSIAN {
-                    *d2 = f2 as Real;
+    // Per axis and code `h << 1 | s`: F, F', F''. A code of axis d is at most 2 order_d + 1.
+    let (mut f0s, mut f1s, mut f2s) =
+        ([[0.0 as Real; SMALL_CODES]; AXES], [[0.0 as Real; SMALL_CODES]; AXES], [[0.0 as Real; SMALL_CODES]; AXES]);
+    let tables = f0s.iter_mut().zip(f1s.iter_mut()).zip(f2s.iter_mut());
+    for (((axis, &xd), &order), ((t0, t1), t2)) in joint_kernel.axes.iter().zip(x.iter()).zip(orders.iter()).zip(tables).take(n) {
+        axis_factors::<HESSIAN, SMALL_CODES>(axis, xd, (order as usize).min(SMALL_ORDERS - 1), t0, t1, t2);
+    }
+    // Rows and codes walked by splitting (a zip of two `chunks_exact` keeps a division-by-zero
+    // panic path the optimiser cannot remove).
+    let mut code_rows = codes;
+    for row in rows.chunks_exact_mut(row_len.max(1)) {
+        let Some((code_row, rest)) = code_rows.split_at_checked(n) else { break };
+        code_rows = rest;
+        let (mut phi, mut grad, mut hess) = (0.0 as Real, [0.0 as Real; AXES], [[0.0 as Real; AXES]; AXES]);
+        for (d, (&code, ((t0, t1), t2))) in code_row.iter().zip(f0s.iter().zip(f1s.iter()).zip(f2s.iter())).enumerate() {
+            // Codes of this model are below SMALL_CODES: the remainder only spares the bounds checks.
+            let k = code as usize % SMALL_CODES;
+            let at = |t: &[Real; SMALL_CODES]| t.get(k).copied().unwrap_or(0.0);
+            let f = [at(t0), at(t1), if HESSIAN { at(t2) } else { 0.0 }];
+            multiply_factor::<HESSIAN>(&mut phi, &mut grad, hess.as_flattened_mut(), AXES, d, f);
+        }
+        let Some((row_phi, rest)) = row.split_first_mut() else { continue };
+        let Some((row_grad, row_hess)) = rest.split_at_mut_checked(n) else { continue };
+        *row_phi = phi;
+        for (dst, src) in row_grad.iter_mut().zip(grad.iter()) {
+            *dst = *src;
+        }
+        if HESSIAN {
+            for (dst_row, src_row) in row_hess.chunks_exact_mut(n.max(1)).zip(hess.iter()) {
+                for (dst, src) in dst_row.iter_mut().zip(src_row.iter()) {
+                    *dst = *src;
                 }
-            }
-        };
-        match *axis {
-            // cos hx: (cos, −h sin, −h² cos); sin hx: (sin, h cos, −h² sin), harmonics by
-            // cos((h+1)x) = cos hx cos x − sin hx sin x, sin((h+1)x) = sin hx cos x + cos hx sin x.
-            JointKernelAxis::Periodic { .. } => {
-                let (s1, c1) = libm::sincos(xd);
-                let (mut c, mut s) = (1.0, 0.0);
-                for k in 0..=order {
-                    let h = k as f64;
-                    set(2 * k, c, -h * s, -(h * h) * c);
-                    set(2 * k + 1, s, h * c, -(h * h) * s);
-                    (c, s) = (c * c1 - s * s1, s * c1 + c * s1);
-                }
-            }
-            // The Hermite function of u = x/ℓ; its derivatives in x are those in u over ℓ, ℓ².
-            // (Gaussian codes have no sine bit; both entries hold the factor, as the order does.)
-            JointKernelAxis::Gaussian { width } => {
-                let u = xd / width;
-                let inv_width = 1.0 / width;
-                hermite_factors(u, order, |k, f0, f1, f2| {
-                    let (f1, f2) = (f1 * inv_width, f2 * (inv_width * inv_width));
-                    set(2 * k, f0, f1, f2);
-                    set(2 * k + 1, f0, f1, f2);
-                });
             }
         }
-        // Rows and codes walked by splitting (a zip of two `chunks_exact` keeps a division-by-zero
-        // panic path the optimiser cannot remove).
+    }
+}
+
+/// The joint basis one axis at a time (tables of every order, 2 × 64 codes): each axis's factors
+/// multiplied into every row before the next axis.
+#[inline(never)]
+fn joint_basis_axes<const HESSIAN: bool>(
+    n: usize,
+    joint_kernel: &JointKernel,
+    codes: &[u8],
+    orders: &[u8; NJ],
+    x: &[f64],
+    rows: &mut [Real],
+) {
+    const CODES: usize = 2 * ORDERS;
+    let row_len = joint_row_len(n);
+    if n == 0 {
+        return;
+    }
+    // Per code: F, F', F'' of the current axis. One set of tables for every axis: a code of axis d
+    // is at most 2 order_d + 1, and those entries are written for axis d before its rows.
+    let (mut f0s, mut f1s, mut f2s) = ([0.0 as Real; CODES], [0.0 as Real; CODES], [0.0 as Real; CODES]);
+    for (d, ((axis, &xd), &order)) in joint_kernel.axes.iter().zip(x.iter()).zip(orders.iter()).enumerate().take(n) {
+        axis_factors::<HESSIAN, CODES>(axis, xd, (order as usize).min(ORDERS - 1), &mut f0s, &mut f1s, &mut f2s);
         let mut code_rows = codes;
         for row in rows.chunks_exact_mut(row_len.max(1)) {
             let Some((code_row, rest)) = code_rows.split_at_checked(n) else { break };
             code_rows = rest;
-            // Codes of this axis are below CODES: the remainder only spares the bounds checks.
+            // Codes are below CODES: the remainder only spares the bounds checks.
             let code = code_row.get(d).copied().unwrap_or(0) as usize % CODES;
             let at = |t: &[Real; CODES]| t.get(code).copied().unwrap_or(0.0);
             let f = [at(&f0s), at(&f1s), if HESSIAN { at(&f2s) } else { 0.0 }];

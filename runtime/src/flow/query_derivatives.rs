@@ -349,7 +349,7 @@ fn expansion_rows<S: Shape>(
     rows: &mut [Real],
     hessian: bool,
 ) -> f64 {
-    crate::expansion::write_joint_basis_with_orders(kernel, codes, orders, shape.n(), q, rows, hessian);
+    crate::expansion::basis::write_joint_basis_shaped(shape, kernel, codes, orders, q, rows, hessian);
     crate::real::to_f64(crate::expansion::fields::support(shape, kernel, fq, features))
 }
 

@@ -132,6 +132,16 @@ fn without_the_hessian_the_second_derivatives_are_untouched_and_the_rest_identic
         );
         assert!(rows[f * 13 + 4..(f + 1) * 13].iter().all(|v| *v == 7.0));
     }
+    // Low orders (every axis's tables at once), two joints: the same.
+    let kernel = kernel_of(2);
+    let codes: std::vec::Vec<u8> = (0..20u8).flat_map(|f| [(f % 8) << 1 | (f % 8 > 0 && f % 2 == 1) as u8, (f % 5) << 1]).collect();
+    let (mut full, mut rows) = ([0.0; 20 * 7], [7.0; 20 * 7]);
+    write_joint_basis(&kernel, &codes, 2, &[0.4, -1.3], &mut full, true);
+    write_joint_basis(&kernel, &codes, 2, &[0.4, -1.3], &mut rows, false);
+    for (f, r) in full.chunks_exact(7).zip(rows.chunks_exact(7)) {
+        assert_eq!(bits(&r[..3]), bits(&f[..3]));
+        assert!(r[3..].iter().all(|v| *v == 7.0));
+    }
 }
 
 #[test]
@@ -346,40 +356,72 @@ fn bits(v: &[Real]) -> std::vec::Vec<u64> {
     v.iter().map(|x| x.to_bits() as u64).collect()
 }
 
-/// Low-order codes only (every table small) and with one row of a high order appended (the tables
-/// of every order): rows, gradients and Hessians bit for bit as the reference computes them, and
-/// the common rows the same in both.
+/// A kernel of n axes, periodic and Gaussian mixed (n = 3: [`mixed_kernel`]).
+fn kernel_of(n: usize) -> JointKernel {
+    if n == 3 {
+        return mixed_kernel();
+    }
+    let axes = (0..n).map(|d| {
+        if d % 3 == 1 {
+            JointKernelAxis::Gaussian { width: 0.7 + 0.2 * d as f64 }
+        } else {
+            JointKernelAxis::Periodic { b: 0.5 }
+        }
+    });
+    JointKernel { gamma: 2.0, axes: axes.collect() }
+}
+
+/// Low-order codes only (every axis's tables at once, rows formed in registers) and with one row of
+/// high orders appended (one axis at a time, tables of every order), for n = 2 and 6 (loops shaped
+/// at compile time) and n = 1, 3, 7: rows, gradients and Hessians bit for bit as the reference
+/// computes them, and the common rows the same in both.
 #[test]
 fn joint_tables_reproduce_the_reference_bit_for_bit() {
-    let kernel = mixed_kernel();
-    // Orders 0..15 on every axis (both tables' sizes meet at 16), the sine bit on periodic axes only.
-    let mut low = std::vec::Vec::new();
-    for f in 0..48u32 {
-        let (h0, k1, h2) = ((f * 7 % 16) as u8, (f * 5 % 16) as u8, (f * 3 % 16) as u8);
-        let s0 = if h0 > 0 { (f % 2) as u8 } else { 0 };
-        let s2 = if h2 > 0 { (f / 2 % 2) as u8 } else { 0 };
-        low.extend_from_slice(&[h0 << 1 | s0, k1 << 1, h2 << 1 | s2]);
-    }
-    let mut high = low.clone();
-    high.extend_from_slice(&[16 << 1, 40 << 1, 63 << 1 | 1]);
-    let n = 3;
-    let len = joint_row_len(n);
-    for x in [[0.3, -0.2, 2.9], [-3.1, 1.4, 0.01], [1.0e-3, -2.5, -1.7]] {
-        for hessian in [true, false] {
-            for codes in [&low, &high] {
-                let r = codes.len() / n;
-                let (mut got, mut want) = (std::vec![0.0 as Real; r * len], std::vec![0.0 as Real; r * len]);
-                write_joint_basis(&kernel, codes, n, &x, &mut got, hessian);
-                reference::joint_basis(&kernel, codes, n, &x, &mut want, hessian);
-                assert_eq!(bits(&got), bits(&want), "x {x:?}, hessian {hessian}, {r} rows");
-                let mut with_orders = std::vec![0.0 as Real; r * len];
-                write_joint_basis_with_orders(&kernel, codes, &joint_orders(codes, n), n, &x, &mut with_orders, hessian);
-                assert_eq!(bits(&with_orders), bits(&got));
+    for n in [1, 2, 3, 6, MAX_JOINTS] {
+        let kernel = kernel_of(n);
+        // Orders 0..15 on every axis (the small tables' limit is 16), the sine bit on periodic axes only.
+        let mut low = std::vec::Vec::new();
+        for f in 0..48usize {
+            for (d, axis) in kernel.axes.iter().enumerate() {
+                let h = ((f * (2 * d + 3) + d) % 16) as u8;
+                let s = matches!(axis, JointKernelAxis::Periodic { .. }) && h > 0 && (f + d) % 2 == 1;
+                low.push(h << 1 | s as u8);
             }
-            let (mut a, mut b) = (std::vec![0.0 as Real; high.len() / n * len], std::vec![0.0 as Real; low.len() / n * len]);
-            write_joint_basis(&kernel, &high, n, &x, &mut a, hessian);
-            write_joint_basis(&kernel, &low, n, &x, &mut b, hessian);
-            assert_eq!(bits(&a[..b.len()]), bits(&b));
+        }
+        let mut high = low.clone();
+        high.extend((0..n).map(|d| [16u8 << 1, 40 << 1, 63 << 1][d % 3]));
+        let len = joint_row_len(n);
+        let xs =
+            [[0.3, -0.2, 2.9, 1.1, -0.4, 0.8, -2.2], [-3.1, 1.4, 0.01, -0.7, 2.5, -1.9, 0.6], [1.0e-3, -2.5, -1.7, 0.2, 3.0, 0.05, -1.0]];
+        for x in xs.iter().map(|x| &x[..n]) {
+            for hessian in [true, false] {
+                for codes in [&low, &high] {
+                    let r = codes.len() / n;
+                    let (mut got, mut want) = (std::vec![0.0 as Real; r * len], std::vec![0.0 as Real; r * len]);
+                    write_joint_basis(&kernel, codes, n, x, &mut got, hessian);
+                    reference::joint_basis(&kernel, codes, n, x, &mut want, hessian);
+                    if !hessian {
+                        // Without the Hessian its part is left as it was: compare the rest.
+                        for (g, w) in got.chunks_exact_mut(len).zip(want.chunks_exact_mut(len)) {
+                            g[1 + n..].fill(0.0);
+                            w[1 + n..].fill(0.0);
+                        }
+                    }
+                    assert_eq!(bits(&got), bits(&want), "n {n}, x {x:?}, hessian {hessian}, {r} rows");
+                    let mut with_orders = std::vec![0.0 as Real; r * len];
+                    write_joint_basis_with_orders(&kernel, codes, &joint_orders(codes, n), n, x, &mut with_orders, hessian);
+                    if !hessian {
+                        for row in with_orders.chunks_exact_mut(len) {
+                            row[1 + n..].fill(0.0);
+                        }
+                    }
+                    assert_eq!(bits(&with_orders), bits(&got));
+                }
+                let (mut a, mut b) = (std::vec![0.0 as Real; high.len() / n * len], std::vec![0.0 as Real; low.len() / n * len]);
+                write_joint_basis(&kernel, &high, n, x, &mut a, hessian);
+                write_joint_basis(&kernel, &low, n, x, &mut b, hessian);
+                assert_eq!(bits(&a[..b.len()]), bits(&b));
+            }
         }
     }
 }
