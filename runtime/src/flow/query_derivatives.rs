@@ -130,10 +130,18 @@ pub(crate) fn joint_sums<S: Shape, const HESSIAN: bool>(
 /// Second derivatives of the nominal forward kinematics at `x` (with effects, the augmented
 /// D²k0_aug of [`crate::kinematics::effects_derivatives::hessian`]).
 pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
+    let mut h = [[[0.0; NJ]; NJ]; MT];
+    write_nominal_hessian(model, x, &mut h);
+    h
+}
+
+/// [`nominal_hessian`] written into `h`, which must hold zeros (no copy of the array on the way).
+fn write_nominal_hessian(model: &NominalModel, x: &[f64], h: &mut NominalHessian) {
     if !model.effects().is_empty() {
-        return crate::kinematics::effects_derivatives::hessian(model, x);
+        *h = crate::kinematics::effects_derivatives::hessian(model, x);
+        return;
     }
-    crate::kinematics::rigid_derivatives::hessian(model, x)
+    crate::kinematics::rigid_derivatives::write_hessian(model, x, h)
 }
 
 /// The rate of one direction's tangent position given the stage's fields:
@@ -453,7 +461,10 @@ impl crate::Calibrator<'_> {
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
         let k0 = crate::kinematics::forward_kinematics(&self.model.nominal, q).normalised(norm);
-        let h0 = if exact_jacobian { nominal_hessian(&self.model.nominal, q) } else { [[[0.0; NJ]; NJ]; MT] };
+        let mut h0 = [[[0.0; NJ]; NJ]; MT];
+        if exact_jacobian {
+            write_nominal_hessian(&self.model.nominal, q, &mut h0);
+        }
         let ql = dims.query_len();
         let state_len = if exact_jacobian { query_tangent_len(dims) } else { ql };
         let (y, rest) = rest.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
@@ -537,7 +548,9 @@ impl crate::Calibrator<'_> {
         } else {
             out.jacobian = out.transported_jacobian;
         }
-        let finite = out.position.iter().chain(out.jacobian.iter()).chain(out.transported_jacobian.iter()).all(|v| v.is_finite());
+        // Over the matrices' storage (slices: nalgebra's strided iterators cost 20 instructions a value).
+        let finite =
+            out.position.as_slice().iter().chain(out.jacobian.as_slice()).chain(out.transported_jacobian.as_slice()).all(|v| v.is_finite());
         if finite {
             Ok(out)
         } else {
