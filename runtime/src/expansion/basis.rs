@@ -231,9 +231,12 @@ fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess:
     }
     let p = *phi;
     if HESSIAN {
-        // ∂_e ∂_e' (φ F) = F ∂_e ∂_e' φ (e, e' < d); ∂_e ∂_d = F' ∂_e φ; ∂_d ∂_d = F'' φ.
-        let mut h_rows = hess.chunks_exact_mut(stride.max(1));
-        for (h_row, g_e) in h_rows.by_ref().zip(grad.iter()).take(d) {
+        // ∂_e ∂_e' (φ F) = F ∂_e ∂_e' φ (e, e' < d); ∂_e ∂_d = F' ∂_e φ; ∂_d ∂_d = F'' φ. Rows by
+        // splitting (an iterator zip over `chunks_exact` keeps a division-by-zero panic path).
+        let mut h_rows: &mut [Real] = hess;
+        for g_e in grad.iter().take(d) {
+            let Some((h_row, rest)) = core::mem::take(&mut h_rows).split_at_mut_checked(stride) else { break };
+            h_rows = rest;
             let Some((left, right)) = h_row.split_at_mut_checked(d) else { break };
             for h in left.iter_mut() {
                 *h *= f0;
@@ -242,7 +245,7 @@ fn multiply_factor<const HESSIAN: bool>(phi: &mut Real, grad: &mut [Real], hess:
                 *h = g_e * f1;
             }
         }
-        if let Some((left, right)) = h_rows.next().and_then(|h_row| h_row.split_at_mut_checked(d)) {
+        if let Some((left, right)) = h_rows.split_at_mut_checked(d) {
             for (h, g) in left.iter_mut().zip(grad.iter()) {
                 *h = g * f1;
             }
@@ -430,7 +433,10 @@ fn joint_basis_rows<const HESSIAN: bool, const AXES: usize, const EXACT: bool>(
             *dst = *src;
         }
         if HESSIAN {
-            for (dst_row, src_row) in row_hess.chunks_exact_mut(n.max(1)).zip(hess.iter()) {
+            let mut dst_rows: &mut [Real] = row_hess;
+            for src_row in hess.iter().take(n) {
+                let Some((dst_row, rest)) = core::mem::take(&mut dst_rows).split_at_mut_checked(n) else { break };
+                dst_rows = rest;
                 for (dst, src) in dst_row.iter_mut().zip(src_row.iter()) {
                     *dst = *src;
                 }

@@ -320,7 +320,14 @@ pub(crate) fn query_rates<S: Shape, F: StageFields, const LAST: bool>(
         let (tf, _) = form.task::<_, false>(shape, stage, &k);
         let (jf, _) = form.joint::<_, false>(shape, stage, rows);
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
-        for (d, (tan, o)) in tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).enumerate().take(n) {
+        // Directions by splitting (a zip of two `chunks_exact` keeps a division-by-zero panic path).
+        let (mut tans, mut outs) = (tangents, out_tangents);
+        for d in 0..n {
+            let (Some((tan, t_rest)), Some((o, o_rest))) = (tans.split_at_checked(q), core::mem::take(&mut outs).split_at_mut_checked(q))
+            else {
+                break;
+            };
+            (tans, outs) = (t_rest, o_rest);
             let (t_k, t_jac) = unpack(shape, tan);
             let (o_k, o_jac) = o.split_at_mut_checked(m)?;
             query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
@@ -331,9 +338,13 @@ pub(crate) fn query_rates<S: Shape, F: StageFields, const LAST: bool>(
     let (tf, t) = form.task::<_, true>(shape, stage, &k);
     let (jf, ddv) = form.joint::<_, true>(shape, stage, rows);
     position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
-    for (d, ((tan, o), ddv_d)) in
-        tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).zip(ddv.iter()).enumerate().take(n)
-    {
+    let (mut tans, mut outs) = (tangents, out_tangents);
+    for (d, ddv_d) in ddv.iter().enumerate().take(n) {
+        let (Some((tan, t_rest)), Some((o, o_rest))) = (tans.split_at_checked(q), core::mem::take(&mut outs).split_at_mut_checked(q))
+        else {
+            break;
+        };
+        (tans, outs) = (t_rest, o_rest);
         let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
         query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
