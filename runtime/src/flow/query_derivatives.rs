@@ -296,18 +296,21 @@ impl StageFields for KernelForm {
 /// The query state's right-hand side at one stage: the primal rates (eq. 20, the arithmetic of the
 /// control points' flow) and, if `state` holds them, every direction's tangent rates.
 ///
-/// `LAST`: the integration's last stage, whose δJ rates only move δJ(1), which nothing reads (the
+/// `last`: the integration's last stage, whose δJ rates only move δJ(1), which nothing reads (the
 /// exact Jacobian is δk(1), the transported one the primal J(1)): the fields' second derivatives
 /// (task Hessian T, ∂_d Dv) are not computed and the δJ rates are written as zeros. Every other rate
 /// is computed by the same arithmetic as on the other stages, so δk(1), k(1) and J(1) keep their bits.
+/// A run-time flag (one branch per stage): the fields without second derivatives are those the
+/// position-only evaluation inlines here anyway, so the last stage adds no copy of them.
 #[inline(always)]
-pub(crate) fn query_rates<S: Shape, F: StageFields, const LAST: bool>(
+pub(crate) fn query_rates<S: Shape, F: StageFields>(
     shape: S,
     form: &F,
     stage: &[Real],
     rows: &[Real],
     state: &[Real],
     out: &mut [Real],
+    last: bool,
 ) -> Option<()> {
     let (m, n) = (shape.m(), shape.n());
     let q = m + m * n;
@@ -316,7 +319,7 @@ pub(crate) fn query_rates<S: Shape, F: StageFields, const LAST: bool>(
     let (k, jac) = unpack(shape, primal);
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     let s_jac = primal.get(m..)?;
-    if tangents.is_empty() || LAST {
+    if tangents.is_empty() || last {
         let (tf, _) = form.task::<_, false>(shape, stage, &k);
         let (jf, _) = form.joint::<_, false>(shape, stage, rows);
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
@@ -393,11 +396,7 @@ fn integrate_expansion<S: Shape>(
     let last = integrator.stage_count().saturating_sub(1);
     crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, crate::Error::Internal, |stage, s, out| {
         let w = weights.get(stage * stage_len..(stage + 1) * stage_len).ok_or(crate::Error::Internal)?;
-        if stage == last {
-            query_rates::<_, _, true>(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
-        } else {
-            query_rates::<_, _, false>(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
-        }
+        query_rates(shape, &form, w, rows, s, out, stage == last).ok_or(crate::Error::Internal)
     })
 }
 
@@ -519,11 +518,7 @@ impl crate::Calibrator<'_> {
                 let last = integrator.stage_count().saturating_sub(1);
                 crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, Error::Internal, |stage, s, out| {
                     let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-                    if stage == last {
-                        query_rates::<_, _, true>(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
-                    } else {
-                        query_rates::<_, _, false>(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
-                    }
+                    query_rates(shape, &form, samples, rows, s, out, stage == last).ok_or(Error::Internal)
                 })?;
             }
             Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.orders.task, self.weights, rows, y, scratch)?,

@@ -1,4 +1,4 @@
-//! The last stage's reduced rates ([`query_rates`] with `LAST`) against the full rates: the primal
+//! The last stage's reduced rates ([`query_rates`] with `last`) against the full rates: the primal
 //! and δk rates bit for bit, whatever the rows' second derivatives hold; integrated with every
 //! scheme, the same k(1), J(1) and δk(1) (the exact Jacobian) as integrating with full rates.
 
@@ -123,11 +123,7 @@ fn integrate_query<S: Shape, F: StageFields>(
     let mut scratch = [0.0; 3 * Y];
     let last = method.stages() * steps as usize - 1;
     crate::integrate::integrate_checked(method, steps, &mut y[..len], &mut scratch, (), |stage, s, out| {
-        if reduce && stage == last {
-            query_rates::<_, _, true>(shape, form, stage_data, rows, s, out).ok_or(())
-        } else {
-            query_rates::<_, _, false>(shape, form, stage_data, rows, s, out).ok_or(())
-        }
+        query_rates(shape, form, stage_data, rows, s, out, reduce && stage == last).ok_or(())
     })
     .unwrap();
     y
@@ -187,8 +183,8 @@ fn check_shape<S: Shape>(shape: S) {
         row[1 + n..].fill(Real::NAN);
     }
     let (mut full, mut reduced) = ([0.0; Y], [1.0; Y]);
-    query_rates::<_, _, false>(shape, &form, stage, rows, &state[..q * (1 + n)], &mut full[..q * (1 + n)]).unwrap();
-    query_rates::<_, _, true>(shape, &form, stage, &poisoned[..rows.len()], &state[..q * (1 + n)], &mut reduced[..q * (1 + n)]).unwrap();
+    query_rates(shape, &form, stage, rows, &state[..q * (1 + n)], &mut full[..q * (1 + n)], false).unwrap();
+    query_rates(shape, &form, stage, &poisoned[..rows.len()], &state[..q * (1 + n)], &mut reduced[..q * (1 + n)], true).unwrap();
     assert_same_outputs(dims, &reduced, &full);
     for d in 0..n {
         let t = q * (1 + d);
