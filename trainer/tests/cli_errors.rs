@@ -265,11 +265,12 @@ fn fit_with_model(dir: &Path, model: &str) -> Output {
 fn model_file_wrong_units() {
     let dir = scratch("model-units");
     let m = ur5_model_with(&dir, "inch.toml", "length_unit = \"mm\"\nangle_unit", "length_unit = \"inch\"\nangle_unit");
-    fails_with(&fit_with_model(&dir, &m), &["inch.toml", "line 5", "inch", "`mm` or `m`"]);
+    // Issue 26: the accepted units are listed.
+    fails_with(&fit_with_model(&dir, &m), &["inch.toml", "line 5", "inch", "`um`, `µm`, `mm`, `cm`, `m`, `in`"]);
     let m = ur5_model_with(&dir, "grad.toml", "angle_unit = \"deg\"\n\n[chain]", "angle_unit = \"grad\"\n\n[chain]");
     fails_with(&fit_with_model(&dir, &m), &["grad.toml", "line 6", "grad", "`deg` or `rad`"]);
-    let m = ur5_model_with(&dir, "csv-unit.toml", "length_unit = \"mm\"\nmin_rows", "length_unit = \"cm\"\nmin_rows");
-    fails_with(&fit_with_model(&dir, &m), &["csv-unit.toml", "cm"]);
+    let m = ur5_model_with(&dir, "csv-unit.toml", "length_unit = \"mm\"\nmin_rows", "length_unit = \"ft\"\nmin_rows");
+    fails_with(&fit_with_model(&dir, &m), &["csv-unit.toml", "ft"]);
     assert!(!dir.join("a.blob").exists());
 }
 
