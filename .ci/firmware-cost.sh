@@ -43,12 +43,13 @@ scheme_of() {
         demo) echo "$demo_method × $demo_steps (cbd demo)" ;;
         rr-ws) echo "Euler × 1, expansion 113 + 28 (format 5)" ;;
         six-ws) echo "Heun × 2, expansion 85 + 35 (format 5)" ;;
+        chain10) echo "Heun × 2" ;;
         *) echo "Euler × 2" ;;
     esac
 }
 
 rows=()
-for name in rr64 demo rr1024 rr six six-effects rr-ws six-ws; do
+for name in rr64 demo rr1024 rr six six-effects rr-ws six-ws chain10; do
     read -r n_points n_joints task_dim storage blob_bytes < <("$HOST" info "$OUT/blobs/$name.blob")
     for variant in dp sp f32; do
         # dp runs on the M7 only; sp (f64 in software) and f32 on the M4: QEMU counts the same
@@ -71,7 +72,7 @@ for name in rr64 demo rr1024 rr six six-effects rr-ws six-ws; do
             load=$(awk '$1 == "load" {print $2}' "$run")
             ratio=$(awk -v a="$tmax" -v b="$tmin" 'BEGIN {printf "%.3f", a / b}')
             model="RR"
-            [ "$n_joints" = 6 ] && model="6-joint"
+            [ "$n_joints" != 2 ] && model="$n_joints-joint"
             rows+=("| $model | $(scheme_of "$name") | $n_points | $cpu | $variant | $((tmin * 40)) | $((tmax * 40)) | $ratio | $((cmin * 40))–$((cmax * 40)) | $cratio × | $((load * 40)) | $blob_bytes | $((storage * bytes)) | $code |")
         done
     done

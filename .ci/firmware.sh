@@ -75,6 +75,12 @@ fw_build() {
         f32) flags="-C link-arg=-Tlink.x"; features="--features f32" ;;
         *) log "unknown variant $variant"; return 1 ;;
     esac
+    # Chains beyond 7 joints need the runtime's `long-chains` build (16 joints, larger stack arrays),
+    # in a target directory of its own so the two builds do not rebuild each other.
+    if [ "$("$HOST" info "$blob" | awk '{print $2}')" -gt 7 ]; then
+        features="$features --features long-chains"
+        target_dir="$target_dir-long-chains"
+    fi
     log "building firmware: blob $name, variant $variant, storage $storage values"
     # shellcheck disable=SC2086
     (cd "$FW_DIR" && CARGO_TARGET_DIR="$target_dir" RUSTFLAGS="$flags" CBD_BLOB="$blob" CBD_STORAGE_LEN="$storage" \
@@ -129,9 +135,10 @@ summary=()
 # six-effects (the 6-joint blob with all four physical effect types) runs sp on the M4 and dp on
 # the M7 only, to keep the check short. rr-ws and six-ws hold the fields in the kernels' own basis
 # (format 5, docs/DESIGN.md §11): the runtime evaluates the expansion instead of the kernel form.
-for name in rr rr256 six six-effects rr-ws six-ws; do
+# chain10 (10 joints, the longest chain the firmware check holds) runs like six-effects.
+for name in rr rr256 six six-effects rr-ws six-ws chain10; do
     variants="sp dp f32"
-    [ "$name" = six-effects ] && variants="sp dp"
+    case "$name" in six-effects | chain10) variants="sp dp" ;; esac
     "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
     "$HOST_F32" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name-f32.txt"
     values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
@@ -144,7 +151,7 @@ for name in rr rr256 six six-effects rr-ws six-ws; do
         elf="$(fw_build "$name" "$variant")"
         cpus="m4 m7"
         [ "$variant" = dp ] && cpus="m7"
-        [ "$name" = six-effects ] && [ "$variant" = sp ] && cpus="m4"
+        case "$name" in six-effects | chain10) [ "$variant" = sp ] && cpus="m4" ;; esac
         host="$OUT/host-$name.txt"
         [ "$variant" = f32 ] && host="$OUT/host-$name-f32.txt"
         for cpu in $cpus; do

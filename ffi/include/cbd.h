@@ -20,7 +20,7 @@
 #define CBD_STORAGE_ALIGN 8
 
 // Most joints a model can have.
-#define CBD_MAX_JOINTS 7
+#define CBD_MAX_JOINTS 16
 
 // Largest task dimension (position coordinates) a model can have.
 #define CBD_MAX_TASK_DIM 3

@@ -35,7 +35,7 @@ use core::mem::{align_of, size_of};
 /// rejected with `CBD_ERR_MISALIGNED`). `double` arrays and `malloc` memory satisfy it.
 pub const CBD_STORAGE_ALIGN: usize = 8;
 /// Most joints a model can have.
-pub const CBD_MAX_JOINTS: usize = 7;
+pub const CBD_MAX_JOINTS: usize = 16;
 /// Largest task dimension (position coordinates) a model can have.
 pub const CBD_MAX_TASK_DIM: usize = 3;
 
@@ -96,7 +96,8 @@ impl From<DecodeError> for CbdStatus {
             DecodeError::BadMagic => CBD_ERR_BAD_MAGIC,
             DecodeError::UnsupportedVersion { .. } => CBD_ERR_UNSUPPORTED_VERSION,
             DecodeError::ChecksumMismatch { .. } => CBD_ERR_CHECKSUM,
-            DecodeError::Payload => CBD_ERR_PAYLOAD,
+            // The C library is built with `long-chains`: a longer chain is no valid blob at all.
+            DecodeError::Payload | DecodeError::TooManyJoints { .. } => CBD_ERR_PAYLOAD,
             DecodeError::Invalid(_) => CBD_ERR_INVALID_MODEL,
         }
     }

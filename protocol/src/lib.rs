@@ -73,6 +73,11 @@ pub enum DecodeError {
     },
     /// The payload does not decode as a [`Model`] (postcard error).
     Payload,
+    /// The model has more joints than this build holds ([`MAX_JOINTS`]; feature `long-chains`).
+    TooManyJoints {
+        found: usize,
+        supported: usize,
+    },
     /// The payload decoded but is inconsistent (dimensions, non-finite or out-of-range values).
     Invalid(ModelError),
 }
@@ -101,6 +106,10 @@ impl core::fmt::Display for DecodeError {
                 write!(f, "blob checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")
             }
             DecodeError::Payload => write!(f, "blob payload does not decode"),
+            DecodeError::TooManyJoints { found, supported } => write!(
+                f,
+                "the model has {found} joints; this build holds at most {supported} (build the runtime with the feature `long-chains` for up to 16)"
+            ),
             DecodeError::Invalid(e) => write!(f, "blob holds an invalid model: {e}"),
         }
     }
@@ -190,7 +199,7 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
         return Err(DecodeError::ChecksumMismatch { stored, computed });
     }
     let payload = framed.get(HEADER_LEN..).ok_or(DecodeError::Payload)?;
-    let (mut model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| DecodeError::Payload)?;
+    let (mut model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| payload_error(payload))?;
     let rest = if version >= 5 {
         // Format 5: the expansion follows the model (`None` allowed, absence not).
         let (expansion, rest): (Option<FieldExpansion<'_>>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
@@ -220,3 +229,30 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
 mod tests;
 #[cfg(test)]
 mod tests_expansion;
+
+/// Why a payload did not decode: a chain longer than this build holds is named (its joint count is
+/// the first length in the payload: the nominal model's variant, then the planar lengths' count or
+/// the DH convention and the joints' count, all postcard varints); anything else is `Payload`.
+fn payload_error(payload: &[u8]) -> DecodeError {
+    fn varint(bytes: &mut core::slice::Iter<'_, u8>) -> Option<usize> {
+        let mut value = 0usize;
+        for shift in (0..35).step_by(7) {
+            let b = *bytes.next()?;
+            value |= usize::from(b & 0x7f) << shift;
+            if b & 0x80 == 0 {
+                return Some(value);
+            }
+        }
+        None
+    }
+    let mut bytes = payload.iter();
+    let found = match varint(&mut bytes) {
+        Some(0) => varint(&mut bytes),
+        Some(1) => varint(&mut bytes).and_then(|_convention| varint(&mut bytes)),
+        _ => None,
+    };
+    match found {
+        Some(found) if found > MAX_JOINTS && found <= MAX_JOINTS_ANY_BUILD => DecodeError::TooManyJoints { found, supported: MAX_JOINTS },
+        _ => DecodeError::Payload,
+    }
+}

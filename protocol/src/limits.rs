@@ -1,8 +1,19 @@
 //! The sizes a model may have (the fixed capacities of the runtime's stack arrays), shared by the
 //! model and its effects.
 
-/// Most joints a model may have.
+/// Most joints a model may have: 7 by default (an industrial arm with a linear track), 16 with the
+/// feature `long-chains` (a humanoid's torso and arm). The blob format does not depend on it; a
+/// runtime's stack arrays do (a query's 3-tensors hold MAX_JOINTS³ values): a controller for a
+/// short arm keeps the small build. A blob with more joints than a build holds is refused with
+/// [`crate::DecodeError::TooManyJoints`].
+#[cfg(not(feature = "long-chains"))]
 pub const MAX_JOINTS: usize = 7;
+/// Most joints a model may have (feature `long-chains`; 7 without it).
+#[cfg(feature = "long-chains")]
+pub const MAX_JOINTS: usize = 16;
+/// Most joints any build holds (with the feature `long-chains`): the trainer's and the model
+/// file's limit.
+pub const MAX_JOINTS_ANY_BUILD: usize = 16;
 /// Largest task-space dimension (3-D position).
 pub const MAX_TASK_DIM: usize = 3;
 /// Most integration steps a model may ask for.

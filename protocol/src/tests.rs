@@ -345,3 +345,45 @@ fn an_invalid_gravity_moment_is_named() {
     // Negative products are allowed (c_j may be of either sign; only the product is identified).
     assert_eq!(bad(Effect::GravityMoment { joint: 0, link: 0, mass: -1.0, first_moment: [0.1, 0.0, -0.2] }), Ok(()));
 }
+
+/// A chain longer than this build holds is named, with the joint count read from the payload's
+/// leading varints (nominal variant, then the planar lengths' count or the DH convention and the
+/// joints' count); a count beyond any build, or a payload too short to say, stays `Payload`.
+#[test]
+fn a_chain_longer_than_the_build_is_named() {
+    let expected = |found: usize| {
+        if found > MAX_JOINTS && found <= MAX_JOINTS_ANY_BUILD {
+            DecodeError::TooManyJoints { found, supported: MAX_JOINTS }
+        } else {
+            DecodeError::Payload
+        }
+    };
+    for found in [2usize, 7, 8, 10, 16, 17, 300] {
+        let count: &[u8] = if found < 128 { &[found as u8] } else { &[0x80 | (found & 0x7f) as u8, (found >> 7) as u8] };
+        let dh: std::vec::Vec<u8> = [&[1u8, 0][..], count, &[0xff, 0xff]].concat();
+        let planar: std::vec::Vec<u8> = [&[0u8][..], count].concat();
+        assert_eq!(payload_error(&dh), expected(found), "DH chain, {found} joints");
+        assert_eq!(payload_error(&planar), expected(found), "planar chain, {found} joints");
+    }
+    assert_eq!(payload_error(&[]), DecodeError::Payload);
+    assert_eq!(payload_error(&[1, 0]), DecodeError::Payload);
+    assert_eq!(payload_error(&[2, 10]), DecodeError::Payload, "no such nominal variant");
+    use std::string::ToString;
+    assert!(DecodeError::TooManyJoints { found: 10, supported: 7 }.to_string().contains("long-chains"));
+}
+
+/// The varints `payload_error` reads are the ones postcard writes: a real blob's payload gives its
+/// own joint count.
+#[test]
+fn the_joint_count_is_read_where_postcard_writes_it() {
+    let (points, momenta) = (le(&[0.0; 18]), le(&[0.0; 9]));
+    let planar = sample_model(&points, &momenta);
+    let dh = Model { nominal: NominalModel::DhChain(crate::ur5::chain()), ..planar.clone() };
+    for (model, leading) in [(planar, [0u8, 2]), (dh, [1u8, 0])] {
+        let mut buf = [0u8; 4096];
+        let payload = postcard::to_slice(&model, &mut buf).unwrap();
+        assert_eq!(payload[..2], leading);
+        let count = if leading[0] == 0 { payload[1] } else { payload[2] };
+        assert_eq!(usize::from(count), model.n_joints());
+    }
+}

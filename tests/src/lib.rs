@@ -41,7 +41,7 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
     let mut s = 7u64;
     let points: Vec<f64> = (0..n_points * n).map(|_| 3.0 * lcg(&mut s)).collect();
     let momenta: Vec<f64> = (0..n_points * m).map(|_| momentum * lcg(&mut s)).collect();
-    let axes: heapless::Vec<JointKernelAxis, 7> = (0..n)
+    let axes: heapless::Vec<JointKernelAxis, { cbd_protocol::MAX_JOINTS }> = (0..n)
         .map(|d| {
             if nominal.is_revolute(d) {
                 JointKernelAxis::Periodic { b: 1.0 }

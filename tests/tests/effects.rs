@@ -424,7 +424,7 @@ fn random_effects_never_panic_in_the_calibrator() {
         }
         let nominal = with_effects(&base, &list);
         let valid = nominal.effects().validate(n).is_ok();
-        let axes: heapless::Vec<JointKernelAxis, 7> = (0..n)
+        let axes: heapless::Vec<JointKernelAxis, { cbd_protocol::MAX_JOINTS }> = (0..n)
             .map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 100.0 } })
             .collect();
         let points: Vec<f64> = (0..4 * n).map(|_| 3.0 * lcg(&mut s)).collect();

@@ -94,20 +94,57 @@ pub fn six_effects_blob() -> Vec<u8> {
 
 fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
     let chain = DhChain { effects, ..cbd_protocol::ur5::chain() };
+    let integrator = Integrator { method: IntegratorMethod::Heun, steps: 5 };
+    dh_chain_blob(chain, [0.0, 0.0, 400.0], 500.0, integrator, 0x0005_5e1f)
+}
+
+/// examples/chain10/chain10.toml's table (mm; a torso carrying a seven-joint arm), 64 random
+/// configurations, small pseudo-random momenta, Heun × 2: the firmware check's longest chain
+/// (issue 26 item 4).
+pub fn chain10_blob() -> Vec<u8> {
+    const H: f64 = core::f64::consts::FRAC_PI_2;
+    let rows = [
+        (0.0, -H, 350.0),
+        (120.0, H, 0.0),
+        (0.0, -H, 280.0),
+        (180.0, -H, 0.0),
+        (0.0, H, 0.0),
+        (0.0, H, 400.0),
+        (0.0, -H, 0.0),
+        (0.0, -H, 400.0),
+        (0.0, H, 0.0),
+        (0.0, 0.0, 126.0),
+    ];
+    let joints = rows.map(|(a, alpha, d)| DhJoint { kind: JointKind::Revolute, a, alpha, d, theta_offset: 0.0 });
+    let mut tool = Transform::IDENTITY;
+    tool.translation = [0.0, 0.0, 31.0];
+    let chain = DhChain {
+        convention: DhConvention::Standard,
+        joints: heapless::Vec::from_slice(&joints).expect("10 joints fit MAX_JOINTS"),
+        base: Transform::IDENTITY,
+        tool,
+        effects: Effects::NONE,
+    };
+    let integrator = Integrator { method: IntegratorMethod::Heun, steps: 2 };
+    dh_chain_blob(chain, [0.0, 0.0, 600.0], 800.0, integrator, 0x000c_4a10)
+}
+
+/// A kernel-form blob on `chain`: 64 configurations uniform on the torus, momenta ~1e-3, periodic
+/// joint kernel (b = 1 on every axis), the trainer's default momentum law.
+fn dh_chain_blob(chain: DhChain, task_offset: [f64; 3], task_scale: f64, integrator: Integrator, seed: u32) -> Vec<u8> {
     const N: usize = 64;
-    let mut rng = Lcg(0x0005_5e1f);
-    let x: Vec<f64> = (0..N * 6).map(|_| PI * rng.symmetric()).collect();
+    let n = chain.joints.len();
+    let mut rng = Lcg(seed);
+    let x: Vec<f64> = (0..N * n).map(|_| PI * rng.symmetric()).collect();
     let p0: Vec<f64> = (0..N * 3).map(|_| 1e-3 * rng.symmetric()).collect();
     let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
+    let axes = heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; MAX_JOINTS][..n]).expect("n ≤ MAX_JOINTS axes");
     let model = Model {
         nominal: NominalModel::DhChain(chain),
-        normalisation: Normalisation { task_offset: [0.0, 0.0, 400.0], task_scale: 500.0 },
-        joint_kernel: JointKernel {
-            gamma: 1.0,
-            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; 6]).expect("6 axes"),
-        },
+        normalisation: Normalisation { task_offset, task_scale },
+        joint_kernel: JointKernel { gamma: 1.0, axes },
         task_kernel: TaskKernel { width: 1.0 },
-        integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
+        integrator,
         // The trainer's default law (v = −K_V Jᵀ P, format 3), so the firmware check covers it.
         momentum_law: MomentumLaw::Hamiltonian,
         sigma: 1.0,
@@ -116,7 +153,7 @@ fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
     };
-    encode_to_vec(&model).expect("encode 6-joint blob")
+    encode_to_vec(&model).expect("encode a DH-chain blob")
 }
 
 /// Joint codes of every product basis function of total degree ≤ `degree` (multi-indices h with

@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, six-effects.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2),
-//!                                  # rr-ws.blob (Euler × 1), six-ws.blob (Heun × 2): the fields in the kernels' own basis (format 5)
+//!                                  # rr-ws.blob (Euler × 1), six-ws.blob (Heun × 2): the fields in the kernels' own basis (format 5),
+//!                                  # chain10.blob (10 joints, Heun × 2)
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
 //! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
 //! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len_for blob_bytes
@@ -20,7 +21,7 @@ use std::process::ExitCode;
 mod blobs;
 #[path = "../../firmware/src/shared.rs"]
 mod shared;
-use blobs::{rr_grid_blob, rr_reference_blob, rr_ws_blob, six_effects_blob, six_joint_blob, six_ws_blob, DEMO_SCHEME};
+use blobs::{chain10_blob, rr_grid_blob, rr_reference_blob, rr_ws_blob, six_effects_blob, six_joint_blob, six_ws_blob, DEMO_SCHEME};
 
 fn make_blobs(out_dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
@@ -33,6 +34,7 @@ fn make_blobs(out_dir: &Path) -> Result<(), String> {
         ("rr1024.blob", rr_grid_blob(32, 0x0000_0400, DEMO_SCHEME)),
         ("rr-ws.blob", rr_ws_blob()),
         ("six-ws.blob", six_ws_blob()),
+        ("chain10.blob", chain10_blob()),
     ] {
         let path = out_dir.join(name);
         std::fs::write(&path, &blob).map_err(|e| format!("{}: {e}", path.display()))?;

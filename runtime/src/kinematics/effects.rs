@@ -397,7 +397,7 @@ pub(crate) mod tests {
             let dt = fd(q, d, 1e-5, |x| terms(x, Order::Value).tau);
             let ddt = fd(q, d, 1e-5, |x| {
                 let t = terms(x, Order::First).d_tau;
-                core::array::from_fn::<f64, 49, _>(|i| t[i / NJ][i % NJ])
+                core::array::from_fn::<f64, { NJ * NJ }, _>(|i| t[i / NJ][i % NJ])
             });
             for j in 0..n {
                 close(&format!("{name} dtau {j} {d}"), dt[j], t.d_tau[j][d], scale, 1e-8);
@@ -435,7 +435,7 @@ pub(crate) mod tests {
                     let dp = fd(q, d, 1e-6, |x| forward_kinematics(&model, x).position);
                     let dj = fd(q, d, 1e-6, |x| {
                         let j = forward_kinematics(&model, x).jacobian;
-                        core::array::from_fn::<f64, 21, _>(|i| j[i / NJ][i % NJ])
+                        core::array::from_fn::<f64, { MT * NJ }, _>(|i| j[i / NJ][i % NJ])
                     });
                     for a in 0..m {
                         worst_j = worst_j.max(close(&format!("{name} J[{a}][{d}]"), dp[a], k.jacobian[a][d], scale, 1e-8));

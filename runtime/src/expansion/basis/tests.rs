@@ -373,11 +373,11 @@ fn kernel_of(n: usize) -> JointKernel {
 
 /// Low-order codes only (every axis's tables at once, rows formed in registers) and with one row of
 /// high orders appended (one axis at a time, tables of every order), for n = 2 and 6 (loops shaped
-/// at compile time) and n = 1, 3, 7: rows, gradients and Hessians bit for bit as the reference
+/// at compile time) and n = 1, 3, 7, 10, 16: rows, gradients and Hessians bit for bit as the reference
 /// computes them, and the common rows the same in both.
 #[test]
 fn joint_tables_reproduce_the_reference_bit_for_bit() {
-    for n in [1, 2, 3, 6, MAX_JOINTS] {
+    for n in [1, 2, 3, 6, 7, 10, MAX_JOINTS] {
         let kernel = kernel_of(n);
         // Orders 0..15 on every axis (the small tables' limit is 16), the sine bit on periodic axes only.
         let mut low = std::vec::Vec::new();
@@ -391,8 +391,11 @@ fn joint_tables_reproduce_the_reference_bit_for_bit() {
         let mut high = low.clone();
         high.extend((0..n).map(|d| [16u8 << 1, 40 << 1, 63 << 1][d % 3]));
         let len = joint_row_len(n);
-        let xs =
-            [[0.3, -0.2, 2.9, 1.1, -0.4, 0.8, -2.2], [-3.1, 1.4, 0.01, -0.7, 2.5, -1.9, 0.6], [1.0e-3, -2.5, -1.7, 0.2, 3.0, 0.05, -1.0]];
+        let xs = [
+            [0.3, -0.2, 2.9, 1.1, -0.4, 0.8, -2.2, 1.7, -0.9, 0.45, -2.7, 2.2, -1.3, 0.15, 3.05, -0.6],
+            [-3.1, 1.4, 0.01, -0.7, 2.5, -1.9, 0.6, -0.25, 1.95, -2.4, 0.85, -1.1, 2.75, -0.05, -1.6, 1.2],
+            [1.0e-3, -2.5, -1.7, 0.2, 3.0, 0.05, -1.0, 2.6, -0.35, 1.3, -2.9, 0.7, -1.45, 2.05, 0.55, -3.0],
+        ];
         for x in xs.iter().map(|x| &x[..n]) {
             for hessian in [true, false] {
                 for codes in [&low, &high] {
