@@ -153,9 +153,25 @@ fn load_average() -> f64 {
     std::fs::read_to_string("/proc/loadavg").ok().and_then(|t| t.split_whitespace().next().and_then(|v| v.parse().ok())).unwrap_or(f64::NAN)
 }
 
+/// The memory check of `cbd fit` for an RR benchmark of `n` rows (`flag` names the list it came
+/// from): the workers to fit on, or why it cannot fit here.
+fn check_size(n: usize, flag: &str) -> Result<usize, String> {
+    per_axis(n)?;
+    crate::cli::memory::check_fit(n, 2, crate::cli::memory::available_bytes(), &format!("lower {flag}"))
+        .map_err(|e| format!("{flag} {n}: {e}"))
+}
+
+/// What a failed single-size run said: its `error:` line (a crash's text is not relayed whole).
+fn child_error(stderr: &[u8]) -> String {
+    let text = String::from_utf8_lossy(stderr);
+    let error = text.lines().rev().find_map(|l| l.strip_prefix("error: "));
+    let last = text.lines().rev().find(|l| !l.trim().is_empty());
+    crate::error::excerpt_of(error.or(last).unwrap_or("no message"), 400)
+}
+
 fn per_axis(n: usize) -> Result<usize, String> {
     let k = (n as f64).sqrt().round() as usize;
-    if k * k == n && k >= 2 {
+    if k.checked_mul(k) == Some(n) && k >= 2 {
         Ok(k)
     } else {
         Err(format!("size {n} is not a perfect square ≥ 4"))
@@ -170,7 +186,11 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
     // The paper's kernels and scheme (Euler × 2) through the pipeline: the solver's scaling in N.
     let settings =
         crate::calibrate::Settings { source: crate::calibrate::HyperparameterSource::PaperRr, steps: Some(2), ..Default::default() };
-    let fit = crate::calibrate::calibrate(&rr::nominal(), &train, &settings).map_err(|e| e.to_string())?.fit;
+    let threads = check_size(n, "--sizes")?;
+    let settings = crate::calibrate::Settings { threads: Some(threads), ..settings };
+    let fit = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))
+        .map_err(|e| e.to_string())?
+        .fit;
     crate::io::write_atomically(blob_out, &fit.blob)?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
     Ok(FitBench::of("rr", n, &fit.report, 0.0, crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean))
@@ -195,6 +215,11 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
 /// marginal likelihood) on the noisy RR benchmark: σ = 1e-4 per coordinate on a √N × √N grid (the
 /// noise of `cbd simulate --noise 1e-4`), 3000 noise-free random test configurations.
 fn evidence_rr(n: usize) -> Result<EvidenceBench, String> {
+    let threads = check_size(n, "--evidence-sizes")?;
+    crate::workers::on_workers(threads, || evidence_rr_on_workers(n))
+}
+
+fn evidence_rr_on_workers(n: usize) -> Result<EvidenceBench, String> {
     let real = rr::RealRr::default();
     let mut train = real.measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
     crate::simulate::add_noise(&mut train.positions, 1e-4, 1u64.wrapping_add(0x5eed));
@@ -292,6 +317,12 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     }
     // `--markdown` is edited in place: an output, and read only to keep its other sections.
     crate::io::check_paths(&[], &[("--json", args.json.as_deref()), ("--markdown", args.markdown.as_deref())])?;
+    // Every size is checked before the first fit: a size too large for the memory is refused up front.
+    for (sizes, flag) in [(&args.sizes, "--sizes"), (&args.evidence_sizes, "--evidence-sizes")] {
+        for &n in sizes {
+            check_size(n, flag)?;
+        }
+    }
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut report = BenchReport {
         machine: machine(),
@@ -311,7 +342,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
             .output()
             .map_err(|e| e.to_string())?;
         if !out.status.success() {
-            return Err(format!("bench for N = {n} failed: {}", String::from_utf8_lossy(&out.stderr)));
+            return Err(format!("bench for N = {n} failed: {}", child_error(&out.stderr)));
         }
         let line = String::from_utf8_lossy(&out.stdout);
         let fit: FitBench = serde_json::from_str(line.trim()).map_err(|e| format!("bench output for N = {n}: {e}"))?;
@@ -338,7 +369,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         let out =
             std::process::Command::new(&exe).args(["bench", "--single-ur5", "--ur5"]).arg(&args.ur5).output().map_err(|e| e.to_string())?;
         if !out.status.success() {
-            return Err(format!("bench for the UR5 example failed: {}", String::from_utf8_lossy(&out.stderr)));
+            return Err(format!("bench for the UR5 example failed: {}", child_error(&out.stderr)));
         }
         let fit: FitBench =
             serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).map_err(|e| format!("UR5 bench output: {e}"))?;

@@ -218,10 +218,12 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         eprintln!("warning: {w}");
     }
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);
-    crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?;
+    let threads = crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?;
     let mut settings = args.solver.settings()?;
     settings.dh_first = args.dh_first;
-    let calibration = crate::calibrate::calibrate(&nominal, &data, &settings).map_err(|e| format!("{}: {e}", args.data.display()))?;
+    settings.threads = Some(threads);
+    let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings))
+        .map_err(|e| format!("{}: {e}", args.data.display()))?;
     print_calibration(&calibration, args.solver.quiet);
     let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;

@@ -7,7 +7,7 @@ use super::encode::encode_checked;
 use super::problem::cancellation_of;
 use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
 use crate::data::Measurements;
-use crate::expansion::{fit_flow, fit_linear, Representation, CANCELLATION_LIMIT};
+use crate::expansion::{fit_flow, fit_linear, Declined, Representation, CANCELLATION_LIMIT};
 use crate::flow::ControlPoints;
 use crate::solver::regulariser::regulariser_matrix;
 use crate::solver::step::solve_regularised;
@@ -44,6 +44,7 @@ pub(super) fn fit(
     // The linear model's expansion first: the flow starts from it, and `auto` decides on its length.
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why.to_string())),
     };
     if opts.representation == Representation::Auto && linear.len() > cp.len() * m && kernel_cancellation <= CANCELLATION_LIMIT {
@@ -66,6 +67,7 @@ pub(super) fn fit(
         opts.prediction_tolerance,
     ) {
         Ok(r) => r,
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why.to_string())),
     };
     let norm = &opts.normalisation;
