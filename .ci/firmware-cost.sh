@@ -87,7 +87,7 @@ table="$(
     echo "sp = thumbv7em-none-eabihf defaults (f64 in software); dp = \`-C target-cpu=cortex-m7\` (double-precision FPU, non-fused"
     echo "VMLA/VMLS only); f32 = sp flags with the runtime's \`f32\` feature (evaluation in f32 on the single-precision FPU; the"
     echo "nominal model and the query's kernel features in f64, rounded once). Produced by \`bash .ci/firmware-cost.sh\`."
-    echo "The f32 rows vary most (max/min 1.13 at N = 64, 1.06 at 256, 1.03 at 1024): the spread, 7–11k instructions, hardly grows"
+    echo "The f32 rows vary most (max/min 1.13 at N = 64, 1.15 for the demo at 256, 1.03 at 1024): the spread, 8–14k instructions, hardly grows"
     echo "with N, so it sits in the per-query fixed part (our reading: software-f64 sin/cos of the nominal model and kernel features,"
     echo "whose range reduction depends on the angle), not in the per-point loop."
     echo "\"4 effects\": the 6-joint blob with encoder scale, transmission, gravity compliance and link bending (nominal model"

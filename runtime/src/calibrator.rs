@@ -89,6 +89,18 @@ pub struct Calibrator<'a> {
     pub(crate) work: &'a mut [Real],
     /// [`crate::precision::evaluation_precision`] of the model, user units (computed at load).
     pub(crate) precision: f64,
+    /// With an expansion: the highest order of each joint axis and of each task coordinate
+    /// ([`crate::expansion::joint_orders`], [`crate::expansion::task_orders`], computed at load;
+    /// zeros for the kernel form).
+    pub(crate) orders: ExpansionOrders,
+}
+
+/// The highest orders an expansion's basis uses, per joint axis and per task coordinate: what
+/// sizes the basis' factor tables, computed once per model instead of once per query.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct ExpansionOrders {
+    pub joint: [u8; MAX_JOINTS],
+    pub task: [u8; MAX_TASK_DIM],
 }
 
 impl<'a> Calibrator<'a> {
@@ -120,7 +132,7 @@ impl<'a> Calibrator<'a> {
         let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
         let features: &'a [Real] = Self::integrate_at_load(&model, dims, features, trajectory, work)?;
         let precision = crate::precision::evaluation_precision(&model);
-        Ok(Calibrator { model, dims, features, trajectory, weights: &[], work, precision })
+        Ok(Calibrator { model, dims, features, trajectory, weights: &[], work, precision, orders: ExpansionOrders::default() })
     }
 
     /// A model with an expansion: the configurations' kernel features (for the support) and the
@@ -135,7 +147,11 @@ impl<'a> Calibrator<'a> {
             *dst = src as Real;
         }
         let precision = crate::precision::evaluation_precision(&model);
-        Ok(Calibrator { model, dims, features, trajectory: &mut [], weights, work, precision })
+        let orders = ExpansionOrders {
+            joint: crate::expansion::joint_orders(e.joint_codes, dims.n),
+            task: crate::expansion::task_orders(e.task_exponents, dims.m),
+        };
+        Ok(Calibrator { model, dims, features, trajectory: &mut [], weights, work, precision, orders })
     }
 
     /// K_V's features of every configuration, from the blob's f64 values (unaligned bytes).

@@ -281,6 +281,35 @@ pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>, remedy: &
     ))
 }
 
+/// The worker threads a fit whose size is checked later (the expansion, [`room_for`]; the kernel
+/// form against [`kernel_form_budget`]) runs on within `available` bytes: as [`check_fit`] for no
+/// matrices. Refused when one worker alone does not fit, naming the memory limit to raise.
+pub fn check_workers(available: Option<f64>) -> Result<usize, String> {
+    let most = crate::workers::worker_threads();
+    let Some(available) = available else { return Ok(most) };
+    if let Some(threads) = [most, 1].into_iter().find(|&t| fixed_fit_bytes(t) <= available) {
+        return Ok(threads);
+    }
+    Err(format!(
+        "a fit needs about {} before its matrices ({} and the allocator's {}), more than the {} this process may use: raise the memory limit",
+        gigabytes(fixed_fit_bytes(1)),
+        workers_text(1),
+        gigabytes(ALLOCATOR_PAD),
+        gigabytes(available)
+    ))
+}
+
+/// [`check_workers`] against what this process may use; the error names the file.
+pub fn check_workers_of(file: &std::path::Path) -> Result<usize, String> {
+    check_workers(available_bytes()).map_err(|e| format!("{}: {e}", file.display()))
+}
+
+/// Bytes the kernel form's (N·m)² matrices may take on `threads` workers: what this process may
+/// use less the workers' and the allocator's ([`fixed_fit_bytes`]); `None` where nothing is known.
+pub fn kernel_form_budget(threads: usize) -> Option<f64> {
+    available_bytes().map(|a| (a - fixed_fit_bytes(threads)).max(0.0))
+}
+
 /// "1 worker thread of 0.08 GB (faer's matrix-multiply workspace 0.07 GB and an 8 MiB stack)".
 fn workers_text(threads: usize) -> String {
     format!(
@@ -337,6 +366,16 @@ mod tests {
         assert_eq!(check_fit(256, 2, Some(fixed_fit_bytes(most) + matrix_bytes(256, 2)), ""), Ok(most));
         let e = check_fit(2048, 2, Some(one + matrix_bytes(1024, 2)), "--max-rows N").unwrap_err();
         assert!(e.contains("at most 1024 rows fit: --max-rows N"), "{e}");
+    }
+
+    /// Issue 27 item 2: the expansion's fits check their workers up front too.
+    #[test]
+    fn the_workers_alone_are_checked() {
+        let one = fixed_fit_bytes(1);
+        assert_eq!(check_workers(Some(one)), Ok(1));
+        assert_eq!(check_workers(None), Ok(crate::workers::worker_threads()));
+        let e = check_workers(Some(0.5 * one)).unwrap_err();
+        assert!(e.contains("faer's matrix-multiply workspace") && e.contains("raise the memory limit"), "{e}");
     }
 
     #[test]

@@ -265,11 +265,12 @@ fn fit_with_model(dir: &Path, model: &str) -> Output {
 fn model_file_wrong_units() {
     let dir = scratch("model-units");
     let m = ur5_model_with(&dir, "inch.toml", "length_unit = \"mm\"\nangle_unit", "length_unit = \"inch\"\nangle_unit");
-    fails_with(&fit_with_model(&dir, &m), &["inch.toml", "line 5", "inch", "`mm` or `m`"]);
+    // Issue 26: the accepted units are listed.
+    fails_with(&fit_with_model(&dir, &m), &["inch.toml", "line 5", "inch", "`um`, `µm`, `mm`, `cm`, `m`, `in`"]);
     let m = ur5_model_with(&dir, "grad.toml", "angle_unit = \"deg\"\n\n[chain]", "angle_unit = \"grad\"\n\n[chain]");
     fails_with(&fit_with_model(&dir, &m), &["grad.toml", "line 6", "grad", "`deg` or `rad`"]);
-    let m = ur5_model_with(&dir, "csv-unit.toml", "length_unit = \"mm\"\nmin_rows", "length_unit = \"cm\"\nmin_rows");
-    fails_with(&fit_with_model(&dir, &m), &["csv-unit.toml", "cm"]);
+    let m = ur5_model_with(&dir, "csv-unit.toml", "length_unit = \"mm\"\nmin_rows", "length_unit = \"ft\"\nmin_rows");
+    fails_with(&fit_with_model(&dir, &m), &["csv-unit.toml", "ft"]);
     assert!(!dir.join("a.blob").exists());
 }
 
@@ -725,14 +726,26 @@ fn too_large_for_memory_is_refused_up_front() {
     );
     let out = cbd(&dir, &["simulate", "--sampling", "uniform", "--count", "20000", "--out", "big.csv"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    // The fit under a 6 GB address-space limit (`ulimit -v`, KiB).
-    let out = Command::new("sh")
-        .args(["-c", &format!("ulimit -v 6000000 && exec {CBD} fit --data big.csv --out big.blob --quiet")])
-        .current_dir(&dir)
-        .output()
-        .unwrap();
+    // The fit under a 6 GB address-space limit (`ulimit -v`, KiB): the kernel form's (N m)² matrices
+    // do not fit, refused up front.
+    let limited = |args: &str| {
+        Command::new("sh").args(["-c", &format!("ulimit -v 6000000 && exec {CBD} {args}")]).current_dir(&dir).output().unwrap()
+    };
+    let out = limited("fit --data big.csv --out big.blob --quiet --representation kernel");
     fails_with(&out, &["big.csv", "20000 measurements", "--max-rows"]);
     assert!(!dir.join("big.blob").exists());
+    // Issue 25: the expansion needs no (N m)² matrix, so with flat kernels the same rows fit (the
+    // hyperparameters given, so no search runs here) …
+    let flat = "--joint-b 0.001 --gamma 1 --task-width 10 --task-gamma 1 --sigma 1e-4";
+    let out = limited(&format!("fit --data big.csv --out big.blob --quiet {flat}"));
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("big.blob").exists());
+    // … while narrow kernels, whose expansion is too long, fall back to the kernel form: refused by
+    // the solver before it allocates, with the expansion's reason.
+    let narrow = "--joint-b 200 --gamma 1 --task-width 10 --task-gamma 1 --sigma 1e-4";
+    let out = limited(&format!("fit --data big.csv --out narrow.blob --quiet {narrow}"));
+    fails_with(&out, &["big.csv", "40000 momenta", "GB", "declined", "--max-rows"]);
+    assert!(!dir.join("narrow.blob").exists());
     // `compare` fits CbD and the hybrids on every training row: refused the same way, before any fit.
     std::fs::write(
         dir.join("rr.toml"),

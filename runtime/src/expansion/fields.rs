@@ -3,7 +3,7 @@
 //! sums over the kernel rows, [`crate::flow::query_derivatives`], with c_f for u_j), and the task
 //! field w(k) = Σ_g ψ_g(k) d_g with Dw and Σ_g d_g ∂²ψ_g from the task basis at the current k.
 
-use crate::expansion::basis::for_each_task_basis;
+use crate::expansion::basis::for_each_task_basis_with_orders;
 use crate::flow::query_derivatives::{joint_sums, JointHessian, StageFields};
 use crate::flow::{JointField, Shape, TaskField, TaskHessian};
 use crate::kernel::{joint_kernel_exponent_n, FEATURES_PER_JOINT};
@@ -11,12 +11,14 @@ use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// w(k) = Σ_g ψ_g(k) d_g, Dw[a][b] = Σ_g d_g[a] ∂_b ψ_g and (HESSIAN) T[a][c][b] = Σ_g d_g[a] ∂_c ∂_b ψ_g,
-/// `d` the stage's task weights (r_W × m). Out of line, as the kernel form's task field.
+/// `d` the stage's task weights (r_W × m), `orders` the coordinates' highest exponents
+/// ([`crate::expansion::task_orders`]). Out of line, as the kernel form's task field.
 #[inline(never)]
 pub fn task_sums<S: Shape, const HESSIAN: bool>(
     shape: S,
     kernel: &TaskKernel,
     exponents: &[u8],
+    orders: &[u8; MT],
     d: &[Real],
     k: &[Real],
 ) -> (TaskField, TaskHessian) {
@@ -24,7 +26,7 @@ pub fn task_sums<S: Shape, const HESSIAN: bool>(
     let mut f = TaskField { w: [0.0; MT], dw: [[0.0; MT]; MT] };
     let mut t = [[[0.0; MT]; MT]; MT];
     let mut weights = d.chunks_exact(m.max(1));
-    for_each_task_basis(kernel, exponents, m, k, HESSIAN, |_, psi, grad, hess| {
+    for_each_task_basis_with_orders(kernel, exponents, orders, m, k, HESSIAN, |_, psi, grad, hess| {
         let Some(d_g) = weights.next() else { return };
         for (((w_a, dw_a), t_a), d_ga) in f.w.iter_mut().zip(f.dw.iter_mut()).zip(t.iter_mut()).zip(d_g.iter()).take(m) {
             *w_a += psi * d_ga;
@@ -74,6 +76,8 @@ pub fn support<S: Shape>(shape: S, kernel: &JointKernel, fq: &[[Real; FEATURES_P
 pub(crate) struct ExpansionForm<'r> {
     pub task_kernel: TaskKernel,
     pub exponents: &'r [u8],
+    /// The task coordinates' highest exponents ([`crate::expansion::task_orders`]).
+    pub orders: [u8; MT],
     /// r_V n: where d starts in a stage's weights.
     pub joint_len: usize,
 }
@@ -82,7 +86,7 @@ impl StageFields for ExpansionForm<'_> {
     #[inline(always)]
     fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, weights: &[Real], k: &[Real]) -> (TaskField, TaskHessian) {
         let d = weights.get(self.joint_len..).unwrap_or(&[]);
-        task_sums::<_, HESSIAN>(shape, &self.task_kernel, self.exponents, d, k)
+        task_sums::<_, HESSIAN>(shape, &self.task_kernel, self.exponents, &self.orders, d, k)
     }
     #[inline(always)]
     fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S, weights: &[Real], rows: &[Real]) -> (JointField, JointHessian) {
@@ -97,8 +101,8 @@ pub fn joint_velocity<S: Shape>(shape: S, c: &[Real], rows: &[Real]) -> [Real; N
     joint_sums::<_, false>(shape, c, shape.n(), 0, rows).0.v
 }
 
-/// w(y) = Σ_g ψ_g(y) d_g (the velocity of the task flow ψ).
+/// w(y) = Σ_g ψ_g(y) d_g (the velocity of the task flow ψ), `orders` as in [`task_sums`].
 #[inline(always)]
-pub fn task_velocity<S: Shape>(shape: S, kernel: &TaskKernel, exponents: &[u8], d: &[Real], y: &[Real]) -> [Real; MT] {
-    task_sums::<_, false>(shape, kernel, exponents, d, y).0.w
+pub fn task_velocity<S: Shape>(shape: S, kernel: &TaskKernel, exponents: &[u8], orders: &[u8; MT], d: &[Real], y: &[Real]) -> [Real; MT] {
+    task_sums::<_, false>(shape, kernel, exponents, orders, d, y).0.w
 }

@@ -4,4 +4,7 @@
 pub mod basis;
 pub mod fields;
 
-pub use basis::{for_each_task_basis, joint_row_len, write_joint_basis};
+pub use basis::{
+    for_each_task_basis, for_each_task_basis_with_orders, joint_orders, joint_row_len, task_orders, write_joint_basis,
+    write_joint_basis_with_orders,
+};

@@ -12,7 +12,7 @@
 //! the queries' working space, hence `&mut self`).
 
 use crate::expansion::fields::stage_weights;
-use crate::expansion::{joint_row_len, write_joint_basis};
+use crate::expansion::{joint_row_len, write_joint_basis_with_orders};
 use crate::flow::{Fixed, Shape};
 use crate::integrate::integrate_checked;
 use crate::kernel::{joint_features, joint_kernel_parts_n, FEATURES_PER_JOINT};
@@ -147,13 +147,14 @@ impl Calibrator<'_> {
         let trajectory: &[Real] = self.trajectory;
         let (weights, expansion) = (self.weights, self.model.expansion.as_ref());
         let (stage_len, joint_len) = expansion.map_or((0, 0), |e| (e.stage_len(self.dims.n, m), e.n_joint_features as usize * self.dims.n));
+        let task_orders = self.orders.task;
         let state = state.get_mut(..m).ok_or(Error::Internal)?;
         flow_along_stages(self.model.integrator, direction, state, |stage, s, rate| {
             let w = match expansion {
                 None => task_velocity(shape, &kernel, s, trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?),
                 Some(e) => {
                     let (_, d) = stage_weights(weights, stage, stage_len, joint_len).ok_or(Error::Internal)?;
-                    crate::expansion::fields::task_velocity(shape, &kernel, e.task_exponents, d, s)
+                    crate::expansion::fields::task_velocity(shape, &kernel, e.task_exponents, &task_orders, d, s)
                 }
             };
             for (r, w_a) in rate.iter_mut().zip(w.iter()) {
@@ -190,6 +191,7 @@ impl Calibrator<'_> {
         let (stage_len, joint_len) = expansion.map_or((0, 0), |e| (e.stage_len(n, m), e.n_joint_features as usize * n));
         // The expansion's joint basis at the moving x goes to the queries' working space.
         let rows_len = expansion.map_or(0, |e| e.n_joint_features as usize * joint_row_len(n));
+        let joint_orders = self.orders.joint;
         let rows = self.work.get_mut(..rows_len).ok_or(Error::Internal)?;
         let state = state.get_mut(..n).ok_or(Error::Internal)?;
         flow_along_stages(self.model.integrator, direction, state, |stage, s, rate| {
@@ -203,7 +205,15 @@ impl Calibrator<'_> {
                     for (dst, src) in xx.iter_mut().zip(s).take(n) {
                         *dst = to_f64(*src);
                     }
-                    write_joint_basis(&self.model.joint_kernel, e.joint_codes, n, xx.get(..n).unwrap_or(&[]), rows, false);
+                    write_joint_basis_with_orders(
+                        &self.model.joint_kernel,
+                        e.joint_codes,
+                        &joint_orders,
+                        n,
+                        xx.get(..n).unwrap_or(&[]),
+                        rows,
+                        false,
+                    );
                     crate::expansion::fields::joint_velocity(shape, c, rows)
                 }
             };

@@ -130,19 +130,58 @@ pub(crate) fn joint_sums<S: Shape, const HESSIAN: bool>(
 /// Second derivatives of the nominal forward kinematics at `x` (with effects, the augmented
 /// D²k0_aug of [`crate::kinematics::effects_derivatives::hessian`]).
 pub fn nominal_hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
-    if !model.effects().is_empty() {
-        return crate::kinematics::effects_derivatives::hessian(model, x);
-    }
-    crate::kinematics::rigid_derivatives::hessian(model, x)
+    let mut h = [[[0.0; NJ]; NJ]; MT];
+    write_nominal_hessian(model, x, &mut h);
+    h
 }
 
-/// The rates of one direction's tangent (δk, δJ) given the stage's fields:
-/// δk' = Dw δk − δJ v − J ∂_d v,  δJ' = (D²w δk) J + Dw δJ − δJ Dv − J ∂_d Dv.
+/// [`nominal_hessian`] written into `h`, which must hold zeros (no copy of the array on the way).
+fn write_nominal_hessian(model: &NominalModel, x: &[f64], h: &mut NominalHessian) {
+    if !model.effects().is_empty() {
+        *h = crate::kinematics::effects_derivatives::hessian(model, x);
+        return;
+    }
+    crate::kinematics::rigid_derivatives::write_hessian(model, x, h)
+}
+
+/// The rate of one direction's tangent position given the stage's fields:
+/// δk' = Dw δk − δJ v − J ∂_d v (first derivatives of the fields only).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn query_tangent_rates<S: Shape>(
+fn query_tangent_position_rate<S: Shape>(
     shape: S,
     direction: usize,
+    jac: &[[Real; NJ]; MT],
+    tf: &TaskField,
+    jf: &JointField,
+    dk: &[Real; MT],
+    djac: &[[Real; NJ]; MT],
+    out_dk: &mut [Real],
+) {
+    let (m, n) = (shape.m(), shape.n());
+    // ∂_d v = Dv[:, d]
+    let mut dv_d = [0.0; NJ];
+    for (dst, dv_f) in dv_d.iter_mut().zip(jf.dv.iter()).take(n) {
+        *dst = dv_f.get(direction).copied().unwrap_or(0.0);
+    }
+    for ((o_k, dw_a), (jac_a, djac_a)) in out_dk.iter_mut().zip(tf.dw.iter()).zip(jac.iter().zip(djac.iter())).take(m) {
+        let mut r = 0.0;
+        for (w, d) in dw_a.iter().zip(dk.iter()).take(m) {
+            r += w * d;
+        }
+        for ((dj, j), (v, dvd)) in djac_a.iter().zip(jac_a.iter()).zip(jf.v.iter().zip(dv_d.iter())).take(n) {
+            r -= dj * v + j * dvd;
+        }
+        *o_k = r;
+    }
+}
+
+/// The rate of one direction's tangent Jacobian given the stage's fields and their second derivatives:
+/// δJ' = (D²w δk) J + Dw δJ − δJ Dv − J ∂_d Dv.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn query_tangent_jacobian_rate<S: Shape>(
+    shape: S,
     jac: &[[Real; NJ]; MT],
     tf: &TaskField,
     t: &TaskHessian,
@@ -150,7 +189,6 @@ fn query_tangent_rates<S: Shape>(
     ddv_d: &[[Real; NJ]; NJ],
     dk: &[Real; MT],
     djac: &[[Real; NJ]; MT],
-    out_dk: &mut [Real],
     out_djac: &mut [Real],
 ) {
     let (m, n) = (shape.m(), shape.n());
@@ -168,22 +206,8 @@ fn query_tangent_rates<S: Shape>(
             *v = r;
         }
     }
-    // ∂_d v = Dv[:, d]
-    let mut dv_d = [0.0; NJ];
-    for (dst, dv_f) in dv_d.iter_mut().zip(jf.dv.iter()).take(n) {
-        *dst = dv_f.get(direction).copied().unwrap_or(0.0);
-    }
-    let rows =
-        out_dk.iter_mut().zip(out_djac.chunks_exact_mut(n.max(1))).zip(tf.dw.iter().zip(d2w.iter())).zip(jac.iter().zip(djac.iter()));
-    for (((o_k, o_jac), (dw_a, d2w_a)), (jac_a, djac_a)) in rows.take(m) {
-        let mut r = 0.0;
-        for (w, d) in dw_a.iter().zip(dk.iter()).take(m) {
-            r += w * d;
-        }
-        for ((dj, j), (v, dvd)) in djac_a.iter().zip(jac_a.iter()).zip(jf.v.iter().zip(dv_d.iter())).take(n) {
-            r -= dj * v + j * dvd;
-        }
-        *o_k = r;
+    let rows = out_djac.chunks_exact_mut(n.max(1)).zip(tf.dw.iter().zip(d2w.iter())).zip(jac.iter().zip(djac.iter()));
+    for ((o_jac, (dw_a, d2w_a)), (jac_a, djac_a)) in rows.take(m) {
         let mut acc = [0.0; NJ];
         for ((d2, w), (jac_c, djac_c)) in d2w_a.iter().zip(dw_a.iter()).zip(jac.iter().zip(djac.iter())).take(m) {
             for (o, (jce, djce)) in acc.iter_mut().zip(jac_c.iter().zip(djac_c.iter())).take(n) {
@@ -271,6 +295,13 @@ impl StageFields for KernelForm {
 
 /// The query state's right-hand side at one stage: the primal rates (eq. 20, the arithmetic of the
 /// control points' flow) and, if `state` holds them, every direction's tangent rates.
+///
+/// `last`: the integration's last stage, whose δJ rates only move δJ(1), which nothing reads (the
+/// exact Jacobian is δk(1), the transported one the primal J(1)): the fields' second derivatives
+/// (task Hessian T, ∂_d Dv) are not computed and the δJ rates are written as zeros. Every other rate
+/// is computed by the same arithmetic as on the other stages, so δk(1), k(1) and J(1) keep their bits.
+/// A run-time flag (one branch per stage): the fields without second derivatives are those the
+/// position-only evaluation inlines here anyway, so the last stage adds no copy of them.
 #[inline(always)]
 pub(crate) fn query_rates<S: Shape, F: StageFields>(
     shape: S,
@@ -279,6 +310,7 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
     rows: &[Real],
     state: &[Real],
     out: &mut [Real],
+    last: bool,
 ) -> Option<()> {
     let (m, n) = (shape.m(), shape.n());
     let q = m + m * n;
@@ -287,21 +319,39 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
     let (k, jac) = unpack(shape, primal);
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     let s_jac = primal.get(m..)?;
-    if tangents.is_empty() {
+    if tangents.is_empty() || last {
         let (tf, _) = form.task::<_, false>(shape, stage, &k);
         let (jf, _) = form.joint::<_, false>(shape, stage, rows);
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
+        // Directions by splitting (a zip of two `chunks_exact` keeps a division-by-zero panic path).
+        let (mut tans, mut outs) = (tangents, out_tangents);
+        for d in 0..n {
+            let (Some((tan, t_rest)), Some((o, o_rest))) = (tans.split_at_checked(q), core::mem::take(&mut outs).split_at_mut_checked(q))
+            else {
+                break;
+            };
+            (tans, outs) = (t_rest, o_rest);
+            let (t_k, t_jac) = unpack(shape, tan);
+            let (o_k, o_jac) = o.split_at_mut_checked(m)?;
+            query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
+            o_jac.fill(0.0);
+        }
         return Some(());
     }
     let (tf, t) = form.task::<_, true>(shape, stage, &k);
     let (jf, ddv) = form.joint::<_, true>(shape, stage, rows);
     position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
-    for (d, ((tan, o), ddv_d)) in
-        tangents.chunks_exact(q.max(1)).zip(out_tangents.chunks_exact_mut(q.max(1))).zip(ddv.iter()).enumerate().take(n)
-    {
+    let (mut tans, mut outs) = (tangents, out_tangents);
+    for (d, ddv_d) in ddv.iter().enumerate().take(n) {
+        let (Some((tan, t_rest)), Some((o, o_rest))) = (tans.split_at_checked(q), core::mem::take(&mut outs).split_at_mut_checked(q))
+        else {
+            break;
+        };
+        (tans, outs) = (t_rest, o_rest);
         let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
-        query_tangent_rates(shape, d, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_k, o_jac);
+        query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
+        query_tangent_jacobian_rate(shape, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_jac);
     }
     Some(())
 }
@@ -314,13 +364,14 @@ fn expansion_rows<S: Shape>(
     shape: S,
     kernel: &JointKernel,
     codes: &[u8],
+    orders: &[u8; NJ],
     q: &[f64],
     fq: &[[Real; FEATURES_PER_JOINT]; NJ],
     features: &[Real],
     rows: &mut [Real],
     hessian: bool,
 ) -> f64 {
-    crate::expansion::write_joint_basis(kernel, codes, shape.n(), q, rows, hessian);
+    crate::expansion::basis::write_joint_basis_shaped(shape, kernel, codes, orders, q, rows, hessian);
     crate::real::to_f64(crate::expansion::fields::support(shape, kernel, fq, features))
 }
 
@@ -333,6 +384,7 @@ fn integrate_expansion<S: Shape>(
     integrator: cbd_protocol::Integrator,
     task_kernel: TaskKernel,
     e: &cbd_protocol::FieldExpansion<'_>,
+    task_orders: [u8; MT],
     weights: &[Real],
     rows: &[Real],
     y: &mut [Real],
@@ -340,10 +392,11 @@ fn integrate_expansion<S: Shape>(
 ) -> Result<(), crate::Error> {
     let (m, n) = (shape.m(), shape.n());
     let stage_len = e.stage_len(n, m);
-    let form = ExpansionForm { task_kernel, exponents: e.task_exponents, joint_len: e.n_joint_features as usize * n };
+    let form = ExpansionForm { task_kernel, exponents: e.task_exponents, orders: task_orders, joint_len: e.n_joint_features as usize * n };
+    let last = integrator.stage_count().saturating_sub(1);
     crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, crate::Error::Internal, |stage, s, out| {
         let w = weights.get(stage * stage_len..(stage + 1) * stage_len).ok_or(crate::Error::Internal)?;
-        query_rates(shape, &form, w, rows, s, out).ok_or(crate::Error::Internal)
+        query_rates(shape, &form, w, rows, s, out, stage == last).ok_or(crate::Error::Internal)
     })
 }
 
@@ -394,18 +447,34 @@ impl crate::Calibrator<'_> {
         let (rows, rest) = self.work.split_at_mut_checked(n_rows * kernel_row_len(n)).ok_or(Error::Internal)?;
         let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
         joint_features(&self.model.joint_kernel, q, &mut fq);
+        // The rows' second derivatives feed only the δJ rates of the stages before the last
+        // ([`query_rates`]): with one stage (Euler × 1) nothing reads them.
+        let row_hessians = exact_jacobian && self.model.integrator.stage_count() > 1;
         let support = match &self.model.expansion {
             None => {
                 let flow_kernel = self.model.joint_kernel.for_flow(self.model.momentum_law);
-                crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, exact_jacobian))
+                crate::real::to_f64(write_kernel_rows(shape, &flow_kernel, &fq, self.features, rows, row_hessians))
                     / self.model.joint_kernel.gamma
             }
-            Some(e) => expansion_rows(shape, &self.model.joint_kernel, e.joint_codes, q, &fq, self.features, rows, exact_jacobian),
+            Some(e) => expansion_rows(
+                shape,
+                &self.model.joint_kernel,
+                e.joint_codes,
+                &self.orders.joint,
+                q,
+                &fq,
+                self.features,
+                rows,
+                row_hessians,
+            ),
         };
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
         let k0 = crate::kinematics::forward_kinematics(&self.model.nominal, q).normalised(norm);
-        let h0 = if exact_jacobian { nominal_hessian(&self.model.nominal, q) } else { [[[0.0; NJ]; NJ]; MT] };
+        let mut h0 = [[[0.0; NJ]; NJ]; MT];
+        if exact_jacobian {
+            write_nominal_hessian(&self.model.nominal, q, &mut h0);
+        }
         let ql = dims.query_len();
         let state_len = if exact_jacobian { query_tangent_len(dims) } else { ql };
         let (y, rest) = rest.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
@@ -446,12 +515,13 @@ impl crate::Calibrator<'_> {
             None => {
                 let (trajectory, block): (&[Real], usize) = (self.trajectory, n_points * dims.sample_len());
                 let form = KernelForm { task_kernel };
+                let last = integrator.stage_count().saturating_sub(1);
                 crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, Error::Internal, |stage, s, out| {
                     let samples = trajectory.get(stage * block..(stage + 1) * block).ok_or(Error::Internal)?;
-                    query_rates(shape, &form, samples, rows, s, out).ok_or(Error::Internal)
+                    query_rates(shape, &form, samples, rows, s, out, stage == last).ok_or(Error::Internal)
                 })?;
             }
-            Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.weights, rows, y, scratch)?,
+            Some(e) => integrate_expansion(shape, integrator, task_kernel, e, self.orders.task, self.weights, rows, y, scratch)?,
         }
         let mut out = crate::Evaluation {
             position: nalgebra::SMatrix::zeros(),
@@ -484,7 +554,9 @@ impl crate::Calibrator<'_> {
         } else {
             out.jacobian = out.transported_jacobian;
         }
-        let finite = out.position.iter().chain(out.jacobian.iter()).chain(out.transported_jacobian.iter()).all(|v| v.is_finite());
+        // Over the matrices' storage (slices: nalgebra's strided iterators cost 20 instructions a value).
+        let finite =
+            out.position.as_slice().iter().chain(out.jacobian.as_slice()).chain(out.transported_jacobian.as_slice()).all(|v| v.is_finite());
         if finite {
             Ok(out)
         } else {
@@ -492,3 +564,6 @@ impl crate::Calibrator<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

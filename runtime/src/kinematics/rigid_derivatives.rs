@@ -10,6 +10,12 @@ pub type NominalHessian = [[[f64; NJ]; NJ]; MT];
 /// D²k0(x) of the chain, ignoring any effects the model carries.
 pub fn hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
     let mut h = [[[0.0; NJ]; NJ]; MT];
+    write_hessian(model, x, &mut h);
+    h
+}
+
+/// [`hessian`] written into `h`, which must hold zeros (the query's path: no copy of the array).
+pub fn write_hessian(model: &NominalModel, x: &[f64], h: &mut NominalHessian) {
     match model {
         // ∂²y/∂x_e∂x_d = Σ_{k ≥ max(d, e)} −l_k (cos θ_k, sin θ_k)
         NominalModel::PlanarChain { lengths, .. } => {
@@ -26,9 +32,8 @@ pub fn hessian(model: &NominalModel, x: &[f64]) -> NominalHessian {
                 }
             }
         }
-        NominalModel::DhChain(chain) => dh_hessian(chain, x, &mut h),
+        NominalModel::DhChain(chain) => dh_hessian(chain, x, h),
     }
-    h
 }
 
 fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {

@@ -86,20 +86,44 @@ impl Comparison {
                 "redundant_at_nominal": d.redundant_at_nominal, "converged": d.converged,
             })),
             "hyperparameters": { "krr": hyper(&self.krr_hyperparameters), "dh+krr": hyper(&self.dh_krr_hyperparameters) },
+            "warnings": self.warnings(),
         })
     }
 
-    /// A plain-text table, one line per method.
+    /// What the reader must not miss: a DH fit that stopped at its iteration limit.
+    pub fn warnings(&self) -> Vec<String> {
+        self.dh.iter().filter(|d| !d.converged).map(dh_not_converged).collect()
+    }
+
+    /// A plain-text table, one line per method. Errors in fixed point with four decimals, or — when
+    /// any is below 0.01 of the unit (RR data in metres), where that would print 0.0000 — all of them
+    /// with four significant digits.
     pub fn table(&self, unit: &str) -> String {
+        let errors = self.rows.iter().flat_map(|r| [r.stats.mean, r.stats.median, r.stats.p99, r.stats.max]);
+        let scientific = errors.filter(|v| *v != 0.0).any(|v| v.abs() < 0.01);
+        let cell = |v: f64| if scientific { format!("{v:>10.3e}") } else { format!("{v:>10.4}") };
         let mut out = format!("{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}  ({unit})\n", "method", "mean", "median", "p99", "max", "fit [s]");
         for r in &self.rows {
             out += &format!(
-                "{:<8} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.2}\n",
-                r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds
+                "{:<8} {} {} {} {} {:>10.2}\n",
+                r.name,
+                cell(r.stats.mean),
+                cell(r.stats.median),
+                cell(r.stats.p99),
+                cell(r.stats.max),
+                r.fit_seconds
             );
         }
         out
     }
+}
+
+/// The warning for a DH fit that stopped at its iteration limit.
+pub fn dh_not_converged(d: &DhFitStats) -> String {
+    format!(
+        "DH calibration stopped at its iteration limit ({} iterations) without converging: training RMS error {:.4e} (from {:.4e}); every model built on that chain (dh, dh+krr, dh+cbd) inherits it",
+        d.iterations, d.final_rms, d.initial_rms
+    )
 }
 
 /// [`compare_peers`] from files: the model file, and training and test CSVs read with the model
@@ -239,7 +263,14 @@ pub fn compare_peers(
                 let s = &f.stats;
                 (
                     nominal_predictor(f.model.clone(), m),
-                    format!("{} iterations, rank {}/{}, train rms {:.4}", s.iterations, s.rank, s.n_parameters, s.final_rms),
+                    format!(
+                        "{} iterations{}, rank {}/{}, train rms {:.4e}",
+                        s.iterations,
+                        if s.converged { "" } else { " (iteration limit: not converged)" },
+                        s.rank,
+                        s.n_parameters,
+                        s.final_rms
+                    ),
                 )
             })
             .map_err(|e| Error::from(e.clone())),
@@ -310,6 +341,39 @@ mod tests {
             }
         }
         assert!(c.table("mm").lines().count() == 7);
+    }
+
+    /// Issue 26: RR data in metres printed every good row as 0.0000; errors below 0.01 of the unit
+    /// switch the whole table to four significant digits.
+    #[test]
+    fn small_errors_keep_their_digits_in_the_table() {
+        let row = |name: &str, v: f64| PeerResult {
+            name: name.into(),
+            stats: ErrorStats { mean: v, median: v, p99: v, max: v },
+            train_stats: ErrorStats { mean: v, median: v, p99: v, max: v },
+            fit_seconds: 0.5,
+            test_errors: vec![],
+            note: String::new(),
+        };
+        let table = |rows| Comparison { rows, dh: None, krr_hyperparameters: None, dh_krr_hyperparameters: None }.table("m");
+        let small = table(vec![row("nominal", 0.1083), row("cbd", 1.2916e-5)]);
+        assert!(small.contains("1.292e-5") && small.contains("1.083e-1") && !small.contains("0.0000"), "{small}");
+        let large = table(vec![row("nominal", 3.25), row("cbd", 0.0876)]);
+        assert!(large.contains("3.2500") && large.contains("0.0876"), "{large}");
+    }
+
+    /// Issue 26: a DH fit at its iteration limit said only "200 iterations" in the text output.
+    #[test]
+    fn a_dh_fit_at_its_iteration_limit_is_a_warning() {
+        let robot = SixJointRobot::ur5_like(21);
+        let train = robot.measure(&random_configurations(60, 22), 23);
+        let options = DhCalibrationOptions { max_iterations: 1, ..DhCalibrationOptions::default() };
+        let stats = calibrate_dh(&robot.nominal, &train, &options).unwrap().stats;
+        assert!(!stats.converged);
+        let c = Comparison { rows: vec![], dh: Some(stats), krr_hyperparameters: None, dh_krr_hyperparameters: None };
+        let w = c.warnings();
+        assert!(w.len() == 1 && w[0].contains("iteration limit (1 iterations)"), "{w:?}");
+        assert_eq!(c.to_json()["warnings"][0], serde_json::json!(w[0]));
     }
 
     /// Issue 14: a planar model gets DH calibration (base, joint offsets, lengths) and the hybrids.

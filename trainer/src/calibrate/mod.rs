@@ -61,6 +61,7 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts.max_iterations = settings.max_iterations;
     opts.method = settings.solver;
     opts.verbose = settings.verbose;
+    opts.memory_budget = settings.memory_budget;
     // The paper's reproduction keeps the paper's form, momenta, unless asked otherwise.
     opts.representation = match (settings.source, settings.representation) {
         (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
@@ -127,7 +128,10 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
     let fit = fit_cbd(&base, data, &options)?;
-    let warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
+    let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
+    if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
+        warnings.insert(0, crate::baselines::compare::dh_not_converged(d));
+    }
     Ok(Calibration { base, dh, hyperparameters, evidence, scheme, options, fit, warnings })
 }
 

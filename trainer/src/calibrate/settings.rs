@@ -83,6 +83,9 @@ pub struct Settings {
     pub threads: Option<usize>,
     /// Points and momenta only, or also the fields in the kernels' own basis (docs/DESIGN.md §11).
     pub representation: crate::expansion::Representation,
+    /// Bytes the kernel form's (N m)² matrices may take; a fit that would need more is refused
+    /// (`FitError::TooLarge`) before allocating. `None`: unchecked.
+    pub memory_budget: Option<f64>,
     pub verbose: bool,
 }
 
@@ -101,6 +104,7 @@ impl Default for Settings {
             solver: SolverMethod::Auto,
             threads: None,
             representation: crate::expansion::Representation::default(),
+            memory_budget: None,
             verbose: false,
         }
     }

@@ -91,6 +91,9 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
         crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, &search, Some(&fitter)));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     println!("{}", comparison.table(unit));
+    for w in comparison.warnings() {
+        eprintln!("warning: {w}");
+    }
     for r in &comparison.rows {
         if !r.note.is_empty() {
             println!("{}: {}", r.name, r.note);

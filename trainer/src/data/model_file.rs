@@ -2,7 +2,7 @@
 //!
 //! ```toml
 //! name = "UR5"
-//! length_unit = "mm"          # "mm" | "m": unit of every length in this file and of the model
+//! length_unit = "mm"          # "um" | "mm" | "cm" | "m" | "in": unit of every length in this file and of the model
 //! angle_unit = "deg"          # "deg" | "rad": unit of every angle in this file
 //!
 //! [chain]                     # a DH table …

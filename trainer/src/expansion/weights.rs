@@ -24,6 +24,26 @@ pub fn periodic_weights(b: f64, max_order: usize) -> Vec<f64> {
     (0..=max_order).map(|h| if h == 0 { values[0] / total } else { 2.0 * values[h] / total }).collect()
 }
 
+/// ω_h (as [`periodic_weights`]) and d ln ω_h / d ln b, h = 0..=`max_order`: with v_h = e^{−b} I_h(b),
+/// dv_h/db = e^{−b}(I_h' − I_h) and I_h' = (I_{h−1} + I_{h+1})/2 (I_{−1} = I_1), so
+/// d ln ω_h / d ln b = b ((v_{h−1} + v_{h+1}) / (2 v_h) − 1); 0 where ω_h underflows (its function carries nothing).
+pub fn periodic_weights_and_log_derivatives(b: f64, max_order: usize) -> (Vec<f64>, Vec<f64>) {
+    let w = periodic_weights(b, max_order + 1);
+    // v_h = e^{−b} I_h: ω_0 = v_0, ω_h = 2 v_h.
+    let v = |h: usize| if h == 0 { w[0] } else { 0.5 * w[h] };
+    let derivative = (0..=max_order)
+        .map(|h| {
+            let below = if h == 0 { v(1) } else { v(h - 1) };
+            if v(h) > 0.0 {
+                b * ((below + v(h + 1)) / (2.0 * v(h)) - 1.0)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    (w[..=max_order].to_vec(), derivative)
+}
+
 /// Poisson(ρ²) probabilities p_k = e^{−ρ²} ρ^{2k} / k!, k = 0..=`max_order`: the share of a Gaussian
 /// kernel's expansion, exp(−(x − x')²/2ℓ²) = e^{−x²/2ℓ²} e^{−x'²/2ℓ²} Σ_k (x x'/ℓ²)^k / k!, that
 /// order k carries at |x| = ρ ℓ (the diagonal k(x, x) = 1 there); at |x| < ρ ℓ the tail is smaller.
@@ -81,6 +101,22 @@ mod tests {
                 let kernel = (b * (f64::cos(delta) - 1.0)).exp();
                 let tail = if b < 100.0 { 1e-14 } else { 1.0 - total + 1e-14 };
                 assert!((series - kernel).abs() <= tail, "b {b} Δ {delta}: {series} vs {kernel}");
+            }
+        }
+    }
+
+    #[test]
+    fn periodic_log_derivatives_match_finite_differences() {
+        for b in [1e-4, 0.0037, 0.3, 1.0186, 4.0, 60.0] {
+            let (w, d) = periodic_weights_and_log_derivatives(b, 10);
+            let h: f64 = 1e-6;
+            let (up, down) = (periodic_weights(b * h.exp(), 10), periodic_weights(b * (-h).exp(), 10));
+            for k in 0..=10 {
+                if w[k] < 1e-250 {
+                    continue;
+                }
+                let fd = (up[k].ln() - down[k].ln()) / (2.0 * h);
+                assert!((fd - d[k]).abs() <= 1e-6 * fd.abs().max(1.0), "b {b} h {k}: {} vs {fd}", d[k]);
             }
         }
     }

@@ -1,11 +1,15 @@
 //! The evidence: negative log marginal likelihood of the linearised model and its gradient.
 
+use super::search::Criterion;
 use super::table::{PairTable, Theta};
 
-impl PairTable {
+impl Criterion for PairTable {
+    fn observations(&self) -> usize {
+        self.dim()
+    }
     /// Negative log marginal likelihood (normalised units) and its gradient with respect to θ's
     /// packed form; `None` when K is not positive definite.
-    pub(crate) fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)> {
+    fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)> {
         let theta = Theta::unpack(packed, self.n);
         let dim = self.dim();
         let f = self.factor(&theta)?;

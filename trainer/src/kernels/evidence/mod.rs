@@ -19,8 +19,10 @@ mod likelihood;
 mod search;
 mod starts;
 mod table;
+mod weight_space;
 
 pub(crate) use table::PairTable;
+pub use weight_space::WeightSpaceReport;
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
@@ -51,7 +53,15 @@ pub struct Evidence {
     pub hyperparameters: CbdHyperparameters,
     /// Log marginal likelihood at the choice, positions in the data's unit, on `rows_used` rows.
     pub log_evidence: f64,
+    /// Rows the chosen θ's evidence was computed on: all of them in weight space, else `rows`.
     pub rows_used: usize,
+    /// "all" or "evenly spaced" (the kernel form above `EvidenceOptions::max_unknowns`).
+    pub rows: &'static str,
+    /// "kernel" ((N m)² covariance) or "weight space" (the kernels' truncated expansions, O(N m r²)).
+    pub form: &'static str,
+    pub weight_space: Option<WeightSpaceReport>,
+    /// Why a subset's kernel-form choice was not refined on every row in weight space.
+    pub weight_space_declined: Option<String>,
     /// Likelihood evaluations (each one (N m)² kernel matrix, a Cholesky factorisation and an inverse).
     pub evaluations: usize,
     pub starts: usize,
@@ -89,11 +99,20 @@ pub struct EvidenceOptions {
     pub screening_iterations: u64,
     /// L-BFGS iterations per run after screening.
     pub max_iterations: u64,
+    /// When the kernel form takes a subset, the weight space refines its θ on every row if the
+    /// truncated expansions need at most this many weights (each evaluation is O(N m r² + r³)).
+    pub max_weight_space_weights: usize,
 }
 
 impl Default for EvidenceOptions {
     fn default() -> Self {
-        EvidenceOptions { max_unknowns: 1200, coarse_unknowns: 240, screening_iterations: 10, max_iterations: 80 }
+        EvidenceOptions {
+            max_unknowns: 1200,
+            coarse_unknowns: 240,
+            screening_iterations: 10,
+            max_iterations: 80,
+            max_weight_space_weights: 1200,
+        }
     }
 }
 
@@ -156,7 +175,17 @@ pub fn choose_cbd_hyperparameters(
         found = run(&table, &best_basins(found), options.max_iterations);
     }
     let best = found.into_iter().next();
-    let Some((nlml, param)) = best else { return Err(EvidenceError::NoValidSetting) };
+    let Some((mut nlml, mut param)) = best else { return Err(EvidenceError::NoValidSetting) };
+    // A subset's choice refined on every row in weight space, where the expansions are short.
+    let (mut rows_used, mut weight_space, mut weight_space_declined) = (used.len(), None, None);
+    if used.len() < data.len() {
+        match weight_space::refine(nominal, data, norm, &param, &lower, &upper, options, used.len(), &evaluations) {
+            Ok((v, p, report)) => {
+                (nlml, param, rows_used, weight_space) = (v, p, data.len(), Some(report));
+            }
+            Err(why) => weight_space_declined = Some(why),
+        }
+    }
     let theta = Theta::unpack(&param, n);
     let scale = norm.task_scale;
     let joint_axes = (0..n)
@@ -176,12 +205,16 @@ pub fn choose_cbd_hyperparameters(
         sigma: theta.log_sigma.exp() * scale,
     };
     // Positions in data units: the density picks up 1/scale per coordinate.
-    let log_evidence = -nlml - (table.dim() as f64) * scale.ln();
+    let log_evidence = -nlml - ((rows_used * m) as f64) * scale.ln();
     let evaluations = evaluations.into_inner();
     Ok(Evidence {
         hyperparameters,
         log_evidence,
-        rows_used: used.len(),
+        rows_used,
+        rows: if used.len() < data.len() && weight_space.is_none() { "evenly spaced" } else { "all" },
+        form: if weight_space.is_some() { "weight space" } else { "kernel" },
+        weight_space,
+        weight_space_declined,
         evaluations,
         starts: starts.len(),
         seconds: start.elapsed().as_secs_f64(),
@@ -220,6 +253,7 @@ mod tests {
         let table = PairTable::new(&rr::nominal(), &data, &norm);
         let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
         let p = theta.pack();
+        use search::Criterion;
         let (_, grad) = table.nlml_and_gradient(&p).unwrap();
         for k in 0..p.len() {
             let h = 1e-5;

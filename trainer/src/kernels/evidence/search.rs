@@ -1,15 +1,23 @@
 //! L-BFGS (argmin) on the negative log evidence over θ in log space, inside bounds.
 
-use super::table::PairTable;
 use argmin::core::{CostFunction, Executor, Gradient, State};
 use argmin::solver::linesearch::{condition::ArmijoCondition, BacktrackingLineSearch};
 use argmin::solver::quasinewton::LBFGS;
 use std::cell::RefCell;
 
+/// A negative log evidence over θ's packed form: the kernel form's ([`super::PairTable`]) or the
+/// weight space's ([`super::weight_space::WeightSpaceTable`]).
+pub(super) trait Criterion {
+    /// Observations (N m): the per-unknown scale of values, gradients and tolerances.
+    fn observations(&self) -> usize;
+    /// Value and gradient; `None` where the covariance is not positive definite.
+    fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)>;
+}
+
 /// The objective argmin sees: nlml plus a quadratic wall outside the bounds; value and gradient
 /// computed together and cached (L-BFGS asks for both at the same point).
 struct Objective<'a> {
-    table: &'a PairTable,
+    table: &'a dyn Criterion,
     lower: Vec<f64>,
     upper: Vec<f64>,
     wall: f64,
@@ -38,7 +46,7 @@ impl Objective<'_> {
         let clamped: Vec<f64> = p.iter().zip(self.lower.iter().zip(&self.upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect();
         // Per unknown: a first L-BFGS step of −g is then of order one in log space, and the
         // tolerances scale with the evaluation's own rounding (which grows with N m).
-        let per_unknown = 1.0 / self.table.dim() as f64;
+        let per_unknown = 1.0 / self.table.observations() as f64;
         let (mut v, mut g) = match self.table.nlml_and_gradient(&clamped) {
             Some((v, g)) => (v * per_unknown, g.iter().map(|x| x * per_unknown).collect()),
             None => (INFEASIBLE, vec![0.0; p.len()]),
@@ -73,7 +81,7 @@ impl Gradient for &Objective<'_> {
 
 /// L-BFGS from `init` (clamped into the box): the best (nlml, θ) found, None if `init` is infeasible.
 pub(super) fn minimise(
-    table: &PairTable,
+    table: &dyn Criterion,
     lower: &[f64],
     upper: &[f64],
     init: &[f64],
@@ -112,5 +120,5 @@ pub(super) fn minimise(
     }
     // The last point L-BFGS evaluated is usually the best one: the cache answers.
     let value = objective.both(&param).0;
-    (value < INFEASIBLE).then_some((value * table.dim() as f64, param))
+    (value < INFEASIBLE).then_some((value * table.observations() as f64, param))
 }

@@ -1,13 +1,15 @@
-//! Multi-step schemes written as per-stage expansions (docs/DESIGN.md §11, issue 25): the blob's
-//! fields are fitted in weight space ([`crate::expansion::fit_flow`]), not through momenta that
-//! cancel; the blob's kernel form holds the linearised model's momenta (K_lin + σ² I)⁻¹ r — the
-//! start of every scheme — as its reference.
+//! Schemes written as expansions (docs/DESIGN.md §11, issue 25): multi-step schemes as per-stage
+//! expansions fitted in weight space ([`crate::expansion::fit_flow`]), not through momenta that
+//! cancel, and the linear scheme beyond the closed form's dense size. The blob's kernel form holds
+//! the linearised model's momenta α = (K_lin + σ² I)⁻¹ r — the start of every scheme — as its
+//! reference: by a dense Cholesky up to [`DENSE_MAX_UNKNOWNS`], else from the expansion's own
+//! linear fit, α = (r − A w)/σ² (the truncated kernel's α; no (N m)² matrix is formed).
 
 use super::encode::encode_checked;
 use super::problem::cancellation_of;
 use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
 use crate::data::Measurements;
-use crate::expansion::{fit_flow, fit_linear, Declined, Representation, CANCELLATION_LIMIT};
+use crate::expansion::{fit_flow, fit_linear, Declined, ExpansionFit, Representation, CANCELLATION_LIMIT};
 use crate::flow::ControlPoints;
 use crate::solver::regulariser::regulariser_matrix;
 use crate::solver::step::solve_regularised;
@@ -33,21 +35,15 @@ pub(super) fn fit(
     if opts.law.joint_field_sign() > 0.0 {
         return Ok(Err("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into()));
     }
-    if cp.len() * m > DENSE_MAX_UNKNOWNS {
-        return Ok(Err(format!("more than {DENSE_MAX_UNKNOWNS} momenta for the linearised start")));
-    }
-    let k_reg = regulariser_matrix(cp);
-    let nominal_positions = cp.nominal_positions();
-    let residual: Vec<f64> = target.iter().zip(&nominal_positions).map(|(y, k)| y - k).collect();
-    let momenta = solve_regularised(&k_reg, opts.sigma, &residual, FIXED_SPLIT).ok_or(FitError::Singular { iteration: 0, damping: 0.0 })?;
-    let kernel_cancellation = cancellation_of(&k_reg, &momenta);
     // The linear model's expansion first: the flow starts from it, and `auto` decides on its length.
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why.to_string())),
     };
-    if opts.representation == Representation::Auto && linear.len() > cp.len() * m && kernel_cancellation <= CANCELLATION_LIMIT {
+    let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;
+    // A cancellation not measured (NaN, large N) is not known to be large.
+    if opts.representation == Representation::Auto && linear.len() > cp.len() * m && !(kernel_cancellation > CANCELLATION_LIMIT) {
         return Ok(Err(format!(
             "the expansion has {} weights a stage, more than the {} momenta, which do not cancel ({kernel_cancellation:.1e})",
             linear.len(),
@@ -120,6 +116,85 @@ pub(super) fn fit(
             e.task.len(),
             e.tolerance,
             last.train_rms
+        );
+    }
+    Ok(Ok(CbdFit { blob, momenta, train_predictions, report }))
+}
+
+/// The linearised model's momenta α = (K_lin + σ² I)⁻¹ r (the blob's kernel form) and their
+/// cancellation: a dense Cholesky up to [`DENSE_MAX_UNKNOWNS`] unknowns, else α = (r − A w)/σ² from the
+/// expansion's linear fit `linear`, cancellation NaN (it would need the (N m)² matrix).
+fn linear_momenta(cp: &ControlPoints, opts: &CbdOptions, target: &[f64], linear: &ExpansionFit) -> Result<(Vec<f64>, f64), FitError> {
+    if cp.len() * cp.dims.m <= DENSE_MAX_UNKNOWNS {
+        let k_reg = regulariser_matrix(cp);
+        let nominal_positions = cp.nominal_positions();
+        let residual: Vec<f64> = target.iter().zip(&nominal_positions).map(|(y, k)| y - k).collect();
+        let momenta =
+            solve_regularised(&k_reg, opts.sigma, &residual, FIXED_SPLIT).ok_or(FitError::Singular { iteration: 0, damping: 0.0 })?;
+        let cancellation = cancellation_of(&k_reg, &momenta);
+        return Ok((momenta, cancellation));
+    }
+    let sigma2 = opts.sigma * opts.sigma;
+    Ok((target.iter().zip(&linear.positions).map(|(y, k)| (y - k) / sigma2).collect(), f64::NAN))
+}
+
+/// The linear scheme (Euler × 1) beyond [`super::CLOSED_FORM_MAX_UNKNOWNS`]: the expansion's weights by
+/// its QR (O(N m r²)) and the kernel form's momenta from them, instead of the (N m)² closed form;
+/// `Ok(Err(why))` when the expansion cannot serve (the kernel form's solver then runs).
+pub(super) fn fit_linear_scheme(
+    nominal: &NominalModel,
+    data: &Measurements,
+    opts: &CbdOptions,
+    cp: &ControlPoints,
+    target: &[f64],
+    start: Instant,
+) -> Result<Result<CbdFit, String>, FitError> {
+    if opts.representation == Representation::Kernel {
+        return Ok(Err("kernel form requested".into()));
+    }
+    let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
+        Ok(l) => l,
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
+        Err(why) => return Ok(Err(why.to_string())),
+    };
+    let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;
+    let norm = &opts.normalisation;
+    let m = cp.dims.m;
+    let train_predictions: Vec<f64> =
+        linear.positions.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
+    let (blob, max_runtime_trainer_diff) = encode_checked(nominal, data, opts, &momenta, Some(&linear), &train_predictions)?;
+    let sum: f64 = linear.positions.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
+    let train_rms = norm.task_scale * (sum / cp.len().max(1) as f64).sqrt();
+    let seconds = start.elapsed().as_secs_f64();
+    let report = FitReport {
+        iterations: 1,
+        converged: true,
+        stop_reason: "closed form (the linearised model: Euler × 1, in the expansion)".into(),
+        log: vec![IterationLog { iteration: 1, energy: f64::NAN, regulariser: f64::NAN, train_rms, damping: 0.0, seconds }],
+        seconds,
+        seconds_flow: 0.0,
+        seconds_tangent: 0.0,
+        seconds_solve: seconds,
+        tangents: 0,
+        method: "expansion".into(),
+        unknowns: linear.len(),
+        seconds_basis: 0.0,
+        max_runtime_trainer_diff,
+        cancellation: linear.cancellation,
+        kernel_cancellation,
+        representation: "expansion".into(),
+        // The momenta come from the expansion: no independent kernel-form difference.
+        expansion: Some(ExpansionReport::of(&linear, f64::NAN)),
+        expansion_declined: None,
+    };
+    if opts.verbose {
+        eprintln!(
+            "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), closed form in weight space, cancellation {:.1e}",
+            linear.len(),
+            linear.joint.len(),
+            linear.task.len(),
+            linear.tolerance,
+            linear.cancellation
         );
     }
     Ok(Ok(CbdFit { blob, momenta, train_predictions, report }))

@@ -47,6 +47,8 @@ pub struct CbdOptions {
     pub verbose: bool,
     /// Whether the blob also carries the fields in the kernels' own expansion (docs/DESIGN.md §11).
     pub representation: crate::expansion::Representation,
+    /// Bytes the kernel form's (N·m)² matrices may take ([`kernel_form_bytes`]); `None`: unchecked.
+    pub memory_budget: Option<f64>,
 }
 
 impl CbdOptions {
@@ -72,6 +74,7 @@ impl CbdOptions {
             // The paper's method: the fields as momenta. The pipeline (`calibrate::options_for`)
             // sets the user's choice, `auto` by default.
             representation: crate::expansion::Representation::Kernel,
+            memory_budget: None,
         }
     }
 }
@@ -91,8 +94,20 @@ pub enum SolverMethod {
     Eigenspace,
 }
 
+/// Copies of the (N·m)² momentum-space matrix a kernel-form fit holds at its peak (K_lin, its
+/// Cholesky factor, the tangent and a work copy): 2.0 GB measured at N = 4096, m = 2 is 3.7 copies.
+const KERNEL_FORM_MATRIX_COPIES: f64 = 4.0;
+
+/// Estimated peak bytes of a kernel-form fit of `unknowns` = N·m momenta.
+pub fn kernel_form_bytes(unknowns: usize) -> f64 {
+    KERNEL_FORM_MATRIX_COPIES * (unknowns as f64).powi(2) * 8.0
+}
+
 /// `SolverMethod::Auto` solves problems up to this many unknowns (N·m) densely.
 pub const DENSE_MAX_UNKNOWNS: usize = 1024;
+/// The linear scheme's closed form (one dense Cholesky of all N·m momenta) up to this many unknowns;
+/// beyond, the expansion's weights when it serves (O(N m r²), no (N m)² matrix), else the kernel form.
+pub const CLOSED_FORM_MAX_UNKNOWNS: usize = 8192;
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct IterationLog {
     pub iteration: usize,
@@ -203,6 +218,14 @@ pub enum FitError {
         damping: f64,
     },
     Encode(String),
+    /// The kernel form's matrices would need more memory than the budget (bytes).
+    TooLarge {
+        unknowns: usize,
+        need: f64,
+        budget: f64,
+        /// Why the expansion, which needs no (N·m)² matrix, could not serve.
+        expansion_declined: String,
+    },
     /// The runtime could not load the blob or does not reproduce the training predictions.
     RuntimeMismatch(String),
     /// The expansion's least-squares problem does not fit in the memory this process may use.
@@ -223,6 +246,12 @@ impl std::fmt::Display for FitError {
                 write!(f, "the normal equations are singular at iteration {iteration} (damping {damping:.1e})")
             }
             FitError::Encode(e) => write!(f, "could not encode the model: {e}"),
+            FitError::TooLarge { unknowns, need, budget, expansion_declined } => write!(
+                f,
+                "the kernel form of {unknowns} momenta needs about {:.1} GB, more than the {:.1} GB this process may use (the expansion, which would not, declined: {expansion_declined}); fit fewer rows (--max-rows)",
+                need / 1e9,
+                budget / 1e9
+            ),
             FitError::RuntimeMismatch(e) => write!(f, "the runtime does not reproduce the fit: {e}"),
             FitError::Memory(why) => write!(f, "{why}: raise the memory limit, or fit the kernel form (--representation kernel)"),
         }
@@ -265,6 +294,16 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             Ok(fit) => return Ok(fit),
             Err(why) => declined_flow = Some(why),
         }
+    } else if closed_form && cp.len() * m > CLOSED_FORM_MAX_UNKNOWNS {
+        match flow_expansion::fit_linear_scheme(nominal, data, opts, &cp, &target, start)? {
+            Ok(fit) => return Ok(fit),
+            Err(why) => declined_flow = Some(why),
+        }
+    }
+    let unknowns = cp.len() * m;
+    if let Some(budget) = opts.memory_budget.filter(|b| kernel_form_bytes(unknowns) > *b) {
+        let expansion_declined = declined_flow.clone().unwrap_or_else(|| "not tried for this scheme and size".into());
+        return Err(FitError::TooLarge { unknowns, need: kernel_form_bytes(unknowns), budget, expansion_declined });
     }
     let t0 = Instant::now();
     let space = SearchSpace::new(opts.method, regulariser_matrix(&cp), closed_form);
