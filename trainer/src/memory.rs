@@ -245,7 +245,9 @@ fn meminfo_available() -> Option<f64> {
 
 /// Bytes as a short figure ("51.2 GB", "0.07 GB").
 pub fn gigabytes(bytes: f64) -> String {
-    if bytes < 1e9 {
+    if bytes >= 1e15 {
+        format!("{:.1e} GB", bytes / 1e9)
+    } else if bytes < 1e9 {
         format!("{:.2} GB", bytes / 1e9)
     } else {
         format!("{:.1} GB", bytes / 1e9)

@@ -153,12 +153,30 @@ fn load_average() -> f64 {
     std::fs::read_to_string("/proc/loadavg").ok().and_then(|t| t.split_whitespace().next().and_then(|v| v.parse().ok())).unwrap_or(f64::NAN)
 }
 
-/// The memory check of `cbd fit` for an RR benchmark of `n` rows (`flag` names the list it came
-/// from): the workers to fit on, or why it cannot fit here.
+/// Copies of kernel ridge's N × N matrix at its peak: the kernel matrix and its Cholesky factor.
+const KRR_MATRIX_COPIES: f64 = 2.0;
+
+/// The memory check for an RR benchmark of `n` rows (`flag` names the list it came from): the
+/// workers to run on, or why it cannot run here. `--sizes` fits the kernel form (`cbd fit`'s check);
+/// `--evidence-sizes` runs the pipeline, whose kernel form is checked in the solver (the budget
+/// [`crate::memory::kernel_form_budget`]), and kernel ridge, whose N × N matrices are checked here.
 fn check_size(n: usize, flag: &str) -> Result<usize, String> {
+    use crate::cli::memory;
     per_axis(n)?;
-    crate::cli::memory::check_fit(n, 2, crate::cli::memory::available_bytes(), &format!("lower {flag}"))
-        .map_err(|e| format!("{flag} {n}: {e}"))
+    let available = memory::available_bytes();
+    if flag == "--sizes" {
+        return memory::check_fit(n, 2, available, &format!("lower {flag}")).map_err(|e| format!("{flag} {n}: {e}"));
+    }
+    let threads = memory::check_workers(available).map_err(|e| format!("{flag} {n}: {e}"))?;
+    let krr = KRR_MATRIX_COPIES * (n as f64).powi(2) * 8.0;
+    match available {
+        Some(a) if krr + memory::fixed_fit_bytes(threads) > a => Err(format!(
+            "{flag} {n}: kernel ridge's {n} × {n} kernel matrix and its factor need about {}, more than the {} this process may use; lower {flag}",
+            memory::gigabytes(krr),
+            memory::gigabytes(a)
+        )),
+        _ => Ok(threads),
+    }
 }
 
 /// What a failed single-size run said: its `error:` line (a crash's text is not relayed whole).
@@ -232,7 +250,11 @@ fn evidence_rr_on_workers(n: usize) -> Result<EvidenceBench, String> {
     let krr_seconds = t0.elapsed().as_secs_f64();
     let krr_test_mean = crate::report::stats::ErrorStats::of_positions(&krr.predict(&nominal, &test.joints), &test.positions, 2).mean;
     let t0 = Instant::now();
-    let c = crate::calibrate::calibrate(&nominal, &train, &crate::calibrate::Settings::default()).map_err(|e| e.to_string())?;
+    let settings = crate::calibrate::Settings {
+        memory_budget: crate::cli::memory::kernel_form_budget(crate::workers::current_workers()),
+        ..Default::default()
+    };
+    let c = crate::calibrate::calibrate(&nominal, &train, &settings).map_err(|e| e.to_string())?;
     let cbd_seconds = t0.elapsed().as_secs_f64();
     let predicted = crate::predict::evaluate_blob(&c.fit.blob, &test.joints)?;
     let cbd_test_mean = crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean;
