@@ -243,12 +243,12 @@ fn meminfo_available() -> Option<f64> {
     Some(kib * 1024.0)
 }
 
-/// Bytes as a short figure ("51.2 GB", "0.07 GB").
+/// Bytes as a short figure ("51.2 GB", "144 MB", "1.3e9 GB").
 pub fn gigabytes(bytes: f64) -> String {
     if bytes >= 1e15 {
         format!("{:.1e} GB", bytes / 1e9)
     } else if bytes < 1e9 {
-        format!("{:.2} GB", bytes / 1e9)
+        format!("{:.0} MB", bytes / 1e6)
     } else {
         format!("{:.1} GB", bytes / 1e9)
     }
