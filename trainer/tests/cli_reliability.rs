@@ -339,3 +339,48 @@ fn messages_name_the_real_cause() {
     );
     assert!(!err.contains("command line"), "{err}");
 }
+
+/// Item 2 as the issue saw it, on a server whose L3 figure makes faer's workspace 960 MiB
+/// (`memory allocation of 1006632960 bytes failed` under `ulimit -v 4000000`): here emulated by
+/// binding a 480 MiB L3 size over sysfs in a user and mount namespace (`unshare -rm`), where
+/// private-gemm-x86 and the memory check read it. Skipped, saying so, where unprivileged namespaces
+/// are not allowed.
+#[test]
+fn a_large_server_cache_fits_under_2_gb_or_is_refused_up_front() {
+    let dir = scratch("memory-limit-large-l3");
+    if !std::process::Command::new("unshare").args(["-rm", "true"]).status().is_ok_and(|s| s.success()) {
+        eprintln!("skipped: no unprivileged user namespaces here (unshare -rm)");
+        return;
+    }
+    let grid = rr_grid(&dir, "grid256.csv", 16);
+    write(&dir, "l3", "491520K\n");
+    let fit = |kib: u64| {
+        let script = format!(
+            "for f in /sys/devices/system/cpu/cpu*/cache/index3/size; do mount --bind l3 \"$f\" || exit 97; done; \
+             ulimit -v {kib} && exec {CBD} fit --data {grid} --out s.blob --quiet --joint-b 0.001 --gamma 1 --task-width 10 \
+             --task-gamma 1 --sigma 1e-4 --steps 1"
+        );
+        std::process::Command::new("unshare").args(["-rm", "sh", "-c", &script]).current_dir(&dir).output().unwrap()
+    };
+    if fit(4_000_000).status.code() == Some(97) {
+        eprintln!("skipped: no L3 cache in sysfs to emulate");
+        return;
+    }
+    for kib in [500_000u64, 1_000_000, 2_000_000, 4_000_000] {
+        let out = fit(kib);
+        let err = stderr(&out);
+        assert!(!err.contains("panicked") && !err.contains("memory allocation"), "ulimit -v {kib}: {err}");
+        match (kib, out.status.code()) {
+            (500_000, _) => {
+                fails_with(&out, &["faer's matrix-multiply workspace", "raise the memory limit"]);
+            }
+            (4_000_000, _) => {
+                succeeds(&out);
+            }
+            (_, Some(0)) => {}
+            _ => {
+                fails_with(&out, &["raise the memory limit"]);
+            }
+        }
+    }
+}
