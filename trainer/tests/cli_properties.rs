@@ -251,7 +251,7 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
     csv_slot(&report_base, "--plots", &["missing".into(), "g4.csv".into()]);
 
     // Flags out of range, huge or not numbers, on every subcommand.
-    let numbers = ["nan", "inf", "-1", "0", "1e300", "99999999999999999999", "abc", ""];
+    let numbers = ["nan", "inf", "-1", "0", "1e300", "1000000", "4294967297", "99999999999999999999", "abc", ""];
     let demo_base = [
         "demo",
         "--grid",
@@ -311,6 +311,9 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
         vec!["simulate", "--effect", "thermal:dx=nan", "--out", "s.csv"],
         vec!["simulate", "--robot", "nine", "--out", "s.csv"],
         vec!["demo", "--hyperparameters", "nonsense", "--out", "d.blob"],
+        vec!["demo", "--grid", "3000", "--out", "d.blob"],
+        vec!["demo", "--grid", "4", "--test-points", "100000000000", "--out", "d.blob"],
+        vec!["demo", "--grid", "5000000000", "--hyperparameters", "evidence", "--out", "d.blob"],
         vec!["bench", "--sizes", "4", "--evidence-sizes", "4", "--ur5", "adir", "--json", "b.json"],
         vec!["compare", "--model", "rr.toml", "--train", "g4.csv", "--test", "t.csv", "--commanded", "ten"],
         vec!["fit", "--data", "g4.csv", "--out", "a2.blob", "--integrator", "leapfrog"],

@@ -384,3 +384,22 @@ fn a_large_server_cache_fits_under_2_gb_or_is_refused_up_front() {
         }
     }
 }
+
+/// Found by the property harness (issue 27): `demo --grid 3000` (9e6 rows) and `demo
+/// --test-points 1e11` aborted on allocation (exit 134). Both are refused up front, naming the flag.
+#[test]
+fn demo_sizes_too_large_for_memory_are_refused_up_front() {
+    let dir = scratch("demo-sizes");
+    for (args, needles) in [
+        (vec!["--grid", "3000"], vec!["--grid 3000", "lower --grid"]),
+        (vec!["--grid", "3000", "--hyperparameters", "evidence"], vec!["--grid 3000", "kernel ridge", "lower --grid"]),
+        (vec!["--grid", "4", "--test-points", "100000000000"], vec!["--test-points 100000000000", "lower --test-points"]),
+    ] {
+        let mut all = vec!["demo", "--out", "d.blob"];
+        all.extend(args);
+        let out = cbd_limited(&dir, 400_000, &all);
+        let err = fails_with(&out, &needles);
+        assert!(err.lines().count() == 1, "{err}");
+        assert!(!dir.join("d.blob").exists());
+    }
+}
