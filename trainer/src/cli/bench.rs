@@ -232,12 +232,11 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
 /// CbD through the pipeline (its own evidence, cross-validated scheme) against kernel ridge (its own
 /// marginal likelihood) on the noisy RR benchmark: σ = 1e-4 per coordinate on a √N × √N grid (the
 /// noise of `cbd simulate --noise 1e-4`), 3000 noise-free random test configurations.
-fn evidence_rr(n: usize) -> Result<EvidenceBench, String> {
-    let threads = check_size(n, "--evidence-sizes")?;
-    crate::workers::on_workers(threads, || evidence_rr_on_workers(n))
+fn evidence_rr(n: usize, threads: usize, memory_budget: Option<f64>) -> Result<EvidenceBench, String> {
+    crate::workers::on_workers(threads, || evidence_rr_on_workers(n, memory_budget))
 }
 
-fn evidence_rr_on_workers(n: usize) -> Result<EvidenceBench, String> {
+fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<EvidenceBench, String> {
     let real = rr::RealRr::default();
     let mut train = real.measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
     crate::simulate::add_noise(&mut train.positions, 1e-4, 1u64.wrapping_add(0x5eed));
@@ -250,10 +249,7 @@ fn evidence_rr_on_workers(n: usize) -> Result<EvidenceBench, String> {
     let krr_seconds = t0.elapsed().as_secs_f64();
     let krr_test_mean = crate::report::stats::ErrorStats::of_positions(&krr.predict(&nominal, &test.joints), &test.positions, 2).mean;
     let t0 = Instant::now();
-    let settings = crate::calibrate::Settings {
-        memory_budget: crate::cli::memory::kernel_form_budget(crate::workers::current_workers()),
-        ..Default::default()
-    };
+    let settings = crate::calibrate::Settings { memory_budget, ..Default::default() };
     let c = crate::calibrate::calibrate(&nominal, &train, &settings).map_err(|e| e.to_string())?;
     let cbd_seconds = t0.elapsed().as_secs_f64();
     let predicted = crate::predict::evaluate_blob(&c.fit.blob, &test.joints)?;
@@ -340,11 +336,13 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     // `--markdown` is edited in place: an output, and read only to keep its other sections.
     crate::io::check_paths(&[], &[("--json", args.json.as_deref()), ("--markdown", args.markdown.as_deref())])?;
     // Every size is checked before the first fit: a size too large for the memory is refused up front.
-    for (sizes, flag) in [(&args.sizes, "--sizes"), (&args.evidence_sizes, "--evidence-sizes")] {
-        for &n in sizes {
-            check_size(n, flag)?;
-        }
+    // The evidence sizes run in this process, on the workers found here: a check after the earlier
+    // runs would count a workspace they already hold twice (the address space includes it).
+    for &n in &args.sizes {
+        check_size(n, "--sizes")?;
     }
+    let evidence_threads: Vec<usize> = args.evidence_sizes.iter().map(|&n| check_size(n, "--evidence-sizes")).collect::<Result<_, _>>()?;
+    let budget = crate::cli::memory::kernel_form_budget(evidence_threads.iter().copied().max().unwrap_or(1));
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut report = BenchReport {
         machine: machine(),
@@ -401,9 +399,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         );
         report.fit.push(fit);
     }
-    for &n in &args.evidence_sizes {
+    for (&n, &threads) in args.evidence_sizes.iter().zip(&evidence_threads) {
         eprintln!("noisy RR, N = {n}: CbD pipeline and kernel ridge, each with its own evidence …");
-        let e = evidence_rr(n)?;
+        let e = evidence_rr(n, threads, budget)?;
         eprintln!(
             "  CbD {:.3e} (selection {:.2} s, pipeline {:.2} s, {}); kernel ridge {:.3e} (selection {:.2} s)",
             e.cbd_test_mean, e.cbd_selection_seconds, e.cbd_seconds, e.cbd_scheme, e.krr_test_mean, e.krr_selection_seconds
