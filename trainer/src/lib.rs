@@ -12,10 +12,12 @@ pub mod expansion;
 pub mod flow;
 pub mod io;
 pub mod kernels;
+pub mod memory;
 pub mod nominal;
 pub mod predict;
 pub mod report;
 pub mod simulate;
 pub mod solver;
+pub mod workers;
 
 pub use error::{Error, Result};

@@ -125,7 +125,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     };
     let norm = normalisation(data, settings);
     let (hyperparameters, evidence) = choose_hyperparameters(&base, data, &norm, settings)?;
-    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings);
+    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
     let fit = fit_cbd(&base, data, &options)?;
     let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);

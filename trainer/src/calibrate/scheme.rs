@@ -48,22 +48,26 @@ pub fn choose_scheme(
     h: &CbdHyperparameters,
     norm: &Normalisation,
     settings: &Settings,
-) -> SchemeChoice {
+) -> crate::Result<SchemeChoice> {
     let method = settings.integrator.unwrap_or(IntegratorMethod::Euler);
     if let Some(steps) = settings.steps {
-        return SchemeChoice { integrator: Integrator { method, steps }, chosen_by: "given".into(), cross_validation: vec![] };
+        return Ok(SchemeChoice { integrator: Integrator { method, steps }, chosen_by: "given".into(), cross_validation: vec![] });
     }
     let candidates = [Integrator { method, steps: 1 }, Integrator { method, steps: 2 }];
     let folds = settings.scheme_folds;
     if folds < 2 || data.len() < 2 * folds {
-        return SchemeChoice { integrator: candidates[0], chosen_by: "too few rows to cross-validate".into(), cross_validation: vec![] };
+        return Ok(SchemeChoice {
+            integrator: candidates[0],
+            chosen_by: "too few rows to cross-validate".into(),
+            cross_validation: vec![],
+        });
     }
     if data.len() * data.task_dim > DENSE_MAX_UNKNOWNS {
-        return SchemeChoice {
+        return Ok(SchemeChoice {
             integrator: candidates[0],
             chosen_by: format!("N·m > {DENSE_MAX_UNKNOWNS}: cross-validation skipped (its fits would dominate); --steps chooses"),
             cross_validation: vec![],
-        };
+        });
     }
     let mut quiet = settings.clone();
     quiet.verbose = false;
@@ -81,6 +85,9 @@ pub fn choose_scheme(
                     sse += p.iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
                     count += held.len();
                 }
+                // Out of memory is the machine's limit, not the scheme's fault: an error, so the
+                // choice (and the blob) never depends on the memory limit.
+                Err(e @ crate::Error::Fit(crate::solver::FitError::Memory(_))) => return Err(e),
                 Err(_) => {
                     sse = f64::INFINITY;
                     break;
@@ -103,5 +110,5 @@ pub fn choose_scheme(
         _ => Some((i, e)),
     });
     let integrator = best.map_or(candidates[0], |(i, _)| i);
-    SchemeChoice { integrator, chosen_by: format!("{folds}-fold cross-validation"), cross_validation }
+    Ok(SchemeChoice { integrator, chosen_by: format!("{folds}-fold cross-validation"), cross_validation })
 }

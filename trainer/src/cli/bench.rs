@@ -153,9 +153,43 @@ fn load_average() -> f64 {
     std::fs::read_to_string("/proc/loadavg").ok().and_then(|t| t.split_whitespace().next().and_then(|v| v.parse().ok())).unwrap_or(f64::NAN)
 }
 
+/// Copies of kernel ridge's N × N matrix at its peak: the kernel matrix and its Cholesky factor.
+const KRR_MATRIX_COPIES: f64 = 2.0;
+
+/// The memory check for an RR benchmark of `n` rows (`flag` names the list it came from): the
+/// workers to run on, or why it cannot run here. `--sizes` fits the kernel form (`cbd fit`'s check);
+/// `--evidence-sizes` runs the pipeline, whose kernel form is checked in the solver (the budget
+/// [`crate::memory::kernel_form_budget`]), and kernel ridge, whose N × N matrices are checked here.
+fn check_size(n: usize, flag: &str) -> Result<usize, String> {
+    use crate::cli::memory;
+    per_axis(n)?;
+    let available = memory::available_bytes();
+    if flag == "--sizes" {
+        return memory::check_fit(n, 2, available, &format!("lower {flag}")).map_err(|e| format!("{flag} {n}: {e}"));
+    }
+    let threads = memory::check_workers(available).map_err(|e| format!("{flag} {n}: {e}"))?;
+    let krr = KRR_MATRIX_COPIES * (n as f64).powi(2) * 8.0;
+    match available {
+        Some(a) if krr + memory::fixed_fit_bytes(threads) > a => Err(format!(
+            "{flag} {n}: kernel ridge's {n} × {n} kernel matrix and its factor need about {}, more than the {} this process may use; lower {flag}",
+            memory::gigabytes(krr),
+            memory::gigabytes(a)
+        )),
+        _ => Ok(threads),
+    }
+}
+
+/// What a failed single-size run said: its `error:` line (a crash's text is not relayed whole).
+fn child_error(stderr: &[u8]) -> String {
+    let text = String::from_utf8_lossy(stderr);
+    let error = text.lines().rev().find_map(|l| l.strip_prefix("error: "));
+    let last = text.lines().rev().find(|l| !l.trim().is_empty());
+    crate::error::excerpt_of(error.or(last).unwrap_or("no message"), 400)
+}
+
 fn per_axis(n: usize) -> Result<usize, String> {
     let k = (n as f64).sqrt().round() as usize;
-    if k * k == n && k >= 2 {
+    if k.checked_mul(k) == Some(n) && k >= 2 {
         Ok(k)
     } else {
         Err(format!("size {n} is not a perfect square ≥ 4"))
@@ -170,7 +204,11 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
     // The paper's kernels and scheme (Euler × 2) through the pipeline: the solver's scaling in N.
     let settings =
         crate::calibrate::Settings { source: crate::calibrate::HyperparameterSource::PaperRr, steps: Some(2), ..Default::default() };
-    let fit = crate::calibrate::calibrate(&rr::nominal(), &train, &settings).map_err(|e| e.to_string())?.fit;
+    let threads = check_size(n, "--sizes")?;
+    let settings = crate::calibrate::Settings { threads: Some(threads), ..settings };
+    let fit = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))
+        .map_err(|e| e.to_string())?
+        .fit;
     crate::io::write_atomically(blob_out, &fit.blob)?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
     Ok(FitBench::of("rr", n, &fit.report, 0.0, crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean))
@@ -194,7 +232,11 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
 /// CbD through the pipeline (its own evidence, cross-validated scheme) against kernel ridge (its own
 /// marginal likelihood) on the noisy RR benchmark: σ = 1e-4 per coordinate on a √N × √N grid (the
 /// noise of `cbd simulate --noise 1e-4`), 3000 noise-free random test configurations.
-fn evidence_rr(n: usize) -> Result<EvidenceBench, String> {
+fn evidence_rr(n: usize, threads: usize, memory_budget: Option<f64>) -> Result<EvidenceBench, String> {
+    crate::workers::on_workers(threads, || evidence_rr_on_workers(n, memory_budget))
+}
+
+fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<EvidenceBench, String> {
     let real = rr::RealRr::default();
     let mut train = real.measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
     crate::simulate::add_noise(&mut train.positions, 1e-4, 1u64.wrapping_add(0x5eed));
@@ -207,7 +249,8 @@ fn evidence_rr(n: usize) -> Result<EvidenceBench, String> {
     let krr_seconds = t0.elapsed().as_secs_f64();
     let krr_test_mean = crate::report::stats::ErrorStats::of_positions(&krr.predict(&nominal, &test.joints), &test.positions, 2).mean;
     let t0 = Instant::now();
-    let c = crate::calibrate::calibrate(&nominal, &train, &crate::calibrate::Settings::default()).map_err(|e| e.to_string())?;
+    let settings = crate::calibrate::Settings { memory_budget, ..Default::default() };
+    let c = crate::calibrate::calibrate(&nominal, &train, &settings).map_err(|e| e.to_string())?;
     let cbd_seconds = t0.elapsed().as_secs_f64();
     let predicted = crate::predict::evaluate_blob(&c.fit.blob, &test.joints)?;
     let cbd_test_mean = crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean;
@@ -292,6 +335,14 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     }
     // `--markdown` is edited in place: an output, and read only to keep its other sections.
     crate::io::check_paths(&[], &[("--json", args.json.as_deref()), ("--markdown", args.markdown.as_deref())])?;
+    // Every size is checked before the first fit: a size too large for the memory is refused up front.
+    // The evidence sizes run in this process, on the workers found here: a check after the earlier
+    // runs would count a workspace they already hold twice (the address space includes it).
+    for &n in &args.sizes {
+        check_size(n, "--sizes")?;
+    }
+    let evidence_threads: Vec<usize> = args.evidence_sizes.iter().map(|&n| check_size(n, "--evidence-sizes")).collect::<Result<_, _>>()?;
+    let budget = crate::cli::memory::kernel_form_budget(evidence_threads.iter().copied().max().unwrap_or(1));
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut report = BenchReport {
         machine: machine(),
@@ -311,7 +362,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
             .output()
             .map_err(|e| e.to_string())?;
         if !out.status.success() {
-            return Err(format!("bench for N = {n} failed: {}", String::from_utf8_lossy(&out.stderr)));
+            return Err(format!("bench for N = {n} failed: {}", child_error(&out.stderr)));
         }
         let line = String::from_utf8_lossy(&out.stdout);
         let fit: FitBench = serde_json::from_str(line.trim()).map_err(|e| format!("bench output for N = {n}: {e}"))?;
@@ -338,7 +389,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         let out =
             std::process::Command::new(&exe).args(["bench", "--single-ur5", "--ur5"]).arg(&args.ur5).output().map_err(|e| e.to_string())?;
         if !out.status.success() {
-            return Err(format!("bench for the UR5 example failed: {}", String::from_utf8_lossy(&out.stderr)));
+            return Err(format!("bench for the UR5 example failed: {}", child_error(&out.stderr)));
         }
         let fit: FitBench =
             serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).map_err(|e| format!("UR5 bench output: {e}"))?;
@@ -348,9 +399,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         );
         report.fit.push(fit);
     }
-    for &n in &args.evidence_sizes {
+    for (&n, &threads) in args.evidence_sizes.iter().zip(&evidence_threads) {
         eprintln!("noisy RR, N = {n}: CbD pipeline and kernel ridge, each with its own evidence …");
-        let e = evidence_rr(n)?;
+        let e = evidence_rr(n, threads, budget)?;
         eprintln!(
             "  CbD {:.3e} (selection {:.2} s, pipeline {:.2} s, {}); kernel ridge {:.3e} (selection {:.2} s)",
             e.cbd_test_mean, e.cbd_selection_seconds, e.cbd_seconds, e.cbd_scheme, e.krr_test_mean, e.krr_selection_seconds

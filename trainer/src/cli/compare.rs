@@ -67,7 +67,6 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     // The table is the output here; the fits' own progress lines would drown it.
     settings.verbose = false;
     let search = SearchOptions::default();
-    let fitter = cbd_fitter(&settings);
     let inputs = read_compare_files(&args.model, &args.train, &args.test).map_err(|e| e.to_string())?;
     let mut warnings = inputs.warnings;
     for (path, imported) in [(&args.train, &inputs.train), (&args.test, &inputs.test)] {
@@ -81,8 +80,15 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     }
     // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
     let train = &inputs.train.measurements;
-    crate::cli::memory::check_fit_of(&args.train, train, "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)")?;
-    let comparison = compare_peers(&inputs.nominal, train, &inputs.test.measurements, &search, Some(&fitter));
+    let threads = crate::cli::memory::check_fit_of(
+        &args.train,
+        train,
+        "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
+    )?;
+    settings.threads = Some(threads);
+    let fitter = cbd_fitter(&settings);
+    let comparison =
+        crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, &search, Some(&fitter)));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     println!("{}", comparison.table(unit));
     for w in comparison.warnings() {
@@ -100,7 +106,9 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     let commanded = match &args.commanded {
-        Some(robot) => Some(crate::baselines::commanded::run_for_compare(robot, &inputs.nominal, train, &search, &settings, unit)?),
+        Some(robot) => Some(crate::workers::on_workers(threads, || {
+            crate::baselines::commanded::run_for_compare(robot, &inputs.nominal, train, &search, &settings, unit)
+        })?),
         None => None,
     };
     if let Some(path) = &args.json {

@@ -60,6 +60,47 @@ pub struct DemoReport {
     pub fit: crate::solver::FitReport,
 }
 
+/// Bytes a demo holds per test point: its joints, measured, nominal, calibrated and kernel ridge
+/// positions and their errors, with room for the temporaries.
+const BYTES_PER_TEST_POINT: f64 = 16.0 * 8.0;
+
+/// The workers the demo fits on, or why its grid or test points do not fit in `available` bytes.
+/// The kernel form (the paper's hyperparameters keep it) is checked up front; the expansion's
+/// fits check their workers here and the kernel form against the budget in the solver, as `cbd fit`.
+fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, available: Option<f64>) -> Result<usize, String> {
+    use crate::calibrate::HyperparameterSource;
+    use crate::expansion::Representation;
+    let rows = args.grid.checked_mul(args.grid).ok_or_else(|| format!("--grid {}: too many rows", args.grid))?;
+    let kernel = settings.representation == Representation::Kernel
+        || (settings.source == HyperparameterSource::PaperRr && settings.representation == Representation::Auto);
+    let flag = |e: String| format!("--grid {}: {e}", args.grid);
+    let threads = match kernel {
+        true => crate::cli::memory::check_fit(rows, 2, available, "lower --grid").map_err(flag)?,
+        false => crate::cli::memory::check_workers(available).map_err(flag)?,
+    };
+    let Some(a) = available else { return Ok(threads) };
+    let fixed = crate::cli::memory::fixed_fit_bytes(threads);
+    let gb = crate::cli::memory::gigabytes;
+    let krr = 2.0 * (rows as f64).powi(2) * 8.0;
+    if krr + fixed > a {
+        return Err(flag(format!(
+            "kernel ridge's {rows} × {rows} kernel matrix and its factor need about {}, more than the {} this process may use; lower --grid",
+            gb(krr + fixed),
+            gb(a)
+        )));
+    }
+    let test = args.test_points as f64 * BYTES_PER_TEST_POINT;
+    if test + fixed > a {
+        return Err(format!(
+            "--test-points {}: about {} to evaluate, more than the {} this process may use; lower --test-points",
+            args.test_points,
+            gb(test + fixed),
+            gb(a)
+        ));
+    }
+    Ok(threads)
+}
+
 pub fn run(args: DemoArgs) -> Result<(), String> {
     if args.test_points == 0 {
         return Err("--test-points must be at least 1".into());
@@ -70,8 +111,6 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     }
     let nominal = rr::nominal();
     let real = rr::RealRr::default();
-    let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
-    let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
 
     let mut settings = args.solver.settings()?;
     settings.source = match args.hyperparameters.as_str() {
@@ -83,7 +122,16 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
         // Two Euler steps: the reproduction's scheme (a genuine flow that generalises best there).
         settings.steps = Some(2);
     }
-    let calibration = crate::calibrate::calibrate(&nominal, &train, &settings).map_err(|e| e.to_string())?;
+    // Issue 27: `--grid 3000` (9e6 rows) and `--test-points 1e11` aborted on allocation. Checked
+    // before anything is allocated: the fit of every grid row as `cbd fit` checks it, kernel ridge's
+    // N² matrices, the test points at their bytes each.
+    let threads = check_demo_memory(&args, &settings, crate::cli::memory::available_bytes())?;
+    settings.memory_budget = crate::cli::memory::kernel_form_budget(threads);
+    let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
+    let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
+    settings.threads = Some(threads);
+    let calibration =
+        crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings)).map_err(|e| e.to_string())?;
     crate::cli::fit::print_calibration(&calibration, args.solver.quiet);
     let (opts, fit) = (&calibration.options, &calibration.fit);
     crate::cli::write_atomically(&args.out, &fit.blob)?;

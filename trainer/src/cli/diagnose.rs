@@ -76,10 +76,11 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         Ok(imported.measurements)
     };
     let data = read(&args.data)?;
-    if !args.no_cbd {
-        // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
-        crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?;
-    }
+    // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
+    let threads = match args.no_cbd {
+        false => crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?,
+        true => crate::workers::worker_threads(),
+    };
     let test = args.test.as_ref().map(read).transpose()?;
     let mut options = DiagnoseOptions::default();
     options.library.harmonics = args.harmonics;
@@ -88,9 +89,13 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     options.selection.margin = args.margin;
     let mut settings = args.solver.settings()?;
     settings.verbose = false;
-    let fitter = crate::cli::compare::cbd_fitter(&settings);
-    let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
-    let d = diagnose(&nominal, &data, test.as_ref(), cbd, &options).map_err(|e| e.to_string())?;
+    settings.threads = Some(threads);
+    let d = crate::workers::on_workers(threads, || {
+        let fitter = crate::cli::compare::cbd_fitter(&settings);
+        let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
+        diagnose(&nominal, &data, test.as_ref(), cbd, &options)
+    })
+    .map_err(|e| e.to_string())?;
     let model_file = match &args.model.model {
         Some(path) => Some(crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?),
         None => None,

@@ -220,13 +220,18 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);
     let mut settings = args.solver.settings()?;
     // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
-    // the solver checks only if it falls back to the kernel form.
-    if settings.representation == crate::expansion::Representation::Kernel {
-        crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?;
-    }
-    settings.memory_budget = crate::cli::memory::available_bytes();
+    // the solver checks only if it falls back to the kernel form (against what the workers leave).
+    // The workers' own memory (faer's multiply workspace, stacks) is checked either way.
+    let threads = if settings.representation == crate::expansion::Representation::Kernel {
+        crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?
+    } else {
+        crate::cli::memory::check_workers_of(&args.data)?
+    };
+    settings.memory_budget = crate::cli::memory::kernel_form_budget(threads);
     settings.dh_first = args.dh_first;
-    let calibration = crate::calibrate::calibrate(&nominal, &data, &settings).map_err(|e| format!("{}: {e}", args.data.display()))?;
+    settings.threads = Some(threads);
+    let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings))
+        .map_err(|e| format!("{}: {e}", args.data.display()))?;
     print_calibration(&calibration, args.solver.quiet);
     let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;

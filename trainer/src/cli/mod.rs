@@ -7,7 +7,6 @@ pub mod demo;
 pub mod diagnose;
 pub mod eval;
 pub mod fit;
-pub mod memory;
 pub mod report;
 pub mod simulate;
 
@@ -77,8 +76,20 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
     }
 }
 
-/// Runs a parsed command; errors are printed by `main` with exit code 1.
+/// Runs a parsed command on the process's worker threads (`crate::workers`: as many as the memory
+/// allows, at most two); errors are printed by `main` with exit code 1.
 pub fn run(cli: Cli) -> Result<(), String> {
+    // Under an address-space limit the allocator returns what is freed: the memory check then holds.
+    if memory::address_space_limited() {
+        crate::solver::allocator::track_live_memory();
+    } else {
+        crate::solver::allocator::keep_freed_memory();
+    }
+    let threads = crate::workers::workers_for_memory(memory::available_bytes());
+    crate::workers::run_in_pool(threads, move || dispatch(cli))?
+}
+
+fn dispatch(cli: Cli) -> Result<(), String> {
     match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Simulate(args) => simulate::run(args),
@@ -92,5 +103,7 @@ pub fn run(cli: Cli) -> Result<(), String> {
     }
 }
 
-// Output files (atomic writes, `-` for standard output) live in `crate::io`; the commands reach them here.
+// Output files (atomic writes, `-` for standard output) live in `crate::io`, the memory estimates
+// in `crate::memory`; the commands reach them here.
 pub use crate::io::{check_output, is_stdout, write_atomically, STDOUT};
+pub use crate::memory;

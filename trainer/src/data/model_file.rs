@@ -93,7 +93,7 @@ impl ModelFile {
     pub fn column_spec(&self) -> Result<ColumnSpec, ImportError> {
         let section = self.measurements.as_ref().ok_or_else(|| ImportError::Model {
             file: self.path.clone(),
-            message: "no [measurements] section: name the CSV columns there or on the command line".into(),
+            message: "no [measurements] section: name the CSV columns in one, e.g. `[measurements]` `joints = [\"q1\", \"q2\"]` `positions = [\"x\", \"y\"]`".into(),
         })?;
         let spec = self.column_spec_with(section.joints.clone(), section.positions.clone());
         let angle_unit = section.angle_unit.unwrap_or(self.angle_unit);

@@ -4,8 +4,9 @@
 /// Why a diagnosis could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum DiagnoseError {
-    #[error("diagnose needs at least 10 training rows, got {got}")]
-    TooFewRows { got: usize },
+    /// `held_out` rows of the data's `rows` went to the held-out split (0 with a test file).
+    #[error("diagnose needs at least 10 training rows, got {got}{}", held_out_note(*rows, *held_out))]
+    TooFewRows { got: usize, rows: usize, held_out: usize },
     #[error("the model has {model} task coordinates, the data {train} (test {test})")]
     TaskDimension { model: usize, train: usize, test: usize },
     /// The found effects do not fit in one model's effect list.
@@ -19,6 +20,14 @@ pub enum DiagnoseError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+}
+
+/// Issue 27 (messages): "got 2" for a file of 3 rows did not say that one was held out.
+fn held_out_note(rows: usize, held_out: usize) -> String {
+    match held_out {
+        0 => String::new(),
+        h => format!(" (the data's {rows} rows less {h} held out for testing; --test FILE holds none out)"),
+    }
 }
 
 impl DiagnoseError {

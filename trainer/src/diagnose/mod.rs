@@ -318,6 +318,7 @@ pub fn diagnose(
     cbd: Option<CorrectionFitter>,
     options: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
+    let given_test = test.is_some();
     let (train, test, held_out) = match test {
         Some(t) => (data.clone(), t.clone(), "test set"),
         None => {
@@ -326,7 +327,8 @@ pub fn diagnose(
         }
     };
     if train.len() < 10 {
-        return Err(DiagnoseError::TooFewRows { got: train.len() });
+        let held_out = if given_test { 0 } else { data.len() - train.len() };
+        return Err(DiagnoseError::TooFewRows { got: train.len(), rows: data.len(), held_out });
     }
     let m = given.task_dim();
     if train.task_dim != m || test.task_dim != m {

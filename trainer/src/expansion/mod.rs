@@ -72,6 +72,8 @@ pub enum Declined {
     TooLong(String),
     /// The whitened least-squares problem could not be solved.
     Singular,
+    /// The least-squares problem would not fit in the memory this process may use.
+    Memory(String),
 }
 
 impl std::fmt::Display for Declined {
@@ -79,6 +81,7 @@ impl std::fmt::Display for Declined {
         match self {
             Declined::TooLong(why) => write!(f, "{why}"),
             Declined::Singular => write!(f, "the weights' least-squares problem is singular"),
+            Declined::Memory(why) => write!(f, "{why}"),
         }
     }
 }
@@ -124,6 +127,8 @@ pub fn fit_linear(
     if weights_len > MAX_WEIGHTS {
         return Err(Declined::TooLong(format!("{weights_len} weights at tolerance {tolerance:.0e} (limit {MAX_WEIGHTS})")));
     }
+    crate::memory::room_for(crate::memory::expansion_bytes(count * m, weights_len))
+        .map_err(|why| Declined::Memory(format!("the expansion's {weights_len} weights {why}")))?;
     let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: &residual };
     let a = design(&problem, joint_kernel, task_kernel, &joint, &task);
     let variances = prior_variances(joint_kernel.gamma, n, m, &joint, &task);
@@ -160,6 +165,8 @@ pub fn fit_flow(
     if params > MAX_WEIGHTS {
         return Err(Declined::TooLong(format!("{params} weights over {} stages (limit {MAX_WEIGHTS})", integrator.stage_count())));
     }
+    crate::memory::room_for(crate::memory::flow_expansion_bytes(cp.len() * m, params))
+        .map_err(|why| Declined::Memory(format!("the {params} weights over {} stages {why}", integrator.stage_count())))?;
     let initial = cp.nominal_kinematics();
     let problem = flow_fit::StageProblem::new(
         cp.dims,

@@ -6,11 +6,9 @@ pub mod tangent;
 
 pub use primal::{ControlPoints, PrimalFlow};
 
-/// Runs `f` on a pool of `threads` threads. The arithmetic never depends on the count: work is
-/// split into a fixed number of pieces (see `solver::FIXED_SPLIT` and the tangent's column chunks).
+/// Runs `f` on a pool of `threads` threads, or on the command's pool when called there
+/// ([`crate::workers::on_workers`]). The arithmetic never depends on the count: work is split into
+/// a fixed number of pieces (see `solver::FIXED_SPLIT` and the tangent's column chunks).
 pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
-    match rayon::ThreadPoolBuilder::new().num_threads(threads.max(1)).build() {
-        Ok(pool) => pool.install(f),
-        Err(_) => f(),
-    }
+    crate::workers::on_workers(threads, f)
 }

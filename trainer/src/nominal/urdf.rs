@@ -124,6 +124,22 @@ pub fn urdf_tip_pose(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, q:
     Ok(pose)
 }
 
+/// A joint's origin and axis as the model uses them: finite and within ±1e100 after the length unit's
+/// conversion (`xyz="1e307 0 0"` in millimetres is 1e310: infinite, and the NaN it made in the
+/// kinematics was blamed on the first data line).
+fn check_origin(joint: &urdf_rs::Joint, length_scale: f64) -> Result<()> {
+    let limit = crate::data::csv_import::MAX_MAGNITUDE;
+    let values =
+        [("origin xyz", scale(joint.origin.xyz.0, length_scale)), ("origin rpy", joint.origin.rpy.0), ("axis xyz", joint.axis.xyz.0)];
+    for (what, v) in values {
+        if let Some(x) = v.iter().find(|x| !x.is_finite() || x.abs() > limit) {
+            let unit = if what == "origin xyz" && length_scale != 1.0 { " after the length unit's conversion" } else { "" };
+            return Err(Error::Urdf(format!("URDF joint '{}': {what} has {x:e}{unit}, beyond ±{limit:e}", joint.name)));
+        }
+    }
+    Ok(())
+}
+
 fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
     let n = norm(v);
     (n > 1e-12).then(|| scale(v, 1.0 / n))
@@ -137,6 +153,7 @@ pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, 
     let mut lines = Vec::new();
     let mut names = Vec::new();
     for joint in joint_path(robot, base_link, tip_link)? {
+        check_origin(joint, length_scale)?;
         pose = pose.compose(&origin_pose(&joint.origin, length_scale));
         let kind = match joint.joint_type {
             urdf_rs::JointType::Fixed => continue,
@@ -339,5 +356,20 @@ mod tests {
         assert!(e.contains("not a descendant"), "{e}");
         let e = chain_from_urdf(&robot, "flange", "tool0", 1.0).unwrap_err().to_string();
         assert!(e.contains("no movable joint"), "{e}");
+    }
+
+    /// Issue 27 (messages): an origin made infinite by the unit conversion gave a NaN that was
+    /// blamed on a data line; it is now refused naming the joint.
+    #[test]
+    fn a_urdf_origin_beyond_range_after_unit_conversion_names_the_joint() {
+        let robot = urdf_rs::read_from_string(&TEST_URDF.replacen("xyz=\"0 0 0.089\"", "xyz=\"1e98 0 0.089\"", 1)).unwrap();
+        assert!(chain_from_urdf(&robot, "world", "tool0", 1.0).is_ok());
+        let e = chain_from_urdf(&robot, "world", "tool0", 1000.0).unwrap_err().to_string();
+        assert!(
+            e.contains("URDF joint 'j1'")
+                && e.contains("origin xyz has 1")
+                && e.contains("e101 after the length unit's conversion, beyond ±1e100"),
+            "{e}"
+        );
     }
 }

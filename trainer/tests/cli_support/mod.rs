@@ -88,3 +88,15 @@ pub fn head(dir: &Path, from: &str, name: &str, rows: usize) -> String {
     let head: Vec<&str> = text.lines().take(rows + 1).collect();
     write(dir, name, head.join("\n") + "\n")
 }
+
+/// A copy of the blob at `from` whose last momentum is `value`: checksum and fields valid, the
+/// model damaged (positions of about `value` times the arm's size).
+pub fn damaged_blob(dir: &std::path::Path, from: &str, to: &str, value: f64) -> String {
+    let blob = std::fs::read(dir.join(from)).unwrap();
+    let mut model = cbd_protocol::decode(&blob).unwrap();
+    let mut momenta: Vec<f64> = model.momenta.iter().collect();
+    *momenta.last_mut().unwrap() = value;
+    let bytes = cbd_protocol::f64_le_bytes(&momenta);
+    model.momenta = cbd_protocol::F64Slice::from_le_bytes(&bytes);
+    write(dir, to, cbd_protocol::encode_to_vec(&model).unwrap())
+}

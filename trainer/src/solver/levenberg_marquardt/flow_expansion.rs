@@ -9,7 +9,7 @@ use super::encode::encode_checked;
 use super::problem::cancellation_of;
 use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
 use crate::data::Measurements;
-use crate::expansion::{fit_flow, fit_linear, ExpansionFit, Representation, CANCELLATION_LIMIT};
+use crate::expansion::{fit_flow, fit_linear, Declined, ExpansionFit, Representation, CANCELLATION_LIMIT};
 use crate::flow::ControlPoints;
 use crate::solver::regulariser::regulariser_matrix;
 use crate::solver::step::solve_regularised;
@@ -38,6 +38,7 @@ pub(super) fn fit(
     // The linear model's expansion first: the flow starts from it, and `auto` decides on its length.
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why.to_string())),
     };
     let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;
@@ -62,6 +63,7 @@ pub(super) fn fit(
         opts.prediction_tolerance,
     ) {
         Ok(r) => r,
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why.to_string())),
     };
     let norm = &opts.normalisation;
@@ -152,6 +154,7 @@ pub(super) fn fit_linear_scheme(
     }
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why.to_string())),
     };
     let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;

@@ -228,6 +228,9 @@ pub enum FitError {
     },
     /// The runtime could not load the blob or does not reproduce the training predictions.
     RuntimeMismatch(String),
+    /// The expansion's least-squares problem does not fit in the memory this process may use.
+    /// An error, not a fall-back to the kernel form: the blob never depends on the memory limit.
+    Memory(String),
 }
 
 impl std::fmt::Display for FitError {
@@ -250,6 +253,7 @@ impl std::fmt::Display for FitError {
                 budget / 1e9
             ),
             FitError::RuntimeMismatch(e) => write!(f, "the runtime does not reproduce the fit: {e}"),
+            FitError::Memory(why) => write!(f, "{why}: raise the memory limit, or fit the kernel form (--representation kernel)"),
         }
     }
 }
@@ -322,7 +326,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let momenta = problem.space.momenta_of(&outcome.p);
     let (expansion, expansion_declined) = match declined_flow {
         Some(why) => (None, Some(why)),
-        None => choose_expansion(&cp, opts, &target, linear_scheme, kernel_cancellation),
+        None => choose_expansion(&cp, opts, &target, linear_scheme, kernel_cancellation)?,
     };
     let (train_predictions, cancellation, expansion_report) = match &expansion {
         Some(e) => {
@@ -379,16 +383,16 @@ fn choose_expansion(
     target: &[f64],
     linear_scheme: bool,
     kernel_cancellation: f64,
-) -> (Option<crate::expansion::ExpansionFit>, Option<String>) {
-    use crate::expansion::{fit_linear, Representation, CANCELLATION_LIMIT};
+) -> Result<(Option<crate::expansion::ExpansionFit>, Option<String>), FitError> {
+    use crate::expansion::{fit_linear, Declined, Representation, CANCELLATION_LIMIT};
     if opts.representation == Representation::Kernel {
-        return (None, Some("kernel form requested".into()));
+        return Ok((None, Some("kernel form requested".into())));
     }
     if !linear_scheme || opts.law.joint_field_sign() > 0.0 {
-        return (None, Some("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into()));
+        return Ok((None, Some("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into())));
     }
     let momenta = cp.len() * cp.dims.m;
-    match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
+    Ok(match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(e) if opts.representation == Representation::Expansion => (Some(e), None),
         Ok(e) if e.len() <= momenta || kernel_cancellation > CANCELLATION_LIMIT => (Some(e), None),
         Ok(e) => (
@@ -398,8 +402,9 @@ fn choose_expansion(
                 e.len()
             )),
         ),
+        Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => (None, Some(why.to_string())),
-    }
+    })
 }
 
 /// The data's shape against the nominal model's, and enough rows to fit.
