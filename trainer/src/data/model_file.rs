@@ -33,6 +33,10 @@
 //! repeat_tolerance = 0.5      # rows with equal joints whose positions differ by more are an error
 //!                             # (length_unit above; default 1e-3 of the positions' bounding-box diagonal)
 //!
+//! [measurements.joint_map]    # optional: controller joint values (columns) → model joints,
+//! sign = { q3 = -1 }          # q_i = sign_i · scale_i · Σ_j coupling_ij c_j + offset_i in the
+//! coupling = [[1, 0], [1, 1]] # columns' units (see `data::joint_map`)
+//!
 //! # [gravity] and [[effects]]: physical effects on top of the chain (see `data::effects_section`)
 //! ```
 //!
@@ -41,6 +45,7 @@
 
 use super::csv_import::{default_joint_limits, ColumnSpec};
 use super::effects_section;
+use super::joint_map::{JointMap, RawJointMap};
 use cbd_protocol::{JointKind, NominalModel};
 use raw::RawModelFile;
 use serde::Deserialize;
@@ -70,6 +75,8 @@ pub struct ModelFile {
     pub joint_names: Vec<String>,
     /// The `[measurements]` section, if any.
     pub measurements: Option<MeasurementSection>,
+    /// Its joint mapping, checked against the model's joints.
+    pub joint_map: Option<JointMap>,
 }
 
 /// The `[measurements]` section: CSV column names and units.
@@ -85,6 +92,8 @@ pub struct MeasurementSection {
     pub joint_limits: Option<Vec<[f64; 2]>>,
     /// Largest distance (length_unit of this section) between positions of repeated joint configurations.
     pub repeat_tolerance: Option<f64>,
+    /// `[measurements.joint_map]`: controller joint values → model joints (`data::joint_map`).
+    pub joint_map: Option<RawJointMap>,
 }
 
 impl ModelFile {
@@ -127,7 +136,16 @@ impl ModelFile {
             }
             t => t.map(|t| t * length_factor),
         };
-        Ok(ColumnSpec { angle_unit, length_unit, min_rows: section.min_rows.unwrap_or(1), joint_limits, repeat_tolerance, ..spec })
+        let joint_map = self.joint_map.clone();
+        Ok(ColumnSpec {
+            angle_unit,
+            length_unit,
+            min_rows: section.min_rows.unwrap_or(1),
+            joint_limits,
+            repeat_tolerance,
+            joint_map,
+            ..spec
+        })
     }
 
     /// Column specification with the given column names (e.g. from the command line), in the
@@ -146,6 +164,7 @@ impl ModelFile {
             min_rows: 1,
             joint_limits: default_joint_limits(&kinds),
             repeat_tolerance: None,
+            joint_map: None,
         }
     }
 }
@@ -213,7 +232,14 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             )));
         }
     }
+    let joint_map = match raw.measurements.as_ref().and_then(|m| m.joint_map.as_ref()) {
+        Some(map) => {
+            Some(JointMap::new(map, &joint_names).map_err(|(field, message)| ImportError::Field { file: file.clone(), field, message })?)
+        }
+        None => None,
+    };
     Ok(ModelFile {
+        joint_map,
         path: file,
         name: raw.name,
         nominal,

@@ -90,6 +90,18 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
         if let Some(t) = s.repeat_tolerance {
             let _ = writeln!(out, "repeat_tolerance = {}", f(t));
         }
+        if let Some(map) = &s.joint_map {
+            out += "\n[measurements.joint_map]\n";
+            for (key, table) in [("sign", &map.sign), ("scale", &map.scale), ("offset", &map.offset)] {
+                let Some(table) = table else { continue };
+                let entries: Vec<String> = table.iter().map(|(name, v)| format!("{} = {}", quoted(name), f(*v))).collect();
+                let _ = writeln!(out, "{key} = {{ {} }}", entries.join(", "));
+            }
+            if let Some(rows) = &map.coupling {
+                let rows: Vec<String> = rows.iter().map(|r| effects_section::list(r)).collect();
+                let _ = writeln!(out, "coupling = [{}]", rows.join(", "));
+            }
+        }
     }
     out += &effects_section::write(&m.nominal, per_unit);
     out
