@@ -247,7 +247,12 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
     let (joint_scale, unit) = (joint_scales(&spec), spec.length_unit.name());
     let mut text = format!("{},residual,flags\n", spec.joint_columns.join(","));
     for r in &rows {
-        let mut columns: Vec<f64> = r.joints.iter().zip(&joint_scale).map(|(v, s)| v / s).collect();
+        let mut joints = r.joints.clone();
+        if let Some(frame) = &spec.planar_frame {
+            // The chain's joints back to the arm's (the import added the offsets).
+            joints.iter_mut().zip(&frame.offsets).for_each(|(q, o)| *q -= o);
+        }
+        let mut columns: Vec<f64> = joints.iter().zip(&joint_scale).map(|(v, s)| v / s).collect();
         if let Some(map) = &spec.joint_map {
             // Model joints back to the controller's values (the inverse of the import's mapping).
             let model = columns.clone();

@@ -73,6 +73,7 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
                 joint_limits: crate::data::csv_import::default_joint_limits(&[cbd_protocol::JointKind::Revolute; 2]),
                 repeat_tolerance: None,
                 joint_map: None,
+                planar_frame: None,
             },
         )),
     }

@@ -5,6 +5,7 @@ use super::import_error::ImportError;
 use super::joint_map::JointMap;
 use super::units::{AngleUnit, LengthUnit};
 use super::Measurements;
+use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
 use std::path::Path;
@@ -36,6 +37,9 @@ pub struct ColumnSpec {
     /// Controller joint values (the columns, in their units) → model joints, applied before the
     /// unit conversion (`[measurements.joint_map]`); `None`: the columns are the model's joints.
     pub joint_map: Option<JointMap>,
+    /// A `[planar]` arm's base, yaw and joint offsets: rows are read into its chain's frame
+    /// (joints + offsets, positions R(−yaw)(y − base)) after the units and the joint map.
+    pub planar_frame: Option<PlanarFrame>,
 }
 
 /// One full turn each way for revolute joints (beyond that no arm we know of turns, and a larger
@@ -161,6 +165,9 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
         row.convert(&record, line, &mut c, &mut q, &mut y)?;
+        if let Some(frame) = &spec.planar_frame {
+            frame.move_row(&mut q, &mut y);
+        }
         // A repeat is a configuration measured twice: a file of targets or seeds alone has none.
         if n > 0 && m > 0 {
             let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
@@ -467,6 +474,7 @@ mod tests {
             joint_limits: default_joint_limits(&[JointKind::Revolute, JointKind::Prismatic]),
             repeat_tolerance: None,
             joint_map: None,
+            planar_frame: None,
         }
     }
 

@@ -21,6 +21,9 @@
 //!
 //! # [planar]                  # … or a planar arm of revolute joints (2-D task space)
 //! # lengths = [1.0, 0.5]
+//! # base = [0.03, -0.02]      # optional: y = R(yaw) k0(q + offsets) + base (length_unit,
+//! # yaw = 0.5                 #   angle_unit); the measurements are read into the chain's frame
+//! # offsets = [0.4, -0.7]     #   (joints + offsets, R(−yaw)(y − base)) at import
 //!
 //! [measurements]              # optional: the CSV columns
 //! joints = ["q1_deg", "q2_deg"]        # one per joint, in chain order
@@ -46,6 +49,7 @@
 use super::csv_import::{default_joint_limits, ColumnSpec};
 use super::effects_section;
 use super::joint_map::{JointMap, RawJointMap};
+use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::{JointKind, NominalModel};
 use raw::RawModelFile;
 use serde::Deserialize;
@@ -77,6 +81,8 @@ pub struct ModelFile {
     pub measurements: Option<MeasurementSection>,
     /// Its joint mapping, checked against the model's joints.
     pub joint_map: Option<JointMap>,
+    /// `[planar]`'s base, yaw and joint offsets (radians): the chain sits in this frame.
+    pub planar_frame: Option<PlanarFrame>,
 }
 
 /// The `[measurements]` section: CSV column names and units.
@@ -165,6 +171,7 @@ impl ModelFile {
             joint_limits: default_joint_limits(&kinds),
             repeat_tolerance: None,
             joint_map: None,
+            planar_frame: self.planar_frame.clone(),
         }
     }
 }
@@ -204,12 +211,15 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     if given != 1 {
         return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({given} found)")));
     }
+    let mut planar_frame = None;
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
         sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
         sections::urdf_chain(&u, raw.length_unit, path)?
     } else {
-        sections::planar(&raw.planar.expect("one section").lengths, path)?
+        let planar = raw.planar.as_ref().expect("one section");
+        planar_frame = sections::planar_frame(planar, deg, path)?;
+        sections::planar(&planar.lengths, path)?
     };
     effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(|e| ImportError::Field {
         file: file.clone(),
@@ -240,6 +250,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     };
     Ok(ModelFile {
         joint_map,
+        planar_frame,
         path: file,
         name: raw.name,
         nominal,
@@ -428,6 +439,44 @@ compliance = 0.5
         let text = format!("{SMALL}{}", EFFECTS.replacen("compliance = 0.5", "compliance = 1e200", 1));
         let e = parse_model_file(&text, Path::new("fx.toml")).unwrap_err().to_string();
         assert!(e.contains("entry 3: compliance = 1e200 is beyond"), "{e}");
+    }
+
+    /// Issue 26 item 6: `[planar]` holds base, yaw and joint offsets (the file's units), reads
+    /// rows into the chain's frame and writes them back; bad entries name the field.
+    #[test]
+    fn planar_frame_reads_rows_into_the_chain_frame_and_round_trips() {
+        let text = "length_unit = \"mm\"\nangle_unit = \"deg\"\n[planar]\nlengths = [1000.0, 500.0]\nbase = [30.0, -20.0]\nyaw = 90.0\noffsets = [1.0, -2.0]\n\
+                    [measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\n";
+        let m = parse_model_file(text, Path::new("p.toml")).unwrap();
+        let frame = m.planar_frame.clone().unwrap();
+        assert_eq!(frame.base, [30.0, -20.0]);
+        let deg = AngleUnit::Deg.radians();
+        assert_eq!((frame.yaw, frame.offsets.clone()), (90.0 * deg, vec![1.0 * deg, -2.0 * deg]));
+        let rows = crate::data::csv_import::read_measurements_from(
+            "q1,q2,x,y\n10,20,30,-10\n".as_bytes(),
+            Path::new("d.csv"),
+            &m.column_spec().unwrap(),
+        )
+        .unwrap()
+        .measurements;
+        // Joints + offsets; (30, −10) − base = (0, 10) turned by −90°: (10, 0).
+        assert_eq!(rows.joints, vec![11.0 * deg, 18.0 * deg]);
+        assert!((rows.positions[0] - 10.0).abs() < 1e-12 && rows.positions[1].abs() < 1e-12, "{:?}", rows.positions);
+        let written = write_model_file(&m, "h");
+        let back = parse_model_file(&written, Path::new("p.toml")).unwrap();
+        assert_eq!(back.planar_frame.as_ref().map(|f| f.base), Some(frame.base));
+        assert_eq!(write_model_file(&back, "h"), written);
+        let bad = text.replace("offsets = [1.0, -2.0]", "offsets = [1.0]");
+        let e = parse_model_file(&bad, Path::new("p.toml")).unwrap_err().to_string();
+        assert!(e.contains("p.toml: [planar] offsets: 1 entries; the arm has 2 joints"), "{e}");
+        let bad = text.replace("yaw = 90.0", "yaw = nan");
+        assert!(parse_model_file(&bad, Path::new("p.toml")).unwrap_err().to_string().contains("[planar] yaw: NaN"));
+        // Composition: a frame given in another's chain coordinates.
+        let inner = crate::nominal::planar::PlanarFrame { offsets: vec![0.1, 0.2], base: [1.0, 0.0], yaw: 0.3 };
+        let total = frame.then(&inner);
+        let p = [0.7, -0.4];
+        let (a, b) = (total.from_chain(&p), frame.from_chain(&inner.from_chain(&p)));
+        assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12, "{a:?} {b:?}");
     }
 
     #[test]

@@ -76,4 +76,9 @@ pub(super) struct RawUrdf {
 #[serde(deny_unknown_fields)]
 pub(super) struct RawPlanar {
     pub(super) lengths: Vec<f64>,
+    /// The arm's base in the measurements' plane (length unit), its yaw (angle unit) and the
+    /// joint offsets (angle unit): y = R(yaw) k0(q + offsets) + base.
+    pub(super) base: Option<[f64; 2]>,
+    pub(super) yaw: Option<f64>,
+    pub(super) offsets: Option<Vec<f64>>,
 }

@@ -1,9 +1,10 @@
 //! The model file's three ways to give the nominal chain — `[chain]` (a DH table), `[urdf]` and
 //! `[planar]` — each read into the nominal model and its joint names.
 
-use super::raw::{RawChain, RawConvention, RawKind, RawTransform, RawUrdf};
+use super::raw::{RawChain, RawConvention, RawKind, RawPlanar, RawTransform, RawUrdf};
 use super::{ImportError, LengthUnit};
 use crate::data::csv_import::MAX_MAGNITUDE;
+use crate::nominal::planar::PlanarFrame;
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::Pose;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
@@ -62,6 +63,27 @@ pub(super) fn urdf_chain(u: &RawUrdf, length_unit: LengthUnit, path: &Path) -> R
     let scale = LengthUnit::M.factor_to(length_unit);
     let conv = chain_from_urdf(&robot, &u.base_link, &u.tip_link, scale).map_err(|e| urdf_err(e.to_string()))?;
     Ok((NominalModel::DhChain(conv.chain), conv.joint_names))
+}
+
+/// `[planar]`'s frame: base, yaw and joint offsets (`deg` radians per angle unit); `None` when
+/// none is given.
+pub(super) fn planar_frame(raw: &RawPlanar, deg: f64, path: &Path) -> Result<Option<PlanarFrame>, ImportError> {
+    if raw.base.is_none() && raw.yaw.is_none() && raw.offsets.is_none() {
+        return Ok(None);
+    }
+    let bad = |field: &str, message: String| ImportError::Field { file: path.to_path_buf(), field: format!("[planar] {field}"), message };
+    let offsets = raw.offsets.clone().unwrap_or_else(|| vec![0.0; raw.lengths.len()]);
+    if offsets.len() != raw.lengths.len() {
+        return Err(bad("offsets", format!("{} entries; the arm has {} joints", offsets.len(), raw.lengths.len())));
+    }
+    let base = raw.base.unwrap_or([0.0; 2]);
+    let yaw = raw.yaw.unwrap_or(0.0);
+    for (field, values) in [("offsets", &offsets[..]), ("base", &base[..]), ("yaw", &[yaw][..])] {
+        if let Some(v) = values.iter().find(|v| !(v.is_finite() && v.abs() <= MAX_MAGNITUDE)) {
+            return Err(bad(field, format!("{v:e} is not a finite value within ±{MAX_MAGNITUDE:e}")));
+        }
+    }
+    Ok(Some(PlanarFrame { offsets: offsets.iter().map(|o| o * deg).collect(), base, yaw: yaw * deg }))
 }
 
 /// `[planar]`: a planar arm of revolute joints with these link lengths.

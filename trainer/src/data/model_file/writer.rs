@@ -69,6 +69,12 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
         }
         NominalModel::PlanarChain { lengths, .. } => {
             let _ = writeln!(out, "\n[planar]\nlengths = {}", effects_section::list(lengths));
+            if let Some(frame) = &m.planar_frame {
+                let offsets: Vec<f64> = frame.offsets.iter().map(|o| o / per_unit).collect();
+                let _ = writeln!(out, "base = {}", effects_section::list(&frame.base));
+                let _ = writeln!(out, "yaw = {}", f(frame.yaw / per_unit));
+                let _ = writeln!(out, "offsets = {}", effects_section::list(&offsets));
+            }
         }
     }
     if let Some(s) = &m.measurements {

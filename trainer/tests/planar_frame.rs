@@ -1,0 +1,93 @@
+//! Issue 26 item 6: a `[planar]` model file holds base x, y, yaw and joint offsets, so
+//! `cbd diagnose --write-model` works on a planar arm whose base and offsets it corrects, and the
+//! written file's nominal (`cbd eval`) is the diagnosed "nominal + effects" row.
+
+mod cli_support;
+
+use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
+use cbd_trainer::simulate::rr::planar_arm;
+use cbd_trainer::simulate::{configurations, Sampling};
+use cli_support::*;
+
+fn csv(data: &cbd_trainer::data::Measurements) -> String {
+    let mut out = String::from("q1,q2,x,y\n");
+    for i in 0..data.len() {
+        let row: Vec<String> = data.joints(i).iter().chain(data.position(i)).map(|v| format!("{v:?}")).collect();
+        out += &(row.join(",") + "\n");
+    }
+    out
+}
+
+fn json(dir: &std::path::Path, name: &str) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join(name)).unwrap()).unwrap()
+}
+
+#[test]
+fn diagnose_writes_a_planar_file_whose_nominal_is_the_diagnosed_effects_row() {
+    let dir = scratch("planar-frame");
+    // Base moved by (3, −2) cm and turned by 0.01 rad, joint offsets 0.008 and −0.012 rad,
+    // lengths 1.03 and 0.48 m, a second harmonic on joint 2, 0.1 mm noise.
+    let arm = EffectArm::new(planar_arm(&[1.03, 0.48], [0.03, -0.02], 0.01, &[0.008, -0.012])).with(InjectedEffect::Transmission {
+        joint: 1,
+        harmonic: 2,
+        cos: 2e-3,
+        sin: -1e-3,
+    });
+    let train = arm.measure_planar(&configurations(Sampling::Uniform { count: 300, seed: 1 }, 2), 1e-4, 1);
+    let test = arm.measure_planar(&configurations(Sampling::Uniform { count: 300, seed: 2 }, 2), 1e-4, 2);
+    write(&dir, "train.csv", csv(&train));
+    write(&dir, "test.csv", csv(&test));
+    // The starting file already has a frame: the diagnosed one composes with it.
+    let model =
+        PLANAR_RR_MODEL.replace("lengths = [1.0, 0.5]", "lengths = [1.0, 0.5]\nbase = [0.01, 0.0]\nyaw = -0.004\noffsets = [0.0, 0.003]");
+    write(&dir, "rr.toml", model);
+    let args = ["diagnose", "--no-cbd", "--model", "rr.toml", "--data", "train.csv", "--test", "test.csv"];
+    let out = cbd(&dir, &[&args[..], &["--write-model", "rr-effects.toml", "--json", "d.json"]].concat());
+    succeeds(&out);
+    let written = std::fs::read_to_string(dir.join("rr-effects.toml")).unwrap();
+    assert!(
+        written.contains("[planar]") && written.contains("base = [") && written.contains("yaw = ") && written.contains("offsets = ["),
+        "{written}"
+    );
+
+    // Any blob will do for eval's nominal row: every hyperparameter given (no search).
+    let fixed = [
+        "--sigma",
+        "1e-4",
+        "--task-width",
+        "1",
+        "--task-gamma",
+        "1e-4",
+        "--joint-b",
+        "1",
+        "--gamma",
+        "1e-4",
+        "--steps",
+        "1",
+        "--integrator",
+        "euler",
+    ];
+    succeeds(&cbd(
+        &dir,
+        &[&["fit", "--model", "rr-effects.toml", "--data", "train.csv", "--out", "rr.blob", "--quiet"][..], &fixed[..]].concat(),
+    ));
+    succeeds(&cbd(&dir, &["eval", "--model", "rr-effects.toml", "--blob", "rr.blob", "--data", "test.csv", "--json", "e.json"]));
+    let (d, e) = (json(&dir, "d.json"), json(&dir, "e.json"));
+    let row = &d["held_out"]["nominal + effects"];
+    let nominal_before = d["held_out"]["nominal"]["mean"].as_f64().unwrap();
+    for key in ["mean", "median", "p99", "max"] {
+        let (want, got) = (row[key].as_f64().unwrap(), e["nominal"][key].as_f64().unwrap());
+        assert!((want - got).abs() <= 1e-9 * want, "{key}: diagnose {want:e}, eval {got:e}");
+    }
+    // The corrections mattered: the file's nominal was 100 × worse.
+    assert!(nominal_before > 100.0 * row["mean"].as_f64().unwrap(), "{nominal_before:e} vs {row}");
+
+    // Written again from what it reads, the file is the same text.
+    let back = cbd_trainer::data::model_file::load_model_file(dir.join("rr-effects.toml")).unwrap();
+    assert_eq!(cbd_trainer::data::model_file::write_model_file(&back, &header(&written)), written);
+}
+
+/// The comment lines a written file starts with, without their `# `.
+fn header(text: &str) -> String {
+    text.lines().take_while(|l| l.starts_with("# ")).map(|l| &l[2..]).collect::<Vec<_>>().join("\n")
+}
