@@ -65,23 +65,26 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
-    let (nominal, spec) = load_nominal(&args.model)?;
-    let read = |path: &PathBuf| -> Result<crate::data::Measurements, String> {
+    let (mut nominal, spec) = load_nominal(&args.model)?;
+    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<crate::data::Measurements, String> {
         let imported = crate::data::csv_import::read_measurements(path, &spec).map_err(|e| e.to_string())?;
         for w in imported.warnings(path) {
             eprintln!("warning: {w}");
+        }
+        if register {
+            crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?;
         }
         for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
             eprintln!("warning: {w}");
         }
         Ok(imported.measurements)
     };
-    let data = read(&args.data)?;
+    let data = read(&args.data, &mut nominal, true)?;
     if !args.no_cbd {
         // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
         crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?;
     }
-    let test = args.test.as_ref().map(read).transpose()?;
+    let test = args.test.as_ref().map(|path| read(path, &mut nominal.clone(), false)).transpose()?;
     let mut options = DiagnoseOptions::default();
     options.library.harmonics = args.harmonics;
     options.structure.harmonics = args.harmonics;
@@ -120,6 +123,8 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
+        // A registered base is written as the pose the diagnosis found.
+        file.register_base = false;
         // A [planar] file holds lengths and effects in a frame (base, yaw, joint offsets); the
         // data were read into the file's frame, so the diagnosed frame composes with it.
         let planar = matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. });

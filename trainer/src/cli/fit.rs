@@ -209,11 +209,12 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data))],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    let (nominal, spec) = load_nominal(&args.model)?;
+    let (mut nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     for w in imported.warnings(&args.data) {
         eprintln!("warning: {w}");
     }
+    crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data)? {
         eprintln!("warning: {w}");
     }

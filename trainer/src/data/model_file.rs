@@ -11,7 +11,8 @@
 //!   { a = 0, alpha = 90, d = 89.159 },
 //!   { a = -425, alpha = 0, d = 0, theta_offset = 0, kind = "revolute" },
 //! ]
-//! base = { translation = [0, 0, 0], rpy = [0, 0, 0] }   # optional; rpy = URDF's Rz(y) Ry(p) Rx(r)
+//! base = { translation = [0, 0, 0], rpy = [0, 0, 0] }   # optional (absent: identity); rpy = URDF's Rz(y) Ry(p) Rx(r)
+//!                             # base = { register = true }: unknown (a tracker's frame), registered on the data
 //! tool = { translation = [0, 0, 31] }                    # or rotation = [[..], [..], [..]] (rows)
 //!
 //! # [urdf]                    # … or a URDF chain (exactly one of [chain], [urdf], [planar])
@@ -83,6 +84,9 @@ pub struct ModelFile {
     pub joint_map: Option<JointMap>,
     /// `[planar]`'s base, yaw and joint offsets (radians): the chain sits in this frame.
     pub planar_frame: Option<PlanarFrame>,
+    /// `[chain] base = { register = true }`: the base is unknown (identity in `nominal`) and is
+    /// registered on the training data (`nominal::register`).
+    pub register_base: bool,
 }
 
 /// The `[measurements]` section: CSV column names and units.
@@ -212,6 +216,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({given} found)")));
     }
     let mut planar_frame = None;
+    let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).is_some_and(|b| b.register == Some(true));
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
         sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
@@ -251,6 +256,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     Ok(ModelFile {
         joint_map,
         planar_frame,
+        register_base,
         path: file,
         name: raw.name,
         nominal,

@@ -59,6 +59,8 @@ pub(super) struct RawJoint {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RawTransform {
+    /// `base = { register = true }`: the base is unknown (a tracker's frame) and registered on the data.
+    pub(super) register: Option<bool>,
     pub(super) translation: Option<[f64; 3]>,
     pub(super) rpy: Option<[f64; 3]>,
     pub(super) rotation: Option<[[f64; 3]; 3]>,

@@ -103,6 +103,18 @@ pub(super) fn planar(lengths: &[f64], path: &Path) -> Result<Section, ImportErro
 fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> Result<Transform, ImportError> {
     let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: field.to_string(), message };
     let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
+    if let Some(register) = raw.register {
+        if field != "[chain.base]" {
+            return Err(bad("register applies to the base only".into()));
+        }
+        if raw.translation.is_some() || raw.rpy.is_some() || raw.rotation.is_some() {
+            return Err(bad("give either register = true or the base's pose, not both".into()));
+        }
+        if !register {
+            return Err(bad("register = false: omit it (no base means the identity) or give the pose".into()));
+        }
+        return Ok(Transform::IDENTITY);
+    }
     let translation = raw.translation.unwrap_or([0.0; 3]);
     let rotation = match (raw.rpy, raw.rotation) {
         (Some(_), Some(_)) => return Err(bad("give either rpy or rotation, not both".into())),

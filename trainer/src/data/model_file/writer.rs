@@ -57,6 +57,10 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
             }
             out += "]\n";
             for (name, t) in [("base", &c.base), ("tool", &c.tool)] {
+                if name == "base" && m.register_base {
+                    out += "base = { register = true }\n";
+                    continue;
+                }
                 let r = &t.rotation;
                 let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
                 let _ = writeln!(
