@@ -82,25 +82,7 @@ fn fanuc_coupling_in_the_model_file_reproduces_the_hand_converted_columns_bit_fo
 
     // The CLI reads it the same way: eval of one blob on both files gives the same figures.
     let fit_rows = head(&dir, "hand.csv", "hand-40.csv", 40);
-    // Every hyperparameter given: no search (a few seconds would go to it).
-    let fixed = [
-        "--sigma",
-        "0.05",
-        "--task-width",
-        "500",
-        "--task-gamma",
-        "1",
-        "--joint-b",
-        "1",
-        "--gamma",
-        "1e-4",
-        "--steps",
-        "1",
-        "--integrator",
-        "euler",
-    ];
-    let args = [&["fit", "--model", "hand.toml", "--data", &fit_rows, "--out", "arm.blob", "--quiet"][..], &fixed[..]].concat();
-    let out = cbd(&dir, &args);
+    let out = fit_without_search(&dir, "hand.toml", &fit_rows, "arm.blob");
     succeeds(&out);
     for (model, data, json) in [("fanuc.toml", "controller.csv", "a.json"), ("hand.toml", "hand.csv", "b.json")] {
         succeeds(&cbd(&dir, &["eval", "--model", model, "--blob", "arm.blob", "--data", data, "--json", json]));

@@ -50,27 +50,8 @@ fn diagnose_writes_a_planar_file_whose_nominal_is_the_diagnosed_effects_row() {
         "{written}"
     );
 
-    // Any blob will do for eval's nominal row: every hyperparameter given (no search).
-    let fixed = [
-        "--sigma",
-        "1e-4",
-        "--task-width",
-        "1",
-        "--task-gamma",
-        "1e-4",
-        "--joint-b",
-        "1",
-        "--gamma",
-        "1e-4",
-        "--steps",
-        "1",
-        "--integrator",
-        "euler",
-    ];
-    succeeds(&cbd(
-        &dir,
-        &[&["fit", "--model", "rr-effects.toml", "--data", "train.csv", "--out", "rr.blob", "--quiet"][..], &fixed[..]].concat(),
-    ));
+    // Any blob will do for eval's nominal row.
+    succeeds(&fit_without_search(&dir, "rr-effects.toml", "train.csv", "rr.blob"));
     succeeds(&cbd(&dir, &["eval", "--model", "rr-effects.toml", "--blob", "rr.blob", "--data", "test.csv", "--json", "e.json"]));
     let (d, e) = (json(&dir, "d.json"), json(&dir, "e.json"));
     let row = &d["held_out"]["nominal + effects"];

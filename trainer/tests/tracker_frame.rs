@@ -136,24 +136,7 @@ fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
         "both.toml",
         model.replace("base = { translation = [0, 0, 0], rpy = [0, 0, 0] }", "base = { register = true, translation = [1, 2, 3] }"),
     );
-    let fixed = [
-        "--sigma",
-        "0.05",
-        "--task-width",
-        "500",
-        "--task-gamma",
-        "1",
-        "--joint-b",
-        "1",
-        "--gamma",
-        "1e-4",
-        "--steps",
-        "1",
-        "--integrator",
-        "euler",
-        "--quiet",
-    ];
-    let fit = |model: &str| cbd(&dir, &[&["fit", "--model", model, "--data", "tracker.csv", "--out", "a.blob"][..], &fixed[..]].concat());
+    let fit = |model: &str| fit_without_search(&dir, model, "tracker.csv", "a.blob");
     let err = succeeds(&fit("declared.toml"));
     assert!(
         err.contains("warning: tracker.csv: the nominal model is 4.243e3 from the measurements (RMS)")

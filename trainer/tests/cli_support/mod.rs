@@ -88,3 +88,11 @@ pub fn head(dir: &Path, from: &str, name: &str, rows: usize) -> String {
     let head: Vec<&str> = text.lines().take(rows + 1).collect();
     write(dir, name, head.join("\n") + "\n")
 }
+
+/// `cbd fit` with every hyperparameter given, so no search runs (a few seconds to minutes saved
+/// where any blob of the model serves): `cbd fit --model MODEL --data DATA --out OUT` plus these.
+pub fn fit_without_search(dir: &Path, model: &str, data: &str, out: &str) -> Output {
+    let fixed = ["--sigma", "0.05", "--task-width", "500", "--task-gamma", "1", "--joint-b", "1", "--gamma", "1e-4"];
+    let scheme = ["--steps", "1", "--integrator", "euler", "--quiet"];
+    cbd(dir, &[&["fit", "--model", model, "--data", data, "--out", out][..], &fixed[..], &scheme[..]].concat())
+}
