@@ -109,6 +109,9 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     };
     if let Some(path) = &args.json {
         let mut json = comparison.to_json();
+        if let Some(r) = &inputs.registration {
+            json["registered_base"] = r.to_json();
+        }
         if let Some(c) = &commanded {
             json["commanded"] = c.to_json();
         }

@@ -214,7 +214,7 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     for w in imported.warnings(&args.data) {
         eprintln!("warning: {w}");
     }
-    crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
+    let registration = crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data)? {
         eprintln!("warning: {w}");
     }
@@ -232,7 +232,11 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&calibration.to_json()).map_err(|e| e.to_string())?;
+        let mut json = calibration.to_json();
+        if let Some(r) = &registration {
+            json["registered_base"] = r.to_json();
+        }
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     let r = &fit.report;

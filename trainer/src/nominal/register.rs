@@ -40,6 +40,16 @@ impl Registration {
     }
 }
 
+impl Registration {
+    /// `{"translation": [..], "rotation": [[..], ..], "axis": [..], "angle_deg", "rms_before", "rms_after"}`
+    /// (model length unit).
+    pub fn to_json(&self) -> serde_json::Value {
+        let (axis, angle) = axis_angle(&self.base);
+        serde_json::json!({"translation": self.base.t, "rotation": self.base.r, "axis": axis, "angle_deg": angle.to_degrees(),
+                           "rms_before": self.rms_before, "rms_after": self.rms_after})
+    }
+}
+
 /// Axis and angle (radians) of a pose's rotation: angle from the trace, axis from the skew part.
 pub fn axis_angle(p: &Pose) -> ([f64; 3], f64) {
     let r = &p.r;
