@@ -72,3 +72,41 @@ fn diagnose_writes_a_planar_file_whose_nominal_is_the_diagnosed_effects_row() {
 fn header(text: &str) -> String {
     text.lines().take_while(|l| l.starts_with("# ")).map(|l| &l[2..]).collect::<Vec<_>>().join("\n")
 }
+
+/// `cbd compensate` with a `[planar]` frame: targets are read into the chain's frame and the
+/// commands handed back in the arm's joints (offsets removed) — the same commands as the frame-free
+/// file given the hand-moved targets and seeds, less the offsets.
+#[test]
+fn compensate_takes_targets_in_the_arms_frame_and_gives_the_arms_joints() {
+    let dir = scratch("planar-frame-compensate");
+    let arm = EffectArm::new(planar_arm(&[1.02, 0.49], [0.0, 0.0], 0.0, &[0.0, 0.0]));
+    let train = arm.measure_planar(&configurations(Sampling::Grid { per_axis: 8 }, 2), 0.0, 1);
+    write(&dir, "train.csv", csv(&train));
+    let frame = cbd_trainer::nominal::planar::PlanarFrame { offsets: vec![0.1, -0.2], base: [0.3, -0.1], yaw: 0.4 };
+    let framed =
+        PLANAR_RR_MODEL.replace("lengths = [1.0, 0.5]", "lengths = [1.0, 0.5]\nbase = [0.3, -0.1]\nyaw = 0.4\noffsets = [0.1, -0.2]");
+    write(&dir, "framed.toml", framed);
+    write(&dir, "plain.toml", PLANAR_RR_MODEL);
+    succeeds(&fit_without_search(&dir, "framed.toml", "train.csv", "a.blob"));
+    let (targets, seeds) = ([[0.9, 0.8], [0.2, 1.1], [-0.7, 0.5]], [[0.5, 0.9], [1.2, 0.8], [2.0, 1.0]]);
+    let rows = |head: &str, v: &[[f64; 2]]| head.to_string() + &v.iter().map(|r| format!("{:?},{:?}\n", r[0], r[1])).collect::<String>();
+    write(&dir, "t.csv", rows("x,y\n", &targets));
+    write(&dir, "s.csv", rows("q1,q2\n", &seeds));
+    let moved_targets: Vec<[f64; 2]> = targets.iter().map(|t| frame.to_chain(t)).collect();
+    let moved_seeds: Vec<[f64; 2]> = seeds.iter().map(|s| [s[0] + 0.1, s[1] - 0.2]).collect();
+    write(&dir, "tc.csv", rows("x,y\n", &moved_targets));
+    write(&dir, "sc.csv", rows("q1,q2\n", &moved_seeds));
+    for (model, t, s, out) in [("framed.toml", "t.csv", "s.csv", "c1.csv"), ("plain.toml", "tc.csv", "sc.csv", "c2.csv")] {
+        succeeds(&cbd(&dir, &["compensate", "--model", model, "--blob", "a.blob", "--targets", t, "--seeds", s, "--out", out]));
+    }
+    let read = |name: &str| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(dir.join(name)).unwrap();
+        text.lines().skip(1).map(|l| l.split(',').take(3).map(|v| v.parse().unwrap()).collect()).collect()
+    };
+    let (framed, plain) = (read("c1.csv"), read("c2.csv"));
+    assert_eq!(framed.len(), 3);
+    for (a, b) in framed.iter().zip(&plain) {
+        assert!((a[0] - (b[0] - 0.1)).abs() < 1e-12 && (a[1] - (b[1] + 0.2)).abs() < 1e-12, "{a:?} vs {b:?}");
+        assert_eq!(a[2], b[2], "residual");
+    }
+}
