@@ -485,6 +485,30 @@ compliance = 0.5
         assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12, "{a:?} {b:?}");
     }
 
+    /// Issue 26 item 2: `base = { register = true }` reads as the identity with the flag, writes
+    /// back as itself; with a pose, on the tool or `false` it is an error naming the field.
+    #[test]
+    fn an_unknown_base_round_trips_and_bad_uses_name_the_field() {
+        let base = "base = { translation = [1, 2, 3], rotation = [[0, -1, 0], [1, 0, 0], [0, 0, 1]] }";
+        let text = SMALL.replace(base, "base = { register = true }");
+        let m = parse_model_file(&text, Path::new("r.toml")).unwrap();
+        let NominalModel::DhChain(c) = &m.nominal else { panic!() };
+        assert!(m.register_base && c.base == cbd_protocol::Transform::IDENTITY);
+        let written = write_model_file(&m, "h");
+        assert!(written.contains("base = { register = true }"), "{written}");
+        assert!(parse_model_file(&written, Path::new("r.toml")).unwrap().register_base);
+        assert!(!parse_model_file(SMALL, Path::new("r.toml")).unwrap().register_base);
+        for (bad, needle) in [
+            ("base = { register = true, translation = [1, 2, 3] }", "[chain.base]: give either register = true or the base's pose"),
+            ("base = { register = false }", "[chain.base]: register = false"),
+        ] {
+            let e = parse_model_file(&SMALL.replace(base, bad), Path::new("r.toml")).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+        let e = parse_model_file(&SMALL.replace("tool = {", "tool = { register = true,"), Path::new("r.toml")).unwrap_err().to_string();
+        assert!(e.contains("[chain.tool]: register applies to the base only"), "{e}");
+    }
+
     #[test]
     fn urdf_model_file_loads_relative_to_itself() {
         let dir = std::env::temp_dir().join(format!("cbd-model-file-{}", std::process::id()));
