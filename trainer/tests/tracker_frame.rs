@@ -148,6 +148,11 @@ fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
     assert!(err.contains("tracker.csv: registered base: translation [2499.") && err.contains("rotation 28."), "{err}");
     assert!(!err.contains("warning: tracker.csv: the nominal model"), "{err}");
     fails_with(&fit("both.toml"), &["both.toml", "[chain.base]", "give either register = true or the base's pose"]);
+    // diagnose reports it in its JSON (and registers on the training rows only).
+    succeeds(&cbd(&dir, &["diagnose", "--no-cbd", "--model", "unknown.toml", "--data", "tracker.csv", "--json", "d.json"]));
+    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("d.json")).unwrap()).unwrap();
+    let angle = d["registered_base"]["angle_deg"].as_f64().unwrap();
+    assert!((angle - 28.56).abs() < 0.01 && d["registered_base"]["rms_after"].as_f64().unwrap() < 2.0, "{d}");
     // eval reports in the registered frame too.
     let err = succeeds(&cbd(&dir, &["eval", "--model", "unknown.toml", "--blob", "a.blob", "--data", "tracker.csv"]));
     assert!(err.contains("registered base:"), "{err}");

@@ -66,25 +66,27 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
-    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<crate::data::Measurements, String> {
+    type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
+    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read, String> {
         let imported = crate::data::csv_import::read_measurements(path, &spec).map_err(|e| e.to_string())?;
         for w in imported.warnings(path) {
             eprintln!("warning: {w}");
         }
-        if register {
-            crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?;
-        }
+        let registration = match register {
+            true => crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?,
+            false => None,
+        };
         for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
             eprintln!("warning: {w}");
         }
-        Ok(imported.measurements)
+        Ok((imported.measurements, registration))
     };
-    let data = read(&args.data, &mut nominal, true)?;
+    let (data, registration) = read(&args.data, &mut nominal, true)?;
     if !args.no_cbd {
         // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
         crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?;
     }
-    let test = args.test.as_ref().map(|path| read(path, &mut nominal.clone(), false)).transpose()?;
+    let test = args.test.as_ref().map(|path| read(path, &mut nominal.clone(), false).map(|(data, _)| data)).transpose()?;
     let mut options = DiagnoseOptions::default();
     options.library.harmonics = args.harmonics;
     options.structure.harmonics = args.harmonics;
@@ -104,7 +106,11 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
     println!("{}", report::text(&d, &d.model_start, &units));
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&report::to_json(&d, &d.model_start, &units)).map_err(|e| e.to_string())?;
+        let mut json = report::to_json(&d, &d.model_start, &units);
+        if let Some(r) = &registration {
+            json["registered_base"] = r.to_json();
+        }
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
