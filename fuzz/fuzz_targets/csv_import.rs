@@ -21,6 +21,8 @@ fn ur5_spec(flags: u8) -> ColumnSpec {
         position_columns: ["x_mm", "y_mm", "z_mm"].iter().map(|s| s.to_string()).collect(),
         joint_limits: cbd_trainer::data::csv_import::default_joint_limits(&kinds),
         repeat_tolerance: None,
+        joint_map: None,
+        planar_frame: None,
         joint_kinds: kinds,
         angle_unit: if flags & 2 != 0 { AngleUnit::Rad } else { AngleUnit::Deg },
         length_unit: if flags & 4 != 0 { LengthUnit::M } else { LengthUnit::Mm },

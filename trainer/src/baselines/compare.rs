@@ -146,9 +146,12 @@ pub struct CompareInputs {
     pub train: crate::data::csv_import::ImportedMeasurements,
     pub test: crate::data::csv_import::ImportedMeasurements,
     pub warnings: Vec<String>,
+    /// The base registered on the training rows (`[chain] base = { register = true }`).
+    pub registration: Option<crate::nominal::register::Registration>,
 }
 
-/// Reads a comparison's model file and measurement files (no fitting yet).
+/// Reads a comparison's model file and measurement files (no fitting yet); an unknown base is
+/// registered on the training rows.
 pub fn read_compare_files(
     model_file: impl AsRef<std::path::Path>,
     train_csv: impl AsRef<std::path::Path>,
@@ -161,7 +164,17 @@ pub fn read_compare_files(
     let test = read_measurements(test_csv.as_ref(), &spec)?;
     let mut warnings = train.warnings(train_csv.as_ref());
     warnings.extend(test.warnings(test_csv.as_ref()));
-    Ok(CompareInputs { nominal: model.nominal, train, test, warnings })
+    let mut nominal = model.nominal;
+    let registration = match model.register_base {
+        true => Some(crate::nominal::register::register_base(&mut nominal, &train.measurements).map_err(|message| ImportError::Csv {
+            file: train_csv.as_ref().to_path_buf(),
+            line: None,
+            column: None,
+            message,
+        })?),
+        false => None,
+    };
+    Ok(CompareInputs { nominal, train, test, warnings, registration })
 }
 
 /// `model`'s first `m` task coordinates (`m` < its own for a planar arm's DH form).

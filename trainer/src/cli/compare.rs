@@ -68,6 +68,10 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     settings.verbose = false;
     let search = SearchOptions::default();
     let inputs = read_compare_files(&args.model, &args.train, &args.test).map_err(|e| e.to_string())?;
+    if let Some(r) = &inputs.registration {
+        let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
+        eprintln!("{}: {}", args.train.display(), r.describe(unit));
+    }
     let mut warnings = inputs.warnings;
     for (path, imported) in [(&args.train, &inputs.train), (&args.test, &inputs.test)] {
         warnings.extend(crate::data::nominal_check::nominal_warnings(&inputs.nominal, &imported.measurements, &imported.lines, path)?);
@@ -113,6 +117,9 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     };
     if let Some(path) = &args.json {
         let mut json = comparison.to_json();
+        if let Some(r) = &inputs.registration {
+            json["registered_base"] = r.to_json();
+        }
         if let Some(c) = &commanded {
             json["commanded"] = c.to_json();
         }

@@ -49,7 +49,14 @@ const NOMINAL_IK_ITERATIONS: usize = 8;
 
 /// The columns of a file of targets: `spec`'s positions alone, at least one row.
 fn targets_spec(spec: &ColumnSpec) -> ColumnSpec {
-    ColumnSpec { joint_columns: Vec::new(), joint_kinds: Vec::new(), joint_limits: Vec::new(), min_rows: 1, ..spec.clone() }
+    ColumnSpec {
+        joint_columns: Vec::new(),
+        joint_kinds: Vec::new(),
+        joint_limits: Vec::new(),
+        min_rows: 1,
+        joint_map: None,
+        ..spec.clone()
+    }
 }
 
 /// The columns of a file of seeds: `spec`'s joints alone (in their ranges), at least one row.
@@ -240,7 +247,18 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
     let (joint_scale, unit) = (joint_scales(&spec), spec.length_unit.name());
     let mut text = format!("{},residual,flags\n", spec.joint_columns.join(","));
     for r in &rows {
-        let q: Vec<String> = r.joints.iter().zip(&joint_scale).map(|(v, s)| format!("{:?}", v / s)).collect();
+        let mut joints = r.joints.clone();
+        if let Some(frame) = &spec.planar_frame {
+            // The chain's joints back to the arm's (the import added the offsets).
+            joints.iter_mut().zip(&frame.offsets).for_each(|(q, o)| *q -= o);
+        }
+        let mut columns: Vec<f64> = joints.iter().zip(&joint_scale).map(|(v, s)| v / s).collect();
+        if let Some(map) = &spec.joint_map {
+            // Model joints back to the controller's values (the inverse of the import's mapping).
+            let model = columns.clone();
+            map.to_columns(&model, &mut columns);
+        }
+        let q: Vec<String> = columns.iter().map(|v| format!("{v:?}")).collect();
         text.push_str(&format!("{},{:?},{}\n", q.join(","), r.compensation.residual / length, flags(&r.compensation)));
     }
     crate::cli::write_atomically(&args.out, text.as_bytes())?;

@@ -4,6 +4,7 @@
 use crate::cli::{load_nominal, ModelArgs};
 use crate::data::model_file::AngleUnit;
 use crate::diagnose::{diagnose, report, DiagnoseOptions};
+use crate::nominal::planar::PlanarFrame;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -64,24 +65,29 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
-    let (nominal, spec) = load_nominal(&args.model)?;
-    let read = |path: &PathBuf| -> Result<crate::data::Measurements, String> {
+    let (mut nominal, spec) = load_nominal(&args.model)?;
+    type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
+    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read, String> {
         let imported = crate::data::csv_import::read_measurements(path, &spec).map_err(|e| e.to_string())?;
         for w in imported.warnings(path) {
             eprintln!("warning: {w}");
         }
+        let registration = match register {
+            true => crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?,
+            false => None,
+        };
         for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
             eprintln!("warning: {w}");
         }
-        Ok(imported.measurements)
+        Ok((imported.measurements, registration))
     };
-    let data = read(&args.data)?;
+    let (data, registration) = read(&args.data, &mut nominal, true)?;
     // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
     let threads = match args.no_cbd {
         false => crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?,
         true => crate::workers::worker_threads(),
     };
-    let test = args.test.as_ref().map(read).transpose()?;
+    let test = args.test.as_ref().map(|path| read(path, &mut nominal.clone(), false).map(|(data, _)| data)).transpose()?;
     let mut options = DiagnoseOptions::default();
     options.library.harmonics = args.harmonics;
     options.structure.harmonics = args.harmonics;
@@ -105,7 +111,11 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
     println!("{}", report::text(&d, &d.model_start, &units));
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&report::to_json(&d, &d.model_start, &units)).map_err(|e| e.to_string())?;
+        let mut json = report::to_json(&d, &d.model_start, &units);
+        if let Some(r) = &registration {
+            json["registered_base"] = r.to_json();
+        }
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
@@ -124,16 +134,22 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
-        // A planar model file holds link lengths only (as does the blob's planar chain).
+        // A registered base is written as the pose the diagnosis found.
+        file.register_base = false;
+        // A [planar] file holds lengths and effects in a frame (base, yaw, joint offsets); the
+        // data were read into the file's frame, so the diagnosed frame composes with it.
         let planar = matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. });
-        file.nominal =
-            if !planar { Some(d.model_after.clone()) } else { crate::nominal::planar::as_planar(&d.model_after) }.ok_or_else(|| {
-                format!(
-                    "--write-model {}: the diagnosis corrects the planar arm's base or joint offsets, which a [planar] model file \
-                 (link lengths only) cannot hold; the corrections are in the report and --json",
-                    path.display()
-                )
-            })?;
+        let inner = if planar {
+            let (chain, inner) = crate::nominal::planar::as_planar_in_frame(&d.model_after)
+                .ok_or_else(|| format!("internal: --write-model {}: the diagnosed planar arm is not a planar DH form", path.display()))?;
+            let outer = file.planar_frame.clone().unwrap_or(PlanarFrame { offsets: vec![0.0; chain.n_joints()], base: [0.0; 2], yaw: 0.0 });
+            file.planar_frame = Some(outer.then(&inner));
+            file.nominal = chain;
+            Some(inner)
+        } else {
+            file.nominal = d.model_after.clone();
+            None
+        };
         let found: Vec<&str> = d.found.iter().map(|f| f.name.as_str()).collect();
         let header = format!(
             "{} with the corrections `cbd diagnose` found on {} ({} rows): {}.\nFit the nonparametric correction on top: cbd fit --model {} ...",
@@ -147,14 +163,43 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         // What is written must read back to the model the diagnosis evaluated.
         let back = crate::data::model_file::parse_model_file(&text, path)
             .map_err(|e| format!("internal: the written model file does not read back: {e}"))?;
-        let gap = max_position_gap(&back.nominal, &d.model_after, &data);
+        let gap = match &inner {
+            Some(frame) => planar_gap(&back.nominal, frame, &d.model_after, &data),
+            None => max_position_gap(&back.nominal, &d.model_after, &data),
+        };
         if gap > 1e-9 * (1.0 + data.positions.iter().fold(0.0f64, |a, v| a.max(v.abs()))) {
-            return Err(format!("internal: the written model file differs from the diagnosed model by {gap:.3e} at the data"));
+            let why = if planar {
+                " (a [planar] file turns the chain at q + offsets before its effects: an encoder scale on a joint whose offset was corrected cannot be written exactly)"
+            } else {
+                ""
+            };
+            return Err(format!(
+                "--write-model {}: the written model file differs from the diagnosed model by {gap:.3e} at the data{why}",
+                path.display()
+            ));
         }
         crate::cli::write_atomically(path, text.as_bytes())?;
         println!("model with the found effects written to {}", path.display());
     }
     Ok(())
+}
+
+/// As [`max_position_gap`] for a planar chain in `frame` against the diagnosed DH form `b`.
+fn planar_gap(
+    chain: &cbd_protocol::NominalModel,
+    frame: &PlanarFrame,
+    b: &cbd_protocol::NominalModel,
+    data: &crate::data::Measurements,
+) -> f64 {
+    let joints = frame.chain_joints(&data.joints);
+    let n = data.n_joints;
+    (0..data.len())
+        .map(|i| {
+            let pa = frame.from_chain(&crate::diagnose::kinematics::position(chain, &joints[i * n..(i + 1) * n], 2));
+            let pb = crate::diagnose::kinematics::position(b, data.joints(i), 2);
+            pa.iter().zip(&pb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Largest position difference between two nominal models over the rows of `data`.

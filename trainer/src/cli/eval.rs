@@ -38,8 +38,9 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
-    let (nominal, spec) = load_nominal(&args.model)?;
+    let (mut nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
+    crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;

@@ -209,11 +209,12 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data))],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    let (nominal, spec) = load_nominal(&args.model)?;
+    let (mut nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
     for w in imported.warnings(&args.data) {
         eprintln!("warning: {w}");
     }
+    let registration = crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data)? {
         eprintln!("warning: {w}");
     }
@@ -236,7 +237,11 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&calibration.to_json()).map_err(|e| e.to_string())?;
+        let mut json = calibration.to_json();
+        if let Some(r) = &registration {
+            json["registered_base"] = r.to_json();
+        }
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     let r = &fit.report;

@@ -50,6 +50,25 @@ pub struct ModelArgs {
     pub model: Option<std::path::PathBuf>,
 }
 
+/// Registers the nominal's base on the training `data` when the model file at `args` declares
+/// it unknown (`[chain] base = { register = true }`), and says so on stderr: from here on
+/// "nominal" is the nominal in the registered frame.
+pub fn register_base_if_unknown(
+    args: &ModelArgs,
+    nominal: &mut cbd_protocol::NominalModel,
+    data: &crate::data::Measurements,
+    data_path: &std::path::Path,
+) -> Result<Option<crate::nominal::register::Registration>, String> {
+    let Some(path) = &args.model else { return Ok(None) };
+    let file = crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?;
+    if !file.register_base {
+        return Ok(None);
+    }
+    let r = crate::nominal::register::register_base(nominal, data).map_err(|e| format!("{}: {e}", data_path.display()))?;
+    eprintln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
+    Ok(Some(r))
+}
+
 /// The nominal model and how to read its measurement CSV files.
 pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, crate::data::csv_import::ColumnSpec), String> {
     use crate::data::model_file::{AngleUnit, LengthUnit};
@@ -71,6 +90,8 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
                 min_rows: 2,
                 joint_limits: crate::data::csv_import::default_joint_limits(&[cbd_protocol::JointKind::Revolute; 2]),
                 repeat_tolerance: None,
+                joint_map: None,
+                planar_frame: None,
             },
         )),
     }

@@ -2,8 +2,10 @@
 //! that name the file, the line and the column.
 
 use super::import_error::ImportError;
+use super::joint_map::JointMap;
 use super::units::{AngleUnit, LengthUnit};
 use super::Measurements;
+use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
 use std::path::Path;
@@ -32,6 +34,12 @@ pub struct ColumnSpec {
     /// configuration before they count as contradictory (an error). `None`: 1e-3 of the diagonal
     /// of the positions' bounding box.
     pub repeat_tolerance: Option<f64>,
+    /// Controller joint values (the columns, in their units) → model joints, applied before the
+    /// unit conversion (`[measurements.joint_map]`); `None`: the columns are the model's joints.
+    pub joint_map: Option<JointMap>,
+    /// A `[planar]` arm's base, yaw and joint offsets: rows are read into its chain's frame
+    /// (joints + offsets, positions R(−yaw)(y − base)) after the units and the joint map.
+    pub planar_frame: Option<PlanarFrame>,
 }
 
 /// One full turn each way for revolute joints (beyond that no arm we know of turns, and a larger
@@ -140,7 +148,7 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     let mut seen: HashMap<Vec<u64>, usize> = HashMap::new();
     let mut repeats: Vec<(usize, usize)> = Vec::new();
     let mut record = csv::StringRecord::new();
-    let (mut q, mut y) = (vec![0.0; n], vec![0.0; m]);
+    let (mut c, mut q, mut y) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
     loop {
         let more = rdr.read_record(&mut record).map_err(|e| {
             let line = e.position().map(line_of);
@@ -156,7 +164,10 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         if record.len() != header.len() {
             return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
-        row.convert(&record, line, &mut q, &mut y)?;
+        row.convert(&record, line, &mut c, &mut q, &mut y)?;
+        if let Some(frame) = &spec.planar_frame {
+            frame.move_row(&mut q, &mut y);
+        }
         // A repeat is a configuration measured twice: a file of targets or seeds alone has none.
         if n > 0 && m > 0 {
             let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
@@ -252,17 +263,19 @@ impl<'a> RowReader<'a> {
         Ok(RowReader { spec, err, joint_idx, pos_idx, joint_factor, length_factor })
     }
 
-    /// The record at file `line` into `q` (joints) and `y` (position).
-    fn convert(&self, record: &csv::StringRecord, line: u64, q: &mut [f64], y: &mut [f64]) -> Result<(), ImportError> {
+    /// The record at file `line` into `q` (model joints) and `y` (position); `c` holds the
+    /// controller's joint values (the columns, in their units) on the way.
+    fn convert(&self, record: &csv::StringRecord, line: u64, c: &mut [f64], q: &mut [f64], y: &mut [f64]) -> Result<(), ImportError> {
         let spec = self.spec;
         for d in 0..q.len() {
-            let (unit, model_unit) = match spec.joint_kinds[d] {
-                JointKind::Revolute => (spec.angle_unit.name(), "rad"),
-                _ => (spec.length_unit.name(), spec.model_length_unit.name()),
+            let unit = match spec.joint_kinds[d] {
+                JointKind::Revolute => spec.angle_unit.name(),
+                _ => spec.length_unit.name(),
             };
             let name = &spec.joint_columns[d];
             let idx = self.joint_idx[d];
-            let v = self.raw_value(record, line, idx, name)? * self.joint_factor[d];
+            c[d] = self.raw_value(record, line, idx, name)?;
+            let v = c[d] * self.joint_factor[d];
             // The joint's range first: it names the real cause (a unit or column mistake).
             let [lo, hi] = spec.joint_limits[d];
             if v.is_finite() && !(lo..=hi).contains(&v) {
@@ -278,7 +291,20 @@ impl<'a> RowReader<'a> {
                     ),
                 ));
             }
-            q[d] = self.bounded(record, line, v, idx, name, (unit, model_unit))?;
+            q[d] = v;
+        }
+        if let Some(map) = &spec.joint_map {
+            map.to_model(c, q);
+            for (q, f) in q.iter_mut().zip(&self.joint_factor) {
+                *q *= f;
+            }
+        }
+        for d in 0..q.len() {
+            let units = match spec.joint_kinds[d] {
+                JointKind::Revolute => (spec.angle_unit.name(), "rad"),
+                _ => (spec.length_unit.name(), spec.model_length_unit.name()),
+            };
+            q[d] = self.bounded(record, line, q[d], self.joint_idx[d], &spec.joint_columns[d], units)?;
         }
         for c in 0..y.len() {
             let name = &spec.position_columns[c];
@@ -447,6 +473,8 @@ mod tests {
             min_rows: 2,
             joint_limits: default_joint_limits(&[JointKind::Revolute, JointKind::Prismatic]),
             repeat_tolerance: None,
+            joint_map: None,
+            planar_frame: None,
         }
     }
 

@@ -82,6 +82,7 @@ pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Resul
 pub mod csv_import;
 pub mod effects_section;
 pub mod import_error;
+pub mod joint_map;
 pub mod model_file;
 pub mod nominal_check;
 pub mod units;

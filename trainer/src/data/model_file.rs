@@ -11,7 +11,8 @@
 //!   { a = 0, alpha = 90, d = 89.159 },
 //!   { a = -425, alpha = 0, d = 0, theta_offset = 0, kind = "revolute" },
 //! ]
-//! base = { translation = [0, 0, 0], rpy = [0, 0, 0] }   # optional; rpy = URDF's Rz(y) Ry(p) Rx(r)
+//! base = { translation = [0, 0, 0], rpy = [0, 0, 0] }   # optional (absent: identity); rpy = URDF's Rz(y) Ry(p) Rx(r)
+//!                             # base = { register = true }: unknown (a tracker's frame), registered on the data
 //! tool = { translation = [0, 0, 31] }                    # or rotation = [[..], [..], [..]] (rows)
 //!
 //! # [urdf]                    # … or a URDF chain (exactly one of [chain], [urdf], [planar])
@@ -21,6 +22,9 @@
 //!
 //! # [planar]                  # … or a planar arm of revolute joints (2-D task space)
 //! # lengths = [1.0, 0.5]
+//! # base = [0.03, -0.02]      # optional: y = R(yaw) k0(q + offsets) + base (length_unit,
+//! # yaw = 0.5                 #   angle_unit); the measurements are read into the chain's frame
+//! # offsets = [0.4, -0.7]     #   (joints + offsets, R(−yaw)(y − base)) at import
 //!
 //! [measurements]              # optional: the CSV columns
 //! joints = ["q1_deg", "q2_deg"]        # one per joint, in chain order
@@ -33,6 +37,10 @@
 //! repeat_tolerance = 0.5      # rows with equal joints whose positions differ by more are an error
 //!                             # (length_unit above; default 1e-3 of the positions' bounding-box diagonal)
 //!
+//! [measurements.joint_map]    # optional: controller joint values (columns) → model joints,
+//! sign = { q3 = -1 }          # q_i = sign_i · scale_i · Σ_j coupling_ij c_j + offset_i in the
+//! coupling = [[1, 0], [1, 1]] # columns' units (see `data::joint_map`)
+//!
 //! # [gravity] and [[effects]]: physical effects on top of the chain (see `data::effects_section`)
 //! ```
 //!
@@ -41,6 +49,8 @@
 
 use super::csv_import::{default_joint_limits, ColumnSpec};
 use super::effects_section;
+use super::joint_map::{JointMap, RawJointMap};
+use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::{JointKind, NominalModel};
 use raw::RawModelFile;
 use serde::Deserialize;
@@ -70,6 +80,13 @@ pub struct ModelFile {
     pub joint_names: Vec<String>,
     /// The `[measurements]` section, if any.
     pub measurements: Option<MeasurementSection>,
+    /// Its joint mapping, checked against the model's joints.
+    pub joint_map: Option<JointMap>,
+    /// `[planar]`'s base, yaw and joint offsets (radians): the chain sits in this frame.
+    pub planar_frame: Option<PlanarFrame>,
+    /// `[chain] base = { register = true }`: the base is unknown (identity in `nominal`) and is
+    /// registered on the training data (`nominal::register`).
+    pub register_base: bool,
 }
 
 /// The `[measurements]` section: CSV column names and units.
@@ -85,6 +102,8 @@ pub struct MeasurementSection {
     pub joint_limits: Option<Vec<[f64; 2]>>,
     /// Largest distance (length_unit of this section) between positions of repeated joint configurations.
     pub repeat_tolerance: Option<f64>,
+    /// `[measurements.joint_map]`: controller joint values → model joints (`data::joint_map`).
+    pub joint_map: Option<RawJointMap>,
 }
 
 impl ModelFile {
@@ -127,7 +146,16 @@ impl ModelFile {
             }
             t => t.map(|t| t * length_factor),
         };
-        Ok(ColumnSpec { angle_unit, length_unit, min_rows: section.min_rows.unwrap_or(1), joint_limits, repeat_tolerance, ..spec })
+        let joint_map = self.joint_map.clone();
+        Ok(ColumnSpec {
+            angle_unit,
+            length_unit,
+            min_rows: section.min_rows.unwrap_or(1),
+            joint_limits,
+            repeat_tolerance,
+            joint_map,
+            ..spec
+        })
     }
 
     /// Column specification with the given column names (e.g. from the command line), in the
@@ -146,6 +174,8 @@ impl ModelFile {
             min_rows: 1,
             joint_limits: default_joint_limits(&kinds),
             repeat_tolerance: None,
+            joint_map: None,
+            planar_frame: self.planar_frame.clone(),
         }
     }
 }
@@ -185,12 +215,16 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     if given != 1 {
         return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({given} found)")));
     }
+    let mut planar_frame = None;
+    let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).is_some_and(|b| b.register == Some(true));
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
         sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
         sections::urdf_chain(&u, raw.length_unit, path)?
     } else {
-        sections::planar(&raw.planar.expect("one section").lengths, path)?
+        let planar = raw.planar.as_ref().expect("one section");
+        planar_frame = sections::planar_frame(planar, deg, path)?;
+        sections::planar(&planar.lengths, path)?
     };
     effects_section::apply(raw.gravity.as_ref(), &raw.effects, deg, &mut nominal).map_err(|e| ImportError::Field {
         file: file.clone(),
@@ -213,7 +247,16 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             )));
         }
     }
+    let joint_map = match raw.measurements.as_ref().and_then(|m| m.joint_map.as_ref()) {
+        Some(map) => {
+            Some(JointMap::new(map, &joint_names).map_err(|(field, message)| ImportError::Field { file: file.clone(), field, message })?)
+        }
+        None => None,
+    };
     Ok(ModelFile {
+        joint_map,
+        planar_frame,
+        register_base,
         path: file,
         name: raw.name,
         nominal,
@@ -402,6 +445,68 @@ compliance = 0.5
         let text = format!("{SMALL}{}", EFFECTS.replacen("compliance = 0.5", "compliance = 1e200", 1));
         let e = parse_model_file(&text, Path::new("fx.toml")).unwrap_err().to_string();
         assert!(e.contains("entry 3: compliance = 1e200 is beyond"), "{e}");
+    }
+
+    /// Issue 26 item 6: `[planar]` holds base, yaw and joint offsets (the file's units), reads
+    /// rows into the chain's frame and writes them back; bad entries name the field.
+    #[test]
+    fn planar_frame_reads_rows_into_the_chain_frame_and_round_trips() {
+        let text = "length_unit = \"mm\"\nangle_unit = \"deg\"\n[planar]\nlengths = [1000.0, 500.0]\nbase = [30.0, -20.0]\nyaw = 90.0\noffsets = [1.0, -2.0]\n\
+                    [measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\n";
+        let m = parse_model_file(text, Path::new("p.toml")).unwrap();
+        let frame = m.planar_frame.clone().unwrap();
+        assert_eq!(frame.base, [30.0, -20.0]);
+        let deg = AngleUnit::Deg.radians();
+        assert_eq!((frame.yaw, frame.offsets.clone()), (90.0 * deg, vec![1.0 * deg, -2.0 * deg]));
+        let rows = crate::data::csv_import::read_measurements_from(
+            "q1,q2,x,y\n10,20,30,-10\n".as_bytes(),
+            Path::new("d.csv"),
+            &m.column_spec().unwrap(),
+        )
+        .unwrap()
+        .measurements;
+        // Joints + offsets; (30, −10) − base = (0, 10) turned by −90°: (10, 0).
+        assert_eq!(rows.joints, vec![11.0 * deg, 18.0 * deg]);
+        assert!((rows.positions[0] - 10.0).abs() < 1e-12 && rows.positions[1].abs() < 1e-12, "{:?}", rows.positions);
+        let written = write_model_file(&m, "h");
+        let back = parse_model_file(&written, Path::new("p.toml")).unwrap();
+        assert_eq!(back.planar_frame.as_ref().map(|f| f.base), Some(frame.base));
+        assert_eq!(write_model_file(&back, "h"), written);
+        let bad = text.replace("offsets = [1.0, -2.0]", "offsets = [1.0]");
+        let e = parse_model_file(&bad, Path::new("p.toml")).unwrap_err().to_string();
+        assert!(e.contains("p.toml: [planar] offsets: 1 entries; the arm has 2 joints"), "{e}");
+        let bad = text.replace("yaw = 90.0", "yaw = nan");
+        assert!(parse_model_file(&bad, Path::new("p.toml")).unwrap_err().to_string().contains("[planar] yaw: NaN"));
+        // Composition: a frame given in another's chain coordinates.
+        let inner = crate::nominal::planar::PlanarFrame { offsets: vec![0.1, 0.2], base: [1.0, 0.0], yaw: 0.3 };
+        let total = frame.then(&inner);
+        let p = [0.7, -0.4];
+        let (a, b) = (total.from_chain(&p), frame.from_chain(&inner.from_chain(&p)));
+        assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12, "{a:?} {b:?}");
+    }
+
+    /// Issue 26 item 2: `base = { register = true }` reads as the identity with the flag, writes
+    /// back as itself; with a pose, on the tool or `false` it is an error naming the field.
+    #[test]
+    fn an_unknown_base_round_trips_and_bad_uses_name_the_field() {
+        let base = "base = { translation = [1, 2, 3], rotation = [[0, -1, 0], [1, 0, 0], [0, 0, 1]] }";
+        let text = SMALL.replace(base, "base = { register = true }");
+        let m = parse_model_file(&text, Path::new("r.toml")).unwrap();
+        let NominalModel::DhChain(c) = &m.nominal else { panic!() };
+        assert!(m.register_base && c.base == cbd_protocol::Transform::IDENTITY);
+        let written = write_model_file(&m, "h");
+        assert!(written.contains("base = { register = true }"), "{written}");
+        assert!(parse_model_file(&written, Path::new("r.toml")).unwrap().register_base);
+        assert!(!parse_model_file(SMALL, Path::new("r.toml")).unwrap().register_base);
+        for (bad, needle) in [
+            ("base = { register = true, translation = [1, 2, 3] }", "[chain.base]: give either register = true or the base's pose"),
+            ("base = { register = false }", "[chain.base]: register = false"),
+        ] {
+            let e = parse_model_file(&SMALL.replace(base, bad), Path::new("r.toml")).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+        let e = parse_model_file(&SMALL.replace("tool = {", "tool = { register = true,"), Path::new("r.toml")).unwrap_err().to_string();
+        assert!(e.contains("[chain.tool]: register applies to the base only"), "{e}");
     }
 
     #[test]

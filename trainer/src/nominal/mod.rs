@@ -4,6 +4,7 @@
 
 pub mod dh_parameters;
 pub mod planar;
+pub mod register;
 pub mod urdf;
 
 use cbd_protocol::Transform;

@@ -75,6 +75,24 @@ impl PlanarFrame {
         let (s, c) = self.yaw.sin_cos();
         [c * p[0] - s * p[1] + self.base[0], s * p[0] + c * p[1] + self.base[1]]
     }
+    /// One measured row into the chain's frame in place: joints `q` (n, or none: a file of
+    /// targets) + offsets, position `y` (2, or none: a file of seeds) by [`Self::to_chain`].
+    /// Zero offsets and an identity placement leave the values' bits unchanged.
+    pub fn move_row(&self, q: &mut [f64], y: &mut [f64]) {
+        for (q, o) in q.iter_mut().zip(&self.offsets).filter(|(_, o)| **o != 0.0) {
+            *q += o;
+        }
+        if y.len() == 2 && (self.yaw != 0.0 || self.base != [0.0; 2]) {
+            let p = self.to_chain(y);
+            y.copy_from_slice(&p);
+        }
+    }
+    /// A frame `inner` given in this frame's chain coordinates, as one frame of the arm:
+    /// y = R(yaw) (R(yaw') p + base') + base, the chain turning at q + offsets + offsets'.
+    pub fn then(&self, inner: &PlanarFrame) -> PlanarFrame {
+        let b = self.from_chain(&inner.base);
+        PlanarFrame { offsets: self.offsets.iter().zip(&inner.offsets).map(|(a, b)| a + b).collect(), base: b, yaw: self.yaw + inner.yaw }
+    }
 }
 
 /// A planar DH form (`as_dh` plus in-plane changes: base x, y, yaw, joint offsets, lengths) as a

@@ -59,6 +59,8 @@ pub(super) struct RawJoint {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RawTransform {
+    /// `base = { register = true }`: the base is unknown (a tracker's frame) and registered on the data.
+    pub(super) register: Option<bool>,
     pub(super) translation: Option<[f64; 3]>,
     pub(super) rpy: Option<[f64; 3]>,
     pub(super) rotation: Option<[[f64; 3]; 3]>,
@@ -76,4 +78,9 @@ pub(super) struct RawUrdf {
 #[serde(deny_unknown_fields)]
 pub(super) struct RawPlanar {
     pub(super) lengths: Vec<f64>,
+    /// The arm's base in the measurements' plane (length unit), its yaw (angle unit) and the
+    /// joint offsets (angle unit): y = R(yaw) k0(q + offsets) + base.
+    pub(super) base: Option<[f64; 2]>,
+    pub(super) yaw: Option<f64>,
+    pub(super) offsets: Option<Vec<f64>>,
 }

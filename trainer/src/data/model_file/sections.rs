@@ -1,9 +1,10 @@
 //! The model file's three ways to give the nominal chain — `[chain]` (a DH table), `[urdf]` and
 //! `[planar]` — each read into the nominal model and its joint names.
 
-use super::raw::{RawChain, RawConvention, RawKind, RawTransform, RawUrdf};
+use super::raw::{RawChain, RawConvention, RawKind, RawPlanar, RawTransform, RawUrdf};
 use super::{ImportError, LengthUnit};
 use crate::data::csv_import::MAX_MAGNITUDE;
+use crate::nominal::planar::PlanarFrame;
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::Pose;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
@@ -64,6 +65,27 @@ pub(super) fn urdf_chain(u: &RawUrdf, length_unit: LengthUnit, path: &Path) -> R
     Ok((NominalModel::DhChain(conv.chain), conv.joint_names))
 }
 
+/// `[planar]`'s frame: base, yaw and joint offsets (`deg` radians per angle unit); `None` when
+/// none is given.
+pub(super) fn planar_frame(raw: &RawPlanar, deg: f64, path: &Path) -> Result<Option<PlanarFrame>, ImportError> {
+    if raw.base.is_none() && raw.yaw.is_none() && raw.offsets.is_none() {
+        return Ok(None);
+    }
+    let bad = |field: &str, message: String| ImportError::Field { file: path.to_path_buf(), field: format!("[planar] {field}"), message };
+    let offsets = raw.offsets.clone().unwrap_or_else(|| vec![0.0; raw.lengths.len()]);
+    if offsets.len() != raw.lengths.len() {
+        return Err(bad("offsets", format!("{} entries; the arm has {} joints", offsets.len(), raw.lengths.len())));
+    }
+    let base = raw.base.unwrap_or([0.0; 2]);
+    let yaw = raw.yaw.unwrap_or(0.0);
+    for (field, values) in [("offsets", &offsets[..]), ("base", &base[..]), ("yaw", &[yaw][..])] {
+        if let Some(v) = values.iter().find(|v| !(v.is_finite() && v.abs() <= MAX_MAGNITUDE)) {
+            return Err(bad(field, format!("{v:e} is not a finite value within ±{MAX_MAGNITUDE:e}")));
+        }
+    }
+    Ok(Some(PlanarFrame { offsets: offsets.iter().map(|o| o * deg).collect(), base, yaw: yaw * deg }))
+}
+
 /// `[planar]`: a planar arm of revolute joints with these link lengths.
 pub(super) fn planar(lengths: &[f64], path: &Path) -> Result<Section, ImportError> {
     let model_err = |message: String| model_error(path, message);
@@ -81,6 +103,18 @@ pub(super) fn planar(lengths: &[f64], path: &Path) -> Result<Section, ImportErro
 fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> Result<Transform, ImportError> {
     let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: field.to_string(), message };
     let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
+    if let Some(register) = raw.register {
+        if field != "[chain.base]" {
+            return Err(bad("register applies to the base only".into()));
+        }
+        if raw.translation.is_some() || raw.rpy.is_some() || raw.rotation.is_some() {
+            return Err(bad("give either register = true or the base's pose, not both".into()));
+        }
+        if !register {
+            return Err(bad("register = false: omit it (no base means the identity) or give the pose".into()));
+        }
+        return Ok(Transform::IDENTITY);
+    }
     let translation = raw.translation.unwrap_or([0.0; 3]);
     let rotation = match (raw.rpy, raw.rotation) {
         (Some(_), Some(_)) => return Err(bad("give either rpy or rotation, not both".into())),

@@ -57,6 +57,10 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
             }
             out += "]\n";
             for (name, t) in [("base", &c.base), ("tool", &c.tool)] {
+                if name == "base" && m.register_base {
+                    out += "base = { register = true }\n";
+                    continue;
+                }
                 let r = &t.rotation;
                 let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
                 let _ = writeln!(
@@ -69,6 +73,12 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
         }
         NominalModel::PlanarChain { lengths, .. } => {
             let _ = writeln!(out, "\n[planar]\nlengths = {}", effects_section::list(lengths));
+            if let Some(frame) = &m.planar_frame {
+                let offsets: Vec<f64> = frame.offsets.iter().map(|o| o / per_unit).collect();
+                let _ = writeln!(out, "base = {}", effects_section::list(&frame.base));
+                let _ = writeln!(out, "yaw = {}", f(frame.yaw / per_unit));
+                let _ = writeln!(out, "offsets = {}", effects_section::list(&offsets));
+            }
         }
     }
     if let Some(s) = &m.measurements {
@@ -89,6 +99,18 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
         }
         if let Some(t) = s.repeat_tolerance {
             let _ = writeln!(out, "repeat_tolerance = {}", f(t));
+        }
+        if let Some(map) = &s.joint_map {
+            out += "\n[measurements.joint_map]\n";
+            for (key, table) in [("sign", &map.sign), ("scale", &map.scale), ("offset", &map.offset)] {
+                let Some(table) = table else { continue };
+                let entries: Vec<String> = table.iter().map(|(name, v)| format!("{} = {}", quoted(name), f(*v))).collect();
+                let _ = writeln!(out, "{key} = {{ {} }}", entries.join(", "));
+            }
+            if let Some(rows) = &map.coupling {
+                let rows: Vec<String> = rows.iter().map(|r| effects_section::list(r)).collect();
+                let _ = writeln!(out, "coupling = [{}]", rows.join(", "));
+            }
         }
     }
     out += &effects_section::write(&m.nominal, per_unit);

@@ -1,0 +1,139 @@
+//! Tracker frames: a base declared unknown (`[chain] base = { register = true }`) is registered
+//! on the training data before anything else — the rigid motion that best carries the nominal
+//! positions (base = identity) onto the measured ones (Kabsch/Horn) — so that "nominal" means
+//! nominal in the registered frame. The DH and diagnose pipelines then refine that base with the
+//! rest of the geometric group, as they do a declared one.
+
+use super::Pose;
+use crate::data::Measurements;
+use cbd_protocol::NominalModel;
+use cbd_runtime::kinematics::forward_kinematics;
+
+/// A registered base and what it did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Registration {
+    /// The base (model length unit, rotation as a matrix).
+    pub base: Pose,
+    /// RMS distance of the nominal positions from the measured ones with the declared (identity)
+    /// base, and with the registered one.
+    pub rms_before: f64,
+    pub rms_after: f64,
+}
+
+impl Registration {
+    /// One line: translation, rotation as axis and angle (degrees), RMS before and after.
+    pub fn describe(&self, unit: &str) -> String {
+        let (axis, angle) = axis_angle(&self.base);
+        let t = self.base.t;
+        format!(
+            "registered base: translation [{:.6}, {:.6}, {:.6}] {unit}, rotation {:.6}° about [{:.6}, {:.6}, {:.6}]; nominal RMS {:.4e} → {:.4e} {unit}",
+            t[0],
+            t[1],
+            t[2],
+            angle.to_degrees(),
+            axis[0],
+            axis[1],
+            axis[2],
+            self.rms_before,
+            self.rms_after
+        )
+    }
+}
+
+impl Registration {
+    /// `{"translation": [..], "rotation": [[..], ..], "axis": [..], "angle_deg", "rms_before", "rms_after"}`
+    /// (model length unit).
+    pub fn to_json(&self) -> serde_json::Value {
+        let (axis, angle) = axis_angle(&self.base);
+        serde_json::json!({"translation": self.base.t, "rotation": self.base.r, "axis": axis, "angle_deg": angle.to_degrees(),
+                           "rms_before": self.rms_before, "rms_after": self.rms_after})
+    }
+}
+
+/// Axis and angle (radians) of a pose's rotation: angle from the trace, axis from the skew part.
+pub fn axis_angle(p: &Pose) -> ([f64; 3], f64) {
+    let r = &p.r;
+    let s = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
+    let sin2 = super::norm(s);
+    let cos = (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0;
+    let angle = sin2.atan2(2.0 * cos);
+    if sin2 == 0.0 {
+        return ([0.0, 0.0, 1.0], angle);
+    }
+    (super::scale(s, 1.0 / sin2), angle)
+}
+
+/// Kabsch/Horn: the rotation R and translation t minimising Σ |R p_i + t − y_i|² — R from the SVD
+/// of the cross-covariance H = Σ (p_i − p̄)(y_i − ȳ)ᵀ = U Σ Vᵀ, R = V diag(1, 1, det(V Uᵀ)) Uᵀ,
+/// t = ȳ − R p̄. `None` for fewer than 3 points or a degenerate SVD.
+pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Pose> {
+    let n = p.len();
+    if n < 3 || y.len() != n {
+        return None;
+    }
+    let mean = |v: &[[f64; 3]]| -> [f64; 3] { std::array::from_fn(|c| v.iter().map(|x| x[c]).sum::<f64>() / n as f64) };
+    let (pm, ym) = (mean(p), mean(y));
+    let h = faer::Mat::<f64>::from_fn(3, 3, |a, b| p.iter().zip(y).map(|(pi, yi)| (pi[a] - pm[a]) * (yi[b] - ym[b])).sum());
+    let svd = h.svd().ok()?;
+    let (u, v) = (svd.U(), svd.V());
+    let vu = |a: usize, b: usize, last: f64| -> f64 { (0..3).map(|k| v[(a, k)] * u[(b, k)] * if k == 2 { last } else { 1.0 }).sum() };
+    let det = {
+        let m: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| vu(a, b, 1.0)));
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let sign = if det < 0.0 { -1.0 } else { 1.0 };
+    let r: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| vu(a, b, sign)));
+    let rotated = Pose { r, t: [0.0; 3] }.rotate(pm);
+    let pose = Pose { r, t: std::array::from_fn(|c| ym[c] - rotated[c]) };
+    pose.r.iter().flatten().chain(&pose.t).all(|v| v.is_finite()).then_some(pose)
+}
+
+/// Registers the base of `nominal` (a DH chain whose base is the identity) on `data`: the base
+/// becomes the rigid fit of its positions to the measured ones.
+pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, String> {
+    let NominalModel::DhChain(chain) = nominal else {
+        return Err("registering the base needs a [chain] or [urdf] arm (a [planar] file gives base and yaw)".into());
+    };
+    let p: Vec<[f64; 3]> =
+        (0..data.len()).map(|i| forward_kinematics(&NominalModel::DhChain(chain.clone()), data.joints(i)).position).collect();
+    let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
+    let rms = |pose: &Pose| -> f64 {
+        let s: f64 = p.iter().zip(&y).map(|(pi, yi)| super::norm(super::sub(pose.apply(*pi), *yi)).powi(2)).sum();
+        (s / p.len().max(1) as f64).sqrt()
+    };
+    let base = rigid_fit(&p, &y)
+        .ok_or_else(|| format!("cannot register the base on {} rows (at least 3 in general position needed)", data.len()))?;
+    let declared = Pose::from_transform(&chain.base);
+    let registration = Registration { rms_before: rms(&declared), rms_after: rms(&base), base: base.compose(&declared) };
+    chain.base = registration.base.to_transform();
+    Ok(registration)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rigid_fit_recovers_a_known_motion_and_refuses_too_few_points() {
+        let motion = Pose { t: [4000.0, -1200.0, 300.0], ..Pose::axis_angle([0.6, 0.0, 0.8], 30f64.to_radians()) };
+        let p: Vec<[f64; 3]> = (0..20).map(|k| [(k as f64 * 0.7).sin() * 500.0, (k as f64 * 1.3).cos() * 400.0, k as f64 * 20.0]).collect();
+        let y: Vec<[f64; 3]> = p.iter().map(|x| motion.apply(*x)).collect();
+        let got = rigid_fit(&p, &y).unwrap();
+        for i in 0..3 {
+            assert!((got.t[i] - motion.t[i]).abs() < 1e-9, "{got:?}");
+            for j in 0..3 {
+                assert!((got.r[i][j] - motion.r[i][j]).abs() < 1e-12, "{got:?}");
+            }
+        }
+        let (axis, angle) = axis_angle(&got);
+        assert!((angle.to_degrees() - 30.0).abs() < 1e-9 && (axis[0] - 0.6).abs() < 1e-9 && (axis[2] - 0.8).abs() < 1e-9);
+        // A reflection is never returned: a mirrored set gets the best proper rotation.
+        let mirrored: Vec<[f64; 3]> = y.iter().map(|v| [-v[0], v[1], v[2]]).collect();
+        let r = rigid_fit(&p, &mirrored).unwrap().r;
+        let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+        assert!((det - 1.0).abs() < 1e-12);
+        assert!(rigid_fit(&p[..2], &y[..2]).is_none());
+    }
+}
