@@ -13,6 +13,7 @@ pub mod flow;
 pub mod io;
 pub mod kernels;
 pub mod nominal;
+pub mod plan;
 pub mod predict;
 pub mod report;
 pub mod simulate;

@@ -8,6 +8,7 @@ pub mod diagnose;
 pub mod eval;
 pub mod fit;
 pub mod memory;
+pub mod plan;
 pub mod report;
 pub mod simulate;
 
@@ -40,6 +41,9 @@ pub enum Command {
     Compensate(compensate::CompensateArgs),
     /// Trace the residual to physical effects (library fit, out-of-sample selection) and report before/after.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Where to measure next: poses within the joint limits chosen for identifiability and CbD's
+    /// posterior variance, with the predicted RMS error after each (learning curve).
+    Plan(plan::PlanArgs),
 }
 
 /// The nominal model: a model file, or the built-in planar RR arm.
@@ -89,6 +93,7 @@ pub fn run(cli: Cli) -> Result<(), String> {
         Command::Report(args) => report::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Compensate(args) => compensate::run(args),
+        Command::Plan(args) => plan::run(args),
     }
 }
 
