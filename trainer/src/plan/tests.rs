@@ -91,3 +91,64 @@ fn predicted_error_matches_the_error_reached() {
     eprintln!("six, 30 random + 30 planned: predicted RMS {predicted:.4e} mm, actual {actual:.4e} mm, ratio {:.3}", predicted / actual);
     assert!(predicted / actual < 1.5 && actual / predicted < 1.5, "predicted {predicted:.4e}, actual {actual:.4e}");
 }
+
+/// RMS error against the true positions of dh+cbd (Euler × 1) fitted on `joints` measured by `robot`.
+fn reached_rms(six: &NominalModel, robot: &SixJointRobot, joints: &[f64], noise_seed: u64, test: &[f64]) -> f64 {
+    let data = robot.measure(joints, noise_seed);
+    let settings = crate::calibrate::Settings {
+        dh_first: true,
+        integrator: Some(cbd_protocol::IntegratorMethod::Euler),
+        steps: Some(1),
+        ..Default::default()
+    };
+    let cal = crate::calibrate::calibrate(six, &data, &settings).unwrap();
+    let got = crate::predict::evaluate_blob(&cal.fit.blob, test).unwrap();
+    let count = test.len() / 6;
+    let mse: f64 = test
+        .chunks_exact(6)
+        .zip(got.chunks_exact(3))
+        .map(|(q, y)| {
+            let t = robot.true_position(q);
+            (0..3).map(|c| (y[c] - t[c]).powi(2)).sum::<f64>()
+        })
+        .sum::<f64>()
+        / count as f64;
+    mse.sqrt()
+}
+
+/// Issue 28's learning curves on the six-joint arm (0.02 mm noise, 1000 fresh test configurations):
+/// planned (20 poses from the stated prior, measured, then continued from them with the evidence's
+/// hyperparameters) against uniformly random poses, dh+cbd (Euler × 1) on each prefix.
+/// `cargo test --release -p cbd-trainer --lib plan::tests::learning_curves -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn learning_curves() {
+    let (six, limits) = ur5_limits();
+    let seeds: Vec<u64> = std::env::var("CBD_PLAN_SEEDS").ok().map_or(vec![1, 2], |s| s.split(',').filter_map(|v| v.parse().ok()).collect());
+    let sizes = [20usize, 30, 40, 60, 90, 120, 160, 200];
+    for seed in seeds {
+        let mut robot = SixJointRobot::ur5_like(1);
+        robot.noise_std = 0.02;
+        let test = random_configurations(1000, 1000 + seed);
+        let sample = candidates::uniform_within(&limits, 500, seed);
+        let reach = candidates::reach(&six, &sample);
+        let stated = prior::stated(&six, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: 0.02 });
+        let options = |count| PlanOptions { count, candidates: 10_000, seed, ..PlanOptions::default() };
+        let first_input = PlanInput { nominal: &six, limits: &limits, user_candidates: &[], measured: None, hyperparameters: stated };
+        let first = plan(&first_input, &options(20)).unwrap();
+        let first_joints: Vec<f64> = first.poses.iter().flat_map(|p| p.joints.clone()).collect();
+        let measured = robot.measure(&first_joints, 50 + seed);
+        let h = prior::from_measurements(&six, &measured).unwrap();
+        let more_input = PlanInput { nominal: &six, limits: &limits, user_candidates: &[], measured: Some(&measured), hyperparameters: h };
+        let more = plan(&more_input, &options(180)).unwrap();
+        let mut planned = first_joints.clone();
+        planned.extend(more.poses.iter().flat_map(|p| p.joints.clone()));
+        let random = random_configurations(200, 200 + seed);
+        for &k in &sizes {
+            let predicted = if k > 20 { more.poses[k - 21].predicted_rms } else { more.measured_predicted_rms };
+            let p = reached_rms(&six, &robot, &planned[..6 * k], 50 + seed, &test);
+            let r = reached_rms(&six, &robot, &random[..6 * k], 300 + seed, &test);
+            eprintln!("seed {seed} K {k:>3}: planned {p:.4e} mm (predicted {:.4e}), random {r:.4e} mm", predicted.unwrap_or(f64::NAN));
+        }
+    }
+}
