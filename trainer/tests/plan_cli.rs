@@ -9,7 +9,8 @@ fn plan_measure_plan_again_fit() {
     let dir = scratch("plan-loop");
     succeeds(&cbd(&dir, &["plan", "--count", "12", "--candidates", "800", "--noise", "1e-4", "--out", "p1.csv"]));
     succeeds(&cbd(&dir, &["simulate", "--poses", "p1.csv", "--noise", "1e-4", "--out", "m1.csv"]));
-    let err = succeeds(&cbd(&dir, &["plan", "--count", "8", "--candidates", "800", "--data", "m1.csv", "--out", "p2.csv", "--json", "p2.json"]));
+    let err =
+        succeeds(&cbd(&dir, &["plan", "--count", "8", "--candidates", "800", "--data", "m1.csv", "--out", "p2.csv", "--json", "p2.json"]));
     assert!(err.contains("predicted RMS position error after the measured poses"), "{err}");
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p2.json")).unwrap()).unwrap();
     let curve = json["learning_curve"].as_array().unwrap();
@@ -37,7 +38,13 @@ fn bad_plan_inputs_name_the_file_and_line() {
     write(&dir, "poses.csv", "q1,q2\n0.1,zz\n");
     fails_with(&cbd(&dir, &["simulate", "--poses", "poses.csv", "--out", "m.csv"]), &["poses.csv:2", "'q2'"]);
     fails_with(&cbd(&dir, &["plan", "--count", "100", "--candidates", "50", "--out", "o.csv"]), &["raise --candidates"]);
-    fails_with(&cbd(&dir, &["plan", "--count", "2", "--out", "cand.csv", "--candidate-file", "cand.csv"]), &["cand.csv", "is also an input"]);
+    fails_with(
+        &cbd(&dir, &["plan", "--count", "2", "--out", "cand.csv", "--candidate-file", "cand.csv"]),
+        &["cand.csv", "is also an input"],
+    );
     write(&dir, "prismatic.toml", "length_unit = \"m\"\nangle_unit = \"rad\"\n[chain]\nconvention = \"standard\"\njoints = [{ a = 0.5, alpha = 0, d = 0 }, { a = 0, alpha = 0, d = 0, kind = \"prismatic\" }]\n[measurements]\njoints = [\"q1\", \"d2\"]\npositions = [\"x\", \"y\", \"z\"]\n");
-    fails_with(&cbd(&dir, &["plan", "--model", "prismatic.toml", "--count", "2", "--out", "o.csv"]), &["prismatic.toml", "joint 2 has no finite limits"]);
+    fails_with(
+        &cbd(&dir, &["plan", "--model", "prismatic.toml", "--count", "2", "--out", "o.csv"]),
+        &["prismatic.toml", "joint 2 has no finite limits"],
+    );
 }

@@ -140,9 +140,6 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         }
     }
     let count_c = distances.len();
-    if std::env::var_os("CBD_PLAN_TIMING").is_some() {
-        eprintln!("candidates {:.2}", start.elapsed().as_secs_f64());
-    }
     if count_c < options.count {
         return Err(PlanError::TooFewCandidates { count: options.count, available: count_c });
     }
@@ -170,9 +167,6 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     let eval_range = count_c + options.workspace..count_c + options.workspace + options.evaluation;
     let measured_start = eval_range.end;
     let mut gp = Posterior::new(prior, points, count_c, options.workspace);
-    if std::env::var_os("CBD_PLAN_TIMING").is_some() {
-        eprintln!("setup {:.2}", start.elapsed().as_secs_f64());
-    }
     let prior_rms_cbd = gp.mean_variance(eval_range.clone()).sqrt();
 
     if let Some(g) = geometric.as_mut() {

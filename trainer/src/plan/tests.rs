@@ -124,7 +124,8 @@ fn reached_rms(six: &NominalModel, robot: &SixJointRobot, joints: &[f64], noise_
 #[ignore]
 fn learning_curves() {
     let (six, limits) = ur5_limits();
-    let seeds: Vec<u64> = std::env::var("CBD_PLAN_SEEDS").ok().map_or(vec![1, 2], |s| s.split(',').filter_map(|v| v.parse().ok()).collect());
+    let seeds: Vec<u64> =
+        std::env::var("CBD_PLAN_SEEDS").ok().map_or(vec![1, 2], |s| s.split(',').filter_map(|v| v.parse().ok()).collect());
     let sizes = [20usize, 30, 40, 60, 90, 120, 160, 200];
     for seed in seeds {
         let mut robot = SixJointRobot::ur5_like(1);
