@@ -29,7 +29,7 @@ fn plan_measure_plan_again_fit() {
 #[test]
 fn bad_plan_inputs_name_the_file_and_line() {
     let dir = scratch("plan-errors");
-    let model = ur5_model();
+    let model = ur5_dir().join("simulated-six.toml").to_str().unwrap().to_string();
     write(&dir, "cand.csv", "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n0,-90,10,0,30,0\n0,45,10,0,30,0\n");
     fails_with(
         &cbd(&dir, &["plan", "--model", &model, "--count", "2", "--candidates", "50", "--candidate-file", "cand.csv", "--out", "o.csv"]),

@@ -80,6 +80,8 @@ pub struct Posterior {
     cov: Vec<f64>,
     /// Per candidate c and workspace point w: k_S(c, w), m × m.
     cross: Vec<f64>,
+    /// Per candidate: Σ_w k_S(c, w) k_S(w, c), m × m, formed in the pass that updates `cross`.
+    spread: Vec<f64>,
     added: usize,
 }
 
@@ -99,7 +101,14 @@ impl Posterior {
             }
         }
         let v = (0..points.len()).map(|_| Vec::new()).collect();
-        Posterior { prior, points, candidates, workspace, v, cov, cross, added: 0 }
+        let mut spread = vec![0.0; candidates * mm];
+        for c in 0..candidates {
+            for w in 0..workspace {
+                let at = (c * workspace + w) * mm;
+                accumulate_outer(&mut spread[c * mm..(c + 1) * mm], &cross[at..at + mm], m);
+            }
+        }
+        Posterior { prior, points, candidates, workspace, v, cov, cross, spread, added: 0 }
     }
 
     pub fn len(&self) -> usize {
@@ -124,15 +133,7 @@ impl Posterior {
     /// (1/|W|) Σ_w tr(k_S(w, c) (k_S(c, c) + σ²I)⁻¹ k_S(c, w)).
     pub fn gain(&self, c: usize) -> f64 {
         let (m, mm) = (self.prior.m, self.prior.m * self.prior.m);
-        let mut b = [0.0; 9];
-        for w in 0..self.workspace {
-            let q = &self.cross[(c * self.workspace + w) * mm..][..mm];
-            for r in 0..m {
-                for s in 0..m {
-                    b[r * m + s] += (0..m).map(|t| q[r * m + t] * q[s * m + t]).sum::<f64>();
-                }
-            }
-        }
+        let b = &self.spread[c * mm..(c + 1) * mm];
         let mut sc = [0.0; 9];
         sc[..mm].copy_from_slice(&self.cov[c * mm..(c + 1) * mm]);
         for r in 0..m {
@@ -140,7 +141,7 @@ impl Posterior {
         }
         let Some(l) = cholesky(&sc, m) else { return 0.0 };
         // tr(S⁻¹ B) = Σ |L⁻¹ B^{1/2}|²: with S = L Lᵀ, tr(L⁻ᵀ L⁻¹ B) = tr(L⁻¹ B L⁻ᵀ).
-        let lb = lower_solve(&l, &b, m); // L⁻¹ B
+        let lb = lower_solve(&l, b, m); // L⁻¹ B
         let lbl = lower_solve(&l, &transpose(&lb, m), m); // L⁻¹ (L⁻¹ B)ᵀ = L⁻¹ B L⁻ᵀ (B symmetric)
         (0..m).map(|r| lbl[r * m + r]).sum::<f64>() / self.workspace.max(1) as f64
     }
@@ -183,6 +184,8 @@ impl Posterior {
         let base = self.candidates;
         for c in 0..self.candidates {
             let uc = &u[c * mm..(c + 1) * mm];
+            let spread = &mut self.spread[c * mm..(c + 1) * mm];
+            spread.iter_mut().for_each(|v| *v = 0.0);
             for w in 0..self.workspace {
                 let uw = &u[(base + w) * mm..(base + w + 1) * mm];
                 let q = &mut self.cross[(c * self.workspace + w) * mm..][..mm];
@@ -191,10 +194,20 @@ impl Posterior {
                         q[r * m + cc] -= (0..m).map(|t| uc[t * m + r] * uw[t * m + cc]).sum::<f64>();
                     }
                 }
+                accumulate_outer(spread, q, m);
             }
         }
         self.added += 1;
         true
+    }
+}
+
+/// out += Q Qᵀ for an m × m Q (row-major).
+fn accumulate_outer(out: &mut [f64], q: &[f64], m: usize) {
+    for r in 0..m {
+        for s in 0..m {
+            out[r * m + s] += (0..m).map(|t| q[r * m + t] * q[s * m + t]).sum::<f64>();
+        }
     }
 }
 

@@ -5,7 +5,7 @@ use super::*;
 use crate::simulate::six_joint::{random_configurations, SixJointRobot};
 
 fn ur5_limits() -> (NominalModel, Vec<[f64; 2]>) {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5/ur5.toml");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5/simulated-six.toml");
     let file = crate::data::model_file::load_model_file(path).unwrap();
     let limits = file.column_spec().unwrap().joint_limits;
     (file.nominal, limits)
