@@ -1,6 +1,6 @@
 //! Offline trainer for Calibration by Diffeomorphisms, laid out by pipeline stage:
 //! data import → nominal models → kernels → flow (primal + tangent) → solver → baselines →
-//! diagnosis → reports → CLI.
+//! diagnosis → planning (where to measure next) → reports → CLI.
 
 pub mod baselines;
 pub mod calibrate;
@@ -14,6 +14,7 @@ pub mod io;
 pub mod kernels;
 pub mod memory;
 pub mod nominal;
+pub mod plan;
 pub mod predict;
 pub mod report;
 pub mod simulate;

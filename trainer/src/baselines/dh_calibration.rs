@@ -441,6 +441,31 @@ pub fn calibrate_dh(
     })
 }
 
+/// The geometric group's identification Jacobian at the nominal parameters, ∂k/∂p (the DH fit's own
+/// Jacobian: `task_dim` rows per configuration of `joints`, row-major, `n` per row), and the
+/// parameters it can identify: those that move the task coordinates (not out of the plane) and are
+/// not redundant on these configurations (the fit's column-pivoted test and tolerance). `None` for a
+/// model without a DH form.
+pub(crate) fn identification_jacobian(nominal: &NominalModel, joints: &[f64]) -> Option<(Mat<f64>, Vec<usize>)> {
+    let dh_form = crate::nominal::planar::as_dh(nominal);
+    let NominalModel::DhChain(chain0) = &dh_form else { return None };
+    let (n, m) = (chain0.joints.len(), nominal.task_dim());
+    let count = joints.len() / n.max(1);
+    let data = Measurements { n_joints: n, task_dim: m, joints: joints[..count * n].to_vec(), positions: vec![0.0; count * m] };
+    let np = parameter_count(n);
+    let mut jac = Mat::zeros(m * count, np);
+    let (mut rp, mut rm) = (vec![0.0; m * count], vec![0.0; m * count]);
+    jacobian_at(chain0, &vec![0.0; np], &data, &mut jac, (&mut rp, &mut rm));
+    let out_of_plane = out_of_plane_parameters(n, m);
+    zero_columns(&mut jac, &out_of_plane);
+    let mut colnorm = vec![0.0; np];
+    column_scales(&jac, &mut colnorm);
+    let mut dropped = redundant_parameters(&jac, &colnorm, DhCalibrationOptions::default().redundancy_tolerance);
+    dropped.extend(out_of_plane);
+    let identifiable = (0..np).filter(|k| !dropped.contains(k)).collect();
+    Some((jac, identifiable))
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod eval;
 pub mod fit;
+pub mod plan;
 pub mod report;
 pub mod simulate;
 
@@ -39,6 +40,9 @@ pub enum Command {
     Compensate(compensate::CompensateArgs),
     /// Trace the residual to physical effects (library fit, out-of-sample selection) and report before/after.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Where to measure next: poses within the joint limits chosen for identifiability and CbD's
+    /// posterior variance, with the predicted RMS error after each (learning curve).
+    Plan(plan::PlanArgs),
 }
 
 /// The nominal model: a model file, or the built-in planar RR arm.
@@ -121,6 +125,7 @@ fn dispatch(cli: Cli) -> Result<(), String> {
         Command::Report(args) => report::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Compensate(args) => compensate::run(args),
+        Command::Plan(args) => plan::run(args),
     }
 }
 

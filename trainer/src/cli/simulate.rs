@@ -38,10 +38,52 @@ pub struct SimulateArgs {
     /// built-in bending/stretch/base offset (rr) and joint compliance (six) are left out.
     #[arg(long = "effect")]
     pub effects: Vec<String>,
+    /// Measure at these poses instead of sampling (`cbd plan --out`): a CSV with the robot's joint
+    /// columns (rr: q1, q2 in radians; six: q1_deg … q6_deg), one pose per row; --sampling, --grid and
+    /// --count are then ignored.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+}
+
+/// The joint columns `cbd simulate` writes for `robot`, read back as a file of poses.
+fn poses_spec(robot: &str) -> crate::data::csv_import::ColumnSpec {
+    use crate::data::csv_import::{default_joint_limits, ColumnSpec};
+    use crate::data::model_file::{AngleUnit, LengthUnit};
+    let (joints, angle_unit, length_unit): (Vec<String>, _, _) = if robot == "six" {
+        ((1..=6).map(|k| format!("q{k}_deg")).collect(), AngleUnit::Deg, LengthUnit::Mm)
+    } else {
+        (vec!["q1".into(), "q2".into()], AngleUnit::Rad, LengthUnit::M)
+    };
+    let kinds = vec![cbd_protocol::JointKind::Revolute; joints.len()];
+    ColumnSpec {
+        joint_columns: joints,
+        position_columns: Vec::new(),
+        joint_limits: default_joint_limits(&kinds),
+        joint_kinds: kinds,
+        angle_unit,
+        length_unit,
+        model_length_unit: length_unit,
+        min_rows: 1,
+        repeat_tolerance: None,
+        joint_map: None,
+        planar_frame: None,
+    }
+}
+
+/// The poses of `--poses` (radians, row-major), read as measurement files are (errors name the
+/// file, line and column).
+fn read_poses(args: &SimulateArgs) -> Result<Option<Vec<f64>>, String> {
+    match &args.poses {
+        Some(path) => {
+            let imported = crate::data::csv_import::read_measurements(path, &poses_spec(&args.robot)).map_err(|e| e.to_string())?;
+            Ok(Some(imported.measurements.joints))
+        }
+        None => Ok(None),
+    }
 }
 
 pub fn run(args: SimulateArgs) -> Result<(), String> {
-    crate::io::check_paths(&[], &[("--out", Some(&args.out))])?;
+    crate::io::check_paths(&[("--poses", args.poses.as_deref())], &[("--out", Some(&args.out))])?;
     if let Some(noise) = args.noise {
         // The importers' bound: a CSV that `cbd` writes, `cbd` reads back.
         if !(noise >= 0.0 && noise <= MAX_MAGNITUDE) {
@@ -67,7 +109,10 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
         "uniform" => Sampling::Uniform { count: args.count, seed: args.seed },
         other => return Err(format!("unknown sampling `{other}` (expected grid or uniform)")),
     };
-    let joints = configurations(sampling, 2);
+    let joints = match read_poses(&args)? {
+        Some(poses) => poses,
+        None => configurations(sampling, 2),
+    };
     let mut data = if args.effects.is_empty() {
         rr::RealRr::default().measure(&joints)
     } else {
@@ -89,14 +134,17 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
 
 fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
-    if args.sampling != "uniform" {
+    if args.sampling != "uniform" && args.poses.is_none() {
         return Err("the six-joint robot is sampled with --sampling uniform".into());
     }
     let mut robot = SixJointRobot::ur5_like(1);
     if let Some(noise) = args.noise {
         robot.noise_std = noise;
     }
-    let joints = random_configurations(args.count, args.seed);
+    let joints = match read_poses(args)? {
+        Some(poses) => poses,
+        None => random_configurations(args.count, args.seed),
+    };
     let data = if args.effects.is_empty() {
         robot.measure(&joints, args.seed.wrapping_add(0x5eed))
     } else {

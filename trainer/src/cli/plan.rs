@@ -1,0 +1,170 @@
+//! `cbd plan`: where to measure next — poses within the joint limits, away from singular
+//! configurations, chosen for the geometric group's identifiability and then for CbD's posterior
+//! variance, with the RMS error the posterior predicts after each (docs/DESIGN.md §13).
+
+use crate::cli::{load_nominal, ModelArgs};
+use crate::data::csv_import::{read_measurements, ColumnSpec};
+use crate::plan::{plan, prior, PlanInput, PlanOptions, Stage};
+use cbd_protocol::JointKind;
+use std::path::PathBuf;
+
+#[derive(Debug, clap::Args)]
+pub struct PlanArgs {
+    #[command(flatten)]
+    pub model: ModelArgs,
+    /// Poses to plan.
+    #[arg(long)]
+    pub count: usize,
+    /// Output CSV of the planned poses: the model file's joint columns in their units (without a
+    /// model file q1, q2 in radians), ready for `cbd simulate --poses` or the robot.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Poses already measured (CSV, as for `cbd fit`): the plan continues from them, and the
+    /// hyperparameters come from CbD's evidence on them.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Random candidates within the joint limits.
+    #[arg(long, default_value_t = 10_000)]
+    pub candidates: usize,
+    /// Your own candidate poses (CSV with the model's joint columns), considered besides the random ones.
+    #[arg(long)]
+    pub candidate_file: Option<PathBuf>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Without --data: the measurement noise per coordinate assumed (model length unit);
+    /// default 1e-5 of the arm's reach.
+    #[arg(long)]
+    pub noise: Option<f64>,
+    /// Without --data: the RMS position error assumed to remain after the geometric (DH)
+    /// calibration, CbD's prior (model length unit); default 3e-4 of the arm's reach.
+    #[arg(long)]
+    pub prior_error: Option<f64>,
+    /// Workspace points whose mean posterior variance each step reduces.
+    #[arg(long, default_value_t = 96)]
+    pub workspace: usize,
+    /// Write the plan as JSON: every pose with its stage and the predicted RMS error after it
+    /// (the learning curve), the hyperparameters, counts and timing.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+pub fn run(args: PlanArgs) -> Result<(), String> {
+    crate::io::check_paths(
+        &[("--model", args.model.model.as_deref()), ("--data", args.data.as_deref()), ("--candidate-file", args.candidate_file.as_deref())],
+        &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
+    )
+    .map_err(|e| e.to_string())?;
+    if args.count == 0 {
+        return Err("--count must be at least 1".into());
+    }
+    if args.workspace == 0 {
+        return Err("--workspace must be at least 1".into());
+    }
+    for (flag, v) in [("--noise", args.noise), ("--prior-error", args.prior_error)] {
+        if let Some(v) = v {
+            if !(v > 0.0 && v <= 1e100) {
+                return Err(format!("{flag} must be a number in (0, 1e100], got {v}"));
+            }
+        }
+    }
+    let (nominal, spec) = load_nominal(&args.model)?;
+    let model_name = args.model.model.as_ref().map_or("the built-in RR arm".to_string(), |p| p.display().to_string());
+    let limits = spec.joint_limits.clone();
+    if let Some(d) = limits.iter().position(|[lo, hi]| !(lo.is_finite() && hi.is_finite())) {
+        return Err(format!("{model_name}: joint {} has no finite limits: declare `joint_limits` in its [measurements]", d + 1));
+    }
+    let measured = match &args.data {
+        Some(path) => Some(read_measurements(path, &spec).map_err(|e| e.to_string())?.measurements),
+        None => None,
+    };
+    let user_candidates = match &args.candidate_file {
+        Some(path) => {
+            let joints_only = ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() };
+            read_measurements(path, &joints_only).map_err(|e| e.to_string())?.measurements.joints
+        }
+        None => Vec::new(),
+    };
+    let options = PlanOptions {
+        count: args.count,
+        candidates: args.candidates,
+        seed: args.seed,
+        workspace: args.workspace,
+        ..PlanOptions::default()
+    };
+    let sample = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2));
+    let reach = crate::plan::candidates::reach(&nominal, &sample);
+    let hyperparameters = match &measured {
+        Some(data) if data.len() >= 3 => prior::from_measurements(&nominal, data)
+            .map_err(|e| format!("{}: {e}", args.data.as_ref().map_or(String::new(), |p| p.display().to_string())))?,
+        _ => prior::stated(
+            &nominal,
+            &sample,
+            reach,
+            prior::StatedPrior { error: args.prior_error.unwrap_or(3e-4 * reach), noise: args.noise.unwrap_or(1e-5 * reach) },
+        ),
+    };
+    let input =
+        PlanInput { nominal: &nominal, limits: &limits, user_candidates: &user_candidates, measured: measured.as_ref(), hyperparameters };
+    let result = plan(&input, &options).map_err(|e| format!("{model_name}: {e}"))?;
+
+    // The poses in the file's units.
+    let to_file: Vec<f64> = spec
+        .joint_kinds
+        .iter()
+        .map(|k| match k {
+            JointKind::Revolute => 1.0 / spec.angle_unit.radians(),
+            JointKind::Prismatic => 1.0 / spec.length_unit.factor_to(spec.model_length_unit),
+        })
+        .collect();
+    let mut text = spec.joint_columns.join(",");
+    text.push('\n');
+    for pose in &result.poses {
+        let row: Vec<String> = pose.joints.iter().zip(&to_file).map(|(q, f)| format!("{:?}", q * f)).collect();
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    crate::cli::write_atomically(&args.out, text.as_bytes()).map_err(|e| e.to_string())?;
+
+    let unit = spec.model_length_unit.name();
+    let geometric = result.poses.iter().filter(|p| p.stage == Stage::Geometric).count();
+    eprintln!(
+        "planned {} poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s: {} for the geometric group ({} parameters), {} for CbD's posterior",
+        result.poses.len(),
+        result.candidates,
+        result.rejected_singular,
+        result.seconds,
+        geometric,
+        result.geometric_parameters,
+        result.poses.len() - geometric
+    );
+    if let Some(e) = result.measured_predicted_rms {
+        eprintln!("predicted RMS position error after the measured poses: {e:.4e} {unit}");
+    }
+    let fmt = |v: Option<f64>| v.map_or("– (geometric group not yet identified)".to_string(), |e| format!("{e:.4e} {unit}"));
+    for k in [9, 19, 29, 49, 99, 199] {
+        if let Some(p) = result.poses.get(k).filter(|_| k + 1 < result.poses.len()) {
+            eprintln!("  after {:>4} planned poses: predicted RMS error {}", k + 1, fmt(p.predicted_rms));
+        }
+    }
+    if let Some(p) = result.poses.last() {
+        eprintln!("  after {:>4} planned poses: predicted RMS error {}", result.poses.len(), fmt(p.predicted_rms));
+    }
+    eprintln!("wrote {} poses to {}", result.poses.len(), args.out.display());
+    if let Some(path) = &args.json {
+        let curve: Vec<serde_json::Value> = result
+            .poses
+            .iter()
+            .enumerate()
+            .map(|(k, p)| serde_json::json!({"poses": k + 1, "predicted_rms": p.predicted_rms, "predicted_rms_cbd": p.predicted_rms_cbd, "stage": p.stage}))
+            .collect();
+        let json = serde_json::json!({
+            "length_unit": unit,
+            "learning_curve": curve,
+            "plan": result,
+            "prior": if measured.as_ref().is_some_and(|d| d.len() >= 3) { "evidence on --data" } else { "stated" },
+        });
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        crate::cli::write_atomically(path, text.as_bytes()).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}

@@ -1,0 +1,50 @@
+//! `cbd plan` and `cbd simulate --poses` through the real binary: the loop plan → measure → plan
+//! again from the data → fit, and bad inputs (exit code 1, the file and line named, no panic).
+
+mod cli_support;
+use cli_support::*;
+
+#[test]
+fn plan_measure_plan_again_fit() {
+    let dir = scratch("plan-loop");
+    succeeds(&cbd(&dir, &["plan", "--count", "12", "--candidates", "800", "--noise", "1e-4", "--out", "p1.csv"]));
+    succeeds(&cbd(&dir, &["simulate", "--poses", "p1.csv", "--noise", "1e-4", "--out", "m1.csv"]));
+    let err =
+        succeeds(&cbd(&dir, &["plan", "--count", "8", "--candidates", "800", "--data", "m1.csv", "--out", "p2.csv", "--json", "p2.json"]));
+    assert!(err.contains("predicted RMS position error after the measured poses"), "{err}");
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p2.json")).unwrap()).unwrap();
+    let curve = json["learning_curve"].as_array().unwrap();
+    assert_eq!(curve.len(), 8);
+    // More poses never raise the posterior's predicted error.
+    let rms: Vec<f64> = curve.iter().map(|c| c["predicted_rms"].as_f64().unwrap()).collect();
+    assert!(rms.windows(2).all(|w| w[1] <= w[0] * (1.0 + 1e-9)), "{rms:?}");
+    succeeds(&cbd(&dir, &["simulate", "--poses", "p2.csv", "--noise", "1e-4", "--seed", "2", "--out", "m2.csv"]));
+    let m2 = std::fs::read_to_string(dir.join("m2.csv")).unwrap();
+    let mut all = std::fs::read_to_string(dir.join("m1.csv")).unwrap();
+    all.extend(m2.lines().skip(1).map(|l| format!("{l}\n")));
+    write(&dir, "all.csv", all);
+    succeeds(&cbd(&dir, &["fit", "--data", "all.csv", "--out", "arm.blob", "--steps", "1"]));
+}
+
+#[test]
+fn bad_plan_inputs_name_the_file_and_line() {
+    let dir = scratch("plan-errors");
+    let model = ur5_dir().join("simulated-six.toml").to_str().unwrap().to_string();
+    write(&dir, "cand.csv", "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n0,-90,10,0,30,0\n0,45,10,0,30,0\n");
+    fails_with(
+        &cbd(&dir, &["plan", "--model", &model, "--count", "2", "--candidates", "50", "--candidate-file", "cand.csv", "--out", "o.csv"]),
+        &["cand.csv:3", "q2_deg", "outside the joint's range"],
+    );
+    write(&dir, "poses.csv", "q1,q2\n0.1,zz\n");
+    fails_with(&cbd(&dir, &["simulate", "--poses", "poses.csv", "--out", "m.csv"]), &["poses.csv:2", "'q2'"]);
+    fails_with(&cbd(&dir, &["plan", "--count", "100", "--candidates", "50", "--out", "o.csv"]), &["raise --candidates"]);
+    fails_with(
+        &cbd(&dir, &["plan", "--count", "2", "--out", "cand.csv", "--candidate-file", "cand.csv"]),
+        &["cand.csv", "is also an input"],
+    );
+    write(&dir, "prismatic.toml", "length_unit = \"m\"\nangle_unit = \"rad\"\n[chain]\nconvention = \"standard\"\njoints = [{ a = 0.5, alpha = 0, d = 0 }, { a = 0, alpha = 0, d = 0, kind = \"prismatic\" }]\n[measurements]\njoints = [\"q1\", \"d2\"]\npositions = [\"x\", \"y\", \"z\"]\n");
+    fails_with(
+        &cbd(&dir, &["plan", "--model", "prismatic.toml", "--count", "2", "--out", "o.csv"]),
+        &["prismatic.toml", "joint 2 has no finite limits"],
+    );
+}
