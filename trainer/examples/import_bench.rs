@@ -26,6 +26,8 @@ fn ur5_spec() -> ColumnSpec {
         model_length_unit: LengthUnit::Mm,
         min_rows: 10,
         repeat_tolerance: None,
+        joint_map: None,
+        planar_frame: None,
     }
 }
 
