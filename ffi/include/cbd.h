@@ -19,7 +19,9 @@
 // rejected with `CBD_ERR_MISALIGNED`). `double` arrays and `malloc` memory satisfy it.
 #define CBD_STORAGE_ALIGN 8
 
-// Most joints a model can have.
+// Most joints a model can have in any build: size joint buffers by it. The library holds 7 by default
+// (small stack arrays; a longer blob is refused with `CBD_ERR_PAYLOAD`) and 16 when built with the
+// feature `long-chains`.
 #define CBD_MAX_JOINTS 16
 
 // Largest task dimension (position coordinates) a model can have.

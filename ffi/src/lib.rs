@@ -34,12 +34,16 @@ use core::mem::{align_of, size_of};
 /// Alignment, in bytes, that the storage passed to `cbd_load` must have (a misaligned buffer is
 /// rejected with `CBD_ERR_MISALIGNED`). `double` arrays and `malloc` memory satisfy it.
 pub const CBD_STORAGE_ALIGN: usize = 8;
-/// Most joints a model can have.
+/// Most joints a model can have in any build: size joint buffers by it. The library holds 7 by default
+/// (small stack arrays; a longer blob is refused with `CBD_ERR_PAYLOAD`) and 16 when built with the
+/// feature `long-chains`.
 pub const CBD_MAX_JOINTS: usize = 16;
 /// Largest task dimension (position coordinates) a model can have.
 pub const CBD_MAX_TASK_DIM: usize = 3;
 
-const _: () = assert!(CBD_MAX_JOINTS == MAX_JOINTS && CBD_MAX_TASK_DIM == MAX_TASK_DIM);
+const _: () = assert!(
+    CBD_MAX_JOINTS == cbd_runtime::protocol::MAX_JOINTS_ANY_BUILD && MAX_JOINTS <= CBD_MAX_JOINTS && CBD_MAX_TASK_DIM == MAX_TASK_DIM
+);
 const _: () = assert!(align_of::<CbdCalibrator>() <= CBD_STORAGE_ALIGN && align_of::<Real>() <= CBD_STORAGE_ALIGN);
 
 /// The result of every call that can fail. `CBD_OK` is 0; every error is non-zero.
@@ -96,7 +100,7 @@ impl From<DecodeError> for CbdStatus {
             DecodeError::BadMagic => CBD_ERR_BAD_MAGIC,
             DecodeError::UnsupportedVersion { .. } => CBD_ERR_UNSUPPORTED_VERSION,
             DecodeError::ChecksumMismatch { .. } => CBD_ERR_CHECKSUM,
-            // The C library is built with `long-chains`: a longer chain is no valid blob at all.
+            // A chain longer than this build holds (feature `long-chains`).
             DecodeError::Payload | DecodeError::TooManyJoints { .. } => CBD_ERR_PAYLOAD,
             DecodeError::Invalid(_) => CBD_ERR_INVALID_MODEL,
         }
