@@ -68,26 +68,7 @@ fn predicted_error_matches_the_error_reached() {
     let predicted = plan.poses.last().unwrap().predicted_rms.unwrap();
     let mut joints = first.joints.clone();
     joints.extend(plan.poses.iter().flat_map(|p| p.joints.clone()));
-    let data = robot.measure(&joints, 13);
-    let settings = crate::calibrate::Settings {
-        dh_first: true,
-        integrator: Some(cbd_protocol::IntegratorMethod::Euler),
-        steps: Some(1),
-        ..Default::default()
-    };
-    let cal = crate::calibrate::calibrate(&six, &data, &settings).unwrap();
-    let test = random_configurations(400, 21);
-    let got = crate::predict::evaluate_blob(&cal.fit.blob, &test).unwrap();
-    let mse: f64 = test
-        .chunks_exact(6)
-        .zip(got.chunks_exact(3))
-        .map(|(q, y)| {
-            let t = robot.true_position(q);
-            (0..3).map(|c| (y[c] - t[c]).powi(2)).sum::<f64>()
-        })
-        .sum::<f64>()
-        / 400.0;
-    let actual = mse.sqrt();
+    let actual = reached_rms(&six, &robot, &joints, 13, &random_configurations(400, 21));
     eprintln!("six, 30 random + 30 planned: predicted RMS {predicted:.4e} mm, actual {actual:.4e} mm, ratio {:.3}", predicted / actual);
     assert!(predicted / actual < 1.5 && actual / predicted < 1.5, "predicted {predicted:.4e}, actual {actual:.4e}");
 }
