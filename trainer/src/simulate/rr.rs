@@ -4,9 +4,9 @@
 use crate::data::Measurements;
 use cbd_protocol::NominalModel;
 
-/// The nominal model of the paper: l1 = 1, l2 = 0.5.
+/// The nominal model of the paper: l1 = 1, l2 = 0.5 (`cbd_protocol::paper_rr::LENGTHS`).
 pub fn nominal() -> NominalModel {
-    NominalModel::planar(&[1.0, 0.5]).expect("two links fit")
+    NominalModel::planar(&cbd_protocol::paper_rr::LENGTHS).expect("two links fit")
 }
 
 /// A planar arm as a DH chain (`nominal::planar::as_dh`) with link `lengths`, its base moved by
