@@ -10,6 +10,7 @@
 //! rewrites it.
 // no_std in every build but its own unit tests (which run on std, as every test harness).
 #![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
 // A host build with the workspace's default profiles (panic = "unwind": `cargo build --workspace`,

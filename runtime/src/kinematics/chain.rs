@@ -160,7 +160,10 @@ pub(crate) fn gravity_vector(model: &NominalModel, gravity: &GravityModel) -> V3
 /// How many derivatives to compute.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Order {
+    /// The value alone.
     Value,
+    /// The value and the first derivatives.
     First,
+    /// The value, the first and the second derivatives.
     Second,
 }

@@ -7,7 +7,9 @@ use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel, Normalisation
 /// Position (first `task_dim` entries) and Jacobian (row-major, `task_dim × n_joints`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Kinematics {
+    /// k0(x), model units (internal units after [`Kinematics::normalised`]).
     pub position: [f64; MAX_TASK_DIM],
+    /// Dk0(x), `jacobian[a][d] = ∂k0_a/∂x_d`.
     pub jacobian: [[f64; MAX_JOINTS]; MAX_TASK_DIM],
 }
 
@@ -91,8 +93,11 @@ fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
 /// `ends[i]`, the origin of the frame after the joint's full transform (the distal end of link i).
 #[derive(Debug, Clone, Copy)]
 pub struct DhWalk {
+    /// z_i, the unit axis of joint i.
     pub axes: [[f64; 3]; MAX_JOINTS],
+    /// o_i, a point on axis i (the origin of the frame joint i moves about or along).
     pub origins: [[f64; 3]; MAX_JOINTS],
+    /// The distal end of link i: the origin of the frame after joint i's full transform.
     pub ends: [[f64; 3]; MAX_JOINTS],
     /// Rotation (row-major rows) of the frame whose origin is `ends[i]`: link i's own frame.
     pub end_rotations: [[[f64; 3]; 3]; MAX_JOINTS],
