@@ -7,7 +7,7 @@
 //!
 //! Augmented kinematics (as `cbd_protocol::effects` defines it): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
 
-use crate::nominal::{dot, norm, scale, sub, Pose};
+use crate::nominal::{dot, norm, scale, sub, Frame};
 use cbd_protocol::{GravityModel, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 use cbd_runtime::kinematics::rigid::dh_walk;
@@ -88,11 +88,11 @@ fn link_points(rigid: &NominalModel, q: &[f64]) -> Vec<[f64; 3]> {
 
 /// The frame of every link k = 0..n at its distal end: DH frames 1..n; planar: the link's end,
 /// rotated by q_1 + … + q_k about z (x along the link).
-fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Pose> {
+fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Frame> {
     match rigid {
         NominalModel::DhChain(chain) => {
             let walk = dh_walk(chain, q);
-            walk.end_rotations.into_iter().zip(walk.ends).take(chain.joints.len()).map(|(r, t)| Pose { r, t }).collect()
+            walk.end_rotations.into_iter().zip(walk.ends).take(chain.joints.len()).map(|(r, t)| Frame::new(r, t)).collect()
         }
         NominalModel::PlanarChain { lengths, .. } => {
             let (mut p, mut theta) = ([0.0; 3], 0.0);
@@ -104,7 +104,7 @@ fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Pose> {
                     p[0] += l * theta.cos();
                     p[1] += l * theta.sin();
                     let (s, c) = theta.sin_cos();
-                    Pose { r: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], t: p }
+                    Frame::new([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], p)
                 })
                 .collect()
         }
@@ -136,7 +136,7 @@ fn moment_potential(rigid: &NominalModel, gravity: &GravityModel, q: &[f64], mom
         .enumerate()
         .map(|(k, frame)| {
             let (m, s) = moment(k);
-            m * dot(g, frame.t) + dot(g, frame.rotate(s))
+            m * dot(g, frame.translation()) + dot(g, frame.rotate(s))
         })
         .sum()
 }
