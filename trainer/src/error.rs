@@ -199,4 +199,21 @@ mod tests {
         assert!(!m.contains('\n') && m.ends_with("bytes in all)"));
         assert_eq!(one_line("plain"), "plain");
     }
+
+    /// Issue 29: a stage's error enters unchanged (its message, its type as the source) and is
+    /// found again under a context; `?` with a context reads as the CLI's `path: message`.
+    #[test]
+    fn stage_errors_keep_their_message_and_type() {
+        #[derive(Debug, PartialEq, thiserror::Error)]
+        #[error("the stage says no")]
+        struct StageError;
+        let e = Error::stage("test", StageError).context("data.csv");
+        assert_eq!(e.to_string(), "data.csv: the stage says no");
+        assert_eq!(e.stage_error::<StageError>(), Some(&StageError));
+        assert!(e.stage_error::<std::io::Error>().is_none());
+        let source = std::error::Error::source(&e).map(|s| s.to_string());
+        assert_eq!(source.as_deref(), Some("the stage says no"));
+        let r: Result<()> = Err(Error::stage("test", StageError)).context(std::path::Path::new("a.blob").display());
+        assert_eq!(r.unwrap_err().to_string(), "a.blob: the stage says no");
+    }
 }
