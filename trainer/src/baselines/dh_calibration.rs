@@ -87,6 +87,12 @@ pub enum DhCalibrationError {
     Numerical(#[from] crate::solver::least_squares::LeastSquaresError),
 }
 
+impl From<DhCalibrationError> for crate::Error {
+    fn from(e: DhCalibrationError) -> crate::Error {
+        crate::Error::stage("DH calibration", e)
+    }
+}
+
 /// k − y over the data's `m = data.task_dim` coordinates (2 for a planar arm's DH form).
 fn residuals(chain: &DhChain, data: &Measurements, out: &mut [f64]) {
     let model = NominalModel::DhChain(chain.clone());

@@ -91,9 +91,9 @@ pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Frame> {
 
 /// Registers the base of `nominal` (a DH chain whose base is the identity) on `data`: the base
 /// becomes the rigid fit of its positions to the measured ones.
-pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, String> {
+pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, RegisterError> {
     let NominalModel::DhChain(chain) = nominal else {
-        return Err("registering the base needs a [chain] or [urdf] arm (a [planar] file gives base and yaw)".into());
+        return Err(RegisterError::NotADhChain);
     };
     let p: Vec<[f64; 3]> =
         (0..data.len()).map(|i| forward_kinematics(&NominalModel::DhChain(chain.clone()), data.joints(i)).position).collect();
@@ -102,12 +102,27 @@ pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<
         let s: f64 = p.iter().zip(&y).map(|(pi, yi)| super::norm(super::sub(pose.apply(*pi), *yi)).powi(2)).sum();
         (s / p.len().max(1) as f64).sqrt()
     };
-    let base = rigid_fit(&p, &y)
-        .ok_or_else(|| format!("cannot register the base on {} rows (at least 3 in general position needed)", data.len()))?;
+    let base = rigid_fit(&p, &y).ok_or(RegisterError::Degenerate { rows: data.len() })?;
     let declared = Frame::from_transform(&chain.base);
     let registration = Registration { rms_before: rms(&declared), rms_after: rms(&base), base: base.compose(&declared) };
     chain.base = registration.base.to_transform();
     Ok(registration)
+}
+
+/// Why [`register_base`] could not register the base.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RegisterError {
+    #[error("registering the base needs a [chain] or [urdf] arm (a [planar] file gives base and yaw)")]
+    NotADhChain,
+    /// No rigid motion is determined by the data's positions.
+    #[error("cannot register the base on {rows} rows (at least 3 in general position needed)")]
+    Degenerate { rows: usize },
+}
+
+impl From<RegisterError> for crate::Error {
+    fn from(e: RegisterError) -> crate::Error {
+        crate::Error::stage("base registration", e)
+    }
 }
 
 #[cfg(test)]

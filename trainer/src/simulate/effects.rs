@@ -309,6 +309,12 @@ pub struct EffectSpecError {
     pub reason: String,
 }
 
+impl From<EffectSpecError> for crate::Error {
+    fn from(e: EffectSpecError) -> crate::Error {
+        crate::Error::stage("effects", e)
+    }
+}
+
 /// Parses `type:key=value,...`, e.g. `transmission:joint=2,harmonic=2,cos=0.001,sin=0`
 /// (joints and links 1-based on the command line; angles in radians, lengths in model units).
 /// Types: encoder_scale (scale), transmission (harmonic, cos, sin), gravity_compliance
@@ -329,7 +335,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
                 let x = v.parse::<f64>().ok().filter(|x| x.is_finite());
                 let x = x.ok_or_else(|| bad(format!("{k}={} is not a finite number", crate::error::excerpt(v))))?;
                 // The model file's bound on effect values: what is injected could be declared.
-                check_effect_value(k, x).map_err(bad)?;
+                check_effect_value(k, x).map_err(|e| bad(e.to_string()))?;
                 Ok(x)
             }
             None => default.ok_or_else(|| bad(format!("missing {k}="))),
@@ -354,7 +360,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
     let effect = match kind {
         "encoder_scale" => {
             let scale = num("scale", None)?;
-            check_encoder_scale(scale).map_err(bad)?;
+            check_encoder_scale(scale).map_err(|e| bad(e.to_string()))?;
             InjectedEffect::EncoderScale { joint: index("joint")?, scale }
         }
         "transmission" => {
@@ -379,7 +385,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
                 .map(|v| {
                     let x = v.trim().parse::<f64>().ok().filter(|x| x.is_finite());
                     let x = x.ok_or_else(|| bad(format!("bad centre value `{}`", crate::error::excerpt(v))))?;
-                    check_effect_value("centre", x).map(|()| x).map_err(bad)
+                    check_effect_value("centre", x).map(|()| x).map_err(|e| bad(e.to_string()))
                 })
                 .collect();
             let centre = centre?;
