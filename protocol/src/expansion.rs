@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::F64Slice;
+use crate::f64_slice::F64Slice;
 
 /// The fields in their kernels' own expansions (format 5, docs/DESIGN.md §11).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

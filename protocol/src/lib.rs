@@ -19,6 +19,7 @@ extern crate std;
 
 mod effects;
 mod expansion;
+mod f64_slice;
 mod limits;
 mod model;
 pub mod paper_rr;
@@ -27,6 +28,7 @@ mod validate;
 
 pub use effects::*;
 pub use expansion::*;
+pub use f64_slice::*;
 pub use limits::*;
 pub use model::*;
 pub use validate::ModelError;

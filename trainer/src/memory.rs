@@ -342,6 +342,17 @@ pub fn check_fit_of(file: &std::path::Path, data: &crate::data::Measurements, re
     check_fit(data.len(), data.task_dim, available_bytes(), remedy).context(file.display())
 }
 
+/// The number of workers for a command: [`crate::workers::MAX_WORKERS`] on a machine with the cores, one when the
+/// memory this process may use does not hold a second worker's workspace with room to spare (half
+/// of it for the computation).
+pub fn workers_for_memory(available: Option<f64>) -> usize {
+    let most = crate::workers::default_workers();
+    match available {
+        Some(bytes) if bytes < 2.0 * most as f64 * worker_bytes(most) => 1,
+        _ => crate::workers::default_workers(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

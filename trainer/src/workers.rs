@@ -1,7 +1,7 @@
 //! The worker threads a `cbd` command computes on: one rayon pool, built before the command runs
 //! and sized here, so that every parallel piece of faer and of the flow runs on threads the memory
 //! check counts. Without it faer's `Par::Rayon` reached rayon's global pool, which has a thread per
-//! core (each holding faer's matrix-multiply workspace, [`crate::memory::gemm_workspace_bytes`])
+//! core (each holding faer's matrix-multiply workspace, `memory::gemm_workspace_bytes`)
 //! and panics ("the global thread pool has not been initialized") when its threads cannot start.
 
 use std::sync::OnceLock;
@@ -30,7 +30,7 @@ pub fn current_workers() -> usize {
     }
 }
 
-fn default_workers() -> usize {
+pub fn default_workers() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_WORKERS)
 }
 
@@ -64,17 +64,6 @@ impl From<PoolError> for crate::Error {
     }
 }
 
-/// The number of workers for a command: [`MAX_WORKERS`] on a machine with the cores, one when the
-/// memory this process may use does not hold a second worker's workspace with room to spare (half
-/// of it for the computation).
-pub fn workers_for_memory(available: Option<f64>) -> usize {
-    let most = default_workers();
-    match available {
-        Some(bytes) if bytes < 2.0 * most as f64 * crate::memory::worker_bytes(most) => 1,
-        _ => default_workers(),
-    }
-}
-
 /// Runs `f` on `threads` workers: on the pool it is called from when that has no more (a fit inside
 /// `cbd fit` runs on the command's pool: a pool per fit would start threads, each with its own
 /// workspace, that the memory check does not count), else on a new pool of `threads` (one worker
@@ -102,7 +91,5 @@ mod tests {
         .unwrap();
         assert_eq!((inside, nested, fewer), (2, 2, 1), "a fit inside a command runs on its pool, or on fewer workers");
         assert_eq!(run_in_pool(9, rayon::current_num_threads).unwrap(), MAX_WORKERS);
-        assert_eq!(workers_for_memory(Some(1.0)), 1);
-        assert_eq!(workers_for_memory(None), default_workers());
     }
 }

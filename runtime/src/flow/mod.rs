@@ -11,6 +11,7 @@
 pub mod control_points;
 pub mod inverse;
 pub mod query_derivatives;
+pub(crate) mod stage_fields;
 
 use crate::kernel::{joint_features, joint_kernel_from_features, read_features, FEATURES_PER_JOINT};
 use crate::real::{exp, Real};

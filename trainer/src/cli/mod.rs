@@ -118,7 +118,7 @@ pub fn configure_allocator() {
 /// Runs a parsed command on the process's worker threads (`crate::workers`: as many as the memory
 /// allows, at most two); errors are printed by `main` with exit code 1.
 pub fn run(cli: Cli) -> Result<()> {
-    let threads = crate::workers::workers_for_memory(memory::available_bytes());
+    let threads = memory::workers_for_memory(memory::available_bytes());
     crate::workers::run_in_pool(threads, move || dispatch(cli))?
 }
 

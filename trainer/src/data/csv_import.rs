@@ -387,10 +387,7 @@ fn check_repeats(
     Ok(duplicates)
 }
 
-/// Largest magnitude of an imported value in the model's unit. Squares and sums of squares of
-/// differences (distances, kernel arguments, σ²) must stay finite; 1e100² is still far from f64's
-/// 1.8e308, and no arm is measured beyond 1e100 of any unit.
-pub const MAX_MAGNITUDE: f64 = 1e100;
+pub use super::limits::MAX_MAGNITUDE;
 
 /// File lines of record starts, counted incrementally: the csv reader hands out records in file
 /// order, so counting from the previous record instead of from the file's start keeps the import

@@ -69,8 +69,8 @@ impl JointMap {
                 };
                 let ok = match key {
                     "sign" => v == 1.0 || v == -1.0,
-                    "scale" => v.is_finite() && v != 0.0 && v.abs() <= super::csv_import::MAX_MAGNITUDE,
-                    _ => v.is_finite() && v.abs() <= super::csv_import::MAX_MAGNITUDE,
+                    "scale" => v.is_finite() && v != 0.0 && v.abs() <= super::limits::MAX_MAGNITUDE,
+                    _ => v.is_finite() && v.abs() <= super::limits::MAX_MAGNITUDE,
                 };
                 if !ok {
                     let need = match key {

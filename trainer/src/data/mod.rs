@@ -83,6 +83,7 @@ pub mod csv_import;
 pub mod effects_section;
 pub mod import_error;
 pub mod joint_map;
+pub mod limits;
 pub mod model_file;
 pub mod nominal_check;
 pub mod units;

@@ -3,6 +3,7 @@
 //! warm-started from the linearised (kernel) model.
 
 pub mod allocator;
+pub mod cancellation;
 pub mod least_squares;
 pub mod levenberg_marquardt;
 pub mod regulariser;

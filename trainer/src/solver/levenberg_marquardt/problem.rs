@@ -3,6 +3,7 @@
 use super::search_space::SearchSpace;
 use crate::flow::tangent::{position_jacobian_in_pool, TangentAlong};
 use crate::flow::{ControlPoints, PrimalFlow};
+pub use crate::solver::cancellation::cancellation_of;
 use faer::Mat;
 use std::cell::{Cell, OnceCell};
 use std::time::Instant;
@@ -101,23 +102,4 @@ pub(super) fn model_energy(jac: &Mat<f64>, k: &Mat<f64>, sigma: f64, residual: &
         }
     }
     0.5 * r.iter().map(|v| v * v).sum::<f64>() + 0.5 * quad_form(k, trial)
-}
-
-/// max_i Σ_j |K_ij p_j| / max_i |Σ_j K_ij p_j| (see [`super::FitReport::cancellation`]); K may be
-/// rectangular (the expansion's design matrix and weights).
-pub fn cancellation_of(k: &Mat<f64>, p: &[f64]) -> f64 {
-    let (mut sum, mut abs) = (vec![0.0; k.nrows()], vec![0.0; k.nrows()]);
-    for (j, pj) in p.iter().enumerate() {
-        for ((s, a), kij) in sum.iter_mut().zip(abs.iter_mut()).zip(k.col(j).iter()) {
-            *s += kij * pj;
-            *a += (kij * pj).abs();
-        }
-    }
-    let top = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let moved = top(&sum);
-    if moved > 0.0 {
-        top(&abs) / moved
-    } else {
-        1.0
-    }
 }
