@@ -59,9 +59,9 @@ pub enum Error {
     #[error(transparent)]
     Evidence(#[from] crate::kernels::evidence::EvidenceError),
     #[error(transparent)]
-    Hyperparameters(#[from] crate::kernels::hyperparameters::HyperparameterError),
+    Hyperparameters(#[from] crate::baselines::kernel_ridge::HyperparameterError),
     #[error(transparent)]
-    KernelRidge(#[from] crate::baselines::krr::KrrError),
+    KernelRidge(#[from] crate::baselines::kernel_ridge::KrrError),
     #[error(transparent)]
     LeastSquares(#[from] crate::solver::least_squares::LeastSquaresError),
     #[error(transparent)]

@@ -1,13 +1,12 @@
 //! `cbd demo`: the paper's RR benchmark end to end — simulate, fit, write the blob, load it
 //! with the runtime, evaluate on random configurations, compare with kernel ridge regression.
 
-use crate::baselines::krr::KernelRidge;
+use crate::baselines::kernel_ridge::fit_kernel_ridge_peer;
 use crate::report::stats::ErrorStats;
 use crate::simulate::{configurations, rr, Sampling};
 
 use serde::Serialize;
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
@@ -145,10 +144,8 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
         joints.chunks_exact(2).flat_map(|q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
     };
     // The peer with its own hyperparameters (its GP marginal likelihood on the same rows).
-    let t0 = Instant::now();
-    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default()).map_err(|e| e.to_string())?;
-    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge()).map_err(|e| e.to_string())?;
-    let krr_fit_seconds = t0.elapsed().as_secs_f64();
+    let peer = fit_kernel_ridge_peer(&nominal, &train, &Default::default()).map_err(|e| e.to_string())?;
+    let (krr, krr_fit_seconds) = (&peer.regression, peer.seconds);
 
     let report = DemoReport {
         nominal: ErrorStats::of_positions(&nominal_at(&test.joints), &test.positions, 2),

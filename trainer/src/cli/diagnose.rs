@@ -98,7 +98,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     settings.threads = Some(threads);
     let d = crate::workers::on_workers(threads, || {
         let fitter = crate::cli::compare::cbd_fitter(&settings);
-        let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
+        let cbd: Option<crate::evaluation::correction::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
         diagnose(&nominal, &data, test.as_ref(), cbd, &options)
     })
     .map_err(|e| e.to_string())?;

@@ -8,12 +8,12 @@
 //! coordinate (pattern) search with shrinking steps. Only the rows given are used: pass
 //! training rows, never test rows.
 //!
-//! For [`crate::baselines::krr::KernelRidge::fit`], predictions depend only on ridge / γ, so
+//! For [`super::KernelRidge::fit`], predictions depend only on ridge / γ, so
 //! `KernelRidge::fit(nominal, data, h.kernel.clone(), h.ridge())` is the GP posterior mean
-//! whatever the units of `data`.
+//! whatever the units of `data` ([`super::fit_kernel_ridge_peer`] does both).
 
 #[cfg(test)]
-use crate::baselines::krr::kernel_matrix;
+use super::fit::kernel_matrix;
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
@@ -23,7 +23,7 @@ use faer::{linalg::solvers::Solve, Mat, Side};
 #[derive(Debug, Clone, PartialEq)]
 pub struct SearchOptions {
     /// Positions are divided by this before the GP sees them; `None`: the scale of
-    /// [`super::normalisation_of`] (RMS distance of the measured positions from their mean),
+    /// [`crate::kernels::normalisation_of`] (RMS distance of the measured positions from their mean),
     /// the same normalisation the CbD model uses.
     pub task_scale: Option<f64>,
     /// After the shared-width search, refine each joint's width separately.
@@ -76,7 +76,7 @@ pub struct Hyperparameters {
 }
 
 impl Hyperparameters {
-    /// Ridge for [`crate::baselines::krr::KernelRidge::fit`] with `self.kernel`: σ².
+    /// Ridge for [`super::KernelRidge::fit`] with `self.kernel`: σ².
     pub fn ridge(&self) -> f64 {
         self.noise_sigma * self.noise_sigma
     }
@@ -157,8 +157,9 @@ fn kernel_of(template: &[bool], theta: &[f64], gamma: f64) -> JointKernel {
     JointKernel { gamma, axes: heapless::Vec::from_slice(&axes).expect("at most MAX_JOINTS axes") }
 }
 
-/// Chooses the joint-kernel widths, γ and σ for the residual of `nominal` on `data`.
-pub fn choose_hyperparameters(
+/// Kernel ridge's own hyperparameters: the joint-kernel widths, γ and σ that maximise its GP's
+/// marginal likelihood on the residual of `nominal` on `data`.
+pub fn choose_kernel_ridge_hyperparameters(
     nominal: &NominalModel,
     data: &Measurements,
     options: &SearchOptions,
@@ -175,7 +176,7 @@ pub fn choose_hyperparameters(
     };
     let used = data.subset(&rows);
     let nominal_pos: Vec<[f64; 3]> = (0..used.len()).map(|i| forward_kinematics(nominal, used.joints(i)).position).collect();
-    let task_scale = options.task_scale.unwrap_or_else(|| super::normalisation_of(data).task_scale);
+    let task_scale = options.task_scale.unwrap_or_else(|| crate::kernels::normalisation_of(data).task_scale);
     let residual = Mat::from_fn(used.len(), m, |i, c| (used.position(i)[c] - nominal_pos[i][c]) / task_scale);
     let template: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
     let init = data_start(&used, &template, options);
@@ -353,8 +354,8 @@ fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, opt
 
 #[cfg(test)]
 mod tests {
+    use super::super::KernelRidge;
     use super::*;
-    use crate::baselines::krr::KernelRidge;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -395,7 +396,7 @@ mod tests {
     fn recovers_the_generating_hyperparameters() {
         let (nominal, train, test) = gp_sample(300, 11);
         let opts = SearchOptions { task_scale: Some(1.0), ..SearchOptions::default() };
-        let h = choose_hyperparameters(&nominal, &train, &opts).unwrap();
+        let h = choose_kernel_ridge_hyperparameters(&nominal, &train, &opts).unwrap();
         let bs: Vec<f64> = h
             .kernel
             .axes
@@ -428,9 +429,12 @@ mod tests {
     #[test]
     fn profiled_value_matches_the_full_likelihood() {
         let (nominal, train, _) = gp_sample(60, 5);
-        let h =
-            choose_hyperparameters(&nominal, &train, &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() })
-                .unwrap();
+        let h = choose_kernel_ridge_hyperparameters(
+            &nominal,
+            &train,
+            &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() },
+        )
+        .unwrap();
         let residual =
             Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
         let mut k = kernel_matrix(&h.kernel, &train.joints, &train.joints, 2);
