@@ -203,7 +203,7 @@ pub fn compare_peers(
         dh_seconds,
     );
 
-    // The kernel-ridge peer (filled by the caller: `baselines::kernel_ridge::kernel_ridge_correction`).
+    // The kernel-ridge peer (filled by the caller: `cli::compare` passes the peer's correction).
     if let Some(fit) = krr {
         let t = Instant::now();
         let fitted = fit(nominal, train);
