@@ -8,6 +8,7 @@ pub mod cli;
 pub mod data;
 pub mod diagnose;
 pub mod error;
+pub mod evaluation;
 pub mod expansion;
 pub mod flow;
 pub mod io;

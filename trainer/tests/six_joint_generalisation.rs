@@ -14,7 +14,7 @@ fn dh_plus_cbd_reaches_the_noise_level_on_fresh_configurations() {
     let dh = calibrate_dh(&robot.nominal, &train, &DhCalibrationOptions::default()).expect("DH calibration");
     let settings = cbd_trainer::calibrate::Settings { steps: Some(1), ..Default::default() };
     let fit = cbd_fitter(&settings);
-    let (predict, _) = fit(&dh.model, &train).expect("CbD fit");
+    let predict = fit(&dh.model, &train).expect("CbD fit").predict;
     let stats = ErrorStats::of_positions(&predict(&test.joints), &test.positions, 3);
     // The measured positions themselves carry noise: E|ε| for a 3-D Gaussian with σ per
     // coordinate is 1.596 σ, the floor of any model's mean error against them.

@@ -3,10 +3,10 @@
 //! (`[chain] base = { register = true }`), against the declared-base run on the original data.
 
 use cbd_protocol::NominalModel;
-use cbd_trainer::baselines::compare::{compare_peers, Comparison};
+use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
 use cbd_trainer::data::model_file::{load_model_file, parse_model_file};
 use cbd_trainer::data::Measurements;
-use cbd_trainer::kernels::hyperparameters::SearchOptions;
+use cbd_trainer::evaluation::compare::{compare_peers, Comparison};
 use cbd_trainer::nominal::register::{axis_angle, register_base};
 use cbd_trainer::nominal::{rotation_about, Frame};
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
@@ -42,7 +42,9 @@ fn compare(nominal: &NominalModel, train: &Measurements, test: &Measurements) ->
         ..Default::default()
     };
     let fitter = cbd_trainer::cli::compare::cbd_fitter(&settings);
-    compare_peers(nominal, train, test, &SearchOptions::default(), Some(&fitter))
+    let search = SearchOptions::default();
+    let krr = kernel_ridge_correction(&search);
+    compare_peers(nominal, train, test, Some(&krr), Some(&fitter))
 }
 
 #[test]

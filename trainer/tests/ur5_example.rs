@@ -68,11 +68,12 @@ fn ur5_dh_calibration_reaches_the_reference_accuracy() {
 #[test]
 #[ignore]
 fn ur5_compare_peers() {
-    use cbd_trainer::baselines::compare::compare_files;
-    use cbd_trainer::kernels::hyperparameters::SearchOptions;
+    use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
+    use cbd_trainer::evaluation::compare::compare_files;
     let d = ur5_dir();
-    let (c, warnings) =
-        compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), &SearchOptions::default(), None).unwrap();
+    let search = SearchOptions::default();
+    let krr = kernel_ridge_correction(&search);
+    let (c, warnings) = compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), Some(&krr), None).unwrap();
     eprintln!("warnings: {warnings:?}");
     eprintln!("{}", c.table("mm"));
     for r in &c.rows {
@@ -90,15 +91,16 @@ fn ur5_compare_peers() {
 #[test]
 #[ignore]
 fn cbd_hook_on_the_simulated_six_joint_arm() {
-    use cbd_trainer::baselines::compare::{compare_peers, Predictor};
+    use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
     use cbd_trainer::data::Measurements;
-    use cbd_trainer::kernels::hyperparameters::SearchOptions;
+    use cbd_trainer::evaluation::compare::compare_peers;
+    use cbd_trainer::evaluation::correction::{FittedCorrection, Predictor};
     use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
     use cbd_trainer::solver::{fit_cbd, CbdOptions};
     let robot = SixJointRobot::ur5_like(21);
     let train = robot.measure(&random_configurations(150, 22), 23);
     let test = robot.measure(&random_configurations(200, 24), 25);
-    let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> cbd_trainer::Result<(Predictor, String)> {
+    let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> cbd_trainer::Result<FittedCorrection> {
         let mut opts = CbdOptions::paper_rr();
         opts.normalisation = cbd_trainer::kernels::normalisation_of(data);
         opts.joint_kernel = cbd_trainer::kernels::default_joint_kernel(nominal);
@@ -108,9 +110,11 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
         let fit = fit_cbd(nominal, data, &opts)?;
         let predictor: Predictor =
             Box::new(move |joints: &[f64]| cbd_trainer::predict::evaluate_blob(&fit.blob, joints).expect("blob evaluates"));
-        Ok((predictor, String::new()))
+        Ok(FittedCorrection::new(predictor, String::new()))
     };
-    let c = compare_peers(&robot.nominal, &train, &test, &SearchOptions::default(), Some(&hook));
+    let search = SearchOptions::default();
+    let krr = kernel_ridge_correction(&search);
+    let c = compare_peers(&robot.nominal, &train, &test, Some(&krr), Some(&hook));
     eprintln!("{}", c.table("mm"));
     for r in &c.rows {
         eprintln!("{}: {}", r.name, r.note);

@@ -1,6 +1,4 @@
 //! The peers Calibration by Diffeomorphisms is compared with.
 
-pub mod commanded;
-pub mod compare;
 pub mod dh_calibration;
-pub mod krr;
+pub mod kernel_ridge;

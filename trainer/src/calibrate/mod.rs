@@ -73,8 +73,9 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts
 }
 
-/// Hyperparameters for `base` on `data`: the source's, then the hand-given values.
-pub fn choose_hyperparameters(
+/// CbD's hyperparameters for `base` on `data`: the source's (its own evidence, or the paper's),
+/// then the hand-given values.
+pub fn choose_cbd_hyperparameters_with_overrides(
     base: &NominalModel,
     data: &Measurements,
     norm: &Normalisation,
@@ -124,15 +125,23 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
         (nominal.clone(), None)
     };
     let norm = normalisation(data, settings);
-    let (hyperparameters, evidence) = choose_hyperparameters(&base, data, &norm, settings)?;
+    let (hyperparameters, evidence) = choose_cbd_hyperparameters_with_overrides(&base, data, &norm, settings)?;
     let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
     let fit = fit_cbd(&base, data, &options)?;
     let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
-        warnings.insert(0, crate::baselines::compare::dh_not_converged(d));
+        warnings.insert(0, dh_not_converged(d));
     }
     Ok(Calibration { base, dh, hyperparameters, evidence, scheme, options, fit, warnings })
+}
+
+/// The warning for a DH fit that stopped at its iteration limit.
+pub fn dh_not_converged(d: &DhFitStats) -> String {
+    format!(
+        "DH calibration stopped at its iteration limit ({} iterations) without converging: training RMS error {:.4e} (from {:.4e}); every model built on that chain (dh, dh+krr, dh+cbd) inherits it",
+        d.iterations, d.final_rms, d.initial_rms
+    )
 }
 
 /// A fit that stops at the iteration limit, or far above the noise it was told about, is a warning

@@ -1,7 +1,7 @@
 //! `cbd bench`: fit time, iterations and peak memory against N, and the runtime's evaluation
 //! time against nominal forward kinematics and against the kernel-ridge peer, measured in one run.
 
-use crate::baselines::krr::KernelRidge;
+use crate::baselines::kernel_ridge::{fit_kernel_ridge_peer, KernelRidge};
 use crate::cli::memory::MemoryError;
 use crate::error::{Context, Error, Result};
 use crate::simulate::{configurations, rr, Sampling};
@@ -251,12 +251,10 @@ fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<Eviden
     crate::simulate::add_noise(&mut train.positions, 1e-4, 1u64.wrapping_add(0x5eed));
     let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
     let nominal = rr::nominal();
-    let t0 = Instant::now();
-    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default())?;
-    let krr_selection_seconds = t0.elapsed().as_secs_f64();
-    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge())?;
-    let krr_seconds = t0.elapsed().as_secs_f64();
-    let krr_test_mean = crate::report::stats::ErrorStats::of_positions(&krr.predict(&nominal, &test.joints), &test.positions, 2).mean;
+    let peer = fit_kernel_ridge_peer(&nominal, &train, &Default::default())?;
+    let (krr_selection_seconds, krr_seconds) = (peer.selection_seconds, peer.seconds);
+    let krr_test_mean =
+        crate::report::stats::ErrorStats::of_positions(&peer.regression.predict(&nominal, &test.joints), &test.positions, 2).mean;
     let t0 = Instant::now();
     let settings = crate::calibrate::Settings { memory_budget, ..Default::default() };
     let c = crate::calibrate::calibrate(&nominal, &train, &settings)?;

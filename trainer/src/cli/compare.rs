@@ -1,9 +1,11 @@
 //! `cbd compare`: every peer on the same data in one run — nominal, parametric DH calibration,
 //! kernel ridge (GP) regression of the residual, Calibration by Diffeomorphisms, and the hybrids.
 
-use crate::baselines::compare::{compare_peers, read_compare_files, FittedCorrection, Predictor};
+use crate::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
 use crate::data::Measurements;
-use crate::kernels::hyperparameters::SearchOptions;
+use crate::evaluation::commanded::{commanded_arm, fit_and_command, CommandedAccuracy};
+use crate::evaluation::compare::{compare_peers, read_compare_files};
+use crate::evaluation::correction::{FittedCorrection, Predictor};
 use cbd_protocol::NominalModel;
 use std::path::PathBuf;
 
@@ -51,8 +53,28 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
         let blob = calibration.fit.blob;
         let predictor: Predictor =
             Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()]));
-        Ok((predictor, note))
+        Ok(FittedCorrection::new(predictor, note))
     }
+}
+
+/// `cbd compare --commanded <robot>`: the table for the arm `cbd simulate --robot <robot>`
+/// measures, kernel ridge with hyperparameters by `search`, CbD fitted with `settings`; prints it
+/// and returns it for the JSON.
+fn commanded_table(
+    robot: &str,
+    nominal: &NominalModel,
+    train: &Measurements,
+    search: &SearchOptions,
+    settings: &crate::calibrate::Settings,
+    unit: &str,
+) -> crate::Result<CommandedAccuracy> {
+    let arm = commanded_arm(robot, nominal)?;
+    let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
+        crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
+    };
+    let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, 1000, 15)?;
+    println!("{}", c.table(unit));
+    Ok(c)
 }
 
 pub fn run(args: CompareArgs) -> crate::Result<()> {
@@ -80,7 +102,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         eprintln!("warning: {w}");
     }
     if let Some(robot) = &args.commanded {
-        crate::baselines::commanded::commanded_arm(robot, &inputs.nominal)?;
+        commanded_arm(robot, &inputs.nominal)?;
     }
     // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
     let train = &inputs.train.measurements;
@@ -90,9 +112,9 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
     )?;
     settings.threads = Some(threads);
-    let fitter = cbd_fitter(&settings);
+    let (krr, cbd) = (kernel_ridge_correction(&search), cbd_fitter(&settings));
     let comparison =
-        crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, &search, Some(&fitter)));
+        crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, Some(&krr), Some(&cbd)));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     println!("{}", comparison.table(unit));
     for w in comparison.warnings() {
@@ -110,9 +132,9 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         println!("figures written to {} ({} files)", dir.display(), files.len());
     }
     let commanded = match &args.commanded {
-        Some(robot) => Some(crate::workers::on_workers(threads, || {
-            crate::baselines::commanded::run_for_compare(robot, &inputs.nominal, train, &search, &settings, unit)
-        })?),
+        Some(robot) => {
+            Some(crate::workers::on_workers(threads, || commanded_table(robot, &inputs.nominal, train, &search, &settings, unit))?)
+        }
         None => None,
     };
     if let Some(path) = &args.json {
@@ -127,4 +149,57 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())
+}
+
+/// The commanded-accuracy table with the peers wired as `cbd compare --commanded` wires them.
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::commanded::SimulatedArm;
+
+    fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> crate::Result<Vec<u8>> {
+        let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
+        crate::calibrate::calibrate(nominal, data, &settings).map(|c| c.fit.blob)
+    }
+
+    /// Issue 15's criteria for CbD's row `best` (cbd on the RR arm, dh+cbd on the six-joint arm,
+    /// the rows `cbd compare` ranks first there): commanded error within 1.2× its forward error,
+    /// ahead of DH-only compensation.
+    fn check(c: &CommandedAccuracy, unit: &str, best: &str) {
+        eprintln!("{}", c.table(unit));
+        let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap();
+        let get = |n: &str| row(n).stats.mean;
+        for r in c.rows.iter().filter(|r| r.name.contains("cbd")) {
+            eprintln!("{}: compensation residual |k1(q) - x| {:?}", r.name, r.residual.unwrap());
+            let forward = r.forward.unwrap().mean;
+            assert!(r.stats.mean <= 1.2 * forward, "{} commanded {} vs forward {forward}", r.name, r.stats.mean);
+        }
+        assert!(get(best) < get("dh"), "{best} {} vs dh {}", get(best), get("dh"));
+        assert!(get("dh") < get("nominal"));
+        let json = c.to_json();
+        // Every forward method of `cbd compare` has a commanded row.
+        for name in ["nominal", "dh", "krr", "dh+krr", "cbd"] {
+            assert!(json["methods"][name]["mean"].is_number(), "{name}");
+        }
+    }
+
+    #[test]
+    fn commanded_accuracy_on_the_simulated_rr_arm() {
+        let arm = SimulatedArm::named("rr").unwrap();
+        let SimulatedArm::Rr(real) = &arm else { unreachable!() };
+        let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 16 }, 2));
+        let nominal = crate::simulate::rr::nominal();
+        let c = fit_and_command(&arm, &nominal, &train, &kernel_ridge_correction(&SearchOptions::default()), &cbd_fit, 1000, 7).unwrap();
+        check(&c, "m", "cbd");
+    }
+
+    #[test]
+    fn commanded_accuracy_on_the_simulated_six_joint_arm() {
+        let arm = SimulatedArm::named("six").unwrap();
+        let SimulatedArm::Six(robot) = &arm else { unreachable!() };
+        let train = robot.measure(&crate::simulate::six_joint::random_configurations(250, 22), 23);
+        let c =
+            fit_and_command(&arm, &robot.nominal, &train, &kernel_ridge_correction(&SearchOptions::default()), &cbd_fit, 1000, 7).unwrap();
+        check(&c, "mm", "dh+cbd");
+    }
 }

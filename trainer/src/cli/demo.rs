@@ -1,7 +1,7 @@
 //! `cbd demo`: the paper's RR benchmark end to end — simulate, fit, write the blob, load it
 //! with the runtime, evaluate on random configurations, compare with kernel ridge regression.
 
-use crate::baselines::krr::KernelRidge;
+use crate::baselines::kernel_ridge::fit_kernel_ridge_peer;
 use crate::cli::memory::MemoryError;
 use crate::error::{Context, Error, Result};
 use crate::report::stats::ErrorStats;
@@ -9,7 +9,6 @@ use crate::simulate::{configurations, rr, Sampling};
 
 use serde::Serialize;
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
@@ -148,10 +147,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         joints.chunks_exact(2).flat_map(|q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
     };
     // The peer with its own hyperparameters (its GP marginal likelihood on the same rows).
-    let t0 = Instant::now();
-    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default())?;
-    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge())?;
-    let krr_fit_seconds = t0.elapsed().as_secs_f64();
+    let peer = fit_kernel_ridge_peer(&nominal, &train, &Default::default())?;
+    let (krr, krr_fit_seconds) = (&peer.regression, peer.seconds);
 
     let report = DemoReport {
         nominal: ErrorStats::of_positions(&nominal_at(&test.joints), &test.positions, 2),

@@ -99,7 +99,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     settings.threads = Some(threads);
     let d = crate::workers::on_workers(threads, || {
         let fitter = crate::cli::compare::cbd_fitter(&settings);
-        let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
+        let cbd: Option<crate::evaluation::correction::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
         diagnose(&nominal, &data, test.as_ref(), cbd, &options)
     })?;
     let model_file = match &args.model.model {

@@ -15,8 +15,8 @@ pub mod report;
 pub mod selection;
 pub mod structure;
 
-use crate::baselines::compare::{fit_on, CorrectionFitter};
 use crate::data::Measurements;
+use crate::evaluation::correction::{fit_on, CorrectionFitter};
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 pub use error::DiagnoseError;
@@ -146,7 +146,7 @@ fn cross_validated_rms(fit: CorrectionFitter, base: &NominalModel, train: &Measu
     let (mut sse, mut count) = (0.0, 0usize);
     for fold in 0..folds {
         let (rest, held) = train.fold(folds, fold);
-        let (predict, _) = fit_on(fit, base, &rest)?;
+        let predict = fit_on(fit, base, &rest)?.predict;
         sse += predict(&held.joints).iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         count += held.len();
     }
@@ -525,9 +525,9 @@ fn held_out_table(
     push("nominal + effects", predict(with_effects, &test.joints, m));
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
-        let (on_effects, _) = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?;
+        let on_effects = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?.predict;
         push("nominal + effects + CbD", on_effects(&test.joints));
-        let (plain, _) = fit(given, train).map_err(DiagnoseError::on_nominal)?;
+        let plain = fit(given, train).map_err(DiagnoseError::on_nominal)?.predict;
         push("nominal + CbD", plain(&test.joints));
     }
     Ok(table)

@@ -29,4 +29,4 @@ pub fn default_joint_kernel(nominal: &NominalModel) -> JointKernel {
     JointKernel { gamma: 1.0, axes }
 }
 pub mod evidence;
-pub mod hyperparameters;
+pub(crate) mod joint_pair_table;

@@ -1,39 +1,64 @@
 //! The quadratic part of energy (16) and the linearised model around P0 = 0.
 
 use crate::flow::ControlPoints;
-use cbd_protocol::MAX_JOINTS;
+use cbd_protocol::{MAX_JOINTS, MAX_TASK_DIM};
 use cbd_runtime::kernel::{joint_kernel_from_features, read_features, task_kernel};
 use faer::Mat;
 
-/// Blocks (J_i J_jᵀ) K_V(x_i, x_j) and K_W(k0_i, k0_j) I of the initial state, combined with signs:
-/// `joint_sign` · Dk0 K_V Dk0ᵀ + K_W. Rows and columns i·m + a.
-fn combined(cp: &ControlPoints, joint_sign: f64) -> Mat<f64> {
-    let dims = cp.dims;
-    let (m, n, len, count) = (dims.m, dims.n, dims.state_len(), cp.len());
-    let s = |i: usize| &cp.initial[i * len..(i + 1) * len];
-    let mut out = Mat::zeros(count * m, count * m);
-    let mut g = [0.0; MAX_JOINTS];
-    let mut gw = [0.0; 3];
-    let features = |i: usize| read_features(&cp.features, n, i);
-    // Column by column (contiguous); K_V from the feature table, bit-identical to `joint_kernel`.
-    for j in 0..count {
-        let fj = features(j);
-        for i in 0..count {
-            let kv = joint_kernel_from_features(&cp.joint_kernel, &features(i), &fj, &mut g);
-            let mut diff = [0.0; 3];
-            for c in 0..m {
-                diff[c] = s(i)[c] - s(j)[c];
-            }
-            let kw = task_kernel(&cp.task_kernel, &diff, m, &mut gw);
-            for b in 0..m {
-                for a in 0..m {
-                    let jj: f64 = (0..n).map(|d| s(i)[m + a * n + d] * s(j)[m + b * n + d]).sum();
-                    out[(i * m + a, j * m + b)] = joint_sign * kv * jj + if a == b { kw } else { 0.0 };
+/// J_i J_jᵀ (m × m, row-major) of two m × n Jacobians stored row-major: Σ_d J_i[a, d] J_j[b, d].
+pub(crate) fn jacobian_outer(ji: &[f64], jj: &[f64], m: usize, n: usize, out: &mut [f64]) {
+    for a in 0..m {
+        for b in 0..m {
+            out[a * m + b] = (0..n).map(|d| ji[a * n + d] * jj[b * n + d]).sum();
+        }
+    }
+}
+
+/// K_lin = γ_V Dk0 K̃_V Dk0ᵀ + γ_W K̃_W I (docs/DESIGN.md §3), the one assembly: block (i, j) is
+/// (γ_V k_V) J_i J_jᵀ + (γ_W k_W) I, rows and columns i·m + a, with `pair(i, j, jj)` giving
+/// (k_V, k_W) of rows i ≥ j and writing J_i J_jᵀ into `jj`; the upper blocks are the lower ones
+/// mirrored (every kernel here is symmetric to the bit).
+pub(crate) fn assemble_k_lin(
+    count: usize,
+    m: usize,
+    gamma_v: f64,
+    gamma_w: f64,
+    mut pair: impl FnMut(usize, usize, &mut [f64]) -> (f64, f64),
+) -> Mat<f64> {
+    let mut k = Mat::<f64>::zeros(count * m, count * m);
+    let mut jj = [0.0; MAX_TASK_DIM * MAX_TASK_DIM];
+    for i in 0..count {
+        for j in 0..=i {
+            let (kv, kw) = pair(i, j, &mut jj[..m * m]);
+            for a in 0..m {
+                for b in 0..m {
+                    let v = gamma_v * kv * jj[a * m + b] + if a == b { gamma_w * kw } else { 0.0 };
+                    k[(i * m + a, j * m + b)] = v;
+                    k[(j * m + b, i * m + a)] = v;
                 }
             }
         }
     }
-    out
+    k
+}
+
+/// `joint_sign` · Dk0 K_V Dk0ᵀ + K_W at the control points' initial state, the kernels the
+/// runtime's (`joint_kernel_from_features`, `task_kernel`; K_V carries γ and the flow's sign).
+fn combined(cp: &ControlPoints, joint_sign: f64) -> Mat<f64> {
+    let dims = cp.dims;
+    let (m, n, len) = (dims.m, dims.n, dims.state_len());
+    let s = |i: usize| &cp.initial[i * len..(i + 1) * len];
+    let features = |i: usize| read_features(&cp.features, n, i);
+    let (mut g, mut gw) = ([0.0; MAX_JOINTS], [0.0; MAX_TASK_DIM]);
+    assemble_k_lin(cp.len(), m, joint_sign, 1.0, |i, j, jj| {
+        let kv = joint_kernel_from_features(&cp.joint_kernel, &features(i), &features(j), &mut g);
+        let mut diff = [0.0; MAX_TASK_DIM];
+        for c in 0..m {
+            diff[c] = s(i)[c] - s(j)[c];
+        }
+        jacobian_outer(&s(i)[m..m + m * n], &s(j)[m..m + m * n], m, n, jj);
+        (kv, task_kernel(&cp.task_kernel, &diff, m, &mut gw))
+    })
 }
 
 /// K_lin = Dk0 K_V Dk0ᵀ + K_W: energy (16)'s regulariser is ½ P0ᵀ K_lin P0 (`cp.joint_kernel`
@@ -79,6 +104,49 @@ mod tests {
             let gap = (0..18).flat_map(|r| (0..18).map(move |c| (r, c))).fold(0.0f64, |w, (r, c)| w.max((reg[(r, c)] - lin[(r, c)]).abs()));
             let expect_equal = law == MomentumLaw::Hamiltonian;
             assert_eq!(gap < 1e-12, expect_equal, "{law:?}: |K_lin − response| = {gap:e}");
+        }
+    }
+
+    /// The one K_lin assembly is the runtime's kernel evaluation to the last bit: every entry equals
+    /// s·K_V(x_i, x_j) (J_i J_jᵀ)_ab + δ_ab K_W(k0_i, k0_j) with `joint_kernel` and `task_kernel`
+    /// called directly, the mirrored upper blocks included.
+    #[test]
+    fn k_lin_is_the_runtimes_kernel_evaluation_to_the_last_bit() {
+        use cbd_runtime::kernel::joint_kernel;
+        use cbd_runtime::kinematics::forward_kinematics;
+        let robot = crate::simulate::six_joint::SixJointRobot::ur5_like(3);
+        let (count, n, m) = (7, 6, 3);
+        let points = crate::simulate::six_joint::random_configurations(count, 4);
+        let norm = Normalisation { task_offset: [0.1, -0.2, 0.3], task_scale: 0.8 };
+        let axes = [0.3, 1.1, 0.7, 2.0, 0.05, 0.4].map(|b| JointKernelAxis::Periodic { b });
+        let kernel = JointKernel { gamma: 0.7, axes: heapless::Vec::from_slice(&axes).unwrap() };
+        for law in [MomentumLaw::Hamiltonian, MomentumLaw::WithDivergence] {
+            let integrator = Integrator { method: IntegratorMethod::Euler, steps: 1 };
+            let cp = ControlPoints::new(&robot.nominal, &norm, points.clone(), kernel.clone(), TaskKernel { width: 1.3 }, law, integrator);
+            let k = regulariser_matrix(&cp);
+            let (mut g, mut gw) = ([0.0; MAX_JOINTS], [0.0; MAX_TASK_DIM]);
+            for i in 0..count {
+                for j in 0..count {
+                    let (xi, xj) = (&points[i * n..(i + 1) * n], &points[j * n..(j + 1) * n]);
+                    let (ki, kj) = (
+                        forward_kinematics(&robot.nominal, xi).normalised(&norm),
+                        forward_kinematics(&robot.nominal, xj).normalised(&norm),
+                    );
+                    let kv = joint_kernel(&cp.joint_kernel, xi, xj, &mut g);
+                    let mut diff = [0.0; MAX_TASK_DIM];
+                    for c in 0..m {
+                        diff[c] = ki.position[c] - kj.position[c];
+                    }
+                    let kw = task_kernel(&cp.task_kernel, &diff, m, &mut gw);
+                    for a in 0..m {
+                        for b in 0..m {
+                            let jj: f64 = (0..n).map(|d| ki.jacobian[a][d] * kj.jacobian[b][d]).sum();
+                            let expected = law.joint_field_sign() * kv * jj + if a == b { kw } else { 0.0 };
+                            assert_eq!(k[(i * m + a, j * m + b)].to_bits(), expected.to_bits(), "{law:?}: rows {i} {j}, block ({a}, {b})");
+                        }
+                    }
+                }
+            }
         }
     }
 }

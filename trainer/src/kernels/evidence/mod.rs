@@ -196,7 +196,7 @@ pub fn choose_cbd_hyperparameters(
     let scale = norm.task_scale;
     let joint_axes = (0..n)
         .map(|d| {
-            if table.periodic[d] {
+            if table.joint.periodic[d] {
                 JointKernelAxis::Periodic { b: theta.log_widths[d].exp() }
             } else {
                 JointKernelAxis::Gaussian { width: theta.log_widths[d].exp() }

@@ -2,7 +2,6 @@
 //! residual's variance, the mean |Dk0|² and the joints' spread.
 
 use super::table::{PairTable, Theta};
-use cbd_protocol::MAX_JOINTS;
 
 /// Scales of the data that set the starts and the bounds (normalised units, logs where named so).
 pub(super) struct DataScales {
@@ -17,30 +16,21 @@ pub(super) struct DataScales {
 
 impl DataScales {
     pub fn of(table: &PairTable) -> Self {
-        let (n, m) = (table.n, table.m);
+        let m = table.m;
         let var_r = (table.residual.iter().map(|v| v * v).sum::<f64>() / table.residual.len() as f64).max(1e-30);
         let count = table.count;
         let mean_jj =
             (0..count).map(|i| table.jj[(i * (i + 1) / 2 + i) * m * m..][..m * m].iter().step_by(m + 1).sum::<f64>()).sum::<f64>()
                 / (count * m) as f64;
-        let mut spread = [0.0; MAX_JOINTS];
-        let pairs = table.dist2.len() as f64;
-        for f in table.axis_terms.chunks_exact(n.max(1)) {
-            for d in 0..n {
-                spread[d] += -f[d] / pairs;
-            }
-        }
-        let total: f64 = spread[..n].iter().sum::<f64>().max(1e-12);
-        // b Σ spread = ln 2 (periodic) and Σ spread / ℓ² = ln 2 (Gaussian): typical pairs at kernel ½.
-        let log_b0 = (2f64.ln() / total).ln();
-        let log_l0 = (total / 2f64.ln()).sqrt().ln();
+        // Typical pairs (the mean over every pair) at kernel ½.
+        let (log_b0, log_l0) = table.joint.half_kernel_log_widths(0..table.dist2.len());
         let gamma_v0 = (0.5 * var_r / mean_jj.max(1e-30)).ln();
         DataScales { var_r, gamma_v0, log_b0, log_l0 }
     }
 
     /// Joint widths shifted by `shift` in log b (ℓ moves by half as much the other way).
     fn widths(&self, table: &PairTable, shift: f64) -> Vec<f64> {
-        (0..table.n).map(|d| if table.periodic[d] { self.log_b0 + shift } else { self.log_l0 - 0.5 * shift }).collect()
+        (0..table.n).map(|d| if table.joint.periodic[d] { self.log_b0 + shift } else { self.log_l0 - 0.5 * shift }).collect()
     }
 
     /// The four starts: balanced, smooth, nearly noise-free, rough.
@@ -89,7 +79,7 @@ impl DataScales {
         let mut lower = vec![0.0; n + 4];
         let mut upper = vec![0.0; n + 4];
         for d in 0..n {
-            (lower[d], upper[d]) = if table.periodic[d] { (ln(1e-5), ln(1e3)) } else { (log_l0 - ln(1e3), log_l0 + ln(1e3)) };
+            (lower[d], upper[d]) = if table.joint.periodic[d] { (ln(1e-5), ln(1e3)) } else { (log_l0 - ln(1e3), log_l0 + ln(1e3)) };
         }
         (lower[n], upper[n]) = (gamma_v0 - ln(1e12), gamma_v0 + ln(1e8));
         (lower[n + 1], upper[n + 1]) = (ln(1e-2), ln(1e3));

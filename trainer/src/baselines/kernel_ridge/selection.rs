@@ -8,13 +8,14 @@
 //! coordinate (pattern) search with shrinking steps. Only the rows given are used: pass
 //! training rows, never test rows.
 //!
-//! For [`crate::baselines::krr::KernelRidge::fit`], predictions depend only on ridge / γ, so
+//! For [`super::KernelRidge::fit`], predictions depend only on ridge / γ, so
 //! `KernelRidge::fit(nominal, data, h.kernel.clone(), h.ridge())` is the GP posterior mean
-//! whatever the units of `data`.
+//! whatever the units of `data` ([`super::fit_kernel_ridge_peer`] does both).
 
 #[cfg(test)]
-use crate::baselines::krr::kernel_matrix;
+use super::fit::kernel_matrix;
 use crate::data::Measurements;
+use crate::kernels::joint_pair_table::JointPairTable;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
@@ -23,7 +24,7 @@ use faer::{linalg::solvers::Solve, Mat, Side};
 #[derive(Debug, Clone, PartialEq)]
 pub struct SearchOptions {
     /// Positions are divided by this before the GP sees them; `None`: the scale of
-    /// [`super::normalisation_of`] (RMS distance of the measured positions from their mean),
+    /// [`crate::kernels::normalisation_of`] (RMS distance of the measured positions from their mean),
     /// the same normalisation the CbD model uses.
     pub task_scale: Option<f64>,
     /// After the shared-width search, refine each joint's width separately.
@@ -76,7 +77,7 @@ pub struct Hyperparameters {
 }
 
 impl Hyperparameters {
-    /// Ridge for [`crate::baselines::krr::KernelRidge::fit`] with `self.kernel`: σ².
+    /// Ridge for [`super::KernelRidge::fit`] with `self.kernel`: σ².
     pub fn ridge(&self) -> f64 {
         self.noise_sigma * self.noise_sigma
     }
@@ -163,8 +164,9 @@ fn kernel_of(template: &[bool], theta: &[f64], gamma: f64) -> JointKernel {
     JointKernel { gamma, axes: heapless::Vec::from_slice(&axes).expect("at most MAX_JOINTS axes") }
 }
 
-/// Chooses the joint-kernel widths, γ and σ for the residual of `nominal` on `data`.
-pub fn choose_hyperparameters(
+/// Kernel ridge's own hyperparameters: the joint-kernel widths, γ and σ that maximise its GP's
+/// marginal likelihood on the residual of `nominal` on `data`.
+pub fn choose_kernel_ridge_hyperparameters(
     nominal: &NominalModel,
     data: &Measurements,
     options: &SearchOptions,
@@ -181,11 +183,11 @@ pub fn choose_hyperparameters(
     };
     let used = data.subset(&rows);
     let nominal_pos: Vec<[f64; 3]> = (0..used.len()).map(|i| forward_kinematics(nominal, used.joints(i)).position).collect();
-    let task_scale = options.task_scale.unwrap_or_else(|| super::normalisation_of(data).task_scale);
+    let task_scale = options.task_scale.unwrap_or_else(|| crate::kernels::normalisation_of(data).task_scale);
     let residual = Mat::from_fn(used.len(), m, |i, c| (used.position(i)[c] - nominal_pos[i][c]) / task_scale);
-    let template: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
-    let init = data_start(&used, &template, options);
-    let gp = ResidualGp::new(&used, template, residual);
+    let table = JointPairTable::new((0..n).map(|d| nominal.is_revolute(d)).collect(), &used);
+    let init = data_start(&table, options);
+    let gp = ResidualGp { table, residual, evaluations: std::cell::Cell::new(0) };
     let bounds = Bounds {
         width: (options.b_range.0.ln(), options.b_range.1.ln()),
         noise: (options.noise_ratio_range.0.ln(), options.noise_ratio_range.1.ln()),
@@ -196,7 +198,7 @@ pub fn choose_hyperparameters(
     pattern_search(&gp, &mut point, &bounds, options);
     let gamma = point.value.1;
     Ok(Hyperparameters {
-        kernel: kernel_of(&gp.template, &point.theta, gamma),
+        kernel: kernel_of(&gp.table.periodic, &point.theta, gamma),
         noise_sigma: (point.log_lambda.exp() * gamma).sqrt(),
         task_scale,
         log_marginal_likelihood: point.value.0,
@@ -205,67 +207,36 @@ pub fn choose_hyperparameters(
     })
 }
 
-/// Log widths where typical pairs of rows have kernel ½: from the mean over pairs of (1 − cos Δ_d)
-/// (periodic) or Δ_d² / 2 (Gaussian), unless the options give a start.
-fn data_start(used: &Measurements, template: &[bool], options: &SearchOptions) -> Vec<f64> {
-    let n = template.len();
-    let mut spread = vec![0.0; n];
-    let pairs = used.len().min(200);
-    for i in 0..pairs {
-        let (a, b) = (used.joints(i), used.joints((i * 7919 + 1) % used.len()));
-        for d in 0..n {
-            let delta = a[d] - b[d];
-            spread[d] += if template[d] { 1.0 - delta.cos() } else { 0.5 * delta * delta } / pairs as f64;
-        }
-    }
-    let total: f64 = spread.iter().sum::<f64>().max(1e-12);
-    // b Σ_d spread_d = ln 2 (periodic); Σ_d spread_d / ℓ² = ln 2 (Gaussian): same shared factor.
-    let b0 = options.initial_b.unwrap_or(2f64.ln() / total);
-    let w0 = options.initial_width.unwrap_or((total / 2f64.ln()).sqrt());
-    template.iter().map(|&p| if p { b0.ln() } else { w0.ln() }).collect()
+/// Log widths where typical pairs of rows have kernel ½ ([`JointPairTable::half_kernel_log_widths`]
+/// over up to 200 pairs (i, 7919 i + 1 mod N)), unless the options give a start.
+fn data_start(table: &JointPairTable, options: &SearchOptions) -> Vec<f64> {
+    let count = table.count;
+    let pairs = (0..count.min(200)).map(|i| JointPairTable::pair_index(i, (i * 7919 + 1) % count));
+    let (log_b0, log_l0) = table.half_kernel_log_widths(pairs);
+    let log_b0 = options.initial_b.map_or(log_b0, f64::ln);
+    let log_l0 = options.initial_width.map_or(log_l0, f64::ln);
+    table.periodic.iter().map(|&p| if p { log_b0 } else { log_l0 }).collect()
 }
 
 /// The GP on the residual for one joint kernel, its profiled marginal likelihood counted per call.
 struct ResidualGp {
-    template: Vec<bool>,
-    count: usize,
-    /// The kernel's exponent is Σ_d w_d f_d(Δ_d) with w_d = b_d or 1/ℓ_d²: f_d per pair (lower
-    /// triangle, row-major), so each evaluation costs one exp per pair.
-    terms: Vec<f64>,
+    /// The kernel's exponent per pair of rows and axis: each evaluation costs one exp per pair.
+    table: JointPairTable,
     residual: Mat<f64>,
     evaluations: std::cell::Cell<usize>,
 }
 
 impl ResidualGp {
-    fn new(used: &Measurements, template: Vec<bool>, residual: Mat<f64>) -> Self {
-        let (n, count) = (template.len(), used.len());
-        let mut terms = vec![0.0; n * count * (count + 1) / 2];
-        let mut at = 0;
-        for i in 0..count {
-            let xi = used.joints(i);
-            for j in 0..=i {
-                let xj = used.joints(j);
-                for d in 0..n {
-                    let delta = xi[d] - xj[d];
-                    terms[at * n + d] = if template[d] { delta.cos() - 1.0 } else { -0.5 * delta * delta };
-                }
-                at += 1;
-            }
-        }
-        ResidualGp { template, count, terms, residual, evaluations: std::cell::Cell::new(0) }
-    }
-
     /// (log marginal likelihood, γ) at log widths `theta` and log noise ratio `log_lambda`.
     fn eval(&self, theta: &[f64], log_lambda: f64) -> Option<(f64, f64)> {
         self.evaluations.set(self.evaluations.get() + 1);
-        let n = self.template.len();
-        let w: Vec<f64> = theta.iter().zip(&self.template).map(|(t, &p)| if p { t.exp() } else { (-2.0 * t).exp() }).collect();
-        let mut c = Mat::<f64>::zeros(self.count, self.count);
+        let count = self.table.count;
+        let w = self.table.axis_weights(theta);
+        let mut c = Mat::<f64>::zeros(count, count);
         let mut at = 0;
-        for i in 0..self.count {
+        for i in 0..count {
             for j in 0..=i {
-                let f = &self.terms[at * n..at * n + n];
-                let v = f.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>().exp();
+                let v = self.table.unit_kernel(at, &w);
                 c[(i, j)] = v;
                 c[(j, i)] = v;
                 at += 1;
@@ -294,7 +265,10 @@ struct SearchPoint {
 fn grid_search(gp: &ResidualGp, init: &[f64], bounds: &Bounds, half_width: i32) -> Option<SearchPoint> {
     let (lo_b, hi_b) = bounds.width;
     let shift = |k: f64| -> Vec<f64> {
-        init.iter().zip(&gp.template).map(|(t, &p)| if p { (t + k).clamp(lo_b, hi_b) } else { (t - 0.5 * k).clamp(lo_b, hi_b) }).collect()
+        init.iter()
+            .zip(&gp.table.periodic)
+            .map(|(t, &p)| if p { (t + k).clamp(lo_b, hi_b) } else { (t - 0.5 * k).clamp(lo_b, hi_b) })
+            .collect()
     };
     let mut best: Option<SearchPoint> = None;
     for k in -half_width..=half_width {
@@ -314,7 +288,7 @@ fn grid_search(gp: &ResidualGp, init: &[f64], bounds: &Bounds, half_width: i32) 
 /// Compass search from `point` within the evaluation budget: λ and the shared width first, then
 /// (per axis) every axis alone; steps from a factor 2 halving down to 5 %.
 fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, options: &SearchOptions) {
-    let n = gp.template.len();
+    let n = gp.table.periodic.len();
     let (lo_b, hi_b) = bounds.width;
     let budget = options.max_evaluations.max(4);
     // Coordinates: 0 = λ, 1 = shared width (all axes), 2.. = single axes (second phase).
@@ -334,7 +308,7 @@ fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, opt
                         0 => ll = (ll + dir * step).clamp(bounds.noise.0, bounds.noise.1),
                         1 => th
                             .iter_mut()
-                            .zip(&gp.template)
+                            .zip(&gp.table.periodic)
                             .for_each(|(t, &p)| *t = (*t + if p { dir * step } else { -0.5 * dir * step }).clamp(lo_b, hi_b)),
                         a => th[a - 2] = (th[a - 2] + dir * step).clamp(lo_b, hi_b),
                     }
@@ -359,8 +333,8 @@ fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, opt
 
 #[cfg(test)]
 mod tests {
+    use super::super::KernelRidge;
     use super::*;
-    use crate::baselines::krr::KernelRidge;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -401,7 +375,7 @@ mod tests {
     fn recovers_the_generating_hyperparameters() {
         let (nominal, train, test) = gp_sample(300, 11);
         let opts = SearchOptions { task_scale: Some(1.0), ..SearchOptions::default() };
-        let h = choose_hyperparameters(&nominal, &train, &opts).unwrap();
+        let h = choose_kernel_ridge_hyperparameters(&nominal, &train, &opts).unwrap();
         let bs: Vec<f64> = h
             .kernel
             .axes
@@ -434,9 +408,12 @@ mod tests {
     #[test]
     fn profiled_value_matches_the_full_likelihood() {
         let (nominal, train, _) = gp_sample(60, 5);
-        let h =
-            choose_hyperparameters(&nominal, &train, &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() })
-                .unwrap();
+        let h = choose_kernel_ridge_hyperparameters(
+            &nominal,
+            &train,
+            &SearchOptions { task_scale: Some(1.0), max_evaluations: 30, ..Default::default() },
+        )
+        .unwrap();
         let residual =
             Mat::from_fn(train.len(), 2, |i, c| train.position(i)[c] - forward_kinematics(&nominal, train.joints(i)).position[c]);
         let mut k = kernel_matrix(&h.kernel, &train.joints, &train.joints, 2);

@@ -7,13 +7,13 @@
 //! (command the nominal IK of x', x' ← x' + x − krr(q), five times), (c') the same on the
 //! DH-calibrated chain with kernel ridge on its residual (`dh+krr`; for the planar arm its
 //! DH form), (d) CbD compensation (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
-//! target: q* moved by up to 0.05 rad per joint (a controller's previous command).
+//! target: q* moved by up to 0.05 rad per joint (a controller's previous command). The caller
+//! passes the kernel-ridge correction and CbD's fit in ([`fit_and_command`]).
 
-use super::dh_calibration::{calibrate_dh, DhCalibrationOptions};
-use super::krr::KernelRidge;
+use super::correction::{CorrectionFitter, Predictor};
+use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use crate::data::Measurements;
 use crate::error::Error;
-use crate::kernels::hyperparameters::{choose_hyperparameters, SearchOptions};
 use crate::nominal::planar::as_planar_in_frame;
 use crate::report::stats::ErrorStats;
 use crate::simulate::{rr::RealRr, six_joint::SixJointRobot};
@@ -133,9 +133,10 @@ pub struct Fitted<'a> {
     pub dh: Option<&'a NominalModel>,
     /// Planar parametric calibration (RR) — or `None`.
     pub planar: Option<PlanarCalibration>,
-    pub krr: Option<&'a KernelRidge>,
+    /// Kernel ridge fitted on the nominal model's residual: its corrected positions.
+    pub krr: Option<&'a Predictor>,
     /// Kernel ridge fitted on the residual of a DH-calibrated chain, with that chain.
-    pub dh_krr: Option<(&'a NominalModel, &'a KernelRidge)>,
+    pub dh_krr: Option<(&'a NominalModel, &'a Predictor)>,
     /// CbD's blobs by row name: `cbd` (fitted on the nominal model), `dh+cbd` (on the DH-calibrated chain).
     pub cbd: Vec<(&'a str, &'a [u8])>,
 }
@@ -267,13 +268,13 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         }
         // (c) kernel ridge by pose redefinition: x' ← x' + (x − krr(q)), on the nominal model and
         // (c') on the DH-calibrated chain.
-        let pose_redefinition = |model: &NominalModel, krr: &KernelRidge, ik: &dyn Fn(&[f64], &[f64]) -> (Vec<f64>, bool)| {
+        let pose_redefinition = |krr: &Predictor, ik: &dyn Fn(&[f64], &[f64]) -> (Vec<f64>, bool)| {
             let mut shifted = x.clone();
             let mut q = q_nominal.clone();
             let mut ok = true;
             for _ in 0..POSE_REDEFINITION_ROUNDS {
                 (q, ok) = ik(&shifted, &q);
-                let predicted = krr.evaluate(model, &q).position;
+                let predicted = krr(&q);
                 for (s, (target, p)) in shifted.iter_mut().zip(x.iter().zip(predicted)) {
                     *s += target - p;
                 }
@@ -281,17 +282,17 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
             (q, ok)
         };
         if let Some(krr) = fitted.krr {
-            let (q, ok) = pose_redefinition(nominal, krr, &|target, hint| nominal_ik(nominal, target, hint));
+            let (q, ok) = pose_redefinition(krr, &|target, hint| nominal_ik(nominal, target, hint));
             record(2, &q, ok);
         }
         if let Some((model, krr)) = fitted.dh_krr {
             // The chain's own inverse: the planar arm's closed form in its frame, else the DH chain's.
             let (q, ok) = match &fitted.planar {
-                Some(p) if fitted.dh.is_none() => pose_redefinition(model, krr, &|target, hint| match p.inverse(target, hint) {
+                Some(p) if fitted.dh.is_none() => pose_redefinition(krr, &|target, hint| match p.inverse(target, hint) {
                     Some(q) => (q.to_vec(), true),
                     None => (hint.to_vec(), false),
                 }),
-                _ => pose_redefinition(model, krr, &|target, hint| nominal_ik(model, target, hint)),
+                _ => pose_redefinition(krr, &|target, hint| nominal_ik(model, target, hint)),
             };
             record(3, &q, ok);
         }
@@ -320,15 +321,15 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
     Ok(CommandedAccuracy { targets: count, rows })
 }
 
-/// Fits every method on `train` (DH or the planar parametric fit, kernel ridge with evidence
-/// hyperparameters on the nominal model and on the DH-calibrated chain — for the planar arm its DH
+/// Fits every method on `train` (DH or the planar parametric fit, the kernel-ridge correction
+/// `krr_fit` on the nominal model and on the DH-calibrated chain — for the planar arm its DH
 /// form, as `cbd compare` — CbD through `cbd_fit`, which returns a blob, on the nominal model and on
 /// the DH-calibrated chain) and runs [`commanded_accuracy`].
 pub fn fit_and_command(
     arm: &SimulatedArm,
     nominal: &NominalModel,
     train: &Measurements,
-    search: &SearchOptions,
+    krr_fit: CorrectionFitter,
     cbd_fit: &dyn Fn(&NominalModel, &Measurements) -> crate::Result<Vec<u8>>,
     count: usize,
     seed: u64,
@@ -338,9 +339,7 @@ pub fn fit_and_command(
         NominalModel::PlanarChain { .. } => None,
     };
     let planar = PlanarCalibration::fit(nominal, train);
-    let krr_on = |model: &NominalModel| {
-        choose_hyperparameters(model, train, search).ok().and_then(|h| KernelRidge::fit(model, train, h.kernel.clone(), h.ridge()).ok())
-    };
+    let krr_on = |model: &NominalModel| krr_fit(model, train).ok().map(|fitted| fitted.predict);
     let krr = krr_on(nominal);
     // The chain `cbd compare`'s dh+krr row corrects: the DH fit, planar arms in their DH form.
     let dh_for_krr = match &dh {
@@ -363,8 +362,6 @@ pub fn fit_and_command(
     commanded_accuracy(arm, &fitted, count, seed)
 }
 
-/// `cbd compare --commanded <robot>`: the table for the arm `cbd simulate --robot <robot>`
-/// measures, CbD fitted with `settings`; prints it and returns it for the JSON.
 /// The simulated arm `--commanded robot` names, checked against the model file's arm: `compare`
 /// calls it before any fit (an unknown name was refused only after all six fits).
 pub fn commanded_arm(robot: &str, nominal: &NominalModel) -> crate::Result<SimulatedArm> {
@@ -379,71 +376,9 @@ pub fn commanded_arm(robot: &str, nominal: &NominalModel) -> crate::Result<Simul
     Ok(arm)
 }
 
-pub fn run_for_compare(
-    robot: &str,
-    nominal: &NominalModel,
-    train: &Measurements,
-    search: &SearchOptions,
-    settings: &crate::calibrate::Settings,
-    unit: &str,
-) -> crate::Result<CommandedAccuracy> {
-    let arm = commanded_arm(robot, nominal)?;
-    let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
-        crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
-    };
-    let c = fit_and_command(&arm, nominal, train, search, &cbd_fit, 1000, 15)?;
-    println!("{}", c.table(unit));
-    Ok(c)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> crate::Result<Vec<u8>> {
-        let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
-        crate::calibrate::calibrate(nominal, data, &settings).map(|c| c.fit.blob)
-    }
-
-    /// Issue 15's criteria for CbD's row `best` (cbd on the RR arm, dh+cbd on the six-joint arm,
-    /// the rows `cbd compare` ranks first there): commanded error within 1.2× its forward error,
-    /// ahead of DH-only compensation.
-    fn check(c: &CommandedAccuracy, unit: &str, best: &str) {
-        eprintln!("{}", c.table(unit));
-        let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap();
-        let get = |n: &str| row(n).stats.mean;
-        for r in c.rows.iter().filter(|r| r.name.contains("cbd")) {
-            eprintln!("{}: compensation residual |k1(q) - x| {:?}", r.name, r.residual.unwrap());
-            let forward = r.forward.unwrap().mean;
-            assert!(r.stats.mean <= 1.2 * forward, "{} commanded {} vs forward {forward}", r.name, r.stats.mean);
-        }
-        assert!(get(best) < get("dh"), "{best} {} vs dh {}", get(best), get("dh"));
-        assert!(get("dh") < get("nominal"));
-        let json = c.to_json();
-        // Every forward method of `cbd compare` has a commanded row.
-        for name in ["nominal", "dh", "krr", "dh+krr", "cbd"] {
-            assert!(json["methods"][name]["mean"].is_number(), "{name}");
-        }
-    }
-
-    #[test]
-    fn commanded_accuracy_on_the_simulated_rr_arm() {
-        let arm = SimulatedArm::named("rr").unwrap();
-        let SimulatedArm::Rr(real) = &arm else { unreachable!() };
-        let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 16 }, 2));
-        let nominal = crate::simulate::rr::nominal();
-        let c = fit_and_command(&arm, &nominal, &train, &SearchOptions::default(), &cbd_fit, 1000, 7).unwrap();
-        check(&c, "m", "cbd");
-    }
-
-    #[test]
-    fn commanded_accuracy_on_the_simulated_six_joint_arm() {
-        let arm = SimulatedArm::named("six").unwrap();
-        let SimulatedArm::Six(robot) = &arm else { unreachable!() };
-        let train = robot.measure(&crate::simulate::six_joint::random_configurations(250, 22), 23);
-        let c = fit_and_command(&arm, &robot.nominal, &train, &SearchOptions::default(), &cbd_fit, 1000, 7).unwrap();
-        check(&c, "mm", "dh+cbd");
-    }
 
     #[test]
     fn the_planar_parametric_fit_recovers_an_exact_planar_arm() {

@@ -1,0 +1,272 @@
+//! Every method on the same data: nominal, parametric DH calibration, and — through hooks the
+//! caller fills — the kernel-ridge peer of the residual, Calibration by Diffeomorphisms, and the
+//! hybrids DH + KRR and DH + CbD.
+
+use super::correction::{fit_on, CorrectionFitter, FittedCorrection, Predictor};
+use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
+use crate::calibrate::dh_not_converged;
+use crate::data::Measurements;
+use crate::data::import_error::ImportError;
+use crate::error::Error;
+use crate::report::stats::ErrorStats;
+use cbd_protocol::NominalModel;
+use std::time::Instant;
+
+/// One method's row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeerResult {
+    /// `nominal`, `dh`, `krr`, `dh+krr`, `cbd`, `dh+cbd`.
+    pub name: String,
+    /// Test-row errors (model length unit).
+    pub stats: ErrorStats,
+    /// Training-row errors.
+    pub train_stats: ErrorStats,
+    pub fit_seconds: f64,
+    /// Position error of every test row (for plots).
+    pub test_errors: Vec<f64>,
+    /// Chosen hyperparameters, DH fit summary, or why the method failed.
+    pub note: String,
+    /// The chosen hyperparameters for the JSON (the kernel-ridge rows).
+    pub hyperparameters: Option<serde_json::Value>,
+}
+
+/// Everything [`compare_peers`] found, besides the table.
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    pub rows: Vec<PeerResult>,
+    pub dh: Option<DhFitStats>,
+}
+
+impl Comparison {
+    /// The `cbd compare --json` shape: `{"methods": {name: {mean, median, p99, max, fit_seconds,
+    /// train_mean, note}}, "dh": {...}, "hyperparameters": {"krr": ..., "dh+krr": ...}}`.
+    pub fn to_json(&self) -> serde_json::Value {
+        use serde_json::json;
+        let mut methods = serde_json::Map::new();
+        for r in &self.rows {
+            methods.insert(
+                r.name.clone(),
+                json!({
+                    "mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max,
+                    "fit_seconds": r.fit_seconds, "train_mean": r.train_stats.mean, "note": r.note,
+                }),
+            );
+        }
+        let hyper = |name: &str| self.rows.iter().find(|r| r.name == name).and_then(|r| r.hyperparameters.clone());
+        json!({
+            "methods": methods,
+            "dh": self.dh.as_ref().map(|d| json!({
+                "iterations": d.iterations, "initial_rms": d.initial_rms, "final_rms": d.final_rms,
+                "n_parameters": d.n_parameters, "rank": d.rank, "unidentifiable": d.unidentifiable,
+                "redundant_at_nominal": d.redundant_at_nominal, "converged": d.converged,
+            })),
+            "hyperparameters": { "krr": hyper("krr"), "dh+krr": hyper("dh+krr") },
+            "warnings": self.warnings(),
+        })
+    }
+
+    /// What the reader must not miss: a DH fit that stopped at its iteration limit.
+    pub fn warnings(&self) -> Vec<String> {
+        self.dh.iter().filter(|d| !d.converged).map(dh_not_converged).collect()
+    }
+
+    /// A plain-text table, one line per method. Errors in fixed point with four decimals, or — when
+    /// any is below 0.01 of the unit (RR data in metres), where that would print 0.0000 — all of them
+    /// with four significant digits.
+    pub fn table(&self, unit: &str) -> String {
+        let errors = self.rows.iter().flat_map(|r| [r.stats.mean, r.stats.median, r.stats.p99, r.stats.max]);
+        let scientific = errors.filter(|v| *v != 0.0).any(|v| v.abs() < 0.01);
+        let cell = |v: f64| if scientific { format!("{v:>10.3e}") } else { format!("{v:>10.4}") };
+        let mut out = format!("{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}  ({unit})\n", "method", "mean", "median", "p99", "max", "fit [s]");
+        for r in &self.rows {
+            out += &format!(
+                "{:<8} {} {} {} {} {:>10.2}\n",
+                r.name,
+                cell(r.stats.mean),
+                cell(r.stats.median),
+                cell(r.stats.p99),
+                cell(r.stats.max),
+                r.fit_seconds
+            );
+        }
+        out
+    }
+}
+
+/// [`compare_peers`] from files: the model file, and training and test CSVs read with the model
+/// file's `[measurements]` columns. Returns the comparison and the import warnings.
+pub fn compare_files(
+    model_file: impl AsRef<std::path::Path>,
+    train_csv: impl AsRef<std::path::Path>,
+    test_csv: impl AsRef<std::path::Path>,
+    krr: Option<CorrectionFitter>,
+    cbd: Option<CorrectionFitter>,
+) -> Result<(Comparison, Vec<String>), ImportError> {
+    let inputs = read_compare_files(model_file, train_csv, test_csv)?;
+    Ok((compare_peers(&inputs.nominal, &inputs.train.measurements, &inputs.test.measurements, krr, cbd), inputs.warnings))
+}
+
+/// What `compare_files` reads: the model file's nominal model, both measurement files (with their
+/// line numbers) and the import warnings.
+pub struct CompareInputs {
+    pub nominal: NominalModel,
+    pub train: crate::data::csv_import::ImportedMeasurements,
+    pub test: crate::data::csv_import::ImportedMeasurements,
+    pub warnings: Vec<String>,
+    /// The base registered on the training rows (`[chain] base = { register = true }`).
+    pub registration: Option<crate::nominal::register::Registration>,
+}
+
+/// Reads a comparison's model file and measurement files (no fitting yet); an unknown base is
+/// registered on the training rows.
+pub fn read_compare_files(
+    model_file: impl AsRef<std::path::Path>,
+    train_csv: impl AsRef<std::path::Path>,
+    test_csv: impl AsRef<std::path::Path>,
+) -> Result<CompareInputs, ImportError> {
+    use crate::data::csv_import::read_measurements;
+    let model = crate::data::model_file::load_model_file(model_file)?;
+    let spec = model.column_spec()?;
+    let train = read_measurements(train_csv.as_ref(), &spec)?;
+    let test = read_measurements(test_csv.as_ref(), &spec)?;
+    let mut warnings = train.warnings(train_csv.as_ref());
+    warnings.extend(test.warnings(test_csv.as_ref()));
+    let mut nominal = model.nominal;
+    let registration = match model.register_base {
+        true => Some(crate::nominal::register::register_base(&mut nominal, &train.measurements).map_err(|e| ImportError::Csv {
+            file: train_csv.as_ref().to_path_buf(),
+            line: None,
+            column: None,
+            message: e.to_string(),
+        })?),
+        false => None,
+    };
+    Ok(CompareInputs { nominal, train, test, warnings, registration })
+}
+
+/// `model`'s first `m` task coordinates (`m` < its own for a planar arm's DH form).
+fn nominal_predictor(model: NominalModel, m: usize) -> Predictor {
+    Box::new(move |joints: &[f64]| crate::nominal::planar::positions(&model, joints, m))
+}
+
+/// Runs every method: fits on `train` only, reports errors on `test`. `krr` is the hook for the
+/// kernel-ridge peer, fitted on the nominal model (`krr`) and on the DH-calibrated chain as it is
+/// (`dh+krr`); `cbd` the hook for Calibration by Diffeomorphisms, fitted on the nominal model
+/// (`cbd`) and on the DH-calibrated chain by [`fit_on`] (`dh+cbd`). A hook that is `None` has no rows.
+pub fn compare_peers(
+    nominal: &NominalModel,
+    train: &Measurements,
+    test: &Measurements,
+    krr: Option<CorrectionFitter>,
+    cbd: Option<CorrectionFitter>,
+) -> Comparison {
+    let m = nominal.task_dim();
+    let mut rows = Vec::new();
+    let mut push = |name: &str, fitted: crate::Result<FittedCorrection>, seconds: f64| {
+        let (stats, train_stats, note, test_errors, hyperparameters) = match fitted {
+            Ok(FittedCorrection { predict: p, note, hyperparameters }) => {
+                let predicted = p(&test.joints);
+                let test_errors = crate::report::plots::position_errors(&predicted, &test.positions, m);
+                let train_stats = ErrorStats::of_positions(&p(&train.joints), &train.positions, m);
+                (ErrorStats::of_errors(&test_errors), train_stats, note, test_errors, hyperparameters)
+            }
+            Err(e) => {
+                let nan = ErrorStats::of_errors(&[]);
+                (nan, nan, format!("failed: {e}"), Vec::new(), None)
+            }
+        };
+        rows.push(PeerResult { name: name.to_string(), stats, train_stats, fit_seconds: seconds, test_errors, note, hyperparameters });
+    };
+    push("nominal", Ok(FittedCorrection::new(nominal_predictor(nominal.clone(), m), String::new())), 0.0);
+
+    let t = Instant::now();
+    let dh = calibrate_dh(nominal, train, &DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() });
+    let dh_seconds = t.elapsed().as_secs_f64();
+    let dh_model = dh.as_ref().ok().map(|f| f.model.clone());
+    push(
+        "dh",
+        dh.as_ref()
+            .map(|f| {
+                let s = &f.stats;
+                FittedCorrection::new(
+                    nominal_predictor(f.model.clone(), m),
+                    format!(
+                        "{} iterations{}, rank {}/{}, train rms {:.4e}",
+                        s.iterations,
+                        if s.converged { "" } else { " (iteration limit: not converged)" },
+                        s.rank,
+                        s.n_parameters,
+                        s.final_rms
+                    ),
+                )
+            })
+            .map_err(|e| Error::from(e.clone())),
+        dh_seconds,
+    );
+
+    // The kernel-ridge peer (filled by the caller: `cli::compare` passes the peer's correction).
+    if let Some(fit) = krr {
+        let t = Instant::now();
+        let fitted = fit(nominal, train);
+        push("krr", fitted, t.elapsed().as_secs_f64());
+        if let Some(dh_model) = &dh_model {
+            let t = Instant::now();
+            let fitted = fit(dh_model, train);
+            push("dh+krr", fitted, dh_seconds + t.elapsed().as_secs_f64());
+        }
+    }
+
+    // Calibration by Diffeomorphisms (filled by the caller: `cli::compare::cbd_fitter`).
+    if let Some(fit) = cbd {
+        let t = Instant::now();
+        let fitted = fit(nominal, train);
+        push("cbd", fitted, t.elapsed().as_secs_f64());
+        if let Some(dh_model) = &dh_model {
+            let t = Instant::now();
+            let fitted = fit_on(fit, dh_model, train);
+            push("dh+cbd", fitted, dh_seconds + t.elapsed().as_secs_f64());
+        }
+    }
+
+    Comparison { rows, dh: dh.ok().map(|f| f.stats) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::six_joint::{random_configurations, SixJointRobot};
+
+    /// Issue 26: RR data in metres printed every good row as 0.0000; errors below 0.01 of the unit
+    /// switch the whole table to four significant digits.
+    #[test]
+    fn small_errors_keep_their_digits_in_the_table() {
+        let row = |name: &str, v: f64| PeerResult {
+            name: name.into(),
+            stats: ErrorStats { mean: v, median: v, p99: v, max: v },
+            train_stats: ErrorStats { mean: v, median: v, p99: v, max: v },
+            fit_seconds: 0.5,
+            test_errors: vec![],
+            note: String::new(),
+            hyperparameters: None,
+        };
+        let table = |rows| Comparison { rows, dh: None }.table("m");
+        let small = table(vec![row("nominal", 0.1083), row("cbd", 1.2916e-5)]);
+        assert!(small.contains("1.292e-5") && small.contains("1.083e-1") && !small.contains("0.0000"), "{small}");
+        let large = table(vec![row("nominal", 3.25), row("cbd", 0.0876)]);
+        assert!(large.contains("3.2500") && large.contains("0.0876"), "{large}");
+    }
+
+    /// Issue 26: a DH fit at its iteration limit said only "200 iterations" in the text output.
+    #[test]
+    fn a_dh_fit_at_its_iteration_limit_is_a_warning() {
+        let robot = SixJointRobot::ur5_like(21);
+        let train = robot.measure(&random_configurations(60, 22), 23);
+        let options = DhCalibrationOptions { max_iterations: 1, ..DhCalibrationOptions::default() };
+        let stats = calibrate_dh(&robot.nominal, &train, &options).unwrap().stats;
+        assert!(!stats.converged);
+        let c = Comparison { rows: vec![], dh: Some(stats) };
+        let w = c.warnings();
+        assert!(w.len() == 1 && w[0].contains("iteration limit (1 iterations)"), "{w:?}");
+        assert_eq!(c.to_json()["warnings"][0], serde_json::json!(w[0]));
+    }
+}

@@ -1,0 +1,54 @@
+//! A correction fitted on top of a base model — the hook through which kernel ridge, CbD and the
+//! hybrids enter a comparison, a commanded-accuracy table or a diagnosis — and its fit on a planar
+//! arm's DH form.
+
+use crate::data::Measurements;
+use crate::error::Error;
+use cbd_protocol::NominalModel;
+
+/// Predicted positions (row-major, `task_dim` per row) at joint rows (row-major).
+pub type Predictor = Box<dyn Fn(&[f64]) -> Vec<f64>>;
+
+/// A fitted correction and what was chosen for it.
+pub struct FittedCorrection {
+    pub predict: Predictor,
+    /// One line saying what was chosen (hyperparameters, scheme, warnings).
+    pub note: String,
+    /// The chosen hyperparameters for a JSON report, when the method has any to report there.
+    pub hyperparameters: Option<serde_json::Value>,
+}
+
+impl FittedCorrection {
+    /// A correction with its note and nothing for the JSON.
+    pub fn new(predict: Predictor, note: String) -> Self {
+        FittedCorrection { predict, note, hyperparameters: None }
+    }
+}
+
+/// Fits a nonparametric correction on top of a nominal model (training rows only).
+pub type CorrectionFitter<'a> = &'a dyn Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection>;
+
+/// `fit` on `base` for data of `data.task_dim` coordinates. A planar arm's DH form (three) is
+/// fitted as the planar chain it is in a moved frame (`nominal::planar::as_planar_in_frame`),
+/// the data moved into that frame and the predictions back. (Lifting the data to 3-D instead
+/// would hand the correction a noise-free coordinate, which drives its noise estimate to zero.)
+pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -> crate::Result<FittedCorrection> {
+    use crate::nominal::planar::as_planar_in_frame;
+    let (m, full) = (data.task_dim, base.task_dim());
+    if m == full {
+        return fit(base, data);
+    }
+    if let (2, Some((chain, frame))) = (m, as_planar_in_frame(base)) {
+        let mut moved = Measurements::new(data.n_joints, 2);
+        let joints = frame.chain_joints(&data.joints);
+        for i in 0..data.len() {
+            moved.push(&joints[i * data.n_joints..(i + 1) * data.n_joints], &frame.to_chain(data.position(i)));
+        }
+        let FittedCorrection { predict, note, hyperparameters } = fit(&chain, &moved)?;
+        let back: Predictor = Box::new(move |joints: &[f64]| {
+            predict(&frame.chain_joints(joints)).chunks_exact(2).flat_map(|p| frame.from_chain(p)).collect()
+        });
+        return Ok(FittedCorrection { predict: back, note, hyperparameters });
+    }
+    Err(Error::InvalidInput(format!("a model of {full} task coordinates for data of {m} that is not a planar arm's DH form")))
+}

@@ -1,0 +1,7 @@
+//! Evaluation harnesses: every method on the same data ([`compare`]), and where a simulated arm's
+//! tool goes when each method turns a target into a joint command ([`commanded`]). The methods
+//! enter as fitted corrections ([`correction`]) the CLI chooses; no harness names a peer.
+
+pub mod commanded;
+pub mod compare;
+pub mod correction;
