@@ -1,5 +1,5 @@
 //! Kernel widths and noise chosen objectively: maximise the log marginal likelihood of the
-//! Gaussian-process model of the residual r(x) = (y − k0(x)) / scale (docs/DESIGN.md §3).
+//! Gaussian-process model of the residual r(x) = (y − k0(x)) / scale (docs/DESIGN.md §9).
 //!
 //! Model: each task coordinate of r is an independent GP with the same covariance
 //! γ K_V(x, x') + σ² δ, K_V the joint kernel with γ = 1 (periodic axes b (cos Δ − 1), Gaussian
