@@ -65,7 +65,7 @@ pub enum Error {
     #[error(transparent)]
     LeastSquares(#[from] crate::solver::least_squares::LeastSquaresError),
     #[error(transparent)]
-    DhCalibration(#[from] crate::baselines::dh_calibration::DhCalibrationError),
+    DhCalibration(#[from] crate::parametric::DhCalibrationError),
     /// A `--effect` specification of `cbd simulate` that does not parse.
     #[error(transparent)]
     EffectSpec(#[from] crate::simulate::effects::EffectSpecError),

@@ -9,12 +9,12 @@
 //! DH form), (d) CbD compensation (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
 //! target: q* moved by up to 0.05 rad per joint (a controller's previous command).
 
-use super::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use super::krr::KernelRidge;
 use crate::data::Measurements;
 use crate::error::Error;
 use crate::kernels::hyperparameters::{choose_hyperparameters, SearchOptions};
 use crate::nominal::planar::as_planar_in_frame;
+use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use crate::report::stats::ErrorStats;
 use crate::simulate::{rr::RealRr, six_joint::SixJointRobot};
 use cbd_protocol::NominalModel;

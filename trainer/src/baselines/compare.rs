@@ -2,11 +2,11 @@
 //! of the residual (hyperparameters by marginal likelihood on the training rows only), the
 //! hybrid DH + KRR, and — through a hook — Calibration by Diffeomorphisms and DH + CbD.
 
-use super::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use super::krr::KernelRidge;
 use crate::data::Measurements;
 use crate::error::{Error, ImportError};
 use crate::kernels::hyperparameters::{choose_hyperparameters, Hyperparameters, SearchOptions};
+use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 use std::time::Instant;

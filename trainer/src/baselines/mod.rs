@@ -2,5 +2,4 @@
 
 pub mod commanded;
 pub mod compare;
-pub mod dh_calibration;
 pub mod krr;

@@ -2,7 +2,7 @@
 //! not as a whole), how a parameter vector changes the model, and each parameter's Jacobian
 //! column ∂k/∂θ over the data.
 //!
-//! Geometric parameters are those of `baselines::dh_calibration` (a, α, d, θ_offset per joint,
+//! Geometric parameters are those of `parametric` (a, α, d, θ_offset per joint,
 //! base, tool; planar chains: the link lengths) and are written into the chain itself. Joint
 //! effects: ∂k/∂θ = Dk_rigid(q + δ) · response; task effects (link bending): ∂k/∂θ = response.
 

@@ -150,7 +150,7 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     let mut all = kept.clone();
     all.extend_from_slice(measured_joints);
     all.extend_from_slice(&evaluation);
-    let mut geometric = crate::baselines::dh_calibration::identification_jacobian(nominal, &all)
+    let mut geometric = crate::parametric::identification_jacobian(nominal, &all)
         .map(|(jac, identifiable)| Identifiability::new(&jac, m, count_c, count_c + count_d, &identifiable));
 
     // The posterior on [candidates | workspace | evaluation | measured (at most max_conditioning)].

@@ -2,9 +2,9 @@
 //! far (after the DH fit, as `cbd fit --dh-first` and `compare`'s dh+cbd choose them), or before any
 //! data a stated prior (docs/DESIGN.md §13).
 
-use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use crate::data::Measurements;
 use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceOptions};
+use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_protocol::{JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 
