@@ -341,43 +341,6 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
     jac
 }
 
-/// Indices of the columns of `jac` (among `candidates`) that form an identifiable set: greedy
-/// column-pivoted Gram–Schmidt on unit-scaled columns; a column whose part orthogonal to those
-/// kept is below `tol` of its own norm is left out (a redundant or unidentifiable direction).
-pub fn identifiable_columns(jac: &Mat<f64>, candidates: &[usize], tol: f64) -> Vec<usize> {
-    let rows = jac.nrows();
-    let mut cols: Vec<(usize, Vec<f64>)> = candidates
-        .iter()
-        .filter_map(|&k| {
-            let norm = (0..rows).map(|i| jac[(i, k)].powi(2)).sum::<f64>().sqrt();
-            (norm > 0.0).then(|| (k, (0..rows).map(|i| jac[(i, k)] / norm).collect()))
-        })
-        .collect();
-    let mut kept = Vec::new();
-    loop {
-        let best = cols
-            .iter()
-            .enumerate()
-            .map(|(pos, (_, v))| (pos, v.iter().map(|x| x * x).sum::<f64>().sqrt()))
-            .max_by(|a, b| a.1.total_cmp(&b.1));
-        let Some((pos, size)) = best else { break };
-        if size <= tol {
-            break;
-        }
-        let (k, v) = cols.remove(pos);
-        let unit: Vec<f64> = v.iter().map(|x| x / size).collect();
-        for (_, w) in cols.iter_mut() {
-            let d: f64 = unit.iter().zip(w.iter()).map(|(a, b)| a * b).sum();
-            for (x, u) in w.iter_mut().zip(&unit) {
-                *x -= d * u;
-            }
-        }
-        kept.push(k);
-    }
-    kept.sort_unstable();
-    kept
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,10 +17,11 @@ pub mod structure;
 
 use crate::baselines::compare::{fit_on, CorrectionFitter};
 use crate::data::Measurements;
+use crate::parametric::independent_columns;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 pub use error::DiagnoseError;
-use library::{candidate_groups, identifiable_columns, jacobian, predict, Group, GroupKind, LibraryOptions, Param};
+use library::{candidate_groups, jacobian, predict, Group, GroupKind, LibraryOptions, Param};
 use selection::{forward_select, LinearProblem, Selection, SelectionOptions};
 use structure::{structure_tests, StructureOptions, StructureTest};
 
@@ -287,16 +288,16 @@ fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol
                 .filter(|&k| norms[k] > 1e-9 * largest[group.kind.type_name()] && norms[k] > 0.0)
                 .collect();
             if group.kind == GroupKind::Geometric {
-                geometric = identifiable_columns(jac, &cols, tol);
+                geometric = independent_columns(jac.as_ref(), &norms, &cols, tol);
                 geometric.clone()
             } else if group.kind == GroupKind::GravityCompliance {
                 // The gravity regressor's identifiable combinations: the columns column-pivoted
-                // Gram–Schmidt keeps beside the geometric ones (the others are fitted as zero).
+                // QR keeps beside the geometric ones (the others are fitted as zero).
                 let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
-                identifiable_columns(jac, &with, tol).into_iter().filter(|c| cols.contains(c)).collect()
+                independent_columns(jac.as_ref(), &norms, &with, tol).into_iter().filter(|c| cols.contains(c)).collect()
             } else {
                 let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
-                let kept = identifiable_columns(jac, &with, tol);
+                let kept = independent_columns(jac.as_ref(), &norms, &with, tol);
                 if cols.iter().all(|c| kept.contains(c)) {
                     cols
                 } else {

@@ -24,7 +24,7 @@ mod residuals;
 pub(crate) mod tests;
 
 pub use calibrate_dh::calibrate_dh;
-pub use identifiable::identification_jacobian;
+pub use identifiable::{identification_jacobian, independent_columns};
 
 use cbd_protocol::NominalModel;
 
@@ -38,7 +38,7 @@ pub struct DhCalibrationOptions {
     pub cost_tolerance: f64,
     /// Parameters whose (unit-scaled) Jacobian column lies within this distance of the span of
     /// the others at the nominal model are redundant and kept at their nominal values
-    /// (greedy column-pivoted Gram–Schmidt). 0 disables.
+    /// (column-pivoted QR, [`independent_columns`]). 0 disables.
     pub redundancy_tolerance: f64,
     /// Fit a planar arm as its DH form (the result is then a 3-D DH chain read in its first two
     /// coordinates, which only callers that read it so — compare, diagnose — can use); when
