@@ -1,10 +1,9 @@
 //! The identifiable parameters: those whose unit-scaled Jacobian column is not (numerically) in the
 //! span of the others kept, chosen by column-pivoted QR.
 
-use super::jacobian::{jacobian_at, zero_columns};
+use super::jacobian::{geometric_jacobian, zero_columns};
 use super::least_squares::column_scales;
 use super::DhCalibrationOptions;
-use crate::data::Measurements;
 use crate::nominal::dh_parameters::parameter_count;
 use cbd_protocol::NominalModel;
 use faer::{Mat, MatRef};
@@ -70,12 +69,8 @@ pub fn identification_jacobian(nominal: &NominalModel, joints: &[f64]) -> Option
     let dh_form = crate::nominal::planar::as_dh(nominal);
     let NominalModel::DhChain(chain0) = &dh_form else { return None };
     let (n, m) = (chain0.joints.len(), nominal.task_dim());
-    let count = joints.len() / n.max(1);
-    let data = Measurements { n_joints: n, task_dim: m, joints: joints[..count * n].to_vec(), positions: vec![0.0; count * m] };
     let np = parameter_count(n);
-    let mut jac = Mat::zeros(m * count, np);
-    let (mut rp, mut rm) = (vec![0.0; m * count], vec![0.0; m * count]);
-    jacobian_at(chain0, &vec![0.0; np], &data, &mut jac, (&mut rp, &mut rm));
+    let mut jac = geometric_jacobian(chain0, joints, m);
     let out_of_plane = out_of_plane_parameters(n, m);
     zero_columns(&mut jac, &out_of_plane);
     let mut colnorm = vec![0.0; np];

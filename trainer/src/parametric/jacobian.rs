@@ -78,6 +78,21 @@ pub(super) fn jacobian_at(chain0: &DhChain, p: &[f64], data: &Measurements, jac:
     }
 }
 
+/// The identification Jacobian ∂k/∂p of `chain` at its own parameters (p = 0), every parameter of
+/// `nominal::dh_parameters`, at each row of `joints` (row-major): `m` rows per configuration, the
+/// first `m` task coordinates. Effects are not part of it: pass the rigid chain and, for a model
+/// with joint deflections, the deflected joints q + δ(q).
+pub fn geometric_jacobian(chain: &DhChain, joints: &[f64], m: usize) -> Mat<f64> {
+    let n = chain.joints.len().max(1);
+    let count = joints.len() / n;
+    let data = Measurements { n_joints: n, task_dim: m, joints: joints[..count * n].to_vec(), positions: vec![0.0; count * m] };
+    let np = crate::nominal::dh_parameters::parameter_count(chain.joints.len());
+    let mut jac = Mat::zeros(m * count, np);
+    let (mut rp, mut rm) = (vec![0.0; m * count], vec![0.0; m * count]);
+    jacobian_at(chain, &vec![0.0; np], &data, &mut jac, (&mut rp, &mut rm));
+    jac
+}
+
 /// Sets the Jacobian columns of parameters that do not move (out of the plane, frozen) to zero.
 pub(super) fn zero_columns(jac: &mut Mat<f64>, columns: &[usize]) {
     for &k in columns {

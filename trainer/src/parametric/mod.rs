@@ -25,6 +25,7 @@ pub(crate) mod tests;
 
 pub use calibrate_dh::calibrate_dh;
 pub use identifiable::{identification_jacobian, independent_columns};
+pub use jacobian::geometric_jacobian;
 
 use cbd_protocol::NominalModel;
 
