@@ -179,7 +179,7 @@ pub fn read_compare_files(
 
 /// `model`'s first `m` task coordinates (`m` < its own for a planar arm's DH form).
 fn nominal_predictor(model: NominalModel, m: usize) -> Predictor {
-    Box::new(move |joints: &[f64]| crate::nominal::planar::positions(&model, joints, m))
+    Box::new(move |joints: &[f64]| crate::nominal::positions(&model, joints, m))
 }
 
 /// `fit` on `base` for data of `data.task_dim` coordinates. A planar arm's DH form (three) is

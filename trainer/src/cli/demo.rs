@@ -141,9 +141,7 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     let calibrated_test = crate::predict::evaluate_blob(&blob, &test.joints)?;
     let calibrated_grid = crate::predict::evaluate_blob(&blob, &train.joints)?;
 
-    let nominal_at = |joints: &[f64]| -> Vec<f64> {
-        joints.chunks_exact(2).flat_map(|q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
-    };
+    let nominal_at = |joints: &[f64]| -> Vec<f64> { crate::nominal::positions(&nominal, joints, 2) };
     // The peer with its own hyperparameters (its GP marginal likelihood on the same rows).
     let t0 = Instant::now();
     let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default()).map_err(|e| e.to_string())?;

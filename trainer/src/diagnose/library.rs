@@ -10,6 +10,7 @@
 use super::kinematics::{self, Response};
 use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
+use crate::nominal::positions;
 use cbd_protocol::{Effect, NominalModel};
 use cbd_runtime::kinematics::effects::{effect_terms, Order};
 use faer::Mat;
@@ -279,12 +280,6 @@ pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<N
     Ok(out)
 }
 
-/// Predicted positions (first `m` coordinates) of `model` at every row of `joints` (row-major).
-pub fn predict(model: &NominalModel, joints: &[f64], m: usize) -> Vec<f64> {
-    let n = model.n_joints();
-    joints.chunks_exact(n).flat_map(|q| kinematics::position(model, q, m)).collect()
-}
-
 /// Step of the central difference for geometric parameter `p`: 1e-6 rad, or 1e-6 of the
 /// workspace's size for lengths.
 fn fd_step(model: &NominalModel, p: &Param, length_scale: f64) -> f64 {
@@ -337,7 +332,7 @@ fn geometric_columns(model: &NominalModel, data: &Measurements, geometric: &[(us
         return;
     }
     // Size of the workspace (for the difference step of lengths): the model's own positions.
-    let length_scale = predict(model, &data.joints, m).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
+    let length_scale = positions(model, &data.joints, m).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
     for &(col, p) in geometric {
         let h = fd_step(model, &p, length_scale);
         let plus = apply(model, &[p], &[h]).expect("geometric change adds no effect");
@@ -412,7 +407,7 @@ mod tests {
         for (col, p) in params.iter().enumerate() {
             let h = 1e-6;
             let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (predict(&plus, &data.joints, 2), predict(&minus, &data.joints, 2));
+            let (a, b) = (positions(&plus, &data.joints, 2), positions(&minus, &data.joints, 2));
             for r in 0..a.len() {
                 let fd = (a[r] - b[r]) / (2.0 * h);
                 assert!(
@@ -446,7 +441,7 @@ mod tests {
         for (col, p) in params.iter().enumerate() {
             let h = 1e-6;
             let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (predict(&plus, &data.joints, 3), predict(&minus, &data.joints, 3));
+            let (a, b) = (positions(&plus, &data.joints, 3), positions(&minus, &data.joints, 3));
             for r in 0..a.len() {
                 let fd = (a[r] - b[r]) / (2.0 * h);
                 assert!(

@@ -17,11 +17,12 @@ pub mod structure;
 
 use crate::baselines::compare::{fit_on, CorrectionFitter};
 use crate::data::Measurements;
+use crate::nominal::positions;
 use crate::parametric::independent_columns;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 pub use error::DiagnoseError;
-use library::{candidate_groups, jacobian, predict, Group, GroupKind, LibraryOptions, Param};
+use library::{candidate_groups, jacobian, Group, GroupKind, LibraryOptions, Param};
 use selection::{forward_select, LinearProblem, Selection, SelectionOptions};
 use structure::{structure_tests, StructureOptions, StructureTest};
 
@@ -263,7 +264,7 @@ pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurem
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
+    positions(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// Columns of each group that enter the selection: geometric pruned to an identifiable set, a
@@ -521,9 +522,9 @@ fn held_out_table(
         let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
         table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
     };
-    push("nominal", predict(model, &test.joints, m));
-    push("nominal + geometric", predict(geometric_only, &test.joints, m));
-    push("nominal + effects", predict(with_effects, &test.joints, m));
+    push("nominal", positions(model, &test.joints, m));
+    push("nominal + geometric", positions(geometric_only, &test.joints, m));
+    push("nominal + effects", positions(with_effects, &test.joints, m));
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
         let (on_effects, _) = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?;

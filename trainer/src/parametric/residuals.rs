@@ -2,16 +2,11 @@
 
 use crate::data::Measurements;
 use cbd_protocol::{DhChain, NominalModel};
-use cbd_runtime::kinematics::forward_kinematics;
 
 /// k − y over the data's `m = data.task_dim` coordinates (2 for a planar arm's DH form).
 pub(super) fn residuals(chain: &DhChain, data: &Measurements, out: &mut [f64]) {
-    let model = NominalModel::DhChain(chain.clone());
-    let m = data.task_dim;
-    for i in 0..data.len() {
-        let k = forward_kinematics(&model, data.joints(i));
-        for c in 0..m {
-            out[m * i + c] = k.position[c] - data.position(i)[c];
-        }
+    let k = crate::nominal::positions(&NominalModel::DhChain(chain.clone()), &data.joints, data.task_dim);
+    for ((r, k), y) in out.iter_mut().zip(&k).zip(&data.positions) {
+        *r = k - y;
     }
 }

@@ -100,7 +100,7 @@ fn a_planar_arm_is_calibrated_as_its_dh_form_in_its_plane() {
     // In-plane parameters: 3 lengths, 3 offsets, base x, y, yaw; yaw and the first offset are one.
     assert_eq!((fit.stats.n_parameters, fit.stats.rank), (9, 8), "{:?}", fit.stats);
     assert!(fit.stats.initial_rms > 0.01 && fit.stats.final_rms < 1e-10, "{:?}", fit.stats);
-    let predicted = crate::nominal::planar::positions(&fit.model, &test.joints, 2);
+    let predicted = crate::nominal::positions(&fit.model, &test.joints, 2);
     let worst = predicted.iter().zip(&test.positions).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     assert!(worst < 1e-9, "{worst}");
     // Out of the plane nothing moved: the result is exactly a planar chain in a moved frame.
