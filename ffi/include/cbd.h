@@ -122,7 +122,7 @@ CbdStatus cbd_load(const uint8_t *blob,
 // Evaluates the calibrated model at joint configuration `q` (`n_joints` values, radians or the
 // model's length unit for prismatic joints): writes the calibrated position (`task_dim` values)
 // into `position` and its exact Jacobian (`task_dim` × `n_joints`, row-major:
-// `jacobian[a * n_joints + d]` = ∂position[a]/∂q[d]) into `jacobian`. If `support` is not NULL,
+// `jacobian[a * n_joints + d] = ∂position[a]/∂q[d]`) into `jacobian`. If `support` is not NULL,
 // also writes the extrapolation measure: the largest joint-kernel value K_V(q, x_j)/γ over the
 // measured configurations, in (0, 1] — 1 on a measured configuration, near 0 far from every one
 // (`cbd eval` warns below 0.05).

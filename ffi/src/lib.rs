@@ -10,6 +10,7 @@
 //! rewrites it.
 // no_std in every build but its own unit tests (which run on std, as every test harness).
 #![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
 // A host build with the workspace's default profiles (panic = "unwind": `cargo build --workspace`,
@@ -242,7 +243,7 @@ unsafe fn loaded<'a>(calibrator: *const CbdCalibrator) -> Result<&'a CbdCalibrat
 /// Evaluates the calibrated model at joint configuration `q` (`n_joints` values, radians or the
 /// model's length unit for prismatic joints): writes the calibrated position (`task_dim` values)
 /// into `position` and its exact Jacobian (`task_dim` × `n_joints`, row-major:
-/// `jacobian[a * n_joints + d]` = ∂position[a]/∂q[d]) into `jacobian`. If `support` is not NULL,
+/// `jacobian[a * n_joints + d] = ∂position[a]/∂q[d]`) into `jacobian`. If `support` is not NULL,
 /// also writes the extrapolation measure: the largest joint-kernel value K_V(q, x_j)/γ over the
 /// measured configurations, in (0, 1] — 1 on a measured configuration, near 0 far from every one
 /// (`cbd eval` warns below 0.05).

@@ -20,7 +20,9 @@ pub const GRAVITY_UNIT_TOLERANCE: f64 = 1e-9;
 /// The effects of a nominal chain and the gravity/mass model the gravity-driven ones use.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Effects {
+    /// Gravity direction and link masses (used by the gravity-driven effects).
     pub gravity: GravityModel,
+    /// The effects, applied together (their deflections add).
     pub list: HVec<Effect, MAX_EFFECTS>,
 }
 
@@ -30,6 +32,7 @@ impl Effects {
     /// No effect, planar default gravity (−y).
     pub const NONE_PLANAR: Effects = Effects { gravity: GravityModel::PLANAR, list: HVec::new() };
 
+    /// Whether there is no effect (the gravity model alone changes nothing).
     pub fn is_empty(&self) -> bool {
         self.list.is_empty()
     }
@@ -42,6 +45,7 @@ pub struct GravityModel {
     /// Unit vector along gravity in the base frame. For a planar chain only the first two
     /// entries are used.
     pub direction: [f64; 3],
+    /// Point mass at the distal end of each link (mass units of the model file; empty: unit masses).
     pub link_masses: HVec<f64, MAX_JOINTS>,
 }
 
@@ -62,13 +66,37 @@ impl Default for GravityModel {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Effect {
     /// δ_j = scale · q_j (encoder or gear-ratio scale error).
-    EncoderScale { joint: u8, scale: f64 },
+    EncoderScale {
+        /// The joint (0-based).
+        joint: u8,
+        /// Relative scale error (dimensionless).
+        scale: f64,
+    },
     /// δ_j = cos · cos(h q_j) + sin · sin(h q_j) (transmission error, harmonic h ≥ 1).
-    Transmission { joint: u8, harmonic: u8, cos: f64, sin: f64 },
+    Transmission {
+        /// The joint (0-based).
+        joint: u8,
+        /// h, cycles per joint revolution (1..=[`MAX_HARMONIC`]).
+        harmonic: u8,
+        /// Amplitude of the cosine term (joint units).
+        cos: f64,
+        /// Amplitude of the sine term (joint units).
+        sin: f64,
+    },
     /// δ_j = compliance · τ_j(q): τ_j the gravity torque at joint j from the mass model.
-    GravityCompliance { joint: u8, compliance: f64 },
+    GravityCompliance {
+        /// The joint (0-based).
+        joint: u8,
+        /// Deflection per unit gravity torque (joint unit per mass·length unit).
+        compliance: f64,
+    },
     /// Tool point displaced by compliance · (g − (g·u) u), u the unit direction of link `link`.
-    LinkBending { link: u8, compliance: f64 },
+    LinkBending {
+        /// The link (0-based; link k ends after joint k).
+        link: u8,
+        /// Displacement per unit of the gravity component across the link (length units).
+        compliance: f64,
+    },
     /// One link's share of a compliant joint's gravity deflection, from a physical mass model:
     /// δ_j += ∂/∂q_j g·(mass·o_k(q) + R_k(q)·first_moment), k = `link` ≥ j = `joint`, o_k and R_k
     /// the origin and rotation of link k's frame (the frame at its distal end: the DH frame after
@@ -77,7 +105,16 @@ pub enum Effect {
     /// the joint's compliance c_j; the gauge c_j = 1 (joint unit per mass·length unit) makes them
     /// read as a mass and a first moment (mass × length) of the file's units. Per compliant
     /// joint: each compliant joint carries its own set (format 4 and later).
-    GravityMoment { joint: u8, link: u8, mass: f64, first_moment: [f64; 3] },
+    GravityMoment {
+        /// The compliant joint j (0-based).
+        joint: u8,
+        /// The link k ≥ j whose weight deflects it (0-based).
+        link: u8,
+        /// c_j·m_k (a mass in the gauge c_j = 1).
+        mass: f64,
+        /// c_j·m_k·r_k in link k's frame (a mass × length in the gauge c_j = 1).
+        first_moment: [f64; 3],
+    },
 }
 
 impl Effect {

@@ -11,6 +11,8 @@
 //! before it. The large arrays (measurement configurations, momenta) are stored as raw
 //! little-endian `f64` bytes that the runtime reads in place, so a blob in flash is never copied.
 #![no_std]
+#![deny(missing_docs)]
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
 
 #[cfg(feature = "std")]
 extern crate std;
@@ -54,28 +56,41 @@ const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 pub enum DecodeError {
     /// Shorter than header plus trailer, or shorter than the declared payload length.
     Truncated {
+        /// Bytes the frame needs.
         needed: usize,
+        /// Bytes the blob has.
         got: usize,
     },
     /// Longer than header + declared payload + trailer.
     TrailingBytes {
+        /// Bytes the header declares (header + payload + trailer).
         expected: usize,
+        /// Bytes the blob has.
         got: usize,
     },
+    /// The blob does not open with [`MAGIC`].
     BadMagic,
+    /// The format version is outside [`OLDEST_FORMAT_VERSION`]..=[`FORMAT_VERSION`].
     UnsupportedVersion {
+        /// The blob's version.
         found: u16,
+        /// The newest version this build reads.
         supported: u16,
     },
+    /// The stored CRC-32 differs from the one computed over header and payload.
     ChecksumMismatch {
+        /// The CRC-32 in the trailer.
         stored: u32,
+        /// The CRC-32 of the bytes before the trailer.
         computed: u32,
     },
     /// The payload does not decode as a [`Model`] (postcard error).
     Payload,
     /// The model has more joints than this build holds ([`MAX_JOINTS`]; feature `long-chains`).
     TooManyJoints {
+        /// Joints in the blob's model.
         found: usize,
+        /// [`MAX_JOINTS`] of this build.
         supported: usize,
     },
     /// The payload decoded but is inconsistent (dimensions, non-finite or out-of-range values).
@@ -85,7 +100,9 @@ pub enum DecodeError {
 /// Why a model could not be encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum EncodeError {
+    /// The output buffer cannot hold the blob.
     BufferTooSmall,
+    /// The model fails [`Model::validate`].
     Invalid(ModelError),
 }
 
@@ -137,23 +154,26 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     if out.len() < HEADER_LEN + TRAILER_LEN {
         return Err(EncodeError::BufferTooSmall);
     }
-    let payload_end = {
-        let (_, rest) = out.split_at_mut(HEADER_LEN);
-        let room = rest.len() - TRAILER_LEN;
-        let rest = &mut rest[..room];
-        let mut written = postcard::to_slice(model, &mut rest[..]).map_err(|_| EncodeError::BufferTooSmall)?.len();
+    // Slicing without indexing, as in `decode`: no panic path.
+    let room = out.len() - HEADER_LEN - TRAILER_LEN;
+    let payload_len = {
+        let body = out.get_mut(HEADER_LEN..HEADER_LEN + room).ok_or(EncodeError::BufferTooSmall)?;
+        let mut written = postcard::to_slice(model, &mut *body).map_err(|_| EncodeError::BufferTooSmall)?.len();
         if model.expansion.is_some() {
-            written += postcard::to_slice(&model.expansion, &mut rest[written..]).map_err(|_| EncodeError::BufferTooSmall)?.len();
+            let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
+            written += postcard::to_slice(&model.expansion, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
         }
-        HEADER_LEN + written
+        written
     };
+    let payload_end = HEADER_LEN + payload_len;
     let version = if model.expansion.is_some() { FORMAT_VERSION } else { FORMAT_WITHOUT_EXPANSION };
-    let payload_len = (payload_end - HEADER_LEN) as u32;
-    out[0..4].copy_from_slice(&MAGIC);
-    out[4..6].copy_from_slice(&version.to_le_bytes());
-    out[6..10].copy_from_slice(&payload_len.to_le_bytes());
-    let crc = CRC32.checksum(&out[..payload_end]);
-    out[payload_end..payload_end + TRAILER_LEN].copy_from_slice(&crc.to_le_bytes());
+    let (framed, trailer) = out.split_at_mut_checked(payload_end).ok_or(EncodeError::BufferTooSmall)?;
+    let header = MAGIC.into_iter().chain(version.to_le_bytes()).chain((payload_len as u32).to_le_bytes());
+    for (byte, value) in framed.iter_mut().zip(header) {
+        *byte = value;
+    }
+    let crc = CRC32.checksum(framed);
+    *trailer.first_chunk_mut::<TRAILER_LEN>().ok_or(EncodeError::BufferTooSmall)? = crc.to_le_bytes();
     Ok(payload_end + TRAILER_LEN)
 }
 
@@ -174,14 +194,17 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     if blob.len() < min {
         return Err(DecodeError::Truncated { needed: min, got: blob.len() });
     }
-    if blob[0..4] != MAGIC {
+    let Some([m0, m1, m2, m3, v0, v1, l0, l1, l2, l3]) = blob.first_chunk::<HEADER_LEN>().copied() else {
+        return Err(DecodeError::Truncated { needed: min, got: blob.len() });
+    };
+    if [m0, m1, m2, m3] != MAGIC {
         return Err(DecodeError::BadMagic);
     }
-    let version = u16::from_le_bytes([blob[4], blob[5]]);
+    let version = u16::from_le_bytes([v0, v1]);
     if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(DecodeError::UnsupportedVersion { found: version, supported: FORMAT_VERSION });
     }
-    let payload_len = u32::from_le_bytes([blob[6], blob[7], blob[8], blob[9]]) as usize;
+    let payload_len = u32::from_le_bytes([l0, l1, l2, l3]) as usize;
     let total = HEADER_LEN.saturating_add(payload_len).saturating_add(TRAILER_LEN);
     if blob.len() < total {
         return Err(DecodeError::Truncated { needed: total, got: blob.len() });
@@ -233,6 +256,8 @@ mod tests_expansion;
 /// Why a payload did not decode: a chain longer than this build holds is named (its joint count is
 /// the first length in the payload: the nominal model's variant, then the planar lengths' count or
 /// the DH convention and the joints' count, all postcard varints); anything else is `Payload`.
+// With the feature `long-chains` MAX_JOINTS is MAX_JOINTS_ANY_BUILD: no count is too many.
+#[allow(clippy::impossible_comparisons)]
 fn payload_error(payload: &[u8]) -> DecodeError {
     fn varint(bytes: &mut core::slice::Iter<'_, u8>) -> Option<usize> {
         let mut value = 0usize;

@@ -10,14 +10,21 @@ use crate::limits::{MAX_JOINTS, MAX_TASK_DIM};
 /// A calibrated model: nominal kinematics, kernels, integrator, control points and momenta.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Model<'a> {
+    /// The controller's nominal kinematics k0 (with its effects), in the model's own units.
     pub nominal: NominalModel,
+    /// Task-space normalisation between the model's units and the flow's internal units.
     pub normalisation: Normalisation,
+    /// K_V, the joint-space kernel.
     pub joint_kernel: JointKernel,
+    /// K_W, the task-space kernel (internal units).
     pub task_kernel: TaskKernel,
+    /// The fixed-step scheme the flow is integrated with.
     pub integrator: Integrator,
+    /// The sign of the joint field and the momenta's divergence term (docs/DESIGN.md §2).
     pub momentum_law: MomentumLaw,
     /// Noise level σ of energy (16), internal units (kept for provenance; not used to evaluate).
     pub sigma: f64,
+    /// N, the number of control points (measured configurations).
     pub n_points: u32,
     /// Measurement configurations, `n_points × n_joints`, row-major, joint units of the nominal model.
     #[serde(borrow)]
@@ -33,9 +40,11 @@ pub struct Model<'a> {
 }
 
 impl Model<'_> {
+    /// n, the number of joints.
     pub fn n_joints(&self) -> usize {
         self.nominal.n_joints()
     }
+    /// m, the task-space dimension (2 planar, 3 spatial).
     pub fn task_dim(&self) -> usize {
         self.nominal.task_dim()
     }
@@ -43,9 +52,16 @@ impl Model<'_> {
 
 /// The controller's own kinematics k0.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// The variants are stored inline (no heap on the controller): a DH chain is larger than a planar one.
+#[allow(clippy::large_enum_variant)]
 pub enum NominalModel {
     /// Planar serial arm of revolute joints: y = Σ_k l_k (cos, sin)(x_1 + … + x_k), plus effects.
-    PlanarChain { lengths: HVec<f64, MAX_JOINTS>, effects: Effects },
+    PlanarChain {
+        /// Link lengths l_k, base first (length units).
+        lengths: HVec<f64, MAX_JOINTS>,
+        /// Physical effects on top of the rigid chain.
+        effects: Effects,
+    },
     /// Spatial serial chain from a Denavit–Hartenberg table; task space is the tool position.
     DhChain(DhChain),
 }
@@ -62,18 +78,21 @@ impl NominalModel {
             NominalModel::DhChain(c) => &c.effects,
         }
     }
+    /// The physical effects on top of the rigid chain, to change.
     pub fn effects_mut(&mut self) -> &mut Effects {
         match self {
             NominalModel::PlanarChain { effects, .. } => effects,
             NominalModel::DhChain(c) => &mut c.effects,
         }
     }
+    /// n, the number of joints.
     pub fn n_joints(&self) -> usize {
         match self {
             NominalModel::PlanarChain { lengths, .. } => lengths.len(),
             NominalModel::DhChain(c) => c.joints.len(),
         }
     }
+    /// m, the task-space dimension: 2 for a planar chain, 3 (the tool position) for a DH chain.
     pub fn task_dim(&self) -> usize {
         match self {
             NominalModel::PlanarChain { .. } => 2,
@@ -89,6 +108,7 @@ impl NominalModel {
     }
 }
 
+/// Which Denavit–Hartenberg convention a table is written in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum DhConvention {
     /// T_i = Rz(θ) Tz(d) Tx(a) Rx(α)
@@ -97,9 +117,12 @@ pub enum DhConvention {
     Modified,
 }
 
+/// How a joint moves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum JointKind {
+    /// Rotation about its axis; the joint value is an angle (radians).
     Revolute,
+    /// Translation along its axis; the joint value is a length (the model's length unit).
     Prismatic,
 }
 
@@ -107,29 +130,42 @@ pub enum JointKind {
 /// For a revolute joint θ = q + theta_offset; for a prismatic joint d = q + d.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DhJoint {
+    /// Revolute or prismatic.
     pub kind: JointKind,
+    /// Link length a (along x).
     pub a: f64,
+    /// Link twist α (about x, radians).
     pub alpha: f64,
+    /// Link offset d (along z); for a prismatic joint, its value at q = 0.
     pub d: f64,
+    /// θ at q = 0 (radians); for a prismatic joint, the fixed θ.
     pub theta_offset: f64,
 }
 
 /// A rigid transform: rotation (row-major 3×3) and translation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Transform {
+    /// R, row-major: `rotation[3 * row + col]`.
     pub rotation: [f64; 9],
+    /// t, in the model's length unit.
     pub translation: [f64; 3],
 }
 
 impl Transform {
+    /// R = I, t = 0.
     pub const IDENTITY: Transform = Transform { rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], translation: [0.0; 3] };
 }
 
+/// A serial chain from a DH table: base ∘ T_1(q_1) ∘ … ∘ T_n(q_n) ∘ tool; task space is the tool point.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DhChain {
+    /// The table's convention.
     pub convention: DhConvention,
+    /// One row per joint, base first.
     pub joints: HVec<DhJoint, MAX_JOINTS>,
+    /// The first DH frame in the task (world) frame.
     pub base: Transform,
+    /// The tool frame in the last DH frame; its origin is the tool point.
     pub tool: Transform,
     /// Physical effects on top of the rigid chain.
     pub effects: Effects,
@@ -138,35 +174,49 @@ pub struct DhChain {
 /// Task-space normalisation: internal = (user − offset) / scale.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Normalisation {
+    /// The offset (model units; the first `task_dim` entries are used).
     pub task_offset: [f64; MAX_TASK_DIM],
+    /// The scale (model units per internal unit, > 0).
     pub task_scale: f64,
 }
 
 impl Normalisation {
+    /// Internal units are the model's units.
     pub const IDENTITY: Normalisation = Normalisation { task_offset: [0.0; MAX_TASK_DIM], task_scale: 1.0 };
 }
 
 /// K_V(x, x') = γ · exp(Σ_d f_d(x_d − x'_d)); f_d = b_d (cos Δ − 1) (periodic) or −Δ²/(2 ℓ_d²).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JointKernel {
+    /// γ, the amplitude (> 0 in a blob; the flow's copy carries the momentum law's sign).
     pub gamma: f64,
+    /// f_d, one per joint.
     pub axes: HVec<JointKernelAxis, MAX_JOINTS>,
 }
 
+/// One joint's factor of K_V.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum JointKernelAxis {
     /// b (cos Δ − 1): for revolute joints, periodic in 2π.
-    Periodic { b: f64 },
+    Periodic {
+        /// b > 0 (dimensionless): larger is narrower.
+        b: f64,
+    },
     /// −Δ² / (2 ℓ²): for prismatic joints.
-    Gaussian { width: f64 },
+    Gaussian {
+        /// ℓ > 0, in the joint's length unit.
+        width: f64,
+    },
 }
 
 /// K_W(y, y') = exp(−|y − y'|² / (2 a²)), internal units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TaskKernel {
+    /// a > 0, internal units.
     pub width: f64,
 }
 
+/// The explicit Runge–Kutta method of the fixed-step integration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum IntegratorMethod {
     /// Forward Euler: one stage per step.
@@ -178,6 +228,7 @@ pub enum IntegratorMethod {
 }
 
 impl IntegratorMethod {
+    /// Right-hand-side evaluations per step.
     pub const fn stages(self) -> usize {
         match self {
             IntegratorMethod::Euler => 1,
@@ -187,9 +238,12 @@ impl IntegratorMethod {
     }
 }
 
+/// Fixed-step integration of the flow over t ∈ [0, 1].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Integrator {
+    /// The method of each step.
     pub method: IntegratorMethod,
+    /// Equal steps over [0, 1] (1..=[`crate::MAX_STEPS`]).
     pub steps: u16,
 }
 
@@ -212,9 +266,13 @@ impl Integrator {
 /// New variants are appended, so format-2 blobs decode unchanged.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum MomentumLaw {
+    /// s = +1, with the −(div v) P term (format 2).
     WithDivergence,
+    /// s = +1, without the divergence term (format 2).
     WithoutDivergence,
+    /// s = −1, with the divergence term (format 3; the default).
     Hamiltonian,
+    /// s = −1, without the divergence term (format 3).
     HamiltonianWithoutDivergence,
 }
 
@@ -259,15 +317,19 @@ impl<'a> F64Slice<'a> {
     pub const fn from_le_bytes(bytes: &'a [u8]) -> Self {
         F64Slice(bytes)
     }
+    /// The number of whole values.
     pub fn len(&self) -> usize {
         self.0.len() / 8
     }
+    /// Whether there is no whole value.
     pub fn is_empty(&self) -> bool {
         self.0.len() < 8
     }
+    /// The length in bytes.
     pub fn byte_len(&self) -> usize {
         self.0.len()
     }
+    /// The little-endian bytes.
     pub fn bytes(&self) -> &'a [u8] {
         self.0
     }
@@ -281,6 +343,7 @@ impl<'a> F64Slice<'a> {
         }
         Some(f64::from_le_bytes(a))
     }
+    /// The values in order (a trailing partial value is skipped).
     pub fn iter(&self) -> impl Iterator<Item = f64> + 'a {
         self.0.chunks_exact(8).map(|c| {
             let mut a = [0u8; 8];

@@ -20,6 +20,9 @@ pub const DH_TABLE: [DhJoint; 6] = [
     revolute(0.0, 0.0, 82.3),
 ];
 
+// Every build holds the six rows (MAX_JOINTS ≥ 7).
+const _: () = assert!(DH_TABLE.len() <= crate::MAX_JOINTS);
+
 /// The tool point's offset along the flange z axis (mm).
 pub const TOOL_Z: f64 = 31.0;
 
@@ -27,11 +30,10 @@ pub const TOOL_Z: f64 = 31.0;
 pub fn chain() -> DhChain {
     let mut tool = Transform::IDENTITY;
     tool.translation = [0.0, 0.0, TOOL_Z];
-    DhChain {
-        convention: DhConvention::Standard,
-        joints: heapless::Vec::from_slice(&DH_TABLE).expect("6 joints"),
-        base: Transform::IDENTITY,
-        tool,
-        effects: Effects::NONE,
+    let mut joints = heapless::Vec::new();
+    for joint in DH_TABLE {
+        // Six rows always fit (checked at compile time above).
+        let _ = joints.push(joint);
     }
+    DhChain { convention: DhConvention::Standard, joints, base: Transform::IDENTITY, tool, effects: Effects::NONE }
 }

@@ -9,13 +9,33 @@ use crate::model::*;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ModelError {
     /// A field holds NaN or ±∞.
-    NonFinite { field: &'static str, index: usize },
+    NonFinite {
+        /// The field's path in the model.
+        field: &'static str,
+        /// The value's position in the field.
+        index: usize,
+    },
     /// A field is outside its allowed range (e.g. a width ≤ 0).
-    OutOfRange { field: &'static str },
+    OutOfRange {
+        /// The field's path in the model (with the reason in parentheses where there are several).
+        field: &'static str,
+    },
     /// Array or table sizes disagree.
-    Dimension { field: &'static str, expected: usize, found: usize },
+    Dimension {
+        /// The field's path in the model.
+        field: &'static str,
+        /// The size the other fields imply.
+        expected: usize,
+        /// The field's size.
+        found: usize,
+    },
     /// A field of entry `index` of a list is outside its allowed range (e.g. the joint of an effect).
-    OutOfRangeAt { field: &'static str, index: usize },
+    OutOfRangeAt {
+        /// The field's path in the model.
+        field: &'static str,
+        /// The entry's position in its list.
+        index: usize,
+    },
 }
 
 impl core::fmt::Display for ModelError {

@@ -16,7 +16,10 @@
 //! their kernels' own basis, evaluated instead of the kernel form when the blob has them), `integrate`, `real`, and
 //! `inverse_kinematics` (the nominal closed forms compensation starts from).
 #![no_std]
+#![deny(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing))]
+// `!(a >= b)` is how this crate writes "a < b, or NaN": a non-finite value takes the refusing branch.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod calibrator;
 pub mod compensate;
@@ -39,15 +42,36 @@ pub enum Error {
     /// The blob was rejected (frame, checksum, version or contents).
     Blob(cbd_protocol::DecodeError),
     /// The caller's storage is smaller than [`storage_len_for`] this model.
-    StorageTooSmall { needed: usize, got: usize },
+    StorageTooSmall {
+        /// Values the model needs.
+        needed: usize,
+        /// Values the caller gave.
+        got: usize,
+    },
     /// The query has the wrong number of joints.
-    QueryDimension { expected: usize, found: usize },
+    QueryDimension {
+        /// The model's joints.
+        expected: usize,
+        /// The query's coordinates.
+        found: usize,
+    },
     /// A query coordinate is NaN or infinite.
-    NonFiniteQuery { index: usize },
+    NonFiniteQuery {
+        /// The joint.
+        index: usize,
+    },
     /// A compensation target has the wrong number of coordinates.
-    TargetDimension { expected: usize, found: usize },
+    TargetDimension {
+        /// The model's task dimension.
+        expected: usize,
+        /// The target's coordinates.
+        found: usize,
+    },
     /// A compensation target coordinate is NaN or infinite.
-    NonFiniteTarget { index: usize },
+    NonFiniteTarget {
+        /// The coordinate.
+        index: usize,
+    },
     /// The control points' flow produced a non-finite value.
     Diverged,
     /// The query's flow produced a non-finite value.

@@ -53,6 +53,8 @@ pub fn evaluation_precision(model: &Model<'_>) -> f64 {
 }
 
 /// Half the machine epsilon of [`Real`].
+// A cast from f64 to f64 in the default build, from f32 with the feature `f32`.
+#[allow(clippy::unnecessary_cast)]
 pub fn unit_roundoff() -> f64 {
     0.5 * Real::EPSILON as f64
 }

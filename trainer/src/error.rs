@@ -1,14 +1,16 @@
-//! The trainer's one error type. Each variant carries what a user needs to find the problem
-//! (the file, line, column or field; the joint; the configuration row) and its `Display` is the
-//! message the `cbd` command prints. The stage errors (`FitError`, `EvidenceError`, …) stay where
-//! their stage is and enter here unchanged, so their messages do not change either.
+//! The trainer's one error type, at the bottom of the crate: it names no stage module. Each
+//! variant carries what a user needs to find the problem (the file, line, column or field; the
+//! joint; the configuration row) and its `Display` is the message the `cbd` command prints. The
+//! stage errors (`FitError`, `EvidenceError`, `DhCalibrationError`, `ImportError`, …) stay where
+//! their stage is and enter here unchanged as the source of [`Error::Stage`]: each stage's module
+//! writes its own `From` conversion (the dependency points from the stage down to this file), and
+//! their messages do not change either.
 
 use std::path::PathBuf;
 
-pub use crate::data::import_error::ImportError;
-
-/// Any failure of the trainer's library (the CLI turns it into its `error: …` line).
+/// Any failure of the trainer's library (the CLI prints it as its `error: …` line).
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A file or directory could not be read, created or written.
     #[error("{}: {source}", path.display())]
@@ -27,16 +29,21 @@ pub enum Error {
     /// A JSON file (a fit's `--json` output) that does not parse.
     #[error("{}: line {line}, column {column}: {error}", path.display())]
     Json { path: PathBuf, line: usize, column: usize, error: serde_json::Error },
-    /// A model file or measurement file: names the file and, for CSV data, the line and column.
-    #[error(transparent)]
-    Import(#[from] ImportError),
+    /// A JSON document (a command's `--json` output) that could not be serialised.
+    #[error("{0}")]
+    JsonOutput(#[source] serde_json::Error),
     /// A URDF chain that cannot be converted to DH (no file: the model file reader adds it).
     #[error("{0}")]
     Urdf(String),
     /// The nominal model is unusable at a measured configuration: names the file and line.
     #[error("{}:{line}: {message}", file.display())]
     NominalAtRow { file: PathBuf, line: u64, message: String },
-    /// Inputs or options that do not fit together (joint counts, a name not known, an empty list).
+    /// A row of an input file that a model cannot be evaluated or used at (a target the
+    /// calibrated arm cannot reach, a non-finite error): names the file and line.
+    #[error("{}:{line}: {message}", file.display())]
+    AtLine { file: PathBuf, line: u64, message: String },
+    /// Inputs or options that do not fit together (joint counts, a name not known, an empty list,
+    /// a command-line value out of range).
     #[error("{0}")]
     InvalidInput(String),
     /// A factorisation failed (non-finite data).
@@ -45,6 +52,9 @@ pub enum Error {
     /// A figure could not be drawn.
     #[error("{0}")]
     Plot(String),
+    /// A check of the trainer's own work failed (a bug to report, not a bad input).
+    #[error("{0}")]
+    Internal(String),
     /// A blob could not be decoded.
     #[error(transparent)]
     Decode(#[from] cbd_protocol::DecodeError),
@@ -54,23 +64,14 @@ pub enum Error {
     /// The runtime could not evaluate configuration `row` (0-based) of a query.
     #[error("configuration {row}: {error}")]
     Evaluate { row: usize, error: cbd_runtime::Error },
-    #[error(transparent)]
-    Fit(#[from] crate::solver::FitError),
-    #[error(transparent)]
-    Evidence(#[from] crate::kernels::evidence::EvidenceError),
-    #[error(transparent)]
-    Hyperparameters(#[from] crate::kernels::hyperparameters::HyperparameterError),
-    #[error(transparent)]
-    KernelRidge(#[from] crate::baselines::krr::KrrError),
-    #[error(transparent)]
-    LeastSquares(#[from] crate::solver::least_squares::LeastSquaresError),
-    #[error(transparent)]
-    DhCalibration(#[from] crate::parametric::DhCalibrationError),
-    /// A `--effect` specification of `cbd simulate` that does not parse.
-    #[error(transparent)]
-    EffectSpec(#[from] crate::simulate::effects::EffectSpecError),
-    #[error(transparent)]
-    Diagnose(#[from] crate::diagnose::error::DiagnoseError),
+    /// A stage's own error, unchanged (its message is the one printed): `stage` names the stage
+    /// ("fit", "evidence", "import", …), `source` is its typed error ([`Error::stage_error`]).
+    #[error("{source}")]
+    Stage {
+        stage: &'static str,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// Any of the above, with what was being done: `--commanded: unknown simulated robot`.
     #[error("{context}: {source}")]
     Context {
@@ -100,18 +101,38 @@ impl Error {
     pub fn context(self, context: impl Into<String>) -> Error {
         Error::Context { context: context.into(), source: Box::new(self) }
     }
+
+    /// A stage's error carried unchanged ([`Error::Stage`]); the stages' `From` conversions call it.
+    pub fn stage(stage: &'static str, source: impl std::error::Error + Send + Sync + 'static) -> Error {
+        Error::Stage { stage, source: Box::new(source) }
+    }
+
+    /// The stage error of type `E` this error carries, also under [`Error::Context`]:
+    /// `e.stage_error::<FitError>()`.
+    pub fn stage_error<E: std::error::Error + 'static>(&self) -> Option<&E> {
+        match self {
+            Error::Stage { source, .. } => source.downcast_ref(),
+            Error::Context { source, .. } => source.stage_error(),
+            _ => None,
+        }
+    }
+}
+
+/// `?` with what was being done: `read(path).context(path.display())?` fails with
+/// `path: <the error>`, the error kept as the source.
+pub trait Context<T> {
+    fn context(self, context: impl std::fmt::Display) -> Result<T>;
+}
+
+impl<T, E: Into<Error>> Context<T> for std::result::Result<T, E> {
+    fn context(self, context: impl std::fmt::Display) -> Result<T> {
+        self.map_err(|e| e.into().context(context.to_string()))
+    }
 }
 
 impl From<cbd_runtime::Error> for Error {
     fn from(e: cbd_runtime::Error) -> Error {
         Error::Runtime(e)
-    }
-}
-
-/// The CLI reports errors as one line of text.
-impl From<Error> for String {
-    fn from(e: Error) -> String {
-        e.to_string()
     }
 }
 
@@ -177,5 +198,22 @@ mod tests {
         assert!(m.starts_with("a.toml: TOML parse error at line 5 | 5 | xxx") && m.len() <= MAX_MESSAGE_BYTES + 40, "{m}");
         assert!(!m.contains('\n') && m.ends_with("bytes in all)"));
         assert_eq!(one_line("plain"), "plain");
+    }
+
+    /// Issue 29: a stage's error enters unchanged (its message, its type as the source) and is
+    /// found again under a context; `?` with a context reads as the CLI's `path: message`.
+    #[test]
+    fn stage_errors_keep_their_message_and_type() {
+        #[derive(Debug, PartialEq, thiserror::Error)]
+        #[error("the stage says no")]
+        struct StageError;
+        let e = Error::stage("test", StageError).context("data.csv");
+        assert_eq!(e.to_string(), "data.csv: the stage says no");
+        assert_eq!(e.stage_error::<StageError>(), Some(&StageError));
+        assert!(e.stage_error::<std::io::Error>().is_none());
+        let source = std::error::Error::source(&e).map(|s| s.to_string());
+        assert_eq!(source.as_deref(), Some("the stage says no"));
+        let r: Result<()> = Err(Error::stage("test", StageError)).context(std::path::Path::new("a.blob").display());
+        assert_eq!(r.unwrap_err().to_string(), "a.blob: the stage says no");
     }
 }

@@ -1,9 +1,11 @@
 use clap::Parser;
 
 fn main() {
+    // A usage error (unknown flag, missing or mistyped value): clap prints the usage, exit code 2.
     let cli = cbd_trainer::cli::Cli::parse();
-    if let Err(message) = cbd_trainer::cli::run(cli) {
-        eprintln!("error: {}", cbd_trainer::error::one_line(&message));
+    cbd_trainer::cli::configure_allocator();
+    if let Err(e) = cbd_trainer::cli::run(cli) {
+        eprintln!("error: {}", cbd_trainer::error::one_line(&e.to_string()));
         std::process::exit(1);
     }
 }

@@ -4,8 +4,22 @@
 //! (exit 134). The estimate counts every large allocation: the (N·m)² matrices, and per worker
 //! thread faer's matrix-multiply workspace and the thread's stack.
 
+use crate::error::Context;
+
 /// Bytes per f64.
 const F64: f64 = 8.0;
+
+/// A computation refused up front: what it needs, what this process may use, and the flag that
+/// lowers the need or the limit to raise (the message says which).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct MemoryError(pub String);
+
+impl From<MemoryError> for crate::Error {
+    fn from(e: MemoryError) -> crate::Error {
+        crate::Error::stage("memory", e)
+    }
+}
 
 /// Copies of the (N·m)² momentum-space matrix a fit holds at its peak (K_lin, its Cholesky factor,
 /// the tangent and a work copy): 2.0 GB measured at N = 4096, m = 2 (BENCHMARKS.md) is 3.7 copies.
@@ -172,7 +186,7 @@ pub fn flow_expansion_bytes(rows: usize, params: usize) -> f64 {
 /// allocated (it is in the address space already), two workspaces each for several (one may not
 /// have multiplied yet, and work stealing starts second ones), and a margin for small blocks. The
 /// error gives both figures.
-pub fn room_for(bytes: f64) -> Result<(), String> {
+pub fn room_for(bytes: f64) -> Result<(), MemoryError> {
     let Some(available) = available_bytes() else { return Ok(()) };
     let workers = crate::workers::current_workers();
     let pending = if workers > 1 { 2.0 * workers as f64 * gemm_workspace_bytes() } else { 0.0 };
@@ -180,7 +194,7 @@ pub fn room_for(bytes: f64) -> Result<(), String> {
     if bytes <= room {
         Ok(())
     } else {
-        Err(format!("needs about {}, more than the {} this process may use", gigabytes(bytes), gigabytes(room.max(0.0))))
+        Err(MemoryError(format!("needs about {}, more than the {} this process may use", gigabytes(bytes), gigabytes(room.max(0.0)))))
     }
 }
 
@@ -259,7 +273,7 @@ pub fn gigabytes(bytes: f64) -> String {
 /// that does not fit even on one is refused, naming the need and its parts, what is available, how
 /// many rows would fit and `remedy` (the caller's flag that lowers it), or, when one worker alone
 /// does not fit, the memory limit to raise.
-pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>, remedy: &str) -> Result<usize, String> {
+pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>, remedy: &str) -> Result<usize, MemoryError> {
     let most = crate::workers::worker_threads();
     let Some(available) = available else { return Ok(most) };
     if let Some(threads) = [most, 1].into_iter().find(|&t| fit_bytes(rows, task_dim, t) <= available) {
@@ -276,34 +290,34 @@ pub fn check_fit(rows: usize, task_dim: usize, available: Option<f64>, remedy: &
     } else {
         format!("the worker thread alone needs {}: raise the memory limit", gigabytes(fixed_fit_bytes(1)))
     };
-    Err(format!(
+    Err(MemoryError(format!(
         "fitting {rows} measurements of {task_dim} coordinates needs about {} ({parts}), more than the {} this process may use; {what_fits}",
         gigabytes(fit_bytes(rows, task_dim, 1)),
         gigabytes(available)
-    ))
+    )))
 }
 
 /// The worker threads a fit whose size is checked later (the expansion, [`room_for`]; the kernel
 /// form against [`kernel_form_budget`]) runs on within `available` bytes: as [`check_fit`] for no
 /// matrices. Refused when one worker alone does not fit, naming the memory limit to raise.
-pub fn check_workers(available: Option<f64>) -> Result<usize, String> {
+pub fn check_workers(available: Option<f64>) -> Result<usize, MemoryError> {
     let most = crate::workers::worker_threads();
     let Some(available) = available else { return Ok(most) };
     if let Some(threads) = [most, 1].into_iter().find(|&t| fixed_fit_bytes(t) <= available) {
         return Ok(threads);
     }
-    Err(format!(
+    Err(MemoryError(format!(
         "a fit needs about {} before its matrices ({} and the allocator's {}), more than the {} this process may use: raise the memory limit",
         gigabytes(fixed_fit_bytes(1)),
         workers_text(1),
         gigabytes(ALLOCATOR_PAD),
         gigabytes(available)
-    ))
+    )))
 }
 
 /// [`check_workers`] against what this process may use; the error names the file.
-pub fn check_workers_of(file: &std::path::Path) -> Result<usize, String> {
-    check_workers(available_bytes()).map_err(|e| format!("{}: {e}", file.display()))
+pub fn check_workers_of(file: &std::path::Path) -> crate::Result<usize> {
+    check_workers(available_bytes()).context(file.display())
 }
 
 /// Bytes the kernel form's (N·m)² matrices may take on `threads` workers: what this process may
@@ -324,8 +338,8 @@ fn workers_text(threads: usize) -> String {
 
 /// [`check_fit`] for all rows of `data`, read from `file`, against what this process may use; the
 /// error names the file. Returns the worker threads to fit on (`crate::workers::on_workers`).
-pub fn check_fit_of(file: &std::path::Path, data: &crate::data::Measurements, remedy: &str) -> Result<usize, String> {
-    check_fit(data.len(), data.task_dim, available_bytes(), remedy).map_err(|e| format!("{}: {e}", file.display()))
+pub fn check_fit_of(file: &std::path::Path, data: &crate::data::Measurements, remedy: &str) -> crate::Result<usize> {
+    check_fit(data.len(), data.task_dim, available_bytes(), remedy).context(file.display())
 }
 
 #[cfg(test)]
@@ -336,7 +350,7 @@ mod tests {
     /// inside faer (exit 101).
     #[test]
     fn memory_needed_is_estimated_before_allocating() {
-        let e = check_fit(20_000, 3, Some(6e9), "--max-rows").unwrap_err();
+        let e = check_fit(20_000, 3, Some(6e9), "--max-rows").unwrap_err().to_string();
         assert!(e.contains("needs about 115.") && e.contains("6.0 GB") && e.contains("--max-rows"), "{e}");
         let k = max_fit_rows(6e9, 3, 1);
         assert!(check_fit(k, 3, Some(6e9), "").is_ok() && check_fit(k + 1, 3, Some(6e9), "").is_err(), "{k}");
@@ -356,7 +370,7 @@ mod tests {
         assert!(one >= gemm_workspace_bytes() + 8.0 * 1048576.0 + ALLOCATOR_PAD);
         assert!(fixed_fit_bytes(2) >= 2.0 * (2.0 * gemm_workspace_bytes() + 8.0 * 1048576.0) + ALLOCATOR_PAD);
         assert!(gemm_workspace_bytes() >= 2.0 * 2.0 * 1048576.0, "at least two blocks of 2 MiB");
-        let e = check_fit(256, 2, Some(0.9 * one), "--max-rows N").unwrap_err();
+        let e = check_fit(256, 2, Some(0.9 * one), "--max-rows N").unwrap_err().to_string();
         assert!(
             e.contains("faer's matrix-multiply workspace")
                 && e.contains("the worker thread alone needs")
@@ -366,7 +380,7 @@ mod tests {
         assert_eq!(check_fit(256, 2, Some(one + matrix_bytes(256, 2)), ""), Ok(1));
         let most = crate::workers::worker_threads();
         assert_eq!(check_fit(256, 2, Some(fixed_fit_bytes(most) + matrix_bytes(256, 2)), ""), Ok(most));
-        let e = check_fit(2048, 2, Some(one + matrix_bytes(1024, 2)), "--max-rows N").unwrap_err();
+        let e = check_fit(2048, 2, Some(one + matrix_bytes(1024, 2)), "--max-rows N").unwrap_err().to_string();
         assert!(e.contains("at most 1024 rows fit: --max-rows N"), "{e}");
     }
 
@@ -376,7 +390,7 @@ mod tests {
         let one = fixed_fit_bytes(1);
         assert_eq!(check_workers(Some(one)), Ok(1));
         assert_eq!(check_workers(None), Ok(crate::workers::worker_threads()));
-        let e = check_workers(Some(0.5 * one)).unwrap_err();
+        let e = check_workers(Some(0.5 * one)).unwrap_err().to_string();
         assert!(e.contains("faer's matrix-multiply workspace") && e.contains("raise the memory limit"), "{e}");
     }
 

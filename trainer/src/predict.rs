@@ -11,7 +11,7 @@ const CHECKED_CONFIGURATIONS: usize = 64;
 /// used: at up to 64 of its own training configurations (evenly spaced) every calibrated position
 /// must be finite and within ±1e100 in the model's unit, the bound every imported measurement
 /// obeys (a model that fits its data predicts near them). The message names the configuration.
-pub fn check_calibrator(cal: &mut Calibrator) -> std::result::Result<(), String> {
+pub fn check_calibrator(cal: &mut Calibrator) -> std::result::Result<(), DamagedModel> {
     use crate::data::csv_import::MAX_MAGNITUDE;
     let n = cal.model().n_joints().max(1);
     let points: Vec<f64> = cal.model().points.iter().collect();
@@ -20,21 +20,31 @@ pub fn check_calibrator(cal: &mut Calibrator) -> std::result::Result<(), String>
     for (k, q) in points.chunks_exact(n).enumerate().step_by(step) {
         let position: Vec<f64> = match cal.evaluate(q) {
             Ok(e) => e.position().iter().copied().collect(),
-            Err(e) => {
-                return Err(format!(
-                    "the model cannot be evaluated at its own training configuration {} of {count}: {e}: the blob is damaged; fit it again",
-                    k + 1
-                ))
-            }
+            Err(error) => return Err(DamagedModel::Unevaluable { configuration: k + 1, count, error }),
         };
-        if let Some(v) = position.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
-            return Err(format!(
-                "the model evaluates to {v:.3e} at its own training configuration {} of {count}, beyond ±{MAX_MAGNITUDE:e}: the blob is damaged; fit it again",
-                k + 1
-            ));
+        if let Some(&value) = position.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
+            return Err(DamagedModel::OutOfRange { value, configuration: k + 1, count });
         }
     }
     Ok(())
+}
+
+/// Why [`check_calibrator`] refused a model: at its own training `configuration` (1-based) of
+/// `count`, the blob is damaged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DamagedModel {
+    /// The runtime could not evaluate it there.
+    #[error("the model cannot be evaluated at its own training configuration {configuration} of {count}: {error}: the blob is damaged; fit it again")]
+    Unevaluable { configuration: usize, count: usize, error: cbd_runtime::Error },
+    /// A calibrated position there is not finite or beyond ±1e100.
+    #[error("the model evaluates to {value:.3e} at its own training configuration {configuration} of {count}, beyond ±{:e}: the blob is damaged; fit it again", crate::data::csv_import::MAX_MAGNITUDE)]
+    OutOfRange { value: f64, configuration: usize, count: usize },
+}
+
+impl From<DamagedModel> for Error {
+    fn from(e: DamagedModel) -> Error {
+        Error::stage("blob check", e)
+    }
 }
 
 /// Loads `blob` with the runtime and evaluates it at every configuration of `joints`

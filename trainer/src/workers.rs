@@ -37,18 +37,31 @@ fn default_workers() -> usize {
 /// Runs `f` on a new pool of `threads` workers (the results do not depend on the count: the work is
 /// split into fixed pieces). A pool whose threads cannot start (a memory limit too low for their
 /// stacks) is an error, never a panic.
-pub fn run_in_pool<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> Result<R, String> {
+pub fn run_in_pool<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> Result<R, PoolError> {
     let threads = threads.clamp(1, MAX_WORKERS);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .stack_size(WORKER_STACK_BYTES)
         .thread_name(|k| format!("cbd-worker-{k}"))
         .build()
-        .map_err(|e| {
-            format!("cannot start {threads} worker thread(s) of {} MiB stack: {e} (is the memory limit too low?)", WORKER_STACK_BYTES >> 20)
-        })?;
+        .map_err(|source| PoolError { threads, source })?;
     let _ = WORKERS.set(threads);
     Ok(pool.install(f))
+}
+
+/// The worker pool's threads could not start ([`run_in_pool`]).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot start {threads} worker thread(s) of {} MiB stack: {source} (is the memory limit too low?)", WORKER_STACK_BYTES >> 20)]
+pub struct PoolError {
+    pub threads: usize,
+    #[source]
+    pub source: rayon::ThreadPoolBuildError,
+}
+
+impl From<PoolError> for crate::Error {
+    fn from(e: PoolError) -> crate::Error {
+        crate::Error::stage("workers", e)
+    }
 }
 
 /// The number of workers for a command: [`MAX_WORKERS`] on a machine with the cores, one when the

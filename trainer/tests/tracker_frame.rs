@@ -8,10 +8,10 @@ use cbd_trainer::data::model_file::{load_model_file, parse_model_file};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::kernels::hyperparameters::SearchOptions;
 use cbd_trainer::nominal::register::{axis_angle, register_base};
-use cbd_trainer::nominal::Pose;
+use cbd_trainer::nominal::{rotation_about, Frame};
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
 
-fn moved(data: &Measurements, motion: &Pose) -> Measurements {
+fn moved(data: &Measurements, motion: &Frame) -> Measurements {
     let mut out = Measurements::new(data.n_joints, 3);
     for i in 0..data.len() {
         let y = data.position(i);
@@ -20,9 +20,9 @@ fn moved(data: &Measurements, motion: &Pose) -> Measurements {
     out
 }
 
-fn base_of(model: &NominalModel) -> Pose {
+fn base_of(model: &NominalModel) -> Frame {
     let NominalModel::DhChain(c) = model else { panic!("a DH chain") };
-    Pose::from_transform(&c.base)
+    Frame::from_transform(&c.base)
 }
 
 /// The comparison with CbD at fixed hyperparameters (no evidence search: the test stays fast;
@@ -56,7 +56,7 @@ fn data_in_a_hidden_frame_give_the_declared_base_figures_and_the_registered_base
         v.map(|x| x / l)
     };
     let axis = n([1.0, -2.0, 3.0]);
-    let motion = Pose { t: n([2.0, 1.0, -0.5]).map(|x| 4000.0 * x), ..Pose::axis_angle(axis, 30f64.to_radians()) };
+    let motion = rotation_about(axis, 30f64.to_radians()).with_translation(n([2.0, 1.0, -0.5]).map(|x| 4000.0 * x));
     let (train_moved, test_moved) = (moved(&train, &motion), moved(&test, &motion));
 
     let declared = load_model_file(concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5/ur5.toml")).unwrap();
@@ -75,12 +75,12 @@ fn data_in_a_hidden_frame_give_the_declared_base_figures_and_the_registered_base
     register_base(&mut at_home, &train).unwrap();
     let want = motion.compose(&base_of(&at_home));
     let got = base_of(&registered);
-    let gap_mm = (0..3).map(|k| (got.t[k] - want.t[k]).powi(2)).sum::<f64>().sqrt();
+    let gap_mm = (0..3).map(|k| (got.translation()[k] - want.translation()[k]).powi(2)).sum::<f64>().sqrt();
     let (_, gap_angle) = axis_angle(&want.inverse().compose(&got));
     eprintln!("{}", r.describe("mm"));
     eprintln!("registered base vs hidden frame ∘ home registration: {gap_mm:.3e} mm, {:.3e}°", gap_angle.to_degrees());
     let (_, off_angle) = axis_angle(&motion.inverse().compose(&got));
-    let off_mm = (0..3).map(|k| (got.t[k] - motion.t[k]).powi(2)).sum::<f64>().sqrt();
+    let off_mm = (0..3).map(|k| (got.translation()[k] - motion.translation()[k]).powi(2)).sum::<f64>().sqrt();
     eprintln!("registered base vs the hidden frame itself: {off_mm:.3e} mm, {:.3e}°", off_angle.to_degrees());
     assert!(gap_mm < 0.05 && gap_angle.to_degrees() < 0.005, "{gap_mm} mm, {}°", gap_angle.to_degrees());
     assert!(off_mm < 5.0 && off_angle.to_degrees() < 0.5, "{off_mm} mm, {}°", off_angle.to_degrees());
@@ -114,7 +114,7 @@ mod cli_support;
 fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
     use cli_support::*;
     let dir = scratch("tracker-frame");
-    let motion = Pose { t: [2500.0, -3000.0, 800.0], ..Pose::axis_angle([0.0, 0.6, 0.8], 0.5) };
+    let motion = rotation_about([0.0, 0.6, 0.8], 0.5).with_translation([2500.0, -3000.0, 800.0]);
     let text = std::fs::read_to_string(ur5_dir().join("train.csv")).unwrap();
     let mut out = String::new();
     for (k, line) in text.lines().take(61).enumerate() {

@@ -10,7 +10,7 @@ use crate::kernel::{joint_kernel_exponent_n, FEATURES_PER_JOINT};
 use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
-/// w(k) = Σ_g ψ_g(k) d_g, Dw[a][b] = Σ_g d_g[a] ∂_b ψ_g and (HESSIAN) T[a][c][b] = Σ_g d_g[a] ∂_c ∂_b ψ_g,
+/// w(k) = Σ_g ψ_g(k) d_g, `Dw[a][b] = Σ_g d_g[a] ∂_b ψ_g` and (HESSIAN) `T[a][c][b] = Σ_g d_g[a] ∂_c ∂_b ψ_g`,
 /// `d` the stage's task weights (r_W × m), `orders` the coordinates' highest exponents
 /// ([`crate::expansion::task_orders`]). Out of line, as the kernel form's task field.
 #[inline(never)]

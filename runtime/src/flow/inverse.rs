@@ -23,7 +23,9 @@ use cbd_protocol::{Integrator, JointKernel, TaskKernel, MAX_JOINTS as NJ, MAX_TA
 /// Which way a flow is integrated: from t = 0 to 1 (ψ, φ) or from t = 1 back to 0 (ψ⁻¹, φ⁻¹).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Direction {
+    /// From t = 0 to 1: the flow itself.
     Forward,
+    /// From t = 1 back to 0: its inverse.
     Backward,
 }
 

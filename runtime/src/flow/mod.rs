@@ -44,8 +44,11 @@ impl Dims {
 /// time, so that the loops of a common shape unroll. Both run the same arithmetic in the same
 /// order, so results are bit-identical whichever is used.
 pub trait Shape: Copy {
+    /// Task-space dimension, m.
     fn m(self) -> usize;
+    /// Joints, n.
     fn n(self) -> usize;
+    /// The dimensions as run-time values.
     #[inline(always)]
     fn dims(self) -> Dims {
         Dims { n: self.n(), m: self.m() }
@@ -81,14 +84,18 @@ impl<const M: usize, const N: usize> Shape for Fixed<M, N> {
 /// w and its Jacobian Dw at a task-space point.
 #[derive(Debug, Clone, Copy)]
 pub struct TaskField {
+    /// w (internal units; the first m entries are used).
     pub w: [Real; MAX_TASK_DIM],
+    /// Dw, `dw[a][b] = ∂w_a/∂y_b`.
     pub dw: [[Real; MAX_TASK_DIM]; MAX_TASK_DIM],
 }
 
 /// v and its Jacobian Dv (`dv[a][b] = ∂v_a/∂x_b`) at a joint configuration.
 #[derive(Debug, Clone, Copy)]
 pub struct JointField {
+    /// v (joint units; the first n entries are used).
     pub v: [Real; MAX_JOINTS],
+    /// Dv, `dv[a][b] = ∂v_a/∂x_b`.
     pub dv: [[Real; MAX_JOINTS]; MAX_JOINTS],
 }
 
@@ -309,9 +316,13 @@ pub fn momentum_rate(dims: Dims, law: MomentumLaw, p: &[Real], tf: &TaskField, j
 /// Everything the control-point dynamics need besides the state.
 #[derive(Debug, Clone, Copy)]
 pub struct FlowParams<'m> {
+    /// n and m.
     pub dims: Dims,
+    /// K_V as the flow uses it (γ carries the law's sign: [`JointKernel::for_flow`]).
     pub joint_kernel: &'m JointKernel,
+    /// K_W.
     pub task_kernel: &'m TaskKernel,
+    /// Whether the momenta carry the −(div v) P term.
     pub law: MomentumLaw,
 }
 

@@ -104,6 +104,7 @@ pub fn conditioning(jacobian: &SMatrix<f64, MT, NJ>, m: usize) -> f64 {
 /// Result of [`nominal_position`]: |k0(q) − target| at the returned q, in the model's units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NominalSolution {
+    /// |k0(q) − target| (model units).
     pub residual: f64,
 }
 

@@ -3,7 +3,9 @@
 /// Which of the two solutions: the sign of sin q2 (q2 ∈ [0, π] or [−π, 0]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Elbow {
+    /// q2 ∈ [0, π].
     Positive,
+    /// q2 ∈ [−π, 0].
     Negative,
 }
 

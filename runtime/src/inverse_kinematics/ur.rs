@@ -15,52 +15,22 @@
 //!
 //! and q_i = θ_i − theta_offset_i.
 
-use cbd_protocol::{DhChain, DhConvention, JointKind, Transform};
+use crate::kinematics::rigid::{dh_transform, dh_walk};
+use crate::kinematics::spatial::Frame;
+use cbd_protocol::{DhChain, DhConvention, JointKind};
+// The tests (`use super::*`) give their chains a `Transform` base, as before the pose became a `Frame`.
+#[cfg(test)]
+use cbd_protocol::Transform;
 
-/// A rigid transform as a homogeneous 4×4 matrix (last row 0 0 0 1).
-pub type Pose = [[f64; 4]; 4];
+/// A tool pose in the base frame: a [`Frame`] (the runtime's one rigid-transform type).
+pub type Pose = Frame;
 
 /// One solution slot: the joints, or `None` where that branch does not exist for the pose.
 pub type Solutions = [Option<[f64; 6]>; 8];
 
-const IDENTITY: Pose = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
-
-fn mul(a: &Pose, b: &Pose) -> Pose {
-    let mut out = [[0.0; 4]; 4];
-    for (o_row, a_row) in out.iter_mut().zip(a.iter()) {
-        for (c, o) in o_row.iter_mut().enumerate() {
-            *o = a_row.iter().zip(b.iter()).map(|(x, b_row)| x * b_row.get(c).copied().unwrap_or(0.0)).sum();
-        }
-    }
-    out
-}
-
-/// The inverse of a rigid transform: [Rᵀ | −Rᵀ t].
-fn inverse(t: &Pose) -> Pose {
-    let mut out = IDENTITY;
-    for (r, out_r) in out.iter_mut().enumerate().take(3) {
-        // Row r of Rᵀ is column r of R; the translation −Σ_k R_kr t_k, summed over k in order.
-        let column = |row: &[f64; 4]| row.get(r).copied().unwrap_or(0.0);
-        for (o, t_c) in out_r.iter_mut().zip(t.iter()).take(3) {
-            *o = column(t_c);
-        }
-        out_r[3] = -t.iter().take(3).map(|t_k| column(t_k) * t_k[3]).sum::<f64>();
-    }
-    out
-}
-
-/// A protocol transform as a pose.
-pub fn pose_of(t: &Transform) -> Pose {
-    let r = &t.rotation;
-    let p = &t.translation;
-    [[r[0], r[1], r[2], p[0]], [r[3], r[4], r[5], p[1]], [r[6], r[7], r[8], p[2]], [0.0, 0.0, 0.0, 1.0]]
-}
-
-/// T_i = Rz(θ) Tz(d) Tx(a) Rx(α) (standard DH).
-fn dh(theta: f64, d: f64, a: f64, alpha: f64) -> Pose {
-    let (st, ct) = (libm::sin(theta), libm::cos(theta));
-    let (sa, ca) = (libm::sin(alpha), libm::cos(alpha));
-    [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0.0, sa, ca, d], [0.0, 0.0, 0.0, 1.0]]
+/// T_i = Rz(θ) Tz(d) Tx(a) Rx(α) (standard DH), the DH walk's product.
+fn dh(theta: f64, d: f64, a: f64, alpha: f64) -> Frame {
+    dh_transform(DhConvention::Standard, theta, d, a, alpha)
 }
 
 /// Whether `chain` is UR-type (see the module doc): then [`solutions`] applies.
@@ -83,17 +53,10 @@ pub fn is_ur_type(chain: &DhChain) -> bool {
         && chain.joints.get(5).map(|j| j.d.abs() > 0.0).unwrap_or(false)
 }
 
-/// The full tool pose (base frame, tool included) of a DH chain at joints `q`.
+/// The full tool pose (base frame, tool included) of a DH chain at joints `q`: the DH walk's tool frame.
 pub fn tool_pose(chain: &DhChain, q: &[f64]) -> Pose {
-    let mut t = pose_of(&chain.base);
-    for (j, x) in chain.joints.iter().zip(q) {
-        let (theta, d) = match j.kind {
-            JointKind::Revolute => (x + j.theta_offset, j.d),
-            JointKind::Prismatic => (j.theta_offset, x + j.d),
-        };
-        t = mul(&t, &dh(theta, d, j.a, j.alpha));
-    }
-    mul(&t, &pose_of(&chain.tool))
+    let walk = dh_walk(chain, q);
+    Frame::new(walk.tool_rotation, walk.tool)
 }
 
 /// The eight closed-form solutions for the tool `pose` (base frame), in the order
@@ -110,11 +73,13 @@ pub fn solutions(chain: &DhChain, pose: &Pose) -> Solutions {
     let (Some(j1), Some(j2), Some(j3), Some(j4), Some(j5), Some(j6)) = (p(0), p(1), p(2), p(3), p(4), p(5)) else {
         return out;
     };
-    let flange = mul(&mul(&inverse(&pose_of(&chain.base)), pose), &inverse(&pose_of(&chain.tool)));
+    let flange = Frame::from_transform(&chain.base).inverse().compose(pose).compose(&Frame::from_transform(&chain.tool).inverse());
     let (d1, a2, a3, d5, d6) = (j1.d, j2.a, j3.a, j5.d, j6.d);
     let offset_sum = j2.d + j3.d + j4.d;
-    let p6 = [flange[0][3], flange[1][3], flange[2][3]];
-    let z6 = [flange[0][2], flange[1][2], flange[2][2]];
+    // Rows [R_i0, R_i1, R_i2, p6_i]: x6, y6, z6 are R's columns.
+    let Frame([[x6x, y6x, z6x, p6x], [x6y, y6y, z6y, p6y], [_, _, z6z, p6z]]) = flange;
+    let p6 = [p6x, p6y, p6z];
+    let z6 = [z6x, z6y, z6z];
     let o5 = [p6[0] - d6 * z6[0], p6[1] - d6 * z6[1]];
     let rho = libm::hypot(o5[0], o5[1]);
     if !(rho >= offset_sum.abs()) || rho == 0.0 {
@@ -131,15 +96,15 @@ pub fn solutions(chain: &DhChain, pose: &Pose) -> Solutions {
         for theta5 in [acos5, -acos5] {
             let s5 = libm::sin(theta5);
             // x6 · z1 = sin θ5 cos θ6, y6 · z1 = −sin θ5 sin θ6.
-            let x6z1 = flange[0][0] * s1 - flange[1][0] * c1;
-            let y6z1 = flange[0][1] * s1 - flange[1][1] * c1;
+            let x6z1 = x6x * s1 - x6y * c1;
+            let y6z1 = y6x * s1 - y6y * c1;
             let theta6 = if s5.abs() < 1e-12 { 0.0 } else { libm::atan2(-y6z1 / s5, x6z1 / s5) };
             // T14 = T01⁻¹ T T56⁻¹ T45⁻¹.
             let t01 = dh(theta1, d1, j1.a, j1.alpha);
             let t45 = dh(theta5, d5, j5.a, j5.alpha);
             let t56 = dh(theta6, d6, j6.a, j6.alpha);
-            let t14 = mul(&mul(&inverse(&t01), &flange), &inverse(&mul(&t45, &t56)));
-            let (x, y) = (t14[0][3], t14[1][3]);
+            let t14 = t01.inverse().compose(&flange).compose(&t45.compose(&t56).inverse());
+            let Frame([[x4x, _, _, x], [x4y, _, _, y], _]) = t14;
             let cos3 = (x * x + y * y - a2 * a2 - a3 * a3) / (2.0 * a2 * a3);
             let elbow_ok = (-1.0 - 1e-12..=1.0 + 1e-12).contains(&cos3);
             let acos3 = libm::acos(cos3.clamp(-1.0, 1.0));
@@ -147,7 +112,7 @@ pub fn solutions(chain: &DhChain, pose: &Pose) -> Solutions {
                 let (s3, c3) = (libm::sin(theta3), libm::cos(theta3));
                 let theta2 = libm::atan2(y, x) - libm::atan2(a3 * s3, a2 + a3 * c3);
                 // x4 in frame 1 is (cos θ234, sin θ234, 0).
-                let theta4 = libm::atan2(t14[1][0], t14[0][0]) - theta2 - theta3;
+                let theta4 = libm::atan2(x4y, x4x) - theta2 - theta3;
                 if let Some(s) = out.get_mut(slot) {
                     if wrist_ok && elbow_ok {
                         let thetas = [theta1, theta2, theta3, theta4, theta5, theta6];
@@ -180,10 +145,7 @@ fn wrap(a: f64) -> f64 {
 /// to `hint` (sum of squared angle differences modulo 2π; whole turns taken from the hint).
 /// `None` when the chain is not UR-type or no branch reaches.
 pub fn nearest_to_hint(chain: &DhChain, target: &[f64; 3], hint: &[f64; 6]) -> Option<[f64; 6]> {
-    let mut pose = tool_pose(chain, hint);
-    for (row, t) in pose.iter_mut().zip(target) {
-        row[3] = *t;
-    }
+    let pose = tool_pose(chain, hint).with_translation(*target);
     let mut best: Option<(f64, [f64; 6])> = None;
     for q in solutions(chain, &pose).into_iter().flatten() {
         let mut near = q;

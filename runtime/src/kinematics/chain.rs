@@ -1,43 +1,12 @@
 //! The rigid chain's geometry at one configuration (joint axes, axis points, link ends and
-//! rotations in the base frame) and the small vector algebra the effects and the gravity torques
-//! differentiate it with. One owner, so `effects` and `gravity` both build on it.
+//! rotations in the base frame), which the effects and the gravity torques differentiate (with the
+//! vector algebra of [`crate::kinematics::spatial`]). One owner, so `effects` and `gravity` both build on it.
 //!
 //! f64 through `libm`, no fused multiply-add, no panic path.
 
 use crate::kinematics::rigid::dh_walk;
+use crate::kinematics::spatial::{cross, sub, V3, ZERO};
 use cbd_protocol::{GravityModel, JointKind, NominalModel, MAX_JOINTS as NJ};
-
-pub(crate) type V3 = [f64; 3];
-
-pub(crate) const ZERO: V3 = [0.0; 3];
-
-#[inline(always)]
-pub(crate) fn cross(a: &V3, b: &V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-#[inline(always)]
-pub(crate) fn dot(a: &V3, b: &V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline(always)]
-pub(crate) fn sub(a: &V3, b: &V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-#[inline(always)]
-pub(crate) fn scaled(a: &V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-/// `acc += s·a`.
-#[inline(always)]
-pub(crate) fn add_scaled(acc: &mut V3, a: &V3, s: f64) {
-    for (o, v) in acc.iter_mut().zip(a.iter()) {
-        *o += s * v;
-    }
-}
 
 #[inline(always)]
 pub(crate) fn at<T: Copy + Default>(s: &[T], i: usize) -> T {
@@ -122,7 +91,7 @@ impl Chain {
         if at(&self.prismatic, a) {
             ZERO
         } else {
-            cross(&at(&self.axes, a), w)
+            cross(at(&self.axes, a), *w)
         }
     }
 
@@ -133,7 +102,7 @@ impl Chain {
         if at(&self.prismatic, a) {
             z
         } else {
-            cross(&z, &sub(c, &at(&self.origins, a)))
+            cross(z, sub(*c, at(&self.origins, a)))
         }
     }
 
@@ -143,7 +112,7 @@ impl Chain {
         if at(&self.prismatic, a) {
             ZERO
         } else {
-            cross(g, &at(&self.axes, a))
+            cross(*g, at(&self.axes, a))
         }
     }
 }
@@ -160,7 +129,10 @@ pub(crate) fn gravity_vector(model: &NominalModel, gravity: &GravityModel) -> V3
 /// How many derivatives to compute.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Order {
+    /// The value alone.
     Value,
+    /// The value and the first derivatives.
     First,
+    /// The value, the first and the second derivatives.
     Second,
 }

@@ -24,11 +24,12 @@
 //! bit. Out-of-range joint or link indices (rejected by validation) are ignored, never a panic.
 
 pub use crate::kinematics::chain::Order;
-use crate::kinematics::chain::{add_scaled, at, at2, dot, gravity_vector, scaled, sub, Chain, V3, ZERO};
+use crate::kinematics::chain::{at, at2, gravity_vector, Chain};
 use crate::kinematics::gravity::{gravity_of, one_link, point_masses};
 pub use crate::kinematics::gravity::{gravity_terms, gravity_torques, GravityTerms};
 use crate::kinematics::rigid::Kinematics;
 use crate::kinematics::rigid_derivatives::NominalHessian;
+use crate::kinematics::spatial::{add_scaled, dot, scale, sub, V3, ZERO};
 use cbd_protocol::{DhChain, Effect, Effects, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// δ(q), b(q) and their derivatives for a list of effects.
@@ -69,14 +70,14 @@ fn add_bending(chain: &Chain, g: &V3, link: usize, compliance: f64, order: Order
     }
     let end = at(&chain.ends, link);
     let start = if link == 0 { chain.start } else { at(&chain.ends, link - 1) };
-    let v = sub(&end, &start);
-    let r = libm::sqrt(dot(&v, &v));
+    let v = sub(end, start);
+    let r = libm::sqrt(dot(v, v));
     if r.is_nan() || r <= 0.0 {
         return;
     }
     let inv = 1.0 / r;
-    let u = scaled(&v, inv);
-    let gu = dot(g, &u);
+    let u = scale(v, inv);
+    let gu = dot(*g, u);
     // b = κ (g − (g·u) u)
     for (b, (g_c, u_c)) in out.b.iter_mut().zip(g.iter().zip(u.iter())) {
         *b += compliance * (g_c - gu * u_c);
@@ -93,12 +94,12 @@ fn add_bending(chain: &Chain, g: &V3, link: usize, compliance: f64, order: Order
     let mut u_d = [ZERO; NJ];
     for (ud, vd) in u_d.iter_mut().zip(v_d.iter()).take(link + 1) {
         let mut p = *vd;
-        add_scaled(&mut p, &u, -dot(&u, vd));
-        *ud = scaled(&p, inv);
+        add_scaled(&mut p, u, -dot(u, *vd));
+        *ud = scale(p, inv);
     }
     // ∂_d b = −κ ((g·u_d) u + (g·u) u_d)
     for (d, ud) in u_d.iter().enumerate().take(link + 1) {
-        let gud = dot(g, ud);
+        let gud = dot(*g, *ud);
         for (row, (u_c, ud_c)) in out.d_b.iter_mut().zip(u.iter().zip(ud.iter())) {
             if let Some(slot) = row.get_mut(d) {
                 *slot -= compliance * (gud * u_c + gu * ud_c);
@@ -115,12 +116,12 @@ fn add_bending(chain: &Chain, g: &V3, link: usize, compliance: f64, order: Order
             let v_ed = chain.carry(lo, &at(&v_d, hi));
             let (ue, ud, ve, vd) = (at(&u_d, e), at(&u_d, d), at(&v_d, e), at(&v_d, d));
             let mut w = v_ed;
-            add_scaled(&mut w, &u, -dot(&u, &v_ed));
-            add_scaled(&mut w, &ud, -dot(&u, &ve));
-            add_scaled(&mut w, &ue, -dot(&u, &vd));
-            add_scaled(&mut w, &u, -dot(&ud, &ve));
-            let u_ed = scaled(&w, inv);
-            let (gued, gud, gue) = (dot(g, &u_ed), dot(g, &ud), dot(g, &ue));
+            add_scaled(&mut w, u, -dot(u, v_ed));
+            add_scaled(&mut w, ud, -dot(u, ve));
+            add_scaled(&mut w, ue, -dot(u, vd));
+            add_scaled(&mut w, u, -dot(ud, ve));
+            let u_ed = scale(w, inv);
+            let (gued, gud, gue) = (dot(*g, u_ed), dot(*g, ud), dot(*g, ue));
             for (plane, c) in out.d2_b.iter_mut().zip(0..3) {
                 let value = gued * at(&u, c) + gud * at(&ue, c) + gue * at(&ud, c) + gu * at(&u_ed, c);
                 if let Some(slot) = plane.get_mut(e).and_then(|row| row.get_mut(d)) {
@@ -362,7 +363,7 @@ pub(crate) mod tests {
         let chain = Chain::of(model, q);
         let gravity = &model.effects().gravity;
         let g = gravity_vector(model, gravity);
-        (0..chain.n).map(|k| gravity.link_masses.get(k).copied().unwrap_or(1.0) * dot(&g, &chain.ends[k])).sum()
+        (0..chain.n).map(|k| gravity.link_masses.get(k).copied().unwrap_or(1.0) * dot(g, chain.ends[k])).sum()
     }
 
     /// Central difference of `f` along joint d.

@@ -13,7 +13,8 @@
 //!
 //! f64 through `libm`, no fused multiply-add, no panic path.
 
-use crate::kinematics::chain::{add_scaled, at, at2, dot, gravity_vector, sorted3, Chain, Order, V3, ZERO};
+use crate::kinematics::chain::{at, at2, gravity_vector, sorted3, Chain, Order};
+use crate::kinematics::spatial::{add_scaled, dot, V3, ZERO};
 use cbd_protocol::{GravityModel, NominalModel, MAX_JOINTS as NJ};
 
 /// The gravity torques τ = ∇V and their derivatives (V(q) = Σ_k g·(m_k o_k(q) + R_k(q) s_k)), joint order.
@@ -34,7 +35,7 @@ impl GravityTerms {
 /// w = R s: a vector given in a link's own frame (rows of R), in the base frame.
 #[inline(always)]
 fn rotate(rows: &[V3; 3], s: &V3) -> V3 {
-    [dot(&rows[0], s), dot(&rows[1], s), dot(&rows[2], s)]
+    [dot(rows[0], *s), dot(rows[1], *s), dot(rows[2], *s)]
 }
 
 /// τ, Dτ, D²τ of the mass model `moment_of(k) = (m_k, s_k)` (s_k in link k's own frame).
@@ -55,17 +56,17 @@ pub(crate) fn gravity_of(chain: &Chain, g: &V3, moment_of: impl Fn(usize) -> (f6
     let mut col = [ZERO; NJ];
     for (c, col_c) in col.iter_mut().enumerate().take(n) {
         for (k, end) in chain.ends.iter().enumerate().take(n).skip(c) {
-            add_scaled(col_c, &chain.point_rate(c, end), at(&masses, k));
+            add_scaled(col_c, chain.point_rate(c, end), at(&masses, k));
             let w_k = at(&first_moments, k);
             if w_k != ZERO {
                 let rate = chain.carry(c, &w_k);
-                add_scaled(col_c, &rate, 1.0);
+                add_scaled(col_c, rate, 1.0);
             }
         }
     }
     // τ_c = ∂V/∂q_c = g·col_c
     for (t, col_c) in out.tau.iter_mut().zip(col.iter()).take(n) {
-        *t = dot(g, col_c);
+        *t = dot(*g, *col_c);
     }
     if order == Order::Value {
         return out;
@@ -78,7 +79,7 @@ pub(crate) fn gravity_of(chain: &Chain, g: &V3, moment_of: impl Fn(usize) -> (f6
     for (j, row) in out.d_tau.iter_mut().enumerate().take(n) {
         for (e, v) in row.iter_mut().enumerate().take(n) {
             let (a, b) = (j.min(e), j.max(e));
-            *v = dot(&at(&dual, a), &at(&col, b));
+            *v = dot(at(&dual, a), at(&col, b));
         }
     }
     if order == Order::First {
@@ -96,7 +97,7 @@ pub(crate) fn gravity_of(chain: &Chain, g: &V3, moment_of: impl Fn(usize) -> (f6
         for (j, row) in plane.iter_mut().enumerate().take(n) {
             for (k, v) in row.iter_mut().enumerate().take(n) {
                 let (a, b, c) = sorted3(i, j, k);
-                *v = dot(&at(&dual, a), &at2(&carried, b, c));
+                *v = dot(at(&dual, a), at2(&carried, b, c));
             }
         }
     }
@@ -148,8 +149,8 @@ mod tests {
             .map(|k| {
                 let (m, s) = moments(k);
                 let r = &chain.rotations[k];
-                let w = [dot(&r[0], &s), dot(&r[1], &s), dot(&r[2], &s)];
-                m * dot(&g, &chain.ends[k]) + dot(&g, &w)
+                let w = [dot(r[0], s), dot(r[1], s), dot(r[2], s)];
+                m * dot(g, chain.ends[k]) + dot(g, w)
             })
             .sum()
     }
@@ -184,7 +185,7 @@ mod tests {
             let x = [0.3, -0.2, 0.7];
             let point = |c: &Chain, k: usize| {
                 let r = &c.rotations[k];
-                let w = [dot(&r[0], &x), dot(&r[1], &x), dot(&r[2], &x)];
+                let w = [dot(r[0], x), dot(r[1], x), dot(r[2], x)];
                 [c.ends[k][0] + w[0], c.ends[k][1] + w[1], c.ends[k][2] + w[2]]
             };
             for k in 0..n {

@@ -9,10 +9,12 @@ pub mod effects_derivatives;
 pub mod gravity;
 pub mod rigid;
 pub mod rigid_derivatives;
+pub mod spatial;
 
 use cbd_protocol::NominalModel;
 
 pub use rigid::{dh_frames, Kinematics};
+pub use spatial::Frame;
 
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
 /// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::kinematics::effects::kinematics`]).

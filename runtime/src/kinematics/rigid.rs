@@ -2,12 +2,15 @@
 //! walk. `kinematics::forward_kinematics` dispatches here for effect-free models, and the effects
 //! build on it.
 
-use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel, Normalisation, Transform, MAX_JOINTS, MAX_TASK_DIM};
+use crate::kinematics::spatial::{cross, sub, Frame};
+use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Normalisation, MAX_JOINTS, MAX_TASK_DIM};
 
 /// Position (first `task_dim` entries) and Jacobian (row-major, `task_dim × n_joints`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Kinematics {
+    /// k0(x), model units (internal units after [`Kinematics::normalised`]).
     pub position: [f64; MAX_TASK_DIM],
+    /// Dk0(x), `jacobian[a][d] = ∂k0_a/∂x_d`.
     pub jacobian: [[f64; MAX_JOINTS]; MAX_TASK_DIM],
 }
 
@@ -55,44 +58,43 @@ fn planar_chain(lengths: &[f64], x: &[f64]) -> Kinematics {
     out
 }
 
-/// A rigid transform as a 3×4 row-major matrix [R | t].
-type Frame = [[f64; 4]; 3];
-
-fn frame_of(t: &Transform) -> Frame {
-    let r = &t.rotation;
-    [[r[0], r[1], r[2], t.translation[0]], [r[3], r[4], r[5], t.translation[1]], [r[6], r[7], r[8], t.translation[2]]]
-}
-
-fn compose(a: &Frame, b: &Frame) -> Frame {
-    let mut out = [[0.0; 4]; 3];
-    // out_ij = [j = 3] a_i3 + Σ_k a_ik b_kj, summed over k in order for every j.
-    for (out_i, a_i) in out.iter_mut().zip(a.iter()) {
-        *out_i = [0.0, 0.0, 0.0, a_i[3]];
-        for (a_ik, b_k) in a_i.iter().take(3).zip(b.iter()) {
-            for (s, b_kj) in out_i.iter_mut().zip(b_k.iter()) {
-                *s += a_ik * b_kj;
-            }
-        }
-    }
-    out
-}
-
 fn rot_z_trans_z(theta: f64, d: f64) -> Frame {
     let (s, c) = (libm::sin(theta), libm::cos(theta));
-    [[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, d]]
+    Frame([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, d]])
 }
 
 fn trans_x_rot_x(a: f64, alpha: f64) -> Frame {
     let (s, c) = (libm::sin(alpha), libm::cos(alpha));
-    [[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]]
+    Frame([[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0]])
+}
+
+/// θ and d of `joint` at joint value `x`: θ = x + θ_offset (revolute) or d = x + d (prismatic).
+#[inline(always)]
+pub fn dh_variables(joint: &DhJoint, x: f64) -> (f64, f64) {
+    match joint.kind {
+        JointKind::Revolute => (x + joint.theta_offset, joint.d),
+        JointKind::Prismatic => (joint.theta_offset, x + joint.d),
+    }
+}
+
+/// One DH row's transform at θ and d, the product of the two factors [`dh_walk`] multiplies
+/// one after the other: Rz(θ) Tz(d) · Tx(a) Rx(α) (standard) or Tx(a) Rx(α) · Rz(θ) Tz(d) (modified).
+pub fn dh_transform(convention: DhConvention, theta: f64, d: f64, a: f64, alpha: f64) -> Frame {
+    match convention {
+        DhConvention::Standard => rot_z_trans_z(theta, d).compose(&trans_x_rot_x(a, alpha)),
+        DhConvention::Modified => trans_x_rot_x(a, alpha).compose(&rot_z_trans_z(theta, d)),
+    }
 }
 
 /// Per joint of a DH chain at joints `x`, in the base frame: its axis z_i, a point o_i on it, and
 /// `ends[i]`, the origin of the frame after the joint's full transform (the distal end of link i).
 #[derive(Debug, Clone, Copy)]
 pub struct DhWalk {
+    /// z_i, the unit axis of joint i.
     pub axes: [[f64; 3]; MAX_JOINTS],
+    /// o_i, a point on axis i (the origin of the frame joint i moves about or along).
     pub origins: [[f64; 3]; MAX_JOINTS],
+    /// The distal end of link i: the origin of the frame after joint i's full transform.
     pub ends: [[f64; 3]; MAX_JOINTS],
     /// Rotation (row-major rows) of the frame whose origin is `ends[i]`: link i's own frame.
     pub end_rotations: [[[f64; 3]; 3]; MAX_JOINTS],
@@ -112,50 +114,49 @@ pub struct DhWalk {
 /// are removed).
 #[inline(always)]
 pub fn dh_walk(chain: &DhChain, x: &[f64]) -> DhWalk {
-    let mut frame = frame_of(&chain.base);
+    let mut frame = Frame::from_transform(&chain.base);
     let mut out = DhWalk {
         axes: [[0.0; 3]; MAX_JOINTS],
         origins: [[0.0; 3]; MAX_JOINTS],
         ends: [[0.0; 3]; MAX_JOINTS],
         end_rotations: [[[0.0; 3]; 3]; MAX_JOINTS],
-        start: [frame[0][3], frame[1][3], frame[2][3]],
-        start_rotation: rotation_of(&frame),
+        start: frame.translation(),
+        start_rotation: frame.rotation(),
         tool: [0.0; 3],
         tool_rotation: [[0.0; 3]; 3],
     };
     let slots = out.axes.iter_mut().zip(out.origins.iter_mut()).zip(out.ends.iter_mut().zip(out.end_rotations.iter_mut()));
     for ((joint, x_i), ((axis, origin), (end, rotation))) in chain.joints.iter().zip(x).zip(slots) {
-        let (theta, d) = match joint.kind {
-            JointKind::Revolute => (x_i + joint.theta_offset, joint.d),
-            JointKind::Prismatic => (joint.theta_offset, x_i + joint.d),
-        };
+        let (theta, d) = dh_variables(joint, *x_i);
         match chain.convention {
             // T_i = Rz(θ) Tz(d) Tx(a) Rx(α): joint i moves about z of frame i−1.
             DhConvention::Standard => {
-                *axis = [frame[0][2], frame[1][2], frame[2][2]];
-                *origin = [frame[0][3], frame[1][3], frame[2][3]];
-                frame = compose(&frame, &rot_z_trans_z(theta, d));
-                frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
+                *axis = z_axis(&frame);
+                *origin = frame.translation();
+                frame = frame.compose(&rot_z_trans_z(theta, d));
+                frame = frame.compose(&trans_x_rot_x(joint.a, joint.alpha));
             }
             // T_i = Rx(α) Tx(a) Rz(θ) Tz(d): joint i moves about z of frame i.
             DhConvention::Modified => {
-                frame = compose(&frame, &trans_x_rot_x(joint.a, joint.alpha));
-                *axis = [frame[0][2], frame[1][2], frame[2][2]];
-                *origin = [frame[0][3], frame[1][3], frame[2][3]];
-                frame = compose(&frame, &rot_z_trans_z(theta, d));
+                frame = frame.compose(&trans_x_rot_x(joint.a, joint.alpha));
+                *axis = z_axis(&frame);
+                *origin = frame.translation();
+                frame = frame.compose(&rot_z_trans_z(theta, d));
             }
         }
-        *end = [frame[0][3], frame[1][3], frame[2][3]];
-        *rotation = rotation_of(&frame);
+        *end = frame.translation();
+        *rotation = frame.rotation();
     }
-    frame = compose(&frame, &frame_of(&chain.tool));
-    out.tool = [frame[0][3], frame[1][3], frame[2][3]];
-    out.tool_rotation = rotation_of(&frame);
+    frame = frame.compose(&Frame::from_transform(&chain.tool));
+    out.tool = frame.translation();
+    out.tool_rotation = frame.rotation();
     out
 }
 
-fn rotation_of(frame: &Frame) -> [[f64; 3]; 3] {
-    [[frame[0][0], frame[0][1], frame[0][2]], [frame[1][0], frame[1][1], frame[1][2]], [frame[2][0], frame[2][1], frame[2][2]]]
+/// The frame's z axis (column 2 of its rotation).
+fn z_axis(frame: &Frame) -> [f64; 3] {
+    let [[_, _, z0, _], [_, _, z1, _], [_, _, z2, _]] = frame.0;
+    [z0, z1, z2]
 }
 
 /// Joint axes z_i, points o_i on them and the tool point p, in the base frame, at joints `x`.
@@ -170,13 +171,9 @@ fn dh_chain(chain: &DhChain, x: &[f64]) -> Kinematics {
     out.position = p;
     let n = chain.joints.len().min(x.len());
     for (i, ((z, o), joint)) in axes.iter().zip(origins.iter()).zip(chain.joints.iter()).take(n).enumerate() {
-        let z = *z;
         let col = match joint.kind {
-            JointKind::Revolute => {
-                let r = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
-                [z[1] * r[2] - z[2] * r[1], z[2] * r[0] - z[0] * r[2], z[0] * r[1] - z[1] * r[0]]
-            }
-            JointKind::Prismatic => z,
+            JointKind::Revolute => cross(*z, sub(p, *o)),
+            JointKind::Prismatic => *z,
         };
         for (row, v) in out.jacobian.iter_mut().zip(col) {
             if let Some(slot) = row.get_mut(i) {

@@ -2,6 +2,7 @@
 //! ([`crate::kinematics::rigid`]). `query_derivatives::nominal_hessian` dispatches here for effect-free
 //! models, and the effects' Hessian builds on it.
 
+use crate::kinematics::spatial::{cross, sub};
 use cbd_protocol::{DhChain, JointKind, NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// Second derivatives of the nominal model: `h[a][e][d] = ∂²k0_a / ∂x_e ∂x_d`, model units.
@@ -36,14 +37,6 @@ pub fn write_hessian(model: &NominalModel, x: &[f64], h: &mut NominalHessian) {
     }
 }
 
-fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
 // Column j of Dk0 is z_j × (p − o_j) (revolute) or z_j (prismatic). Its derivative with respect
 // to joint i: the axes and origins of joints after i turn with joint i, and p moves with every joint.
 fn dh_hessian(chain: &DhChain, x: &[f64], h: &mut NominalHessian) {
@@ -53,12 +46,12 @@ fn dh_hessian(chain: &DhChain, x: &[f64], h: &mut NominalHessian) {
         for (i, (joint_i, (z_i, o_i))) in chain.joints.iter().zip(axes.iter().zip(origins.iter())).enumerate().take(n) {
             let value = match (joint_j.kind, joint_i.kind) {
                 // i ≤ j: z_j and (p − o_j) both rotate about z_i; i > j: only p moves.
-                (JointKind::Revolute, JointKind::Revolute) if i <= j => cross(z_i, &cross(z_j, &sub(&p, o_j))),
-                (JointKind::Revolute, JointKind::Revolute) => cross(z_j, &cross(z_i, &sub(&p, o_i))),
+                (JointKind::Revolute, JointKind::Revolute) if i <= j => cross(*z_i, cross(*z_j, sub(p, *o_j))),
+                (JointKind::Revolute, JointKind::Revolute) => cross(*z_j, cross(*z_i, sub(p, *o_i))),
                 // A prismatic joint before j translates p and o_j alike.
                 (JointKind::Revolute, JointKind::Prismatic) if i < j => [0.0; 3],
-                (JointKind::Revolute, JointKind::Prismatic) => cross(z_j, z_i),
-                (JointKind::Prismatic, JointKind::Revolute) if i < j => cross(z_i, z_j),
+                (JointKind::Revolute, JointKind::Prismatic) => cross(*z_j, *z_i),
+                (JointKind::Prismatic, JointKind::Revolute) if i < j => cross(*z_i, *z_j),
                 (JointKind::Prismatic, _) => [0.0; 3],
             };
             for (h_a, v) in h.iter_mut().zip(value.iter()) {

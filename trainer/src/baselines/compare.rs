@@ -3,8 +3,9 @@
 //! hybrid DH + KRR, and — through a hook — Calibration by Diffeomorphisms and DH + CbD.
 
 use super::krr::KernelRidge;
+use crate::data::import_error::ImportError;
 use crate::data::Measurements;
-use crate::error::{Error, ImportError};
+use crate::error::Error;
 use crate::kernels::hyperparameters::{choose_hyperparameters, Hyperparameters, SearchOptions};
 use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::report::stats::ErrorStats;
@@ -166,11 +167,11 @@ pub fn read_compare_files(
     warnings.extend(test.warnings(test_csv.as_ref()));
     let mut nominal = model.nominal;
     let registration = match model.register_base {
-        true => Some(crate::nominal::register::register_base(&mut nominal, &train.measurements).map_err(|message| ImportError::Csv {
+        true => Some(crate::nominal::register::register_base(&mut nominal, &train.measurements).map_err(|e| ImportError::Csv {
             file: train_csv.as_ref().to_path_buf(),
             line: None,
             column: None,
-            message,
+            message: e.to_string(),
         })?),
         false => None,
     };

@@ -29,6 +29,12 @@ pub enum KrrError {
 
 impl std::error::Error for KrrError {}
 
+impl From<KrrError> for crate::Error {
+    fn from(e: KrrError) -> crate::Error {
+        crate::Error::stage("kernel ridge", e)
+    }
+}
+
 impl std::fmt::Display for KrrError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {

@@ -87,7 +87,7 @@ pub fn choose_scheme(
                 }
                 // Out of memory is the machine's limit, not the scheme's fault: an error, so the
                 // choice (and the blob) never depends on the memory limit.
-                Err(e @ crate::Error::Fit(crate::solver::FitError::Memory(_))) => return Err(e),
+                Err(e) if matches!(e.stage_error(), Some(crate::solver::FitError::Memory(_))) => return Err(e),
                 Err(_) => {
                     sse = f64::INFINITY;
                     break;

@@ -9,7 +9,7 @@ use cbd_protocol::{IntegratorMethod, JointKernelAxis, MomentumLaw, NominalModel}
 pub enum HyperparameterSource {
     /// CbD's own evidence on the training rows (the default everywhere).
     Evidence,
-    /// The paper's RR values (docs/DESIGN.md §2), task space not normalised: the demo's reproduction.
+    /// The paper's RR values (docs/DESIGN.md §6), task space not normalised: the demo's reproduction.
     PaperRr,
 }
 

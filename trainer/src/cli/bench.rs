@@ -2,6 +2,8 @@
 //! time against nominal forward kinematics and against the kernel-ridge peer, measured in one run.
 
 use crate::baselines::krr::KernelRidge;
+use crate::cli::memory::MemoryError;
+use crate::error::{Context, Error, Result};
 use crate::simulate::{configurations, rr, Sampling};
 use crate::solver::CbdOptions;
 use serde::{Deserialize, Serialize};
@@ -160,23 +162,33 @@ const KRR_MATRIX_COPIES: f64 = 2.0;
 /// workers to run on, or why it cannot run here. `--sizes` fits the kernel form (`cbd fit`'s check);
 /// `--evidence-sizes` runs the pipeline, whose kernel form is checked in the solver (the budget
 /// [`crate::memory::kernel_form_budget`]), and kernel ridge, whose N × N matrices are checked here.
-fn check_size(n: usize, flag: &str) -> Result<usize, String> {
+fn check_size(n: usize, flag: &str) -> Result<usize> {
     use crate::cli::memory;
     per_axis(n)?;
     let available = memory::available_bytes();
     if flag == "--sizes" {
-        return memory::check_fit(n, 2, available, &format!("lower {flag}")).map_err(|e| format!("{flag} {n}: {e}"));
+        return memory::check_fit(n, 2, available, &format!("lower {flag}")).context(format!("{flag} {n}"));
     }
-    let threads = memory::check_workers(available).map_err(|e| format!("{flag} {n}: {e}"))?;
+    let threads = memory::check_workers(available).context(format!("{flag} {n}"))?;
     let krr = KRR_MATRIX_COPIES * (n as f64).powi(2) * 8.0;
     match available {
-        Some(a) if krr + memory::fixed_fit_bytes(threads) > a => Err(format!(
-            "{flag} {n}: kernel ridge's {n} × {n} kernel matrix and its factor need about {}, more than the {} this process may use; lower {flag}",
+        Some(a) if krr + memory::fixed_fit_bytes(threads) > a => Err(Error::from(MemoryError(format!(
+            "kernel ridge's {n} × {n} kernel matrix and its factor need about {}, more than the {} this process may use; lower {flag}",
             memory::gigabytes(krr),
             memory::gigabytes(a)
-        )),
+        )))
+        .context(format!("{flag} {n}"))),
         _ => Ok(threads),
     }
+}
+
+/// A single-size run (a child `cbd bench --single …` process) failed: `what` it fitted and its
+/// `error:` line ([`child_error`]).
+#[derive(Debug, thiserror::Error)]
+#[error("bench for {what} failed: {error}")]
+pub struct ChildFailed {
+    pub what: String,
+    pub error: String,
 }
 
 /// What a failed single-size run said: its `error:` line (a crash's text is not relayed whole).
@@ -187,17 +199,17 @@ fn child_error(stderr: &[u8]) -> String {
     crate::error::excerpt_of(error.or(last).unwrap_or("no message"), 400)
 }
 
-fn per_axis(n: usize) -> Result<usize, String> {
+fn per_axis(n: usize) -> Result<usize> {
     let k = (n as f64).sqrt().round() as usize;
     if k.checked_mul(k) == Some(n) && k >= 2 {
         Ok(k)
     } else {
-        Err(format!("size {n} is not a perfect square ≥ 4"))
+        Err(Error::InvalidInput(format!("size {n} is not a perfect square ≥ 4")))
     }
 }
 
 /// Fits the RR benchmark with `n` grid measurements in this process.
-fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
+fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench> {
     let real = rr::RealRr::default();
     let train = real.measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
     let test = real.measure(&configurations(Sampling::Uniform { count: 1000, seed: 2026 }, 2));
@@ -206,9 +218,7 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
         crate::calibrate::Settings { source: crate::calibrate::HyperparameterSource::PaperRr, steps: Some(2), ..Default::default() };
     let threads = check_size(n, "--sizes")?;
     let settings = crate::calibrate::Settings { threads: Some(threads), ..settings };
-    let fit = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))
-        .map_err(|e| e.to_string())?
-        .fit;
+    let fit = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))?.fit;
     crate::io::write_atomically(blob_out, &fit.blob)?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
     Ok(FitBench::of("rr", n, &fit.report, 0.0, crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean))
@@ -216,13 +226,12 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench, String> {
 
 /// Fits the UR5 example's training rows as `cbd fit` and `cbd compare` do (the calibration pipeline:
 /// CbD's evidence, then the scheme) in this process; test error in the data's unit on its test rows.
-fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
-    let model = crate::data::model_file::load_model_file(dir.join("ur5.toml")).map_err(|e| e.to_string())?;
-    let spec = model.column_spec().map_err(|e| e.to_string())?;
-    let read =
-        |name: &str| crate::data::csv_import::read_measurements(dir.join(name), &spec).map(|m| m.measurements).map_err(|e| e.to_string());
+fn fit_ur5(dir: &std::path::Path) -> Result<FitBench> {
+    let model = crate::data::model_file::load_model_file(dir.join("ur5.toml"))?;
+    let spec = model.column_spec()?;
+    let read = |name: &str| crate::data::csv_import::read_measurements(dir.join(name), &spec).map(|m| m.measurements);
     let (train, test) = (read("train.csv")?, read("test.csv")?);
-    let c = crate::calibrate::calibrate(&model.nominal, &train, &crate::calibrate::Settings::default()).map_err(|e| e.to_string())?;
+    let c = crate::calibrate::calibrate(&model.nominal, &train, &crate::calibrate::Settings::default())?;
     let predicted = crate::predict::evaluate_blob(&c.fit.blob, &test.joints)?;
     let error = crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, train.task_dim).mean;
     let selection = c.evidence.as_ref().map_or(0.0, |e| e.seconds);
@@ -232,29 +241,29 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench, String> {
 /// CbD through the pipeline (its own evidence, cross-validated scheme) against kernel ridge (its own
 /// marginal likelihood) on the noisy RR benchmark: σ = 1e-4 per coordinate on a √N × √N grid (the
 /// noise of `cbd simulate --noise 1e-4`), 3000 noise-free random test configurations.
-fn evidence_rr(n: usize, threads: usize, memory_budget: Option<f64>) -> Result<EvidenceBench, String> {
+fn evidence_rr(n: usize, threads: usize, memory_budget: Option<f64>) -> Result<EvidenceBench> {
     crate::workers::on_workers(threads, || evidence_rr_on_workers(n, memory_budget))
 }
 
-fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<EvidenceBench, String> {
+fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<EvidenceBench> {
     let real = rr::RealRr::default();
     let mut train = real.measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
     crate::simulate::add_noise(&mut train.positions, 1e-4, 1u64.wrapping_add(0x5eed));
     let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
     let nominal = rr::nominal();
     let t0 = Instant::now();
-    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default()).map_err(|e| e.to_string())?;
+    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default())?;
     let krr_selection_seconds = t0.elapsed().as_secs_f64();
-    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge()).map_err(|e| e.to_string())?;
+    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge())?;
     let krr_seconds = t0.elapsed().as_secs_f64();
     let krr_test_mean = crate::report::stats::ErrorStats::of_positions(&krr.predict(&nominal, &test.joints), &test.positions, 2).mean;
     let t0 = Instant::now();
     let settings = crate::calibrate::Settings { memory_budget, ..Default::default() };
-    let c = crate::calibrate::calibrate(&nominal, &train, &settings).map_err(|e| e.to_string())?;
+    let c = crate::calibrate::calibrate(&nominal, &train, &settings)?;
     let cbd_seconds = t0.elapsed().as_secs_f64();
     let predicted = crate::predict::evaluate_blob(&c.fit.blob, &test.joints)?;
     let cbd_test_mean = crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean;
-    let e = c.evidence.as_ref().ok_or("the pipeline ran no evidence search")?;
+    let e = c.evidence.as_ref().ok_or_else(|| Error::Internal("the pipeline ran no evidence search".into()))?;
     Ok(EvidenceBench {
         n,
         cbd_selection_seconds: e.seconds,
@@ -287,16 +296,16 @@ fn time_per_query(queries: &[f64], rounds: usize, mut f: impl FnMut(&[f64]) -> f
     times[times.len() / 2]
 }
 
-fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench, String> {
-    let model = cbd_protocol::decode(blob).map_err(|e| e.to_string())?;
+fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench> {
+    let model = cbd_protocol::decode(blob)?;
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
-    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| e.to_string())?;
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage)?;
     let nominal = rr::nominal();
     let queries = configurations(Sampling::Uniform { count: 500, seed: 11 }, 2);
     let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
     let mut kernel = CbdOptions::paper_rr().joint_kernel;
     kernel.gamma = 1.0;
-    let krr = KernelRidge::fit(&nominal, &train, kernel, 1e-12).map_err(|e| e.to_string())?;
+    let krr = KernelRidge::fit(&nominal, &train, kernel, 1e-12)?;
     let rounds = 7;
     let ns = time_per_query(&queries, rounds, |q| cal.evaluate(q).map(|e| e.position()[0]).unwrap_or(f64::NAN));
     let nominal_ns = time_per_query(&queries, rounds, |q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[0]);
@@ -311,26 +320,26 @@ fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench, String> {
 
 /// The demo's model (`cbd demo`: the RR grid of 16 × 16, kernels by CbD's evidence, the pipeline's
 /// representation and scheme) timed as [`eval_one`] does.
-fn eval_demo() -> Result<EvalBench, String> {
+fn eval_demo() -> Result<EvalBench> {
     let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: 16 }, 2));
     let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
-    let c = crate::calibrate::calibrate(&rr::nominal(), &train, &settings).map_err(|e| e.to_string())?;
+    let c = crate::calibrate::calibrate(&rr::nominal(), &train, &settings)?;
     let mut e = eval_one(256, &c.fit.blob)?;
     let i = c.options.integrator;
     e.model = format!("demo ({}, {:?} × {})", c.fit.report.representation, i.method, i.steps).to_lowercase();
     Ok(e)
 }
 
-pub fn run(args: BenchArgs) -> Result<(), String> {
+pub fn run(args: BenchArgs) -> Result<()> {
     if let Some(n) = args.single {
-        let blob_out = args.blob_out.clone().ok_or("--single needs --blob-out")?;
+        let blob_out = args.blob_out.clone().ok_or_else(|| Error::InvalidInput("--single needs --blob-out".into()))?;
         let fit = fit_one(n, &blob_out)?;
-        println!("{}", serde_json::to_string(&fit).map_err(|e| e.to_string())?);
+        println!("{}", serde_json::to_string(&fit).map_err(Error::JsonOutput)?);
         return Ok(());
     }
     if args.single_ur5 {
         let fit = fit_ur5(&args.ur5)?;
-        println!("{}", serde_json::to_string(&fit).map_err(|e| e.to_string())?);
+        println!("{}", serde_json::to_string(&fit).map_err(Error::JsonOutput)?);
         return Ok(());
     }
     // `--markdown` is edited in place: an output, and read only to keep its other sections.
@@ -343,7 +352,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     }
     let evidence_threads: Vec<usize> = args.evidence_sizes.iter().map(|&n| check_size(n, "--evidence-sizes")).collect::<Result<_, _>>()?;
     let budget = crate::cli::memory::kernel_form_budget(evidence_threads.iter().copied().max().unwrap_or(1));
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let exe = std::env::current_exe().map_err(|e| Error::stage("bench", e))?;
     let mut report = BenchReport {
         machine: machine(),
         load_average: [load_average(), f64::NAN],
@@ -360,18 +369,18 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
             .args(["bench", "--single", &n.to_string(), "--blob-out"])
             .arg(&blob_path)
             .output()
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| Error::stage("bench", e))?;
         if !out.status.success() {
-            return Err(format!("bench for N = {n} failed: {}", child_error(&out.stderr)));
+            return Err(Error::stage("bench", ChildFailed { what: format!("N = {n}"), error: child_error(&out.stderr) }));
         }
         let line = String::from_utf8_lossy(&out.stdout);
-        let fit: FitBench = serde_json::from_str(line.trim()).map_err(|e| format!("bench output for N = {n}: {e}"))?;
+        let fit: FitBench = serde_json::from_str(line.trim()).map_err(Error::JsonOutput).context(format!("bench output for N = {n}"))?;
         eprintln!(
             "  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.2e}",
             fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error
         );
         report.fit.push(fit);
-        let blob = std::fs::read(&blob_path).map_err(|e| format!("{}: {e}", blob_path.display()))?;
+        let blob = std::fs::read(&blob_path).map_err(|e| Error::io(&blob_path, e))?;
         let _ = std::fs::remove_file(&blob_path);
         let mut e = eval_one(n, &blob)?;
         e.model = "paper (kernel, euler × 2)".into();
@@ -386,13 +395,16 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     }
     if !args.no_ur5 {
         eprintln!("fitting the UR5 example ({}) …", args.ur5.display());
-        let out =
-            std::process::Command::new(&exe).args(["bench", "--single-ur5", "--ur5"]).arg(&args.ur5).output().map_err(|e| e.to_string())?;
+        let out = std::process::Command::new(&exe)
+            .args(["bench", "--single-ur5", "--ur5"])
+            .arg(&args.ur5)
+            .output()
+            .map_err(|e| Error::stage("bench", e))?;
         if !out.status.success() {
-            return Err(format!("bench for the UR5 example failed: {}", child_error(&out.stderr)));
+            return Err(Error::stage("bench", ChildFailed { what: "the UR5 example".into(), error: child_error(&out.stderr) }));
         }
         let fit: FitBench =
-            serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).map_err(|e| format!("UR5 bench output: {e}"))?;
+            serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).map_err(Error::JsonOutput).context("UR5 bench output")?;
         eprintln!(
             "  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.3e}",
             fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error
@@ -410,7 +422,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     }
     report.load_average[1] = load_average();
     if let Some(path) = &args.json {
-        crate::cli::write_atomically(path, serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?.as_bytes())?;
+        crate::cli::write_atomically(path, serde_json::to_string_pretty(&report).map_err(Error::JsonOutput)?.as_bytes())?;
     }
     let table = markdown(&report);
     println!("{table}");
@@ -524,7 +536,7 @@ fn markdown(r: &BenchReport) -> String {
 }
 
 /// Replaces `heading`'s section (up to the next `## `) in `path`, or appends it.
-fn replace_section(path: &std::path::Path, heading: &str, body: &str) -> Result<(), String> {
+fn replace_section(path: &std::path::Path, heading: &str, body: &str) -> Result<()> {
     let text = std::fs::read_to_string(path).unwrap_or_else(|_| String::from("# Benchmarks\n\n"));
     let new = match text.find(heading) {
         Some(start) => {
@@ -534,5 +546,5 @@ fn replace_section(path: &std::path::Path, heading: &str, body: &str) -> Result<
         }
         None => format!("{}\n{}\n", text.trim_end(), body),
     };
-    Ok(crate::cli::write_atomically(path, new.as_bytes())?)
+    crate::cli::write_atomically(path, new.as_bytes())
 }

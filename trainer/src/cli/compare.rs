@@ -55,7 +55,7 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
     }
 }
 
-pub fn run(args: CompareArgs) -> Result<(), String> {
+pub fn run(args: CompareArgs) -> crate::Result<()> {
     crate::io::check_paths(
         &[("--model", Some(&args.model)), ("--train", Some(&args.train)), ("--test", Some(&args.test))],
         &[("--json", args.json.as_deref())],
@@ -67,7 +67,7 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
     // The table is the output here; the fits' own progress lines would drown it.
     settings.verbose = false;
     let search = SearchOptions::default();
-    let inputs = read_compare_files(&args.model, &args.train, &args.test).map_err(|e| e.to_string())?;
+    let inputs = read_compare_files(&args.model, &args.train, &args.test)?;
     if let Some(r) = &inputs.registration {
         let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
         eprintln!("{}: {}", args.train.display(), r.describe(unit));
@@ -123,7 +123,7 @@ pub fn run(args: CompareArgs) -> Result<(), String> {
         if let Some(c) = &commanded {
             json["commanded"] = c.to_json();
         }
-        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&json).map_err(crate::Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())

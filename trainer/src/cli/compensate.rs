@@ -4,6 +4,7 @@
 
 use crate::cli::{load_nominal, ModelArgs};
 use crate::data::csv_import::ColumnSpec;
+use crate::error::{Context, Error, Result};
 use cbd_protocol::{JointKind, Model, NominalModel};
 use cbd_runtime::inverse_kinematics::nominal_position;
 use cbd_runtime::{CompensateOptions, Compensation};
@@ -67,8 +68,8 @@ fn seeds_spec(spec: &ColumnSpec) -> ColumnSpec {
 /// The rows of `path` read as measurement files are (`csv_import`: the size and line caps, the
 /// field count, numbers finite and within ±1e100 in the model's unit, joints in their ranges,
 /// errors naming the file, line and column), in the model's units, with their file lines.
-fn read_rows(path: &Path, spec: &ColumnSpec) -> Result<(Vec<Vec<f64>>, Vec<u64>), String> {
-    let imported = crate::data::csv_import::read_measurements(path, spec).map_err(|e| e.to_string())?;
+fn read_rows(path: &Path, spec: &ColumnSpec) -> Result<(Vec<Vec<f64>>, Vec<u64>)> {
+    let imported = crate::data::csv_import::read_measurements(path, spec)?;
     let data = &imported.measurements;
     let row = |i: usize| if data.n_joints > 0 { data.joints(i).to_vec() } else { data.position(i).to_vec() };
     Ok(((0..data.len()).map(row).collect(), imported.lines))
@@ -128,19 +129,13 @@ pub struct CommandRow {
 
 /// Why [`compensate_all`] failed: the model (the blob's fault) or one target row (0-based in
 /// `targets`; the caller names its file line).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, thiserror::Error)]
 pub enum CompensateError {
-    Model(String),
+    /// The blob does not decode, the runtime refuses it, or it is damaged.
+    #[error("{0}")]
+    Model(#[source] Error),
+    #[error("row {row}: {message}")]
     Row { row: usize, message: String },
-}
-
-impl std::fmt::Display for CompensateError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            CompensateError::Model(message) => write!(f, "{message}"),
-            CompensateError::Row { row, message } => write!(f, "row {row}: {message}"),
-        }
-    }
 }
 
 /// Compensates every target (model units): seed from `seeds` (or [`nearest_training_configuration`]),
@@ -153,8 +148,8 @@ pub fn compensate_all(
     seeds: Option<&[Vec<f64>]>,
     iterations: usize,
     tolerance: Option<f64>,
-) -> Result<Vec<CommandRow>, CompensateError> {
-    let model = cbd_protocol::decode(blob).map_err(|e| CompensateError::Model(e.to_string()))?;
+) -> std::result::Result<Vec<CommandRow>, CompensateError> {
+    let model = cbd_protocol::decode(blob).map_err(|e| CompensateError::Model(e.into()))?;
     let n = model.n_joints();
     let nominal: NominalModel = model.nominal.clone();
     let hints: Vec<Vec<f64>> = match seeds {
@@ -162,8 +157,8 @@ pub fn compensate_all(
         None => targets.iter().map(|t| nearest_training_configuration(&model, t)).collect(),
     };
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
-    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| CompensateError::Model(e.to_string()))?;
-    crate::predict::check_calibrator(&mut cal).map_err(CompensateError::Model)?;
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| CompensateError::Model(e.into()))?;
+    crate::predict::check_calibrator(&mut cal).map_err(|e| CompensateError::Model(e.into()))?;
     let mut options = CompensateOptions::for_model(&cal);
     options.iterations = iterations;
     if let Some(t) = tolerance {
@@ -189,7 +184,7 @@ pub fn compensate_all(
     Ok(out)
 }
 
-pub fn run(args: CompensateArgs) -> Result<(), String> {
+pub fn run(args: CompensateArgs) -> Result<()> {
     crate::io::check_paths(
         &[
             ("--model", args.model.model.as_deref()),
@@ -200,26 +195,26 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
     if args.iterations == 0 || args.iterations > 64 {
-        return Err(format!("--iterations must be between 1 and 64, got {}", args.iterations));
+        return Err(Error::InvalidInput(format!("--iterations must be between 1 and 64, got {}", args.iterations)));
     }
     if let Some(t) = args.tolerance {
         if !(t > 0.0 && t.is_finite()) {
-            return Err(format!("--tolerance must be a positive finite length, got {t}"));
+            return Err(Error::InvalidInput(format!("--tolerance must be a positive finite length, got {t}")));
         }
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
-    let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
     if model.n_joints() != nominal.n_joints() || model.task_dim() != nominal.task_dim() {
         let arm = if args.model.model.is_some() { "the model file's arm" } else { "the built-in RR arm (no --model given)" };
-        return Err(format!(
+        return Err(Error::InvalidInput(format!(
             "{}: the model has {} joints and {}-D positions, but {arm} has {} joints and {}-D positions",
             args.blob.display(),
             model.n_joints(),
             model.task_dim(),
             nominal.n_joints(),
             nominal.task_dim()
-        ));
+        )));
     }
     let length = spec.length_unit.factor_to(spec.model_length_unit);
     let (targets, target_lines) = read_rows(&args.targets, &targets_spec(&spec))?;
@@ -227,13 +222,13 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
         Some(path) => {
             let (seeds, _) = read_rows(path, &seeds_spec(&spec))?;
             if seeds.len() != targets.len() {
-                return Err(format!(
+                return Err(Error::InvalidInput(format!(
                     "{}: {} seed rows for {} target rows in {} (one seed per target)",
                     path.display(),
                     seeds.len(),
                     targets.len(),
                     args.targets.display()
-                ));
+                )));
             }
             Some(seeds)
         }
@@ -241,8 +236,8 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
     };
     let tolerance = args.tolerance.map(|t| t * length);
     let rows = compensate_all(&blob, &targets, seeds.as_deref(), args.iterations, tolerance).map_err(|e| match e {
-        CompensateError::Model(message) => format!("{}: {message}", args.blob.display()),
-        CompensateError::Row { row, message } => format!("{}:{}: {message}", args.targets.display(), target_lines[row]),
+        CompensateError::Model(e) => e.context(args.blob.display().to_string()),
+        CompensateError::Row { row, message } => Error::AtLine { file: args.targets.clone(), line: target_lines[row], message },
     })?;
     let (joint_scale, unit) = (joint_scales(&spec), spec.length_unit.name());
     let mut text = format!("{},residual,flags\n", spec.joint_columns.join(","));
@@ -278,7 +273,7 @@ pub fn run(args: CompensateArgs) -> Result<(), String> {
             "iterations": args.iterations, "unit": unit,
             "residual": {"mean": stats.mean, "median": stats.median, "p99": stats.p99, "max": stats.max},
         });
-        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())
@@ -301,8 +296,10 @@ mod tests {
     #[test]
     fn targets_and_seeds_are_read_with_the_importers_rules() {
         let (_, spec) = load_nominal(&ModelArgs { model: None }).unwrap();
-        let targets = |name: &str, text: &str| read_rows(&file(name, text), &targets_spec(&spec));
-        let seeds = |name: &str, text: &str| read_rows(&file(name, text), &seeds_spec(&spec));
+        // The error's message, as `cbd` prints it.
+        let message = |e: Error| e.to_string();
+        let targets = |name: &str, text: &str| read_rows(&file(name, text), &targets_spec(&spec)).map_err(message);
+        let seeds = |name: &str, text: &str| read_rows(&file(name, text), &seeds_spec(&spec)).map_err(message);
         let e = targets("a.csv", "x,y\n0.5,0.1\n0.5,abc\n").unwrap_err();
         assert!(e.ends_with("a.csv:3: column 'y': not a number: 'abc'"), "{e}");
         assert!(targets("b.csv", "x,z\n0.5,1\n").unwrap_err().contains("b.csv:1: column 'y': no such column"));

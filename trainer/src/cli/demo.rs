@@ -2,6 +2,8 @@
 //! with the runtime, evaluate on random configurations, compare with kernel ridge regression.
 
 use crate::baselines::krr::KernelRidge;
+use crate::cli::memory::MemoryError;
+use crate::error::{Context, Error, Result};
 use crate::report::stats::ErrorStats;
 use crate::simulate::{configurations, rr, Sampling};
 
@@ -67,43 +69,45 @@ const BYTES_PER_TEST_POINT: f64 = 16.0 * 8.0;
 /// The workers the demo fits on, or why its grid or test points do not fit in `available` bytes.
 /// The kernel form (the paper's hyperparameters keep it) is checked up front; the expansion's
 /// fits check their workers here and the kernel form against the budget in the solver, as `cbd fit`.
-fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, available: Option<f64>) -> Result<usize, String> {
+fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, available: Option<f64>) -> Result<usize> {
     use crate::calibrate::HyperparameterSource;
     use crate::expansion::Representation;
-    let rows = args.grid.checked_mul(args.grid).ok_or_else(|| format!("--grid {}: too many rows", args.grid))?;
+    let flag = format!("--grid {}", args.grid);
+    let rows = args.grid.checked_mul(args.grid).ok_or_else(|| MemoryError("too many rows".into())).context(&flag)?;
     let kernel = settings.representation == Representation::Kernel
         || (settings.source == HyperparameterSource::PaperRr && settings.representation == Representation::Auto);
-    let flag = |e: String| format!("--grid {}: {e}", args.grid);
     let threads = match kernel {
-        true => crate::cli::memory::check_fit(rows, 2, available, "lower --grid").map_err(flag)?,
-        false => crate::cli::memory::check_workers(available).map_err(flag)?,
+        true => crate::cli::memory::check_fit(rows, 2, available, "lower --grid").context(&flag)?,
+        false => crate::cli::memory::check_workers(available).context(&flag)?,
     };
     let Some(a) = available else { return Ok(threads) };
     let fixed = crate::cli::memory::fixed_fit_bytes(threads);
     let gb = crate::cli::memory::gigabytes;
     let krr = 2.0 * (rows as f64).powi(2) * 8.0;
     if krr + fixed > a {
-        return Err(flag(format!(
+        return Err(Error::from(MemoryError(format!(
             "kernel ridge's {rows} × {rows} kernel matrix and its factor need about {}, more than the {} this process may use; lower --grid",
             gb(krr + fixed),
             gb(a)
-        )));
+        )))
+        .context(flag));
     }
     let test = args.test_points as f64 * BYTES_PER_TEST_POINT;
     if test + fixed > a {
-        return Err(format!(
+        return Err(MemoryError(format!(
             "--test-points {}: about {} to evaluate, more than the {} this process may use; lower --test-points",
             args.test_points,
             gb(test + fixed),
             gb(a)
-        ));
+        ))
+        .into());
     }
     Ok(threads)
 }
 
-pub fn run(args: DemoArgs) -> Result<(), String> {
+pub fn run(args: DemoArgs) -> Result<()> {
     if args.test_points == 0 {
-        return Err("--test-points must be at least 1".into());
+        return Err(Error::InvalidInput("--test-points must be at least 1".into()));
     }
     crate::io::check_paths(&[], &[("--out", Some(&args.out)), ("--json", args.json.as_deref())])?;
     if let Some(dir) = &args.plots {
@@ -116,7 +120,7 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     settings.source = match args.hyperparameters.as_str() {
         "paper" => crate::calibrate::HyperparameterSource::PaperRr,
         "evidence" => crate::calibrate::HyperparameterSource::Evidence,
-        other => return Err(format!("--hyperparameters must be paper or evidence, got {other:?}")),
+        other => return Err(Error::InvalidInput(format!("--hyperparameters must be paper or evidence, got {other:?}"))),
     };
     if settings.source == crate::calibrate::HyperparameterSource::PaperRr && settings.steps.is_none() {
         // Two Euler steps: the reproduction's scheme (a genuine flow that generalises best there).
@@ -130,22 +134,21 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
     settings.threads = Some(threads);
-    let calibration =
-        crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings)).map_err(|e| e.to_string())?;
+    let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings))?;
     crate::cli::fit::print_calibration(&calibration, args.solver.quiet);
     let (opts, fit) = (&calibration.options, &calibration.fit);
     crate::cli::write_atomically(&args.out, &fit.blob)?;
 
     // The controller's view: load the blob written to disk and evaluate it.
-    let blob = std::fs::read(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let blob = std::fs::read(&args.out).map_err(|e| Error::io(&args.out, e))?;
     let calibrated_test = crate::predict::evaluate_blob(&blob, &test.joints)?;
     let calibrated_grid = crate::predict::evaluate_blob(&blob, &train.joints)?;
 
     let nominal_at = |joints: &[f64]| -> Vec<f64> { crate::nominal::positions(&nominal, joints, 2) };
     // The peer with its own hyperparameters (its GP marginal likelihood on the same rows).
     let t0 = Instant::now();
-    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default()).map_err(|e| e.to_string())?;
-    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge()).map_err(|e| e.to_string())?;
+    let h = crate::kernels::hyperparameters::choose_hyperparameters(&nominal, &train, &Default::default())?;
+    let krr = KernelRidge::fit(&nominal, &train, h.kernel.clone(), h.ridge())?;
     let krr_fit_seconds = t0.elapsed().as_secs_f64();
 
     let report = DemoReport {
@@ -195,7 +198,7 @@ pub fn run(args: DemoArgs) -> Result<(), String> {
     }
     println!("model written to {}", args.out.display());
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&report).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())

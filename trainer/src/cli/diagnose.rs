@@ -4,6 +4,7 @@
 use crate::cli::{load_nominal, ModelArgs};
 use crate::data::model_file::AngleUnit;
 use crate::diagnose::{diagnose, report, DiagnoseOptions};
+use crate::error::{Context, Error, Result};
 use crate::nominal::planar::PlanarFrame;
 use std::path::PathBuf;
 
@@ -45,18 +46,18 @@ pub struct DiagnoseArgs {
     pub solver: crate::cli::fit::SolverArgs,
 }
 
-pub fn run(args: DiagnoseArgs) -> Result<(), String> {
+pub fn run(args: DiagnoseArgs) -> Result<()> {
     if !(1..=16).contains(&args.harmonics) {
-        return Err(format!("--harmonics must be between 1 and 16, got {}", args.harmonics));
+        return Err(Error::InvalidInput(format!("--harmonics must be between 1 and 16, got {}", args.harmonics)));
     }
     if args.folds < 2 {
-        return Err(format!("--folds must be at least 2, got {}", args.folds));
+        return Err(Error::InvalidInput(format!("--folds must be at least 2, got {}", args.folds)));
     }
     if !(args.margin >= 0.0 && args.margin < 1.0) {
-        return Err(format!("--margin must be in [0, 1), got {}", args.margin));
+        return Err(Error::InvalidInput(format!("--margin must be in [0, 1), got {}", args.margin)));
     }
     if args.write_model.is_some() && args.model.model.is_none() {
-        return Err("--write-model needs --model (the file the corrections are written into)".into());
+        return Err(Error::InvalidInput("--write-model needs --model (the file the corrections are written into)".into()));
     }
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data)), ("--test", args.test.as_deref())],
@@ -67,8 +68,8 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
     type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
-    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read, String> {
-        let imported = crate::data::csv_import::read_measurements(path, &spec).map_err(|e| e.to_string())?;
+    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
+        let imported = crate::data::csv_import::read_measurements(path, &spec)?;
         for w in imported.warnings(path) {
             eprintln!("warning: {w}");
         }
@@ -100,10 +101,9 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         let fitter = crate::cli::compare::cbd_fitter(&settings);
         let cbd: Option<crate::baselines::compare::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
         diagnose(&nominal, &data, test.as_ref(), cbd, &options)
-    })
-    .map_err(|e| e.to_string())?;
+    })?;
     let model_file = match &args.model.model {
-        Some(path) => Some(crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?),
+        Some(path) => Some(crate::data::model_file::load_model_file(path)?),
         None => None,
     };
     let unit = model_file.as_ref().map(|m| m.length_unit.name()).unwrap_or("length units");
@@ -115,7 +115,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         if let Some(r) = &registration {
             json["registered_base"] = r.to_json();
         }
-        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
@@ -140,8 +140,9 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         // data were read into the file's frame, so the diagnosed frame composes with it.
         let planar = matches!(nominal, cbd_protocol::NominalModel::PlanarChain { .. });
         let inner = if planar {
-            let (chain, inner) = crate::nominal::planar::as_planar_in_frame(&d.model_after)
-                .ok_or_else(|| format!("internal: --write-model {}: the diagnosed planar arm is not a planar DH form", path.display()))?;
+            let (chain, inner) = crate::nominal::planar::as_planar_in_frame(&d.model_after).ok_or_else(|| {
+                Error::Internal(format!("internal: --write-model {}: the diagnosed planar arm is not a planar DH form", path.display()))
+            })?;
             let outer = file.planar_frame.clone().unwrap_or(PlanarFrame { offsets: vec![0.0; chain.n_joints()], base: [0.0; 2], yaw: 0.0 });
             file.planar_frame = Some(outer.then(&inner));
             file.nominal = chain;
@@ -161,8 +162,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         );
         let text = crate::data::model_file::write_model_file(&file, &header);
         // What is written must read back to the model the diagnosis evaluated.
-        let back = crate::data::model_file::parse_model_file(&text, path)
-            .map_err(|e| format!("internal: the written model file does not read back: {e}"))?;
+        let back = crate::data::model_file::parse_model_file(&text, path).context("internal: the written model file does not read back")?;
         let gap = match &inner {
             Some(frame) => planar_gap(&back.nominal, frame, &d.model_after, &data),
             None => max_position_gap(&back.nominal, &d.model_after, &data),
@@ -173,10 +173,10 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
             } else {
                 ""
             };
-            return Err(format!(
+            return Err(Error::InvalidInput(format!(
                 "--write-model {}: the written model file differs from the diagnosed model by {gap:.3e} at the data{why}",
                 path.display()
-            ));
+            )));
         }
         crate::cli::write_atomically(path, text.as_bytes())?;
         println!("model with the found effects written to {}", path.display());

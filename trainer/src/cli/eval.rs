@@ -1,6 +1,7 @@
 //! `cbd eval`: evaluate a blob on measured data and report the position error.
 
 use crate::cli::{load_nominal, ModelArgs};
+use crate::error::{Context, Error, Result};
 use crate::report::stats::ErrorStats;
 use std::path::PathBuf;
 
@@ -25,11 +26,11 @@ pub struct EvalArgs {
     pub json: Option<PathBuf>,
 }
 
-pub fn run(args: EvalArgs) -> Result<(), String> {
+pub fn run(args: EvalArgs) -> Result<()> {
     // Kernel support max K_V(q, x_j)/γ lies in [0, 1]; NaN would silently disable the warning.
     let t = args.extrapolation_threshold;
     if !(0.0..=1.0).contains(&t) {
-        return Err(format!("--extrapolation-threshold must be a number in [0, 1], got {t}"));
+        return Err(Error::InvalidInput(format!("--extrapolation-threshold must be a number in [0, 1], got {t}")));
     }
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
@@ -39,11 +40,11 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
-    let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
+    let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
-    let model = cbd_protocol::decode(&blob).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
     if model.nominal != nominal {
         eprintln!(
             "note: {} carries its own nominal model (e.g. DH-calibrated); errors are reported against the model file's nominal",
@@ -51,7 +52,7 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
         );
     }
     if model.n_joints() != data.n_joints || model.task_dim() != data.task_dim {
-        return Err(format!(
+        return Err(Error::InvalidInput(format!(
             "{}: the model has {} joints and {}-D positions, but {} has {} joints and {}-D positions",
             args.blob.display(),
             model.n_joints(),
@@ -59,12 +60,12 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
             args.data.display(),
             data.n_joints,
             data.task_dim
-        ));
+        )));
     }
     let m = model.task_dim();
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
-    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| format!("{}: {e}", args.blob.display()))?;
-    crate::predict::check_calibrator(&mut cal).map_err(|e| format!("{}: {e}", args.blob.display()))?;
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).context(args.blob.display())?;
+    crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
     let mut predicted = Vec::with_capacity(data.positions.len());
     let mut far = 0;
     for i in 0..data.len() {
@@ -84,7 +85,7 @@ pub fn run(args: EvalArgs) -> Result<(), String> {
     }
     if let Some(path) = &args.json {
         let v = serde_json::json!({"rows": data.len(), "extrapolating": far, "nominal": before, "calibrated": after});
-        let text = serde_json::to_string_pretty(&v).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&v).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(dir) = &args.plots {
@@ -117,15 +118,18 @@ fn finite_statistics(
     dim: usize,
     lines: &[u64],
     data: &std::path::Path,
-) -> Result<ErrorStats, String> {
+) -> Result<ErrorStats> {
     let errors = crate::report::stats::position_errors(predicted, measured, dim);
     if let Some(row) = errors.iter().position(|e| !e.is_finite()) {
         let line = lines.get(row).copied().unwrap_or(0);
-        return Err(format!(
-            "{}:{line}: the {model} position error is not finite ({}): the positions or the model's values are too large to compare",
-            data.display(),
-            errors[row]
-        ));
+        return Err(Error::AtLine {
+            file: data.to_path_buf(),
+            line,
+            message: format!(
+                "the {model} position error is not finite ({}): the positions or the model's values are too large to compare",
+                errors[row]
+            ),
+        });
     }
     // Each error is below √(f64::MAX) here, so their mean cannot overflow for any real row count.
     Ok(ErrorStats::of_errors(&errors))
@@ -135,15 +139,32 @@ fn finite_statistics(
 /// the data's fault; anything else — the flow diverging, a non-finite result — comes from the
 /// blob's own values (kernel widths, momenta), since the importer only lets finite, bounded joint
 /// values through.
-fn evaluation_error(e: cbd_runtime::Error, blob: &std::path::Path, data: &std::path::Path, line: u64) -> String {
-    use cbd_runtime::Error;
+fn evaluation_error(e: cbd_runtime::Error, blob: &std::path::Path, data: &std::path::Path, line: u64) -> Error {
     match e {
-        Error::QueryDimension { .. } | Error::NonFiniteQuery { .. } => format!("{}:{line}: {e}", data.display()),
-        _ => format!(
-            "{}: the model fails at the configuration of {}:{line}: {e} (the blob's own values, e.g. its kernel widths, are out of range)",
-            blob.display(),
-            data.display()
-        ),
+        cbd_runtime::Error::QueryDimension { .. } | cbd_runtime::Error::NonFiniteQuery { .. } => {
+            Error::Runtime(e).context(format!("{}:{line}", data.display()))
+        }
+        _ => BlobFails { blob: blob.to_path_buf(), data: data.to_path_buf(), line, error: e }.into(),
+    }
+}
+
+/// The runtime failed at a row of the data through the blob's own values ([`evaluation_error`]).
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{}: the model fails at the configuration of {}:{line}: {error} (the blob's own values, e.g. its kernel widths, are out of range)",
+    blob.display(),
+    data.display()
+)]
+pub struct BlobFails {
+    pub blob: PathBuf,
+    pub data: PathBuf,
+    pub line: u64,
+    pub error: cbd_runtime::Error,
+}
+
+impl From<BlobFails> for Error {
+    fn from(e: BlobFails) -> Error {
+        Error::stage("eval", e)
     }
 }
 
@@ -156,7 +177,9 @@ mod tests {
     #[test]
     fn eval_refuses_non_finite_statistics() {
         let lines = [2, 3];
-        let e = finite_statistics("nominal", &[0.0, 0.0, 0.0, 0.0], &[1.0, 0.0, 1e300, 1e300], 2, &lines, Path::new("t.csv")).unwrap_err();
+        let e = finite_statistics("nominal", &[0.0, 0.0, 0.0, 0.0], &[1.0, 0.0, 1e300, 1e300], 2, &lines, Path::new("t.csv"))
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("t.csv:3: the nominal position error is not finite"), "{e}");
         let s = finite_statistics("nominal", &[0.0, 0.0], &[3.0, 4.0], 2, &lines, Path::new("t.csv")).unwrap();
         assert_eq!(s.mean, 5.0);
@@ -166,9 +189,10 @@ mod tests {
     /// data file's line; the blob is named first.
     #[test]
     fn a_failing_blob_is_blamed_not_the_data_line() {
-        let e = evaluation_error(cbd_runtime::Error::NonFiniteResult, Path::new("a.blob"), Path::new("test.csv"), 2);
+        let e = evaluation_error(cbd_runtime::Error::NonFiniteResult, Path::new("a.blob"), Path::new("test.csv"), 2).to_string();
         assert!(e.starts_with("a.blob: the model fails at the configuration of test.csv:2"), "{e}");
-        let e = evaluation_error(cbd_runtime::Error::NonFiniteQuery { index: 0 }, Path::new("a.blob"), Path::new("test.csv"), 2);
+        let e =
+            evaluation_error(cbd_runtime::Error::NonFiniteQuery { index: 0 }, Path::new("a.blob"), Path::new("test.csv"), 2).to_string();
         assert!(e.starts_with("test.csv:2: "), "{e}");
     }
 }

@@ -1,6 +1,7 @@
 //! `cbd fit`: train a model blob from measured data.
 
 use crate::cli::{load_nominal, ModelArgs};
+use crate::error::{Context, Error, Result};
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -75,19 +76,19 @@ pub struct SolverArgs {
 }
 
 /// `--solver` values.
-pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod, String> {
+pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod> {
     use crate::solver::SolverMethod;
     match name {
         "auto" => Ok(SolverMethod::Auto),
         "dense" => Ok(SolverMethod::Dense),
         "eigenspace" => Ok(SolverMethod::Eigenspace),
-        other => Err(format!("--solver must be auto, dense or eigenspace, got {other:?}")),
+        other => Err(Error::InvalidInput(format!("--solver must be auto, dense or eigenspace, got {other:?}"))),
     }
 }
 
 impl SolverArgs {
     /// Rejects out-of-range values before any work, naming the flag.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<()> {
         for (flag, value) in [
             ("--sigma", self.sigma),
             ("--task-width", self.task_width),
@@ -98,13 +99,13 @@ impl SolverArgs {
             if let Some(v) = value {
                 // Squares and products of two such values must stay finite (σ², γ |Dk0|², a²).
                 if !(v > 0.0 && v <= 1e100) {
-                    return Err(format!("{flag} must be a number in (0, 1e100], got {v}"));
+                    return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {v}")));
                 }
             }
         }
         if let Some(steps) = self.steps {
             if steps == 0 || steps > cbd_protocol::MAX_STEPS {
-                return Err(format!("--steps must be between 1 and {}, got {steps}", cbd_protocol::MAX_STEPS));
+                return Err(Error::InvalidInput(format!("--steps must be between 1 and {}, got {steps}", cbd_protocol::MAX_STEPS)));
             }
         }
         if let Some(method) = &self.integrator {
@@ -114,13 +115,13 @@ impl SolverArgs {
             parse_solver(solver)?;
         }
         if self.max_iterations == 0 {
-            return Err("--max-iterations must be at least 1".into());
+            return Err(Error::InvalidInput("--max-iterations must be at least 1".into()));
         }
         Ok(())
     }
 
     /// The pipeline's settings for these flags.
-    pub fn settings(&self) -> Result<crate::calibrate::Settings, String> {
+    pub fn settings(&self) -> Result<crate::calibrate::Settings> {
         self.validate()?;
         let mut s = crate::calibrate::Settings::default();
         s.overrides = crate::calibrate::Overrides {
@@ -187,26 +188,26 @@ fn evenly_spaced_rows(data: crate::data::Measurements, max_rows: Option<usize>) 
 }
 
 /// The integrator a command-line name stands for.
-pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod, String> {
+pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod> {
     match name.to_ascii_lowercase().as_str() {
         "euler" => Ok(cbd_protocol::IntegratorMethod::Euler),
         "heun" => Ok(cbd_protocol::IntegratorMethod::Heun),
         "rk4" => Ok(cbd_protocol::IntegratorMethod::Rk4),
-        other => Err(format!("unknown integrator `{other}` (expected euler, heun or rk4)")),
+        other => Err(Error::InvalidInput(format!("unknown integrator `{other}` (expected euler, heun or rk4)"))),
     }
 }
 
-pub fn run(args: FitArgs) -> Result<(), String> {
+pub fn run(args: FitArgs) -> Result<()> {
     args.solver.validate()?;
     if args.max_rows.is_some_and(|k| k < 2) {
-        return Err("--max-rows must be at least 2".into());
+        return Err(Error::InvalidInput("--max-rows must be at least 2".into()));
     }
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data))],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
     let (mut nominal, spec) = load_nominal(&args.model)?;
-    let imported = crate::data::csv_import::read_measurements(&args.data, &spec).map_err(|e| e.to_string())?;
+    let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     for w in imported.warnings(&args.data) {
         eprintln!("warning: {w}");
     }
@@ -227,8 +228,8 @@ pub fn run(args: FitArgs) -> Result<(), String> {
     settings.memory_budget = crate::cli::memory::kernel_form_budget(threads);
     settings.dh_first = args.dh_first;
     settings.threads = Some(threads);
-    let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings))
-        .map_err(|e| format!("{}: {e}", args.data.display()))?;
+    let calibration =
+        crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings)).context(args.data.display())?;
     print_calibration(&calibration, args.solver.quiet);
     let fit = &calibration.fit;
     crate::cli::write_atomically(&args.out, &fit.blob)?;
@@ -237,7 +238,7 @@ pub fn run(args: FitArgs) -> Result<(), String> {
         if let Some(r) = &registration {
             json["registered_base"] = r.to_json();
         }
-        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     let r = &fit.report;

@@ -11,6 +11,7 @@ pub mod plan;
 pub mod report;
 pub mod simulate;
 
+use crate::error::{Context, Result};
 use clap::{Parser, Subcommand};
 
 #[derive(Debug, Parser)]
@@ -62,24 +63,24 @@ pub fn register_base_if_unknown(
     nominal: &mut cbd_protocol::NominalModel,
     data: &crate::data::Measurements,
     data_path: &std::path::Path,
-) -> Result<Option<crate::nominal::register::Registration>, String> {
+) -> Result<Option<crate::nominal::register::Registration>> {
     let Some(path) = &args.model else { return Ok(None) };
-    let file = crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?;
+    let file = crate::data::model_file::load_model_file(path)?;
     if !file.register_base {
         return Ok(None);
     }
-    let r = crate::nominal::register::register_base(nominal, data).map_err(|e| format!("{}: {e}", data_path.display()))?;
+    let r = crate::nominal::register::register_base(nominal, data).context(data_path.display())?;
     eprintln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
     Ok(Some(r))
 }
 
 /// The nominal model and how to read its measurement CSV files.
-pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, crate::data::csv_import::ColumnSpec), String> {
+pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, crate::data::csv_import::ColumnSpec)> {
     use crate::data::model_file::{AngleUnit, LengthUnit};
     match &args.model {
         Some(path) => {
-            let file = crate::data::model_file::load_model_file(path).map_err(|e| e.to_string())?;
-            let spec = file.column_spec().map_err(|e| e.to_string())?;
+            let file = crate::data::model_file::load_model_file(path)?;
+            let spec = file.column_spec()?;
             Ok((file.nominal, spec))
         }
         None => Ok((
@@ -101,20 +102,27 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
     }
 }
 
-/// Runs a parsed command on the process's worker threads (`crate::workers`: as many as the memory
-/// allows, at most two); errors are printed by `main` with exit code 1.
-pub fn run(cli: Cli) -> Result<(), String> {
-    // Under an address-space limit the allocator returns what is freed: the memory check then holds.
+/// Chooses how glibc malloc keeps freed memory for this process (`crate::solver::allocator`):
+/// returned at once under an address-space limit (`ulimit -v`), where kept memory would run out
+/// after the memory check let a fit start; kept otherwise (faster fits). A process-wide setting:
+/// the `cbd` binary calls it first thing, before any allocation of size; a program using the
+/// library decides for itself (the library never changes it behind the caller's back).
+pub fn configure_allocator() {
     if memory::address_space_limited() {
         crate::solver::allocator::track_live_memory();
     } else {
         crate::solver::allocator::keep_freed_memory();
     }
+}
+
+/// Runs a parsed command on the process's worker threads (`crate::workers`: as many as the memory
+/// allows, at most two); errors are printed by `main` with exit code 1.
+pub fn run(cli: Cli) -> Result<()> {
     let threads = crate::workers::workers_for_memory(memory::available_bytes());
     crate::workers::run_in_pool(threads, move || dispatch(cli))?
 }
 
-fn dispatch(cli: Cli) -> Result<(), String> {
+fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Simulate(args) => simulate::run(args),

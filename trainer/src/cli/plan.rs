@@ -4,6 +4,7 @@
 
 use crate::cli::{load_nominal, ModelArgs};
 use crate::data::csv_import::{read_measurements, ColumnSpec};
+use crate::error::{Context, Error, Result};
 use crate::plan::{plan, prior, PlanInput, PlanOptions, Stage};
 use cbd_protocol::JointKind;
 use std::path::PathBuf;
@@ -48,22 +49,21 @@ pub struct PlanArgs {
     pub json: Option<PathBuf>,
 }
 
-pub fn run(args: PlanArgs) -> Result<(), String> {
+pub fn run(args: PlanArgs) -> Result<()> {
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--data", args.data.as_deref()), ("--candidate-file", args.candidate_file.as_deref())],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     if args.count == 0 {
-        return Err("--count must be at least 1".into());
+        return Err(Error::InvalidInput("--count must be at least 1".into()));
     }
     if args.workspace == 0 {
-        return Err("--workspace must be at least 1".into());
+        return Err(Error::InvalidInput("--workspace must be at least 1".into()));
     }
     for (flag, v) in [("--noise", args.noise), ("--prior-error", args.prior_error)] {
         if let Some(v) = v {
             if !(v > 0.0 && v <= 1e100) {
-                return Err(format!("{flag} must be a number in (0, 1e100], got {v}"));
+                return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {v}")));
             }
         }
     }
@@ -71,16 +71,19 @@ pub fn run(args: PlanArgs) -> Result<(), String> {
     let model_name = args.model.model.as_ref().map_or("the built-in RR arm".to_string(), |p| p.display().to_string());
     let limits = spec.joint_limits.clone();
     if let Some(d) = limits.iter().position(|[lo, hi]| !(lo.is_finite() && hi.is_finite())) {
-        return Err(format!("{model_name}: joint {} has no finite limits: declare `joint_limits` in its [measurements]", d + 1));
+        return Err(Error::InvalidInput(format!(
+            "{model_name}: joint {} has no finite limits: declare `joint_limits` in its [measurements]",
+            d + 1
+        )));
     }
     let measured = match &args.data {
-        Some(path) => Some(read_measurements(path, &spec).map_err(|e| e.to_string())?.measurements),
+        Some(path) => Some(read_measurements(path, &spec)?.measurements),
         None => None,
     };
     let user_candidates = match &args.candidate_file {
         Some(path) => {
             let joints_only = ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() };
-            read_measurements(path, &joints_only).map_err(|e| e.to_string())?.measurements.joints
+            read_measurements(path, &joints_only)?.measurements.joints
         }
         None => Vec::new(),
     };
@@ -94,8 +97,9 @@ pub fn run(args: PlanArgs) -> Result<(), String> {
     let sample = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2));
     let reach = crate::plan::candidates::reach(&nominal, &sample);
     let hyperparameters = match &measured {
-        Some(data) if data.len() >= 3 => prior::from_measurements(&nominal, data)
-            .map_err(|e| format!("{}: {e}", args.data.as_ref().map_or(String::new(), |p| p.display().to_string())))?,
+        Some(data) if data.len() >= 3 => {
+            prior::from_measurements(&nominal, data).context(args.data.as_ref().map_or(String::new(), |p| p.display().to_string()))?
+        }
         _ => prior::stated(
             &nominal,
             &sample,
@@ -105,7 +109,7 @@ pub fn run(args: PlanArgs) -> Result<(), String> {
     };
     let input =
         PlanInput { nominal: &nominal, limits: &limits, user_candidates: &user_candidates, measured: measured.as_ref(), hyperparameters };
-    let result = plan(&input, &options).map_err(|e| format!("{model_name}: {e}"))?;
+    let result = plan(&input, &options).context(&model_name)?;
 
     // The poses in the file's units.
     let to_file: Vec<f64> = spec
@@ -123,7 +127,7 @@ pub fn run(args: PlanArgs) -> Result<(), String> {
         text.push_str(&row.join(","));
         text.push('\n');
     }
-    crate::cli::write_atomically(&args.out, text.as_bytes()).map_err(|e| e.to_string())?;
+    crate::cli::write_atomically(&args.out, text.as_bytes())?;
 
     let unit = spec.model_length_unit.name();
     let geometric = result.poses.iter().filter(|p| p.stage == Stage::Geometric).count();
@@ -163,8 +167,8 @@ pub fn run(args: PlanArgs) -> Result<(), String> {
             "plan": result,
             "prior": if measured.as_ref().is_some_and(|d| d.len() >= 3) { "evidence on --data" } else { "stated" },
         });
-        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
-        crate::cli::write_atomically(path, text.as_bytes()).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())
 }

@@ -19,7 +19,7 @@ pub struct ReportArgs {
     pub unit: String,
 }
 
-pub fn run(args: ReportArgs) -> Result<(), String> {
+pub fn run(args: ReportArgs) -> crate::Result<()> {
     crate::io::check_paths(&[("--json", Some(&args.json))], &[("--out", Some(&args.out))])?;
     let figures = crate::report::html::write_report(&args.json, args.plots.as_deref(), &args.out, &args.unit)?;
     println!("report written to {} ({figures} figures embedded)", args.out.display());

@@ -1,6 +1,7 @@
 //! `cbd simulate`: measurements of a simulated "real" robot, as CSV.
 
 use crate::data::csv_import::MAX_MAGNITUDE;
+use crate::error::{Error, Result};
 use crate::simulate::{add_noise, configurations, rr, Sampling};
 use std::path::PathBuf;
 
@@ -72,42 +73,42 @@ fn poses_spec(robot: &str) -> crate::data::csv_import::ColumnSpec {
 
 /// The poses of `--poses` (radians, row-major), read as measurement files are (errors name the
 /// file, line and column).
-fn read_poses(args: &SimulateArgs) -> Result<Option<Vec<f64>>, String> {
+fn read_poses(args: &SimulateArgs) -> Result<Option<Vec<f64>>> {
     match &args.poses {
         Some(path) => {
-            let imported = crate::data::csv_import::read_measurements(path, &poses_spec(&args.robot)).map_err(|e| e.to_string())?;
+            let imported = crate::data::csv_import::read_measurements(path, &poses_spec(&args.robot))?;
             Ok(Some(imported.measurements.joints))
         }
         None => Ok(None),
     }
 }
 
-pub fn run(args: SimulateArgs) -> Result<(), String> {
+pub fn run(args: SimulateArgs) -> Result<()> {
     crate::io::check_paths(&[("--poses", args.poses.as_deref())], &[("--out", Some(&args.out))])?;
     if let Some(noise) = args.noise {
         // The importers' bound: a CSV that `cbd` writes, `cbd` reads back.
         if !(noise >= 0.0 && noise <= MAX_MAGNITUDE) {
-            return Err(format!(
+            return Err(Error::InvalidInput(format!(
                 "--noise must be a number in [0, {MAX_MAGNITUDE:e}] (the bound every imported value obeys), got {noise:e}"
-            ));
+            )));
         }
     }
     if args.sampling == "grid" && args.grid < 2 {
-        return Err(format!("--grid must be at least 2 points per joint, got {}", args.grid));
+        return Err(Error::InvalidInput(format!("--grid must be at least 2 points per joint, got {}", args.grid)));
     }
     if args.sampling == "uniform" && args.count == 0 {
-        return Err("--count must be at least 1".into());
+        return Err(Error::InvalidInput("--count must be at least 1".into()));
     }
     check_simulation_memory(&args, crate::cli::memory::available_bytes())?;
     match args.robot.as_str() {
         "rr" => {}
         "six" => return simulate_six(&args),
-        other => return Err(format!("unknown robot `{other}` (expected rr or six)")),
+        other => return Err(Error::InvalidInput(format!("unknown robot `{other}` (expected rr or six)"))),
     }
     let sampling = match args.sampling.as_str() {
         "grid" => Sampling::Grid { per_axis: args.grid },
         "uniform" => Sampling::Uniform { count: args.count, seed: args.seed },
-        other => return Err(format!("unknown sampling `{other}` (expected grid or uniform)")),
+        other => return Err(Error::InvalidInput(format!("unknown sampling `{other}` (expected grid or uniform)"))),
     };
     let joints = match read_poses(&args)? {
         Some(poses) => poses,
@@ -117,7 +118,7 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
         rr::RealRr::default().measure(&joints)
     } else {
         let lengths = rr::RealRr::default().lengths;
-        let rigid = cbd_protocol::NominalModel::planar(&lengths).ok_or("two links fit")?;
+        let rigid = cbd_protocol::NominalModel::planar(&lengths).ok_or_else(|| Error::Internal("two links fit".into()))?;
         effect_arm(rigid, &args.effects)?.measure(&joints, 0.0, 0)
     };
     add_noise(&mut data.positions, args.noise.unwrap_or(0.0), args.seed.wrapping_add(0x5eed));
@@ -132,10 +133,10 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
+fn simulate_six(args: &SimulateArgs) -> Result<()> {
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
     if args.sampling != "uniform" && args.poses.is_none() {
-        return Err("the six-joint robot is sampled with --sampling uniform".into());
+        return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform".into()));
     }
     let mut robot = SixJointRobot::ur5_like(1);
     if let Some(noise) = args.noise {
@@ -165,31 +166,31 @@ fn simulate_six(args: &SimulateArgs) -> Result<(), String> {
 
 /// Refuses to write positions the importers would refuse to read back (beyond ±1e100: noise and
 /// effects that are each in range can still add up, a thermal drift over many rows), naming the row.
-fn check_readable(data: &crate::data::Measurements) -> Result<(), String> {
+fn check_readable(data: &crate::data::Measurements) -> Result<()> {
     let m = data.task_dim.max(1);
     match data.positions.iter().position(|v| !(v.abs() <= MAX_MAGNITUDE)) {
-        Some(k) => Err(format!(
+        Some(k) => Err(Error::InvalidInput(format!(
             "the simulated position of row {} reaches {:.3e}, beyond the ±{MAX_MAGNITUDE:e} `cbd` reads back: lower --noise or the --effect sizes",
             k / m + 1,
             data.positions[k]
-        )),
+        ))),
         None => Ok(()),
     }
 }
 
 /// The rigid "real" geometry plus the `--effect` specs (undeclared: only the CSV carries them).
-fn effect_arm(rigid: cbd_protocol::NominalModel, specs: &[String]) -> Result<crate::simulate::effects::EffectArm, String> {
+fn effect_arm(rigid: cbd_protocol::NominalModel, specs: &[String]) -> Result<crate::simulate::effects::EffectArm> {
     let n = rigid.n_joints();
     let mut arm = crate::simulate::effects::EffectArm::new(rigid);
     for spec in specs {
-        arm = arm.with(crate::simulate::effects::parse_effect(spec, n).map_err(|e| e.to_string())?);
+        arm = arm.with(crate::simulate::effects::parse_effect(spec, n)?);
     }
     Ok(arm)
 }
 
 /// Refuses a simulation whose rows cannot be held in `available` bytes (a `--grid 100000` of the
 /// RR arm is 10¹⁰ rows), naming the rows, the figure and the flag that sets them.
-fn check_simulation_memory(args: &SimulateArgs, available: Option<f64>) -> Result<(), String> {
+fn check_simulation_memory(args: &SimulateArgs, available: Option<f64>) -> Result<()> {
     if args.robot == "six" && args.sampling != "uniform" {
         return Ok(()); // refused below: the six-joint arm is sampled uniformly only
     }
@@ -201,12 +202,13 @@ fn check_simulation_memory(args: &SimulateArgs, available: Option<f64>) -> Resul
     };
     let need = crate::cli::memory::simulate_bytes(rows, joints + coordinates);
     match available {
-        Some(available) if need > available => Err(format!(
+        Some(available) if need > available => Err(crate::cli::memory::MemoryError(format!(
             "{flag} makes {rows:e} rows, about {} to simulate and write, more than the {} this process may use; lower {}",
             crate::cli::memory::gigabytes(need),
             crate::cli::memory::gigabytes(available),
             flag.split(' ').next().unwrap_or("it")
-        )),
+        ))
+        .into()),
         _ => Ok(()),
     }
 }

@@ -148,17 +148,17 @@ fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, F
 
 /// Finite and within the importer's magnitude bound (squares must stay finite downstream).
 fn check_finite(at: &str, values: &[(&str, f64)]) -> Result<(), FieldError> {
-    values.iter().try_for_each(|(name, v)| check_effect_value(name, *v)).map_err(|message| FieldError::new(at, message))
+    values.iter().try_for_each(|(name, v)| check_effect_value(name, *v)).map_err(|e| FieldError::new(at, e.to_string()))
 }
 
 /// One value of an effect, in a model file or a simulation's `--effect`: finite and within the
 /// importer's bound ±1e100, so that what `cbd simulate` injects a model file could declare.
-pub fn check_effect_value(name: &str, v: f64) -> Result<(), String> {
+pub fn check_effect_value(name: &str, v: f64) -> Result<(), EffectValueError> {
     use crate::data::csv_import::MAX_MAGNITUDE;
     if !v.is_finite() {
-        Err(format!("{name} = {v} is not finite"))
+        Err(EffectValueError::NotFinite { name: name.into(), value: v })
     } else if v.abs() > MAX_MAGNITUDE {
-        Err(format!("{name} = {v:e} is beyond ±{MAX_MAGNITUDE:e}"))
+        Err(EffectValueError::TooLarge { name: name.into(), value: v })
     } else {
         Ok(())
     }
@@ -166,12 +166,24 @@ pub fn check_effect_value(name: &str, v: f64) -> Result<(), String> {
 
 /// An encoder scale error δ = scale·q: a relative error of 100 % or more is not an encoder's scale
 /// error (it reverses or doubles every angle) but a wrong value or unit.
-pub fn check_encoder_scale(scale: f64) -> Result<(), String> {
+pub fn check_encoder_scale(scale: f64) -> Result<(), EffectValueError> {
     check_effect_value("scale", scale)?;
     if scale.abs() >= 1.0 {
-        return Err(format!("scale = {scale:e}: an encoder scale error must lie within (-1, 1)"));
+        return Err(EffectValueError::EncoderScale { scale });
     }
     Ok(())
+}
+
+/// An effect's value out of range ([`check_effect_value`], [`check_encoder_scale`]): `name` is
+/// the value's key (`compliance`, `scale`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EffectValueError {
+    #[error("{name} = {value} is not finite")]
+    NotFinite { name: String, value: f64 },
+    #[error("{name} = {value:e} is beyond ±{:e}", crate::data::csv_import::MAX_MAGNITUDE)]
+    TooLarge { name: String, value: f64 },
+    #[error("scale = {scale:e}: an encoder scale error must lie within (-1, 1)")]
+    EncoderScale { scale: f64 },
 }
 
 /// Puts the file's `[gravity]` and `[[effects]]` into `nominal` (lengths already in the model's
@@ -230,7 +242,7 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
         let entry = k + 1;
         let effect = match *raw {
             RawEffect::EncoderScale { joint, scale } => {
-                check_encoder_scale(scale).map_err(|message| FieldError::new(effects_entry(entry), message))?;
+                check_encoder_scale(scale).map_err(|e| FieldError::new(effects_entry(entry), e.to_string()))?;
                 Effect::EncoderScale { joint: check_index(entry, "joint", joint, n)?, scale }
             }
             RawEffect::Transmission { joint, harmonic, cos, sin } => {

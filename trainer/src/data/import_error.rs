@@ -46,3 +46,9 @@ impl fmt::Display for ImportError {
 }
 
 impl std::error::Error for ImportError {}
+
+impl From<ImportError> for crate::Error {
+    fn from(e: ImportError) -> crate::Error {
+        crate::Error::stage("import", e)
+    }
+}

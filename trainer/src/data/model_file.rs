@@ -526,7 +526,7 @@ compliance = 0.5
         let reference = crate::nominal::urdf::urdf_tip_pose(&robot, "world", "tool0", &q, 1000.0).unwrap();
         let k = forward_kinematics(&m.nominal, &q);
         for c in 0..3 {
-            assert!((k.position[c] - reference.t[c]).abs() < 1e-9);
+            assert!((k.position[c] - reference.translation()[c]).abs() < 1e-9);
         }
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -1,5 +1,5 @@
-//! Why a diagnosis could not be made. Its own file, free of the crate's error type (the failed
-//! correction is held as a boxed source), so `crate::Error` can hold it without an import cycle.
+//! Why a diagnosis could not be made. Its own file: the failed correction is held as a boxed
+//! source (the crate's error), and the conversion into `crate::Error` is written here.
 
 /// Why a diagnosis could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -20,6 +20,12 @@ pub enum DiagnoseError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+}
+
+impl From<DiagnoseError> for crate::Error {
+    fn from(e: DiagnoseError) -> crate::Error {
+        crate::Error::stage("diagnose", e)
+    }
 }
 
 /// Issue 27 (messages): "got 2" for a file of 3 rows did not say that one was held out.

@@ -74,6 +74,13 @@ pub enum Declined {
     Singular,
     /// The least-squares problem would not fit in the memory this process may use.
     Memory(String),
+    /// The kernel form was asked for (`--representation kernel`).
+    KernelRequested,
+    /// A law without the Gaussian-process prior the expansion uses (not Hamiltonian).
+    NotHamiltonian,
+    /// (`auto`) The expansion has more weights a stage than the kernel form has momenta, and the
+    /// momenta do not cancel.
+    LongerThanMomenta { weights: usize, momenta: usize, cancellation: f64 },
 }
 
 impl std::fmt::Display for Declined {
@@ -82,6 +89,11 @@ impl std::fmt::Display for Declined {
             Declined::TooLong(why) => write!(f, "{why}"),
             Declined::Singular => write!(f, "the weights' least-squares problem is singular"),
             Declined::Memory(why) => write!(f, "{why}"),
+            Declined::KernelRequested => write!(f, "kernel form requested"),
+            Declined::NotHamiltonian => write!(f, "only the Hamiltonian laws have the Gaussian-process prior the expansion uses"),
+            Declined::LongerThanMomenta { weights, momenta, cancellation } => {
+                write!(f, "the expansion has {weights} weights a stage, more than the {momenta} momenta, which do not cancel ({cancellation:.1e})")
+            }
         }
     }
 }

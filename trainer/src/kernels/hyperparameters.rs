@@ -104,6 +104,12 @@ impl std::fmt::Display for HyperparameterError {
 
 impl std::error::Error for HyperparameterError {}
 
+impl From<HyperparameterError> for crate::Error {
+    fn from(e: HyperparameterError) -> crate::Error {
+        crate::Error::stage("hyperparameters", e)
+    }
+}
+
 /// Log marginal likelihood of independent GP coordinates `residual` (N × m) with covariance
 /// `k` (N × N, noise included): −½ Σ_c r_cᵀ K⁻¹ r_c − (m/2) log|K| − (N m/2) log 2π.
 /// `None` if `k` is not positive definite.

@@ -1,7 +1,7 @@
 //! A DH chain's parameters as one vector — per joint a, α, d, θ offset; the base's translation and
 //! rotation vector; the tool's translation — shared by DH calibration, diagnosis and the simulators.
 
-use super::Pose;
+use super::{rotation_about, Frame};
 use cbd_protocol::DhChain;
 
 /// Number of parameters for `n` joints: 4 per joint, 6 base, 3 tool.
@@ -36,13 +36,12 @@ pub fn apply_parameters(nominal: &DhChain, p: &[f64]) -> DhChain {
     let o = 4 * n;
     let r = [p[o + 3], p[o + 4], p[o + 5]];
     let angle = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-    let rot = if angle > 0.0 { Pose::axis_angle([r[0] / angle, r[1] / angle, r[2] / angle], angle) } else { Pose::IDENTITY };
-    let mut base = rot.compose(&Pose::from_transform(&nominal.base));
+    let rot = if angle > 0.0 { rotation_about([r[0] / angle, r[1] / angle, r[2] / angle], angle) } else { Frame::IDENTITY };
+    let translation = std::array::from_fn(|k| nominal.base.translation[k] + p[o + k]);
     for k in 0..3 {
-        base.t[k] = nominal.base.translation[k] + p[o + k];
         c.tool.translation[k] += p[o + 6 + k];
     }
     // Base rotation turns about the base origin: rot ∘ base, then restore/shift the translation.
-    c.base = base.to_transform();
+    c.base = rot.compose(&Frame::from_transform(&nominal.base)).with_translation(translation).to_transform();
     c
 }

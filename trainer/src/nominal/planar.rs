@@ -182,8 +182,7 @@ mod tests {
         // The same arm moved and with joint offsets is that chain in a moved frame.
         let mut moved = dh.clone();
         if let NominalModel::DhChain(c) = &mut moved {
-            c.base =
-                crate::nominal::Pose { t: [0.04, -0.03, 0.0], ..crate::nominal::Pose::axis_angle([0.0, 0.0, 1.0], 0.02) }.to_transform();
+            c.base = crate::nominal::rotation_about([0.0, 0.0, 1.0], 0.02).with_translation([0.04, -0.03, 0.0]).to_transform();
             c.joints[1].theta_offset = 0.015;
             c.joints[2].theta_offset = -0.01;
         }

@@ -4,7 +4,7 @@
 //! nominal in the registered frame. The DH and diagnose pipelines then refine that base with the
 //! rest of the geometric group, as they do a declared one.
 
-use super::Pose;
+use super::Frame;
 use crate::data::Measurements;
 use cbd_protocol::NominalModel;
 use cbd_runtime::kinematics::forward_kinematics;
@@ -13,7 +13,7 @@ use cbd_runtime::kinematics::forward_kinematics;
 #[derive(Debug, Clone, PartialEq)]
 pub struct Registration {
     /// The base (model length unit, rotation as a matrix).
-    pub base: Pose,
+    pub base: Frame,
     /// RMS distance of the nominal positions from the measured ones with the declared (identity)
     /// base, and with the registered one.
     pub rms_before: f64,
@@ -24,7 +24,7 @@ impl Registration {
     /// One line: translation, rotation as axis and angle (degrees), RMS before and after.
     pub fn describe(&self, unit: &str) -> String {
         let (axis, angle) = axis_angle(&self.base);
-        let t = self.base.t;
+        let t = self.base.translation();
         format!(
             "registered base: translation [{:.6}, {:.6}, {:.6}] {unit}, rotation {:.6}° about [{:.6}, {:.6}, {:.6}]; nominal RMS {:.4e} → {:.4e} {unit}",
             t[0],
@@ -45,14 +45,14 @@ impl Registration {
     /// (model length unit).
     pub fn to_json(&self) -> serde_json::Value {
         let (axis, angle) = axis_angle(&self.base);
-        serde_json::json!({"translation": self.base.t, "rotation": self.base.r, "axis": axis, "angle_deg": angle.to_degrees(),
+        serde_json::json!({"translation": self.base.translation(), "rotation": self.base.rotation(), "axis": axis, "angle_deg": angle.to_degrees(),
                            "rms_before": self.rms_before, "rms_after": self.rms_after})
     }
 }
 
 /// Axis and angle (radians) of a pose's rotation: angle from the trace, axis from the skew part.
-pub fn axis_angle(p: &Pose) -> ([f64; 3], f64) {
-    let r = &p.r;
+pub fn axis_angle(p: &Frame) -> ([f64; 3], f64) {
+    let r = p.rotation();
     let s = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
     let sin2 = super::norm(s);
     let cos = (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0;
@@ -66,7 +66,7 @@ pub fn axis_angle(p: &Pose) -> ([f64; 3], f64) {
 /// Kabsch/Horn: the rotation R and translation t minimising Σ |R p_i + t − y_i|² — R from the SVD
 /// of the cross-covariance H = Σ (p_i − p̄)(y_i − ȳ)ᵀ = U Σ Vᵀ, R = V diag(1, 1, det(V Uᵀ)) Uᵀ,
 /// t = ȳ − R p̄. `None` for fewer than 3 points or a degenerate SVD.
-pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Pose> {
+pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Frame> {
     let n = p.len();
     if n < 3 || y.len() != n {
         return None;
@@ -84,30 +84,45 @@ pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Pose> {
     };
     let sign = if det < 0.0 { -1.0 } else { 1.0 };
     let r: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| vu(a, b, sign)));
-    let rotated = Pose { r, t: [0.0; 3] }.rotate(pm);
-    let pose = Pose { r, t: std::array::from_fn(|c| ym[c] - rotated[c]) };
-    pose.r.iter().flatten().chain(&pose.t).all(|v| v.is_finite()).then_some(pose)
+    let rotated = Frame::new(r, [0.0; 3]).rotate(pm);
+    let pose = Frame::new(r, std::array::from_fn(|c| ym[c] - rotated[c]));
+    pose.iter().flatten().all(|v| v.is_finite()).then_some(pose)
 }
 
 /// Registers the base of `nominal` (a DH chain whose base is the identity) on `data`: the base
 /// becomes the rigid fit of its positions to the measured ones.
-pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, String> {
+pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, RegisterError> {
     let NominalModel::DhChain(chain) = nominal else {
-        return Err("registering the base needs a [chain] or [urdf] arm (a [planar] file gives base and yaw)".into());
+        return Err(RegisterError::NotADhChain);
     };
     let p: Vec<[f64; 3]> =
         (0..data.len()).map(|i| forward_kinematics(&NominalModel::DhChain(chain.clone()), data.joints(i)).position).collect();
     let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
-    let rms = |pose: &Pose| -> f64 {
+    let rms = |pose: &Frame| -> f64 {
         let s: f64 = p.iter().zip(&y).map(|(pi, yi)| super::norm(super::sub(pose.apply(*pi), *yi)).powi(2)).sum();
         (s / p.len().max(1) as f64).sqrt()
     };
-    let base = rigid_fit(&p, &y)
-        .ok_or_else(|| format!("cannot register the base on {} rows (at least 3 in general position needed)", data.len()))?;
-    let declared = Pose::from_transform(&chain.base);
+    let base = rigid_fit(&p, &y).ok_or(RegisterError::Degenerate { rows: data.len() })?;
+    let declared = Frame::from_transform(&chain.base);
     let registration = Registration { rms_before: rms(&declared), rms_after: rms(&base), base: base.compose(&declared) };
     chain.base = registration.base.to_transform();
     Ok(registration)
+}
+
+/// Why [`register_base`] could not register the base.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RegisterError {
+    #[error("registering the base needs a [chain] or [urdf] arm (a [planar] file gives base and yaw)")]
+    NotADhChain,
+    /// No rigid motion is determined by the data's positions.
+    #[error("cannot register the base on {rows} rows (at least 3 in general position needed)")]
+    Degenerate { rows: usize },
+}
+
+impl From<RegisterError> for crate::Error {
+    fn from(e: RegisterError) -> crate::Error {
+        crate::Error::stage("base registration", e)
+    }
 }
 
 #[cfg(test)]
@@ -116,21 +131,21 @@ mod tests {
 
     #[test]
     fn rigid_fit_recovers_a_known_motion_and_refuses_too_few_points() {
-        let motion = Pose { t: [4000.0, -1200.0, 300.0], ..Pose::axis_angle([0.6, 0.0, 0.8], 30f64.to_radians()) };
+        let motion = crate::nominal::rotation_about([0.6, 0.0, 0.8], 30f64.to_radians()).with_translation([4000.0, -1200.0, 300.0]);
         let p: Vec<[f64; 3]> = (0..20).map(|k| [(k as f64 * 0.7).sin() * 500.0, (k as f64 * 1.3).cos() * 400.0, k as f64 * 20.0]).collect();
         let y: Vec<[f64; 3]> = p.iter().map(|x| motion.apply(*x)).collect();
         let got = rigid_fit(&p, &y).unwrap();
         for i in 0..3 {
-            assert!((got.t[i] - motion.t[i]).abs() < 1e-9, "{got:?}");
+            assert!((got.translation()[i] - motion.translation()[i]).abs() < 1e-9, "{got:?}");
             for j in 0..3 {
-                assert!((got.r[i][j] - motion.r[i][j]).abs() < 1e-12, "{got:?}");
+                assert!((got.rotation()[i][j] - motion.rotation()[i][j]).abs() < 1e-12, "{got:?}");
             }
         }
         let (axis, angle) = axis_angle(&got);
         assert!((angle.to_degrees() - 30.0).abs() < 1e-9 && (axis[0] - 0.6).abs() < 1e-9 && (axis[2] - 0.8).abs() < 1e-9);
         // A reflection is never returned: a mirrored set gets the best proper rotation.
         let mirrored: Vec<[f64; 3]> = y.iter().map(|v| [-v[0], v[1], v[2]]).collect();
-        let r = rigid_fit(&p, &mirrored).unwrap().r;
+        let r = rigid_fit(&p, &mirrored).unwrap().rotation();
         let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
             + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
         assert!((det - 1.0).abs() < 1e-12);

@@ -10,7 +10,7 @@
 //! Not supported: floating, planar and spherical joints, mimic joints (treated as independent),
 //! and joint limits (ignored).
 
-use super::{add, cross, dot, norm, scale, sub, Pose};
+use super::{add, cross, dot, norm, rotation_about, rpy, scale, sub, Frame};
 use crate::error::{Error, Result};
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, MAX_JOINTS};
 
@@ -99,24 +99,24 @@ fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) ->
 }
 
 /// Pose of a URDF joint origin, lengths scaled.
-fn origin_pose(origin: &urdf_rs::Pose, length_scale: f64) -> Pose {
+fn origin_pose(origin: &urdf_rs::Pose, length_scale: f64) -> Frame {
     let [r, p, y] = origin.rpy.0;
-    Pose { t: scale(origin.xyz.0, length_scale), ..Pose::rpy(r, p, y) }
+    rpy(r, p, y).with_translation(scale(origin.xyz.0, length_scale))
 }
 
 /// Pose of `tip_link` in `base_link`'s frame at joint values `q` (URDF order; prismatic values
 /// in the scaled unit), computed directly from the URDF (the reference the DH conversion is
 /// tested against). Lengths are multiplied by `length_scale`.
-pub fn urdf_tip_pose(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, q: &[f64], length_scale: f64) -> Result<Pose> {
-    let mut pose = Pose::IDENTITY;
+pub fn urdf_tip_pose(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, q: &[f64], length_scale: f64) -> Result<Frame> {
+    let mut pose = Frame::IDENTITY;
     let mut k = 0;
     for joint in joint_path(robot, base_link, tip_link)? {
         pose = pose.compose(&origin_pose(&joint.origin, length_scale));
         let axis = unit(joint.axis.xyz.0).ok_or_else(|| Error::Urdf(format!("URDF joint '{}' has a zero axis", joint.name)))?;
         match joint.joint_type {
             urdf_rs::JointType::Fixed => continue,
-            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => pose = pose.compose(&Pose::axis_angle(axis, q[k])),
-            urdf_rs::JointType::Prismatic => pose = pose.compose(&Pose::translation(scale(axis, q[k]))),
+            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => pose = pose.compose(&rotation_about(axis, q[k])),
+            urdf_rs::JointType::Prismatic => pose = pose.compose(&Frame::IDENTITY.with_translation(scale(axis, q[k]))),
             ref other => return Err(Error::Urdf(format!("URDF joint '{}' has unsupported type {other:?}", joint.name))),
         }
         k += 1;
@@ -149,7 +149,7 @@ fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
 /// position is the origin of `tip_link`, in `base_link`'s frame. Lengths are multiplied by
 /// `length_scale` (URDF is in metres: 1000 gives millimetres).
 pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, length_scale: f64) -> Result<UrdfChain> {
-    let mut pose = Pose::IDENTITY;
+    let mut pose = Frame::IDENTITY;
     let mut lines = Vec::new();
     let mut names = Vec::new();
     for joint in joint_path(robot, base_link, tip_link)? {
@@ -167,7 +167,7 @@ pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, 
             }
         };
         let axis = unit(joint.axis.xyz.0).ok_or_else(|| Error::Urdf(format!("URDF joint '{}' has a zero axis", joint.name)))?;
-        lines.push(AxisLine { kind, point: pose.t, dir: pose.rotate(axis) });
+        lines.push(AxisLine { kind, point: pose.translation(), dir: pose.rotate(axis) });
         names.push(joint.name.clone());
     }
     if lines.is_empty() {
@@ -185,7 +185,7 @@ pub fn chain_from_urdf(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, 
 }
 
 /// Standard DH frames along the axis lines (see the module comment).
-fn dh_from_axis_lines(lines: &[AxisLine], tip: &Pose) -> DhChain {
+fn dh_from_axis_lines(lines: &[AxisLine], tip: &Frame) -> DhChain {
     let n = lines.len();
     // Frame 0: on axis 1, z along it; x any perpendicular (the best-conditioned world axis).
     let z0 = lines[0].dir;
@@ -225,7 +225,7 @@ fn dh_from_axis_lines(lines: &[AxisLine], tip: &Pose) -> DhChain {
     let _ = joints.push(DhJoint { kind: lines[n - 1].kind, a: 0.0, alpha: 0.0, d: 0.0, theta_offset: 0.0 });
     let pose_of = |(o, x, z): ([f64; 3], [f64; 3], [f64; 3])| {
         let y = cross(z, x);
-        Pose { r: [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]], t: o }
+        Frame::new([[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]], o)
     };
     let base = pose_of(frames[0]);
     let last = pose_of(frames[n - 1]);
@@ -335,13 +335,18 @@ mod tests {
             let reference = urdf_tip_pose(&robot, "world", "tool0", &q_mm, 1000.0).unwrap();
             let fk = forward_kinematics(&model, &q_mm);
             for c in 0..3 {
-                assert!((fk.position[c] - reference.t[c]).abs() < 1e-9, "config {k}: {:?} vs {:?}", fk.position, reference.t);
+                assert!(
+                    (fk.position[c] - reference.translation()[c]).abs() < 1e-9,
+                    "config {k}: {:?} vs {:?}",
+                    fk.position,
+                    reference.translation()
+                );
             }
             // The whole tip frame, not only its position.
             let tip = cbd_runtime::kinematics::rigid::dh_walk(&conv.chain, &q_mm).tool_rotation;
             for i in 0..3 {
                 for j in 0..3 {
-                    assert!((tip[i][j] - reference.r[i][j]).abs() < 1e-12);
+                    assert!((tip[i][j] - reference.rotation()[i][j]).abs() < 1e-12);
                 }
             }
         }

@@ -97,3 +97,9 @@ pub enum DhCalibrationError {
     #[error("DH calibration: {0}")]
     Numerical(#[from] crate::solver::least_squares::LeastSquaresError),
 }
+
+impl From<DhCalibrationError> for crate::Error {
+    fn from(e: DhCalibrationError) -> crate::Error {
+        crate::Error::stage("DH calibration", e)
+    }
+}

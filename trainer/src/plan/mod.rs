@@ -108,6 +108,12 @@ pub enum PlanError {
     Shape { model: usize, given: usize, what: &'static str },
 }
 
+impl From<PlanError> for crate::Error {
+    fn from(e: PlanError) -> crate::Error {
+        crate::Error::stage("plan", e)
+    }
+}
+
 /// Plans `options.count` poses (see the module documentation).
 pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError> {
     let start = std::time::Instant::now();

@@ -3,7 +3,7 @@
 //! data a stated prior (docs/DESIGN.md §13).
 
 use crate::data::Measurements;
-use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceOptions};
+use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceError, EvidenceOptions};
 use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_protocol::{JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
@@ -46,7 +46,7 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
 /// CbD's evidence on what the DH fit of the geometric group leaves (the residual dh+cbd's CbD
 /// models), read as measurements of the nominal: y − (k_dh(q) − k0(q)); the data as they are when
 /// the DH fit fails.
-pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> Result<CbdHyperparameters, String> {
+pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> Result<CbdHyperparameters, EvidenceError> {
     let options = DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() };
     let (n, m) = (data.n_joints, data.task_dim);
     let mut residual_data = data.clone();
@@ -60,6 +60,6 @@ pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> Result<
         }
     }
     let norm = crate::kernels::normalisation_of(&residual_data);
-    let evidence = choose_cbd_hyperparameters(nominal, &residual_data, &norm, &EvidenceOptions::default()).map_err(|e| e.to_string())?;
+    let evidence = choose_cbd_hyperparameters(nominal, &residual_data, &norm, &EvidenceOptions::default())?;
     Ok(evidence.hyperparameters)
 }

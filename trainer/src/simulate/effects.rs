@@ -7,7 +7,7 @@
 //!
 //! Augmented kinematics (as `cbd_protocol::effects` defines it): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
 
-use crate::nominal::{dot, norm, scale, sub, Pose};
+use crate::nominal::{dot, norm, scale, sub, Frame};
 use cbd_protocol::{GravityModel, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 use cbd_runtime::kinematics::rigid::dh_walk;
@@ -88,11 +88,11 @@ fn link_points(rigid: &NominalModel, q: &[f64]) -> Vec<[f64; 3]> {
 
 /// The frame of every link k = 0..n at its distal end: DH frames 1..n; planar: the link's end,
 /// rotated by q_1 + … + q_k about z (x along the link).
-fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Pose> {
+fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Frame> {
     match rigid {
         NominalModel::DhChain(chain) => {
             let walk = dh_walk(chain, q);
-            walk.end_rotations.into_iter().zip(walk.ends).take(chain.joints.len()).map(|(r, t)| Pose { r, t }).collect()
+            walk.end_rotations.into_iter().zip(walk.ends).take(chain.joints.len()).map(|(r, t)| Frame::new(r, t)).collect()
         }
         NominalModel::PlanarChain { lengths, .. } => {
             let (mut p, mut theta) = ([0.0; 3], 0.0);
@@ -104,7 +104,7 @@ fn link_frames(rigid: &NominalModel, q: &[f64]) -> Vec<Pose> {
                     p[0] += l * theta.cos();
                     p[1] += l * theta.sin();
                     let (s, c) = theta.sin_cos();
-                    Pose { r: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], t: p }
+                    Frame::new([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], p)
                 })
                 .collect()
         }
@@ -136,7 +136,7 @@ fn moment_potential(rigid: &NominalModel, gravity: &GravityModel, q: &[f64], mom
         .enumerate()
         .map(|(k, frame)| {
             let (m, s) = moment(k);
-            m * dot(g, frame.t) + dot(g, frame.rotate(s))
+            m * dot(g, frame.translation()) + dot(g, frame.rotate(s))
         })
         .sum()
 }
@@ -309,6 +309,12 @@ pub struct EffectSpecError {
     pub reason: String,
 }
 
+impl From<EffectSpecError> for crate::Error {
+    fn from(e: EffectSpecError) -> crate::Error {
+        crate::Error::stage("effects", e)
+    }
+}
+
 /// Parses `type:key=value,...`, e.g. `transmission:joint=2,harmonic=2,cos=0.001,sin=0`
 /// (joints and links 1-based on the command line; angles in radians, lengths in model units).
 /// Types: encoder_scale (scale), transmission (harmonic, cos, sin), gravity_compliance
@@ -329,7 +335,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
                 let x = v.parse::<f64>().ok().filter(|x| x.is_finite());
                 let x = x.ok_or_else(|| bad(format!("{k}={} is not a finite number", crate::error::excerpt(v))))?;
                 // The model file's bound on effect values: what is injected could be declared.
-                check_effect_value(k, x).map_err(bad)?;
+                check_effect_value(k, x).map_err(|e| bad(e.to_string()))?;
                 Ok(x)
             }
             None => default.ok_or_else(|| bad(format!("missing {k}="))),
@@ -354,7 +360,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
     let effect = match kind {
         "encoder_scale" => {
             let scale = num("scale", None)?;
-            check_encoder_scale(scale).map_err(bad)?;
+            check_encoder_scale(scale).map_err(|e| bad(e.to_string()))?;
             InjectedEffect::EncoderScale { joint: index("joint")?, scale }
         }
         "transmission" => {
@@ -379,7 +385,7 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
                 .map(|v| {
                     let x = v.trim().parse::<f64>().ok().filter(|x| x.is_finite());
                     let x = x.ok_or_else(|| bad(format!("bad centre value `{}`", crate::error::excerpt(v))))?;
-                    check_effect_value("centre", x).map(|()| x).map_err(bad)
+                    check_effect_value("centre", x).map(|()| x).map_err(|e| bad(e.to_string()))
                 })
                 .collect();
             let centre = centre?;

@@ -4,9 +4,9 @@
 use crate::data::Measurements;
 use cbd_protocol::NominalModel;
 
-/// The nominal model of the paper: l1 = 1, l2 = 0.5.
+/// The nominal model of the paper: l1 = 1, l2 = 0.5 (`cbd_protocol::paper_rr::LENGTHS`).
 pub fn nominal() -> NominalModel {
-    NominalModel::planar(&[1.0, 0.5]).expect("two links fit")
+    NominalModel::planar(&cbd_protocol::paper_rr::LENGTHS).expect("two links fit")
 }
 
 /// A planar arm as a DH chain (`nominal::planar::as_dh`) with link `lengths`, its base moved by
@@ -16,7 +16,7 @@ pub fn nominal() -> NominalModel {
 pub fn planar_arm(lengths: &[f64], base: [f64; 2], base_yaw: f64, offsets: &[f64]) -> NominalModel {
     let mut model = crate::nominal::planar::as_dh(&NominalModel::planar(lengths).expect("at most MAX_JOINTS links"));
     if let NominalModel::DhChain(c) = &mut model {
-        let pose = crate::nominal::Pose { t: [base[0], base[1], 0.0], ..crate::nominal::Pose::axis_angle([0.0, 0.0, 1.0], base_yaw) };
+        let pose = crate::nominal::rotation_about([0.0, 0.0, 1.0], base_yaw).with_translation([base[0], base[1], 0.0]);
         c.base = pose.to_transform();
         for (j, o) in c.joints.iter_mut().zip(offsets) {
             j.theta_offset = *o;

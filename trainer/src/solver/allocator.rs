@@ -1,6 +1,8 @@
-//! How glibc malloc keeps freed memory, chosen once per process.
+//! How glibc malloc keeps freed memory, chosen once per process by the program, never by the
+//! library behind its caller's back: the `cbd` binary calls [`crate::cli::configure_allocator`]
+//! first thing; a program that links the library and fits wants [`keep_freed_memory`] too.
 //!
-//! By default a fit keeps freed memory in the process instead of returning it to the kernel at
+//! By default `cbd` keeps freed memory in the process instead of returning it to the kernel at
 //! once ([`keep_freed_memory`]): a fit allocates and frees the same large blocks (kernel matrices,
 //! tangent chunks, factorisations) every iteration; by default each block over 32 MiB is mmap-ed and
 //! unmapped again, and the page faults and TLB shootdowns cost about a fifth of a fit at N = 1024 on
@@ -13,8 +15,8 @@
 //! one arena for all threads (glibc reserves 64 MiB of address space per thread arena), so the
 //! address space follows the live blocks the check counts.
 
-/// Keeps freed memory (the default for fits). The first of this and [`track_live_memory`] to run
-/// decides for the process; a no-op off glibc.
+/// Keeps freed memory (`cbd`'s default: faster fits). The first of this and [`track_live_memory`]
+/// to run decides for the process; a no-op off glibc.
 pub fn keep_freed_memory() {
     configure(false);
 }

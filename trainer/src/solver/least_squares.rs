@@ -21,6 +21,12 @@ pub enum LeastSquaresError {
     SvdNoConvergence { rows: usize, cols: usize },
 }
 
+impl From<LeastSquaresError> for crate::Error {
+    fn from(e: LeastSquaresError) -> crate::Error {
+        crate::Error::stage("least squares", e)
+    }
+}
+
 /// A = Q R, Householder vectors below the diagonal of `qr`, R on and above it.
 pub struct QrLeastSquares {
     qr: Mat<f64>,

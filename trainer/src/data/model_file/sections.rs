@@ -6,7 +6,7 @@ use super::{ImportError, LengthUnit};
 use crate::data::csv_import::MAX_MAGNITUDE;
 use crate::nominal::planar::PlanarFrame;
 use crate::nominal::urdf::chain_from_urdf;
-use crate::nominal::Pose;
+use crate::nominal::{rpy, Frame};
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
 use std::path::Path;
 
@@ -118,7 +118,7 @@ fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> 
     let translation = raw.translation.unwrap_or([0.0; 3]);
     let rotation = match (raw.rpy, raw.rotation) {
         (Some(_), Some(_)) => return Err(bad("give either rpy or rotation, not both".into())),
-        (Some([r, p, y]), None) => Pose::rpy(r * deg, p * deg, y * deg).r,
+        (Some([r, p, y]), None) => rpy(r * deg, p * deg, y * deg).rotation(),
         (None, Some(m)) => {
             // Must be a rotation: orthonormal with determinant +1.
             for i in 0..3 {
@@ -137,7 +137,7 @@ fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> 
             }
             m
         }
-        (None, None) => Pose::IDENTITY.r,
+        (None, None) => Frame::IDENTITY.rotation(),
     };
     if translation.iter().chain(rotation.iter().flatten()).any(|v| !v.is_finite()) {
         return Err(bad("non-finite value".into()));
@@ -145,5 +145,5 @@ fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> 
     if let Some(v) = translation.iter().find(|v| v.abs() > MAX_MAGNITUDE) {
         return Err(bad(format!("translation {v:e} is beyond ±{MAX_MAGNITUDE:e} (wrong unit?)")));
     }
-    Ok(Pose { r: rotation, t: translation }.to_transform())
+    Ok(Frame::new(rotation, translation).to_transform())
 }

@@ -86,6 +86,12 @@ impl std::fmt::Display for EvidenceError {
 
 impl std::error::Error for EvidenceError {}
 
+impl From<EvidenceError> for crate::Error {
+    fn from(e: EvidenceError) -> crate::Error {
+        crate::Error::stage("evidence", e)
+    }
+}
+
 /// Search settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EvidenceOptions {
@@ -183,7 +189,7 @@ pub fn choose_cbd_hyperparameters(
             Ok((v, p, report)) => {
                 (nlml, param, rows_used, weight_space) = (v, p, data.len(), Some(report));
             }
-            Err(why) => weight_space_declined = Some(why),
+            Err(why) => weight_space_declined = Some(why.to_string()),
         }
     }
     let theta = Theta::unpack(&param, n);

@@ -39,7 +39,7 @@ pub(super) fn encode_checked(
             weights: F64Slice::from_le_bytes(&weights),
         }),
     };
-    let blob = cbd_protocol::encode_to_vec(&model).map_err(|e| FitError::Encode(e.to_string()))?;
+    let blob = cbd_protocol::encode_to_vec(&model).map_err(FitError::Encode)?;
     // Never hand out a blob the runtime does not reproduce.
     let runtime = crate::predict::evaluate_blob(&blob, &data.joints).map_err(|e| FitError::RuntimeMismatch(e.to_string()))?;
     let scale = train_predictions.iter().fold(0.0f64, |s, v| s.max(v.abs())).max(f64::MIN_POSITIVE);

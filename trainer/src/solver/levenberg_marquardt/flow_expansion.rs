@@ -27,28 +27,24 @@ pub(super) fn fit(
     cp: &ControlPoints,
     target: &[f64],
     start: Instant,
-) -> Result<Result<CbdFit, String>, FitError> {
+) -> Result<Result<CbdFit, Declined>, FitError> {
     let m = cp.dims.m;
     if opts.representation == Representation::Kernel {
-        return Ok(Err("kernel form requested".into()));
+        return Ok(Err(Declined::KernelRequested));
     }
     if opts.law.joint_field_sign() > 0.0 {
-        return Ok(Err("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into()));
+        return Ok(Err(Declined::NotHamiltonian));
     }
     // The linear model's expansion first: the flow starts from it, and `auto` decides on its length.
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
-        Err(why) => return Ok(Err(why.to_string())),
+        Err(why) => return Ok(Err(why)),
     };
     let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;
     // A cancellation not measured (NaN, large N) is not known to be large.
     if opts.representation == Representation::Auto && linear.len() > cp.len() * m && !(kernel_cancellation > CANCELLATION_LIMIT) {
-        return Ok(Err(format!(
-            "the expansion has {} weights a stage, more than the {} momenta, which do not cancel ({kernel_cancellation:.1e})",
-            linear.len(),
-            cp.len() * m
-        )));
+        return Ok(Err(Declined::LongerThanMomenta { weights: linear.len(), momenta: cp.len() * m, cancellation: kernel_cancellation }));
     }
     let (e, iterations, converged) = match fit_flow(
         cp,
@@ -64,7 +60,7 @@ pub(super) fn fit(
     ) {
         Ok(r) => r,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
-        Err(why) => return Ok(Err(why.to_string())),
+        Err(why) => return Ok(Err(why)),
     };
     let norm = &opts.normalisation;
     let user = |k: &[f64]| -> Vec<f64> {
@@ -148,14 +144,14 @@ pub(super) fn fit_linear_scheme(
     cp: &ControlPoints,
     target: &[f64],
     start: Instant,
-) -> Result<Result<CbdFit, String>, FitError> {
+) -> Result<Result<CbdFit, Declined>, FitError> {
     if opts.representation == Representation::Kernel {
-        return Ok(Err("kernel form requested".into()));
+        return Ok(Err(Declined::KernelRequested));
     }
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
-        Err(why) => return Ok(Err(why.to_string())),
+        Err(why) => return Ok(Err(why)),
     };
     let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;
     let norm = &opts.normalisation;

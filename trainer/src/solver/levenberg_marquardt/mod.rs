@@ -217,7 +217,8 @@ pub enum FitError {
         iteration: usize,
         damping: f64,
     },
-    Encode(String),
+    /// The protocol refused to encode the model.
+    Encode(cbd_protocol::EncodeError),
     /// The kernel form's matrices would need more memory than the budget (bytes).
     TooLarge {
         unknowns: usize,
@@ -258,7 +259,20 @@ impl std::fmt::Display for FitError {
     }
 }
 
-impl std::error::Error for FitError {}
+impl std::error::Error for FitError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            FitError::Encode(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl From<FitError> for crate::Error {
+    fn from(e: FitError) -> crate::Error {
+        crate::Error::stage("fit", e)
+    }
+}
 
 /// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
 /// depend on how many threads the pool running it has (`Par::Seq` would round differently).
@@ -268,7 +282,6 @@ pub const FIXED_SPLIT: Par = Par::Rayon(match std::num::NonZeroUsize::new(2) {
 });
 /// Fits the initial momenta to `data` (user units) on top of `nominal`, on `opts.threads` threads.
 pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
-    super::allocator::keep_freed_memory();
     crate::flow::with_threads(opts.threads, || fit_in_pool(nominal, data, opts))
 }
 
@@ -292,12 +305,12 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     if !linear_scheme {
         match flow_expansion::fit(nominal, data, opts, &cp, &target, start)? {
             Ok(fit) => return Ok(fit),
-            Err(why) => declined_flow = Some(why),
+            Err(why) => declined_flow = Some(why.to_string()),
         }
     } else if closed_form && cp.len() * m > CLOSED_FORM_MAX_UNKNOWNS {
         match flow_expansion::fit_linear_scheme(nominal, data, opts, &cp, &target, start)? {
             Ok(fit) => return Ok(fit),
-            Err(why) => declined_flow = Some(why),
+            Err(why) => declined_flow = Some(why.to_string()),
         }
     }
     let unknowns = cp.len() * m;

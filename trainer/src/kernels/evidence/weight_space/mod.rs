@@ -74,6 +74,23 @@ pub(crate) struct WeightSpaceTable {
     tolerance: f64,
 }
 
+/// Why the weight space does not refine the subset's choice (the search keeps it; the reason is
+/// reported as `weight_space_declined`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Declined {
+    /// `joint` (1-based) is prismatic.
+    #[error("joint {joint} is prismatic: its kernel's basis depends on its width")]
+    Prismatic { joint: usize },
+    #[error("the joint kernel needs orders above 63 at tolerance {tolerance:.0e}")]
+    JointOrders { tolerance: f64 },
+    #[error("the task kernel needs orders above 63 at tolerance {tolerance:.0e}")]
+    TaskOrders { tolerance: f64 },
+    #[error("{weights} weights at tolerance {tolerance:.0e} (limit {limit})")]
+    TooManyWeights { weights: usize, tolerance: f64, limit: usize },
+    #[error("no θ in the basis's box gave a positive-definite system")]
+    NotPositiveDefinite,
+}
+
 impl WeightSpaceTable {
     /// The table for the box around `theta` (packed, normalised units), or why not: a prismatic
     /// joint (its basis would depend on its width), or more than `max_weights` weights.
@@ -83,10 +100,10 @@ impl WeightSpaceTable {
         norm: &Normalisation,
         theta: &[f64],
         max_weights: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, Declined> {
         let (n, m, count) = (data.n_joints, data.task_dim, data.len());
         if let Some(d) = (0..n).find(|&d| !nominal.is_revolute(d)) {
-            return Err(format!("joint {} is prismatic: its kernel's basis depends on its width", d + 1));
+            return Err(Declined::Prismatic { joint: d + 1 });
         }
         let theta = Theta::unpack(theta, n);
         let kin: Vec<_> = (0..count).map(|i| forward_kinematics(nominal, data.joints(i)).normalised(norm)).collect();
@@ -98,14 +115,12 @@ impl WeightSpaceTable {
         let b_max: Vec<f64> = theta.log_widths.iter().map(|lb| lb.exp() * BOX).collect();
         let a_min = theta.log_a.exp() / BOX.sqrt();
         let joint_axes: Vec<AxisSeries> = b_max.iter().map(|&b| AxisSeries::periodic(b)).collect();
-        let joint = truncate(&joint_axes, tolerance)
-            .ok_or_else(|| format!("the joint kernel needs orders above 63 at tolerance {tolerance:.0e}"))?;
+        let joint = truncate(&joint_axes, tolerance).ok_or(Declined::JointOrders { tolerance })?;
         let task_axes = vec![AxisSeries::gaussian(task_radius_of(&nominal_positions, m) / a_min); m];
-        let task =
-            truncate(&task_axes, tolerance).ok_or_else(|| format!("the task kernel needs orders above 63 at tolerance {tolerance:.0e}"))?;
+        let task = truncate(&task_axes, tolerance).ok_or(Declined::TaskOrders { tolerance })?;
         let weights = joint.len() * n + task.len() * m;
         if weights > max_weights {
-            return Err(format!("{weights} weights at tolerance {tolerance:.0e} (limit {max_weights})"));
+            return Err(Declined::TooManyWeights { weights, tolerance, limit: max_weights });
         }
         // Joint columns through the runtime's basis (periodic features do not depend on b).
         let kernel = JointKernel { gamma: 1.0, axes: heapless::Vec::from_iter((0..n).map(|_| JointKernelAxis::Periodic { b: 1.0 })) };
@@ -193,7 +208,7 @@ pub(super) fn refine(
     options: &EvidenceOptions,
     kernel_rows: usize,
     evaluations: &RefCell<usize>,
-) -> Result<(f64, Vec<f64>, WeightSpaceReport), String> {
+) -> Result<(f64, Vec<f64>, WeightSpaceReport), Declined> {
     let mut param = start.to_vec();
     let mut rounds = 0;
     loop {
@@ -201,8 +216,7 @@ pub(super) fn refine(
         let table = WeightSpaceTable::new(nominal, data, norm, &param, options.max_weight_space_weights)?;
         let lo: Vec<f64> = lower.iter().zip(&table.box_lower).map(|(a, b)| a.max(*b)).collect();
         let hi: Vec<f64> = upper.iter().zip(&table.box_upper).map(|(a, b)| a.min(*b)).collect();
-        let (nlml, found) = minimise(&table, &lo, &hi, &param, options.max_iterations, evaluations)
-            .ok_or_else(|| "no θ in the basis's box gave a positive-definite system".to_string())?;
+        let (nlml, found) = minimise(&table, &lo, &hi, &param, options.max_iterations, evaluations).ok_or(Declined::NotPositiveDefinite)?;
         // On a face the box imposes (not the search's own bounds): the optimum may lie beyond it.
         let on_face =
             (0..found.len()).any(|k| (hi[k] < upper[k] && found[k] >= hi[k] - 1e-3) || (lo[k] > lower[k] && found[k] <= lo[k] + 1e-3));

@@ -57,6 +57,6 @@ fn prismatic_joints_and_long_bases_are_declined() {
     // Narrow joint kernels need many functions: more than a small limit allows.
     let mut narrow = theta();
     narrow.log_widths = vec![20f64.ln(), 20f64.ln()];
-    let err = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &narrow.pack(), 50).err().unwrap();
+    let err = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &narrow.pack(), 50).err().unwrap().to_string();
     assert!(err.contains("limit 50"), "{err}");
 }
