@@ -15,6 +15,7 @@ pub mod io;
 pub mod kernels;
 pub mod memory;
 pub mod nominal;
+pub mod parametric;
 pub mod plan;
 pub mod predict;
 pub mod report;

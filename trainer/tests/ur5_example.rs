@@ -50,7 +50,7 @@ fn ur5_measurements_load_with_the_model_files_columns() {
 
 #[test]
 fn ur5_dh_calibration_reaches_the_reference_accuracy() {
-    use cbd_trainer::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
+    use cbd_trainer::parametric::{calibrate_dh, DhCalibrationOptions};
     let model = load_model_file(ur5_dir().join("ur5.toml")).unwrap();
     let spec = model.column_spec().unwrap();
     let train = read_measurements(ur5_dir().join("train.csv"), &spec).unwrap().measurements;

@@ -1,4 +1,3 @@
 //! The peers Calibration by Diffeomorphisms is compared with.
 
-pub mod dh_calibration;
 pub mod kernel_ridge;

@@ -15,9 +15,9 @@ pub mod settings;
 
 pub use settings::{HyperparameterSource, Overrides, Settings};
 
-use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::data::Measurements;
 use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, Evidence};
+use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions};
 use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
 

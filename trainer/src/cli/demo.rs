@@ -143,9 +143,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let calibrated_test = crate::predict::evaluate_blob(&blob, &test.joints)?;
     let calibrated_grid = crate::predict::evaluate_blob(&blob, &train.joints)?;
 
-    let nominal_at = |joints: &[f64]| -> Vec<f64> {
-        joints.chunks_exact(2).flat_map(|q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[..2].to_vec()).collect()
-    };
+    let nominal_at = |joints: &[f64]| -> Vec<f64> { crate::nominal::positions(&nominal, joints, 2) };
     // The peer with its own hyperparameters (its GP marginal likelihood on the same rows).
     let peer = fit_kernel_ridge_peer(&nominal, &train, &Default::default())?;
     let (krr, krr_fit_seconds) = (&peer.regression, peer.seconds);

@@ -67,7 +67,6 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).context(args.blob.display())?;
     crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
     let mut predicted = Vec::with_capacity(data.positions.len());
-    let mut nominal_pred = Vec::with_capacity(data.positions.len());
     let mut far = 0;
     for i in 0..data.len() {
         let line = lines.get(i).copied().unwrap_or(0);
@@ -76,8 +75,8 @@ pub fn run(args: EvalArgs) -> Result<()> {
             far += 1;
         }
         predicted.extend(e.position().iter());
-        nominal_pred.extend_from_slice(&cbd_runtime::kinematics::forward_kinematics(&nominal, data.joints(i)).position[..m]);
     }
+    let nominal_pred = crate::nominal::positions(&nominal, &data.joints, m);
     let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
     let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;
     println!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");

@@ -21,7 +21,7 @@
 //! c_j τ_j is linear in the products c_j·m_k, c_j·s_k for k ≥ j. Kinematic data see only those
 //! products (c_j and m_k never separately: the gauge c_j = 1 fixes the scale), and only their
 //! identifiable combinations: `cbd diagnose` keeps the columns of the regressor that column-pivoted
-//! Gram–Schmidt finds independent and writes the others as zero, so the written set reproduces
+//! QR finds independent and writes the others as zero, so the written set reproduces
 //! exactly the fitted deflection. Each compliant joint has its own set: one set shared by several
 //! joints would make the products of different joints proportional, a nonlinear constraint the
 //! linear fit does not impose. Without `link_moments` a joint's gravity compliance is the point-mass

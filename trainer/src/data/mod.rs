@@ -81,6 +81,8 @@ pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Resul
 
 pub mod csv_import;
 pub mod effects_section;
+mod evenly_spaced;
+pub use evenly_spaced::evenly_spaced_rows;
 pub mod import_error;
 pub mod joint_map;
 pub mod limits;

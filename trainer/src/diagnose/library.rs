@@ -2,14 +2,17 @@
 //! not as a whole), how a parameter vector changes the model, and each parameter's Jacobian
 //! column ∂k/∂θ over the data.
 //!
-//! Geometric parameters are those of `baselines::dh_calibration` (a, α, d, θ_offset per joint,
-//! base, tool; planar chains: the link lengths) and are written into the chain itself. Joint
+//! Geometric parameters are those of `parametric` (a, α, d, θ_offset per joint,
+//! base, tool; planar chains: the link lengths) and are written into the chain itself; their
+//! columns are `parametric`'s analytic identification Jacobian at the deflected joints. Joint
 //! effects: ∂k/∂θ = Dk_rigid(q + δ) · response; task effects (link bending): ∂k/∂θ = response.
 
 use super::kinematics::{self, Response};
 use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
+use crate::nominal::positions;
 use cbd_protocol::{Effect, NominalModel};
+use cbd_runtime::kinematics::effects::{effect_terms, Order};
 use faer::Mat;
 
 /// One scalar parameter of the library.
@@ -277,12 +280,6 @@ pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<N
     Ok(out)
 }
 
-/// Predicted positions (first `m` coordinates) of `model` at every row of `joints` (row-major).
-pub fn predict(model: &NominalModel, joints: &[f64], m: usize) -> Vec<f64> {
-    let n = model.n_joints();
-    joints.chunks_exact(n).flat_map(|q| kinematics::position(model, q, m)).collect()
-}
-
 /// Step of the central difference for geometric parameter `p`: 1e-6 rad, or 1e-6 of the
 /// workspace's size for lengths.
 fn fd_step(model: &NominalModel, p: &Param, length_scale: f64) -> f64 {
@@ -293,26 +290,78 @@ fn fd_step(model: &NominalModel, p: &Param, length_scale: f64) -> f64 {
     }
 }
 
+/// The index of geometric parameter `k` in the DH form's parameter vector (a planar chain's link
+/// length k is a_k of its DH form).
+fn dh_index(model: &NominalModel, k: usize) -> usize {
+    match model {
+        NominalModel::DhChain(_) => k,
+        NominalModel::PlanarChain { .. } => 4 * k,
+    }
+}
+
+/// The geometric columns of `jac` (`geometric`: (column, parameter)), ∂k_aug/∂p for k_aug(q) =
+/// k_rigid(p; q + δ(p; q)) + b(p; q): the rigid chain's analytic identification Jacobian at the
+/// deflected joints (`parametric::geometric_jacobian`), plus, for a model with effects, how they
+/// move with the geometry (gravity torques, link frames), Dk_rigid(q + δ) ∂δ/∂p + ∂b/∂p, by
+/// central differences of δ and b alone (zero for effects that do not depend on the geometry).
+fn geometric_columns(model: &NominalModel, data: &Measurements, geometric: &[(usize, Param)], jac: &mut Mat<f64>) {
+    let (n, m, rows) = (model.n_joints(), data.task_dim, data.len());
+    let rigid = kinematics::rigid(model);
+    let NominalModel::DhChain(chain) = crate::nominal::planar::as_dh(&rigid) else { unreachable!("as_dh gives a DH chain") };
+    let effects = &model.effects().list;
+    let deflected: Vec<f64> = if effects.is_empty() {
+        data.joints.clone()
+    } else {
+        data.joints
+            .chunks_exact(n)
+            .flat_map(|q| {
+                let delta = effect_terms(model, effects, q, Order::Value).delta;
+                q.iter().zip(delta).map(|(a, d)| a + d).collect::<Vec<f64>>()
+            })
+            .collect()
+    };
+    let analytic = crate::parametric::geometric_jacobian(&chain, &deflected, m);
+    for &(col, p) in geometric {
+        let Param::Geometric(k) = p else { continue };
+        let k = dh_index(model, k);
+        for i in 0..m * rows {
+            jac[(i, col)] = analytic[(i, k)];
+        }
+    }
+    if effects.is_empty() {
+        return;
+    }
+    // Size of the workspace (for the difference step of lengths): the model's own positions.
+    let length_scale = positions(model, &data.joints, m).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
+    for &(col, p) in geometric {
+        let h = fd_step(model, &p, length_scale);
+        let plus = apply(model, &[p], &[h]).expect("geometric change adds no effect");
+        let minus = apply(model, &[p], &[-h]).expect("geometric change adds no effect");
+        for i in 0..rows {
+            let q = data.joints(i);
+            let (a, b) =
+                (effect_terms(&plus, &plus.effects().list, q, Order::Value), effect_terms(&minus, &minus.effects().list, q, Order::Value));
+            let d_delta: Vec<f64> = (0..n).map(|d| (a.delta[d] - b.delta[d]) / (2.0 * h)).collect();
+            if d_delta.iter().all(|v| *v == 0.0) && (0..m).all(|c| a.b[c] == b.b[c]) {
+                continue;
+            }
+            let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q);
+            for c in 0..m {
+                jac[(m * i + c, col)] += (0..n).map(|d| dk[c * n + d] * d_delta[d]).sum::<f64>() + (a.b[c] - b.b[c]) / (2.0 * h);
+            }
+        }
+    }
+}
+
 /// The Jacobian ∂k(q_i)/∂θ of every `params` at `model` over `data`: (N·m) × params.len(),
 /// rows ordered (row i, coordinate c) → m·i + c.
 pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> Mat<f64> {
     let (n, m, rows) = (model.n_joints(), data.task_dim, data.len());
     let mut jac = Mat::<f64>::zeros(m * rows, params.len());
-    // Size of the workspace (for the difference step of lengths): the model's own positions.
-    let length_scale = predict(model, &data.joints, m).iter().chain(&data.positions).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
-    // Geometric columns: central differences of the whole augmented model.
-    for (col, p) in params.iter().enumerate() {
-        if let Param::Geometric(_) = p {
-            let h = fd_step(model, p, length_scale);
-            let plus = apply(model, &[*p], &[h]).expect("geometric change adds no effect");
-            let minus = apply(model, &[*p], &[-h]).expect("geometric change adds no effect");
-            for i in 0..rows {
-                let (a, b) = (kinematics::position(&plus, data.joints(i), m), kinematics::position(&minus, data.joints(i), m));
-                for c in 0..m {
-                    jac[(m * i + c, col)] = (a[c] - b[c]) / (2.0 * h);
-                }
-            }
-        }
+    let geometric: Vec<(usize, Param)> =
+        params.iter().enumerate().filter(|(_, p)| matches!(p, Param::Geometric(_))).map(|(col, p)| (col, *p)).collect();
+    if !geometric.is_empty() {
+        geometric_columns(model, data, &geometric, &mut jac);
     }
     // Effect columns: responses of unit-valued effects.
     let rigid = kinematics::rigid(model);
@@ -341,43 +390,6 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
     jac
 }
 
-/// Indices of the columns of `jac` (among `candidates`) that form an identifiable set: greedy
-/// column-pivoted Gram–Schmidt on unit-scaled columns; a column whose part orthogonal to those
-/// kept is below `tol` of its own norm is left out (a redundant or unidentifiable direction).
-pub fn identifiable_columns(jac: &Mat<f64>, candidates: &[usize], tol: f64) -> Vec<usize> {
-    let rows = jac.nrows();
-    let mut cols: Vec<(usize, Vec<f64>)> = candidates
-        .iter()
-        .filter_map(|&k| {
-            let norm = (0..rows).map(|i| jac[(i, k)].powi(2)).sum::<f64>().sqrt();
-            (norm > 0.0).then(|| (k, (0..rows).map(|i| jac[(i, k)] / norm).collect()))
-        })
-        .collect();
-    let mut kept = Vec::new();
-    loop {
-        let best = cols
-            .iter()
-            .enumerate()
-            .map(|(pos, (_, v))| (pos, v.iter().map(|x| x * x).sum::<f64>().sqrt()))
-            .max_by(|a, b| a.1.total_cmp(&b.1));
-        let Some((pos, size)) = best else { break };
-        if size <= tol {
-            break;
-        }
-        let (k, v) = cols.remove(pos);
-        let unit: Vec<f64> = v.iter().map(|x| x / size).collect();
-        for (_, w) in cols.iter_mut() {
-            let d: f64 = unit.iter().zip(w.iter()).map(|(a, b)| a * b).sum();
-            for (x, u) in w.iter_mut().zip(&unit) {
-                *x -= d * u;
-            }
-        }
-        kept.push(k);
-    }
-    kept.sort_unstable();
-    kept
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,11 +407,45 @@ mod tests {
         for (col, p) in params.iter().enumerate() {
             let h = 1e-6;
             let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (predict(&plus, &data.joints, 2), predict(&minus, &data.joints, 2));
+            let (a, b) = (positions(&plus, &data.joints, 2), positions(&minus, &data.joints, 2));
             for r in 0..a.len() {
                 let fd = (a[r] - b[r]) / (2.0 * h);
                 assert!(
                     (fd - jac[(r, col)]).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "{} row {r}: fd {fd} vs {}",
+                    param_name(&model, p),
+                    jac[(r, col)]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn geometric_columns_of_a_model_with_effects_match_central_differences() {
+        // Gravity compliance and bending move with the geometry (torques, link frames): the analytic
+        // rigid columns at the deflected joints plus that coupling are the whole derivative.
+        let mut model = NominalModel::DhChain(crate::simulate::six_joint::ur5_nominal());
+        for e in [
+            Effect::GravityCompliance { joint: 1, compliance: 2e-3 },
+            Effect::LinkBending { link: 2, compliance: 1e-3 },
+            Effect::Transmission { joint: 0, harmonic: 2, cos: 1e-3, sin: -2e-3 },
+        ] {
+            model.effects_mut().list.push(e).unwrap();
+        }
+        let params: Vec<Param> = (0..crate::nominal::dh_parameters::parameter_count(6)).map(Param::Geometric).collect();
+        let mut data = Measurements::new(6, 3);
+        for q in [[0.3, -1.2, 0.8, 0.1, 1.5, -0.4], [-2.0, -0.4, 1.9, -1.0, 0.2, 2.2]] {
+            data.push(&q, &[0.0; 3]);
+        }
+        let jac = jacobian(&model, &data, &params);
+        for (col, p) in params.iter().enumerate() {
+            let h = 1e-6;
+            let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
+            let (a, b) = (positions(&plus, &data.joints, 3), positions(&minus, &data.joints, 3));
+            for r in 0..a.len() {
+                let fd = (a[r] - b[r]) / (2.0 * h);
+                assert!(
+                    (fd - jac[(r, col)]).abs() < 1e-5 * (1.0 + fd.abs()),
                     "{} row {r}: fd {fd} vs {}",
                     param_name(&model, p),
                     jac[(r, col)]

@@ -17,10 +17,12 @@ pub mod structure;
 
 use crate::data::Measurements;
 use crate::evaluation::correction::{fit_on, CorrectionFitter};
+use crate::nominal::positions;
+use crate::parametric::independent_columns;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 pub use error::DiagnoseError;
-use library::{candidate_groups, identifiable_columns, jacobian, predict, Group, GroupKind, LibraryOptions, Param};
+use library::{candidate_groups, jacobian, Group, GroupKind, LibraryOptions, Param};
 use selection::{forward_select, LinearProblem, Selection, SelectionOptions};
 use structure::{structure_tests, StructureOptions, StructureTest};
 
@@ -262,7 +264,7 @@ pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurem
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
+    positions(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// Columns of each group that enter the selection: geometric pruned to an identifiable set, a
@@ -287,16 +289,16 @@ fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol
                 .filter(|&k| norms[k] > 1e-9 * largest[group.kind.type_name()] && norms[k] > 0.0)
                 .collect();
             if group.kind == GroupKind::Geometric {
-                geometric = identifiable_columns(jac, &cols, tol);
+                geometric = independent_columns(jac.as_ref(), &norms, &cols, tol);
                 geometric.clone()
             } else if group.kind == GroupKind::GravityCompliance {
                 // The gravity regressor's identifiable combinations: the columns column-pivoted
-                // Gram–Schmidt keeps beside the geometric ones (the others are fitted as zero).
+                // QR keeps beside the geometric ones (the others are fitted as zero).
                 let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
-                identifiable_columns(jac, &with, tol).into_iter().filter(|c| cols.contains(c)).collect()
+                independent_columns(jac.as_ref(), &norms, &with, tol).into_iter().filter(|c| cols.contains(c)).collect()
             } else {
                 let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();
-                let kept = identifiable_columns(jac, &with, tol);
+                let kept = independent_columns(jac.as_ref(), &norms, &with, tol);
                 if cols.iter().all(|c| kept.contains(c)) {
                     cols
                 } else {
@@ -520,9 +522,9 @@ fn held_out_table(
         let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
         table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
     };
-    push("nominal", predict(model, &test.joints, m));
-    push("nominal + geometric", predict(geometric_only, &test.joints, m));
-    push("nominal + effects", predict(with_effects, &test.joints, m));
+    push("nominal", positions(model, &test.joints, m));
+    push("nominal + geometric", positions(geometric_only, &test.joints, m));
+    push("nominal + effects", positions(with_effects, &test.joints, m));
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
         let on_effects = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?.predict;

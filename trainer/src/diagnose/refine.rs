@@ -2,8 +2,9 @@
 //! min_θ Σ_i |y_i − k(θ; q_i)|², with step halving, and their uncertainties from the
 //! Gauss–Newton covariance σ̂² (JᵀJ)⁻¹, σ̂² = SSE / (observations − parameters).
 
-use super::library::{apply, jacobian, predict, Param};
+use super::library::{apply, jacobian, Param};
 use crate::data::Measurements;
+use crate::nominal::positions;
 use crate::solver::least_squares::TruncatedSvd;
 use cbd_protocol::NominalModel;
 use faer::{Mat, Side};
@@ -24,7 +25,7 @@ pub struct Refined {
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    predict(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
+    positions(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// The Gauss–Newton step (truncated least squares, directions with σ² below 1e-12 σ_max² of the

@@ -231,7 +231,8 @@ pub fn plots(
     joint_scale: &[f64],
     unit: &str,
 ) -> crate::Result<Vec<std::path::PathBuf>> {
-    use super::library::{apply, jacobian, predict};
+    use super::library::{apply, jacobian};
+    use crate::nominal::positions;
     use crate::solver::least_squares::TruncatedSvd;
     let n = model_start.n_joints();
     let m = d.train.task_dim;
@@ -239,7 +240,7 @@ pub fn plots(
         d.found.iter().filter(|f| f.kind == GroupKind::Geometric).flat_map(|f| f.parameters.iter().map(|p| p.param)).collect();
     // The geometric corrections alone, as in the held-out "nominal + geometric" row.
     let geometric = d.model_geometric.clone();
-    let before = predict(&geometric, &d.train.joints, m);
+    let before = positions(&geometric, &d.train.joints, m);
     let residual: Vec<f64> = before
         .chunks_exact(m)
         .zip(d.train.positions.chunks_exact(m))
@@ -260,7 +261,7 @@ pub fn plots(
         let Some(j) = f.joint.filter(|&j| j < n) else { continue };
         // This effect's displacement at each row, less its least-squares fit by the geometric columns.
         let (p, v): (Vec<Param>, Vec<f64>) = f.parameters.iter().map(|p| (p.param, p.value)).unzip();
-        let with = predict(&apply(&geometric, &p, &v)?, &d.train.joints, m);
+        let with = positions(&apply(&geometric, &p, &v)?, &d.train.joints, m);
         let mut shift: Vec<f64> = with.iter().zip(&before).map(|(a, b)| a - b).collect();
         if let Some((jac, svd)) = &absorb {
             let c = svd.solve(&shift, 1e-12);

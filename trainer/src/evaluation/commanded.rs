@@ -11,10 +11,10 @@
 //! passes the kernel-ridge correction and CbD's fit in ([`fit_and_command`]).
 
 use super::correction::{CorrectionFitter, Predictor};
-use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use crate::data::Measurements;
 use crate::error::Error;
 use crate::nominal::planar::as_planar_in_frame;
+use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use crate::report::stats::ErrorStats;
 use crate::simulate::{rr::RealRr, six_joint::SixJointRobot};
 use cbd_protocol::NominalModel;

@@ -3,7 +3,7 @@
 //! hybrids DH + KRR and DH + CbD.
 
 use super::correction::{fit_on, CorrectionFitter, FittedCorrection, Predictor};
-use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions, DhFitStats};
+use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::calibrate::dh_not_converged;
 use crate::data::Measurements;
 use crate::data::import_error::ImportError;
@@ -146,7 +146,7 @@ pub fn read_compare_files(
 
 /// `model`'s first `m` task coordinates (`m` < its own for a planar arm's DH form).
 fn nominal_predictor(model: NominalModel, m: usize) -> Predictor {
-    Box::new(move |joints: &[f64]| crate::nominal::planar::positions(&model, joints, m))
+    Box::new(move |joints: &[f64]| crate::nominal::positions(&model, joints, m))
 }
 
 /// Runs every method: fits on `train` only, reports errors on `test`. `krr` is the hook for the

@@ -5,6 +5,8 @@
 
 pub mod dh_parameters;
 pub mod planar;
+mod positions;
+pub use positions::positions;
 pub mod register;
 pub mod urdf;
 

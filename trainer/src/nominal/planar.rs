@@ -5,7 +5,6 @@
 
 use super::dh_parameters::parameter_names;
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform};
-use cbd_runtime::kinematics::forward_kinematics;
 
 /// The DH form of `model`: a `PlanarChain` becomes the standard DH chain with a_k = l_k,
 /// α = d = θ_offset = 0, identity base and tool, the same effects and the in-plane part of its
@@ -42,11 +41,6 @@ pub fn in_plane_parameters(n: usize) -> Vec<usize> {
         })
         .map(|(k, _)| k)
         .collect()
-}
-
-/// The first `m` coordinates of `model`'s tool position at every row of `joints` (row-major).
-pub fn positions(model: &NominalModel, joints: &[f64], m: usize) -> Vec<f64> {
-    joints.chunks_exact(model.n_joints()).flat_map(|q| forward_kinematics(model, q).position.into_iter().take(m)).collect()
 }
 
 /// A planar arm's DH form seen as a `PlanarChain` in a moved frame: the chain turns at
@@ -161,6 +155,7 @@ pub fn as_planar(model: &NominalModel) -> Option<NominalModel> {
 mod tests {
     use super::*;
     use cbd_protocol::Effect;
+    use cbd_runtime::kinematics::forward_kinematics;
 
     #[test]
     fn the_dh_form_of_a_planar_arm_moves_and_deflects_like_it() {

@@ -156,16 +156,12 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     let mut all = kept.clone();
     all.extend_from_slice(measured_joints);
     all.extend_from_slice(&evaluation);
-    let mut geometric = crate::baselines::dh_calibration::identification_jacobian(nominal, &all)
+    let mut geometric = crate::parametric::identification_jacobian(nominal, &all)
         .map(|(jac, identifiable)| Identifiability::new(&jac, m, count_c, count_c + count_d, &identifiable));
 
     // The posterior on [candidates | workspace | evaluation | measured (at most max_conditioning)].
     let prior = Prior::new(&input.hyperparameters, m);
-    let conditioned: Vec<usize> = if count_d > options.max_conditioning {
-        (0..options.max_conditioning).map(|k| k * count_d / options.max_conditioning).collect()
-    } else {
-        (0..count_d).collect()
-    };
+    let conditioned = crate::data::evenly_spaced_rows(count_d, options.max_conditioning);
     let mut points: Vec<_> = kept.chunks_exact(n).map(|q| prior.point(nominal, q)).collect();
     points.extend(workspace.chunks_exact(n).map(|q| prior.point(nominal, q)));
     points.extend(evaluation.chunks_exact(n).map(|q| prior.point(nominal, q)));

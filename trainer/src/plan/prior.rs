@@ -2,9 +2,9 @@
 //! far (after the DH fit, as `cbd fit --dh-first` and `compare`'s dh+cbd choose them), or before any
 //! data a stated prior (docs/DESIGN.md §13).
 
-use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
 use crate::data::Measurements;
 use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceError, EvidenceOptions};
+use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_protocol::{JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 
@@ -51,7 +51,7 @@ pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> Result<
     let (n, m) = (data.n_joints, data.task_dim);
     let mut residual_data = data.clone();
     if let Ok(fit) = calibrate_dh(nominal, data, &options) {
-        let fitted = crate::nominal::planar::positions(&fit.model, &data.joints, m);
+        let fitted = crate::nominal::positions(&fit.model, &data.joints, m);
         for (i, q) in data.joints.chunks_exact(n).enumerate() {
             let k0 = forward_kinematics(nominal, q);
             for c in 0..m {

@@ -168,7 +168,7 @@ mod tests {
 
     #[test]
     fn dh_calibration_leaves_only_the_compliance_and_noise() {
-        use crate::baselines::dh_calibration::{calibrate_dh, DhCalibrationOptions};
+        use crate::parametric::{calibrate_dh, DhCalibrationOptions};
         let robot = SixJointRobot::ur5_like(3);
         let train = robot.measure(&random_configurations(300, 4), 5);
         let test_q = random_configurations(300, 6);

@@ -194,9 +194,7 @@ fn rr_demo_figures() {
     let train = real_arm.measure(&configurations(Sampling::Grid { per_axis: 16 }, 2));
     let test = real_arm.measure(&configurations(Sampling::Uniform { count: 3000, seed: 2026 }, 2));
     let fit = crate::solver::fit_cbd(&nominal_model, &train, &crate::solver::CbdOptions::paper_rr()).unwrap();
-    let nominal = |q: &[f64]| -> crate::Result<Vec<f64>> {
-        Ok(q.chunks_exact(2).flat_map(|x| cbd_runtime::kinematics::forward_kinematics(&nominal_model, x).position[..2].to_vec()).collect())
-    };
+    let nominal = |q: &[f64]| -> crate::Result<Vec<f64>> { Ok(crate::nominal::positions(&nominal_model, q, 2)) };
     let real = |q: &[f64]| -> crate::Result<Vec<f64>> { Ok(q.chunks_exact(2).flat_map(|x| real_arm.position(x)).collect()) };
     let calibrated = |q: &[f64]| crate::predict::evaluate_blob(&fit.blob, q);
     let test_before = position_errors(&nominal(&test.joints).unwrap(), &test.positions, 2);
