@@ -1,26 +1,49 @@
-//! Offline trainer for Calibration by Diffeomorphisms, laid out by pipeline stage:
-//! data import → nominal models → kernels → flow (primal + tangent) → solver → baselines →
-//! diagnosis → planning (where to measure next) → reports → CLI.
+//! Offline trainer for Calibration by Diffeomorphisms, laid out by pipeline stage, bottom to top
+//! (docs/DESIGN.md §1 states the layers; `cargo test -p cbd-tests --test house` checks them):
+//! errors and files → worker threads and memory → data import and nominal models → simulation,
+//! flow (primal + tangent), reports → the kernels' expansions, the solver, parametric (DH)
+//! calibration → CbD's evidence → calibrate (the one pipeline) → diagnosis, planning, evaluation
+//! harnesses → the peers (kernel ridge) → the `cbd` CLI.
 
+/// The peers CbD is compared with (kernel ridge on the residual).
 pub mod baselines;
+/// The one calibration pipeline: hyperparameters, scheme, fit, blob.
 pub mod calibrate;
+/// The `cbd` command line.
 pub mod cli;
+/// Measurement import: CSV, model files, units, joint maps.
 pub mod data;
+/// Residual diagnosis: which physical effects the data show.
 pub mod diagnose;
+/// The trainer's one error type (every stage's error enters it as a source).
 pub mod error;
+/// Evaluation harnesses: side-by-side comparison and commanded accuracy, any fitter through a hook.
 pub mod evaluation;
+/// CbD's own evidence: hyperparameters by marginal likelihood (docs/DESIGN.md §3, §9).
+pub mod evidence;
+/// The fields in the kernels' own basis (docs/DESIGN.md §11).
 pub mod expansion;
+/// The control points' flow and its tangent (eq. 17, 19).
 pub mod flow;
+/// Reading inputs and writing outputs safely (atomic writes, no writes through links).
 pub mod io;
-pub mod kernels;
+/// What a fit needs in memory, checked before it allocates.
 pub mod memory;
+/// Nominal models: DH chains, planar arms, URDF, base registration, batched k0.
 pub mod nominal;
+/// Parametric (DH / geometric) calibration: its Jacobian, identifiable set and least squares.
 pub mod parametric;
+/// Where to measure next (docs/DESIGN.md §13).
 pub mod plan;
+/// Evaluating a trained blob with the runtime.
 pub mod predict;
+/// Figures, statistics, progress and the HTML report.
 pub mod report;
+/// Simulated arms: the paper's RR, a six-joint arm, injected physical effects.
 pub mod simulate;
+/// Energy (16) minimised over the momenta: closed form and Levenberg–Marquardt.
 pub mod solver;
+/// The worker thread pool every command runs on.
 pub mod workers;
 
 pub use error::{Error, Result};

@@ -21,13 +21,30 @@ fn exit_codes_version_message_is_what_this_build_prints() {
     assert!(docs.contains(reads), "docs/EXIT_CODES.md does not quote {reads:?}");
 }
 
-/// The README once said the demo fits Heun × 5; `cbd demo --hyperparameters paper` fits Euler × 2.
+/// The README once said the demo fits Heun × 5; `cbd demo --hyperparameters paper` fits Euler × 2
+/// (asked of the command itself, on a small grid, not read from its source).
 #[test]
 fn readme_demo_scheme_is_what_demo_fits() {
     let readme = repo_file("README.md");
     assert!(!readme.contains("Heun × 5"), "README still says Heun × 5");
-    let source = repo_file("trainer/src/cli/demo.rs");
-    assert!(source.contains("settings.steps = Some(2)"), "the paper reproduction's step count changed: update the README");
+    let dir = std::env::temp_dir().join(format!("cbd-docs-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (blob, json) = (dir.join("paper.blob"), dir.join("paper.json"));
+    let out = Command::new(CBD)
+        .args(["demo", "--quiet", "--hyperparameters", "paper", "--grid", "4", "--test-points", "10", "--out"])
+        .arg(&blob)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(
+        (report["integrator"].as_str(), report["steps"].as_u64()),
+        (Some("euler"), Some(2)),
+        "the paper reproduction's scheme changed: update the README"
+    );
     assert!(readme.contains("`--hyperparameters paper` reproduces the paper's kernels"));
     assert!(readme.contains("with Euler × 2."));
 }

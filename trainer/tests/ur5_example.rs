@@ -102,8 +102,8 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
     let test = robot.measure(&random_configurations(200, 24), 25);
     let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> cbd_trainer::Result<FittedCorrection> {
         let mut opts = CbdOptions::paper_rr();
-        opts.normalisation = cbd_trainer::kernels::normalisation_of(data);
-        opts.joint_kernel = cbd_trainer::kernels::default_joint_kernel(nominal);
+        opts.normalisation = cbd_trainer::evidence::normalisation_of(data);
+        opts.joint_kernel = cbd_trainer::evidence::default_joint_kernel(nominal);
         opts.task_kernel.width = 1.0;
         opts.sigma = robot.noise_std / opts.normalisation.task_scale;
         opts.max_iterations = 15;

@@ -1,7 +1,7 @@
 //! "Calibrate this data": the one pipeline `fit`, `compare`, `diagnose`, `bench` and `demo` call.
 //!
 //! 1. The starting model: the nominal one, or DH-calibrated first (`dh_first`).
-//! 2. Hyperparameters: CbD's own evidence on the training rows ([`crate::kernels::evidence`]),
+//! 2. Hyperparameters: CbD's own evidence on the training rows ([`crate::evidence`]),
 //!    or the paper's RR values; a hand-given value replaces that one hyperparameter after the search
 //!    (so `--sigma S`, S the chosen value as printed, gives the default blob back).
 //! 3. The scheme (Euler × 1 = the linearised model, Euler × 2): k-fold cross-validation on the
@@ -16,7 +16,7 @@ pub mod settings;
 pub use settings::{HyperparameterSource, Overrides, Settings};
 
 use crate::data::Measurements;
-use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, Evidence};
+use crate::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, Evidence};
 use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions};
 use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
@@ -107,7 +107,7 @@ fn placeholder_hyperparameters(base: &NominalModel) -> CbdHyperparameters {
 pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation {
     match settings.source {
         HyperparameterSource::PaperRr => Normalisation::IDENTITY,
-        HyperparameterSource::Evidence => crate::kernels::normalisation_of(data),
+        HyperparameterSource::Evidence => crate::evidence::normalisation_of(data),
     }
 }
 

@@ -4,7 +4,7 @@
 
 use super::{options_for, Settings};
 use crate::data::Measurements;
-use crate::kernels::evidence::CbdHyperparameters;
+use crate::evidence::CbdHyperparameters;
 use crate::solver::{fit_cbd, DENSE_MAX_UNKNOWNS};
 use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
 

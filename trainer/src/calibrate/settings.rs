@@ -1,6 +1,6 @@
 //! What a user can set for a calibration; anything unset is chosen by the pipeline.
 
-use crate::kernels::evidence::{CbdHyperparameters, EvidenceOptions};
+use crate::evidence::{CbdHyperparameters, EvidenceOptions};
 use crate::solver::SolverMethod;
 use cbd_protocol::{IntegratorMethod, JointKernelAxis, MomentumLaw, NominalModel};
 

@@ -87,7 +87,7 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
     }
     // Task position, normalised: (k − mean) / rms.
     let predicted: Vec<f64> = (0..rows).flat_map(|i| kinematics::position(model, data.joints(i), m)).collect();
-    let norm = crate::kernels::normalisation_of(&Measurements {
+    let norm = crate::evidence::normalisation_of(&Measurements {
         n_joints: n,
         task_dim: m,
         joints: data.joints.clone(),

@@ -3,11 +3,11 @@
 //! hybrids DH + KRR and DH + CbD.
 
 use super::correction::{fit_on, CorrectionFitter, FittedCorrection, Predictor};
-use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::calibrate::dh_not_converged;
-use crate::data::Measurements;
 use crate::data::import_error::ImportError;
+use crate::data::Measurements;
 use crate::error::Error;
+use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 use std::time::Instant;

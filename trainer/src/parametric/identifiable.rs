@@ -1,8 +1,7 @@
 //! The identifiable parameters: those whose unit-scaled Jacobian column is not (numerically) in the
 //! span of the others kept, chosen by column-pivoted QR.
 
-use super::jacobian::{geometric_jacobian, zero_columns};
-use super::least_squares::column_scales;
+use super::jacobian::{column_scales, geometric_jacobian, zero_columns};
 use super::DhCalibrationOptions;
 use crate::nominal::dh_parameters::parameter_count;
 use cbd_protocol::NominalModel;

@@ -102,6 +102,18 @@ pub(super) fn zero_columns(jac: &mut Mat<f64>, columns: &[usize]) {
     }
 }
 
+/// The column norms of `jac`, floored: a parameter with almost no effect must not take huge steps
+/// (a null direction drifting to 1e10 rad would ruin the arithmetic).
+pub(super) fn column_scales(jac: &Mat<f64>, colnorm: &mut [f64]) {
+    for (k, c) in colnorm.iter_mut().enumerate() {
+        *c = (0..jac.nrows()).map(|i| jac[(i, k)] * jac[(i, k)]).sum::<f64>().sqrt();
+    }
+    let floor = 1e-6 * colnorm.iter().cloned().fold(0.0, f64::max);
+    for c in colnorm.iter_mut() {
+        *c = c.max(floor).max(f64::MIN_POSITIVE);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::tests::{sample, ur5_like};

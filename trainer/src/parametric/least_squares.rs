@@ -3,7 +3,7 @@
 //! (the parameters redundant at the nominal model first held fixed, then all freed).
 
 use super::identifiable::redundant_in_plane;
-use super::jacobian::{jacobian_at, zero_columns};
+use super::jacobian::{column_scales, jacobian_at, zero_columns};
 use super::residuals::residuals;
 use super::{DhCalibrationError, DhCalibrationOptions};
 use crate::data::Measurements;
@@ -20,18 +20,6 @@ fn reported_null_directions(factored: &TruncatedSvd, rank_tolerance: f64, out_of
         .map(|k| factored.direction(k))
         .filter(|v| v.iter().enumerate().any(|(i, w)| w.abs() > 0.3 && !out_of_plane.contains(&i)))
         .collect()
-}
-
-/// The column norms of `jac`, floored: a parameter with almost no effect must not take huge steps
-/// (a null direction drifting to 1e10 rad would ruin the arithmetic).
-pub(super) fn column_scales(jac: &Mat<f64>, colnorm: &mut [f64]) {
-    for (k, c) in colnorm.iter_mut().enumerate() {
-        *c = (0..jac.nrows()).map(|i| jac[(i, k)] * jac[(i, k)]).sum::<f64>().sqrt();
-    }
-    let floor = 1e-6 * colnorm.iter().cloned().fold(0.0, f64::max);
-    for c in colnorm.iter_mut() {
-        *c = c.max(floor).max(f64::MIN_POSITIVE);
-    }
 }
 
 /// What the Levenberg–Marquardt iterations of [`super::calibrate_dh`] end with.

@@ -13,7 +13,7 @@ pub mod posterior;
 pub mod prior;
 
 use crate::data::Measurements;
-use crate::kernels::evidence::CbdHyperparameters;
+use crate::evidence::CbdHyperparameters;
 use cbd_protocol::NominalModel;
 use identifiability::Identifiability;
 use posterior::{Posterior, Prior};

@@ -2,7 +2,7 @@
 //! posterior covariance at every tracked point kept by rank-m Cholesky updates, never refactorised
 //! (docs/DESIGN.md §13).
 
-use crate::kernels::evidence::CbdHyperparameters;
+use crate::evidence::CbdHyperparameters;
 use cbd_protocol::{JointKernel, NominalModel, TaskKernel, MAX_JOINTS};
 use cbd_runtime::kernel::{joint_features, joint_kernel_from_features, FEATURES_PER_JOINT};
 use cbd_runtime::kinematics::forward_kinematics;

@@ -3,7 +3,7 @@
 //! data a stated prior (docs/DESIGN.md §13).
 
 use crate::data::Measurements;
-use crate::kernels::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceError, EvidenceOptions};
+use crate::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceError, EvidenceOptions};
 use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_protocol::{JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
@@ -59,7 +59,7 @@ pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> Result<
             }
         }
     }
-    let norm = crate::kernels::normalisation_of(&residual_data);
+    let norm = crate::evidence::normalisation_of(&residual_data);
     let evidence = choose_cbd_hyperparameters(nominal, &residual_data, &norm, &EvidenceOptions::default())?;
     Ok(evidence.hyperparameters)
 }

@@ -15,7 +15,7 @@
 #[cfg(test)]
 use super::fit::kernel_matrix;
 use crate::data::Measurements;
-use crate::kernels::joint_pair_table::JointPairTable;
+use crate::evidence::joint_pair_table::JointPairTable;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
@@ -24,7 +24,7 @@ use faer::{linalg::solvers::Solve, Mat, Side};
 #[derive(Debug, Clone, PartialEq)]
 pub struct SearchOptions {
     /// Positions are divided by this before the GP sees them; `None`: the scale of
-    /// [`crate::kernels::normalisation_of`] (RMS distance of the measured positions from their mean),
+    /// [`crate::evidence::normalisation_of`] (RMS distance of the measured positions from their mean),
     /// the same normalisation the CbD model uses.
     pub task_scale: Option<f64>,
     /// After the shared-width search, refine each joint's width separately.
@@ -183,7 +183,7 @@ pub fn choose_kernel_ridge_hyperparameters(
     };
     let used = data.subset(&rows);
     let nominal_pos: Vec<[f64; 3]> = (0..used.len()).map(|i| forward_kinematics(nominal, used.joints(i)).position).collect();
-    let task_scale = options.task_scale.unwrap_or_else(|| crate::kernels::normalisation_of(data).task_scale);
+    let task_scale = options.task_scale.unwrap_or_else(|| crate::evidence::normalisation_of(data).task_scale);
     let residual = Mat::from_fn(used.len(), m, |i, c| (used.position(i)[c] - nominal_pos[i][c]) / task_scale);
     let table = JointPairTable::new((0..n).map(|d| nominal.is_revolute(d)).collect(), &used);
     let init = data_start(&table, options);

@@ -2,7 +2,7 @@
 //! or two `exp` per pair, its factorisation, and the gradient of any criterion of the form ½ tr(Q dK).
 
 use crate::data::Measurements;
-use crate::kernels::joint_pair_table::JointPairTable;
+use crate::evidence::joint_pair_table::JointPairTable;
 use crate::solver::regulariser::assemble_k_lin;
 use cbd_protocol::{NominalModel, Normalisation};
 use cbd_runtime::kinematics::forward_kinematics;
@@ -203,7 +203,7 @@ mod tests {
     #[test]
     fn the_evidences_k_lin_is_the_fits_to_a_stated_bound() {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 30, seed: 3 }, 2));
-        let norm = crate::kernels::normalisation_of(&data);
+        let norm = crate::evidence::normalisation_of(&data);
         let nominal = rr::nominal();
         let table = PairTable::new(&nominal, &data, &norm);
         for log_widths in [vec![0.3f64.ln(), 1.7f64.ln()], vec![8f64.ln(), 0.02f64.ln()]] {

@@ -15,12 +15,15 @@
 //! gradient, from several starts, inside bounds (a quadratic wall outside the box, then clamped).
 //! Only the rows given are used: pass training rows, never test rows.
 
+mod defaults;
+pub(crate) mod joint_pair_table;
 mod likelihood;
 mod search;
 mod starts;
 mod table;
 mod weight_space;
 
+pub use defaults::{default_joint_kernel, normalisation_of};
 pub(crate) use table::PairTable;
 pub use weight_space::WeightSpaceReport;
 
@@ -255,7 +258,7 @@ mod tests {
     #[test]
     fn gradient_matches_finite_differences() {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 25, seed: 3 }, 2));
-        let norm = crate::kernels::normalisation_of(&data);
+        let norm = crate::evidence::normalisation_of(&data);
         let table = PairTable::new(&rr::nominal(), &data, &norm);
         let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
         let p = theta.pack();

@@ -15,7 +15,7 @@ fn rr_rows(count: usize) -> crate::data::Measurements {
 #[test]
 fn weight_space_evidence_equals_the_kernel_form() {
     let data = rr_rows(60);
-    let norm = crate::kernels::normalisation_of(&data);
+    let norm = crate::evidence::normalisation_of(&data);
     let p = theta().pack();
     let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &p, 4000).unwrap();
     let kernel = PairTable::new(&rr::nominal(), &data, &norm);
@@ -36,7 +36,7 @@ fn weight_space_evidence_equals_the_kernel_form() {
 #[test]
 fn weight_space_gradient_matches_finite_differences() {
     let data = rr_rows(40);
-    let norm = crate::kernels::normalisation_of(&data);
+    let norm = crate::evidence::normalisation_of(&data);
     let p = theta().pack();
     let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &p, 4000).unwrap();
     let (_, grad) = ws.nlml_and_gradient(&p).unwrap();
@@ -53,7 +53,7 @@ fn weight_space_gradient_matches_finite_differences() {
 #[test]
 fn prismatic_joints_and_long_bases_are_declined() {
     let data = rr_rows(20);
-    let norm = crate::kernels::normalisation_of(&data);
+    let norm = crate::evidence::normalisation_of(&data);
     // Narrow joint kernels need many functions: more than a small limit allows.
     let mut narrow = theta();
     narrow.log_widths = vec![20f64.ln(), 20f64.ln()];

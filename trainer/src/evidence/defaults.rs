@@ -1,5 +1,5 @@
-//! Kernels and hyperparameters: defaults, task-space normalisation, and the linearised
-//! (Gaussian-process) model of docs/DESIGN.md §3.
+//! The defaults every model selection starts from: the task-space normalisation of the data
+//! (docs/DESIGN.md §1) and one unit kernel axis per joint.
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
@@ -28,5 +28,3 @@ pub fn default_joint_kernel(nominal: &NominalModel) -> JointKernel {
     }
     JointKernel { gamma: 1.0, axes }
 }
-pub mod evidence;
-pub(crate) mod joint_pair_table;
