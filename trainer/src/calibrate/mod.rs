@@ -51,12 +51,8 @@ pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
 
 /// The fit's options for hyperparameters `h`, normalisation `norm` and scheme `integrator`.
 pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Integrator, settings: &Settings) -> CbdOptions {
-    let mut opts = CbdOptions::paper_rr();
-    opts.normalisation = norm.clone();
-    opts.joint_kernel = h.blob_joint_kernel(norm);
-    opts.task_kernel = TaskKernel { width: h.blob_task_width(norm) };
-    opts.sigma = h.blob_sigma();
-    opts.integrator = integrator;
+    let task_kernel = TaskKernel { width: h.blob_task_width(norm) };
+    let mut opts = CbdOptions::new(h.blob_joint_kernel(norm), task_kernel, h.blob_sigma(), integrator, norm.clone());
     opts.law = settings.law;
     opts.max_iterations = settings.max_iterations;
     opts.method = settings.solver;

@@ -5,7 +5,6 @@ use crate::baselines::kernel_ridge::{fit_kernel_ridge_peer, KernelRidge};
 use crate::cli::memory::MemoryError;
 use crate::error::{Context, Error, Result};
 use crate::simulate::{configurations, rr, Sampling};
-use crate::solver::CbdOptions;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -301,7 +300,7 @@ fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench> {
     let nominal = rr::nominal();
     let queries = configurations(Sampling::Uniform { count: 500, seed: 11 }, 2);
     let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: per_axis(n)? }, 2));
-    let mut kernel = CbdOptions::paper_rr().joint_kernel;
+    let mut kernel = cbd_protocol::paper_rr::joint_kernel();
     kernel.gamma = 1.0;
     let krr = KernelRidge::fit(&nominal, &train, kernel, 1e-12)?;
     let rounds = 7;

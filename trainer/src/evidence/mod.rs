@@ -127,12 +127,7 @@ impl Default for EvidenceOptions {
 
 /// The rows used: all, or evenly spaced ones when N m exceeds `max_unknowns`.
 pub fn evidence_rows(count: usize, task_dim: usize, max_unknowns: usize) -> Vec<usize> {
-    let limit = (max_unknowns / task_dim.max(1)).max(3);
-    if count > limit {
-        (0..limit).map(|k| k * count / limit).collect()
-    } else {
-        (0..count).collect()
-    }
+    crate::data::evenly_spaced_rows(count, (max_unknowns / task_dim.max(1)).max(3))
 }
 
 /// Chooses CbD's hyperparameters for `nominal` on `data` (training rows only), with the task space

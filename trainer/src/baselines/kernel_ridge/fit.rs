@@ -106,7 +106,7 @@ mod tests {
     fn fits_the_training_points_and_its_jacobian_matches_finite_differences() {
         let real = rr::RealRr::default();
         let train = real.measure(&configurations(Sampling::Grid { per_axis: 8 }, 2));
-        let mut kernel = crate::solver::CbdOptions::paper_rr().joint_kernel;
+        let mut kernel = cbd_protocol::paper_rr::joint_kernel();
         kernel.gamma = 1.0;
         let nominal = rr::nominal();
         let krr = KernelRidge::fit(&nominal, &train, kernel.clone(), 1e-10).unwrap();

@@ -176,11 +176,7 @@ pub fn choose_kernel_ridge_hyperparameters(
         return Err(HyperparameterError::TooFewRows(count));
     }
     let (n, m) = (data.n_joints, data.task_dim);
-    let rows: Vec<usize> = if count > options.max_points {
-        (0..options.max_points).map(|k| k * count / options.max_points).collect()
-    } else {
-        (0..count).collect()
-    };
+    let rows = crate::data::evenly_spaced_rows(count, options.max_points);
     let used = data.subset(&rows);
     let nominal_pos: Vec<[f64; 3]> = (0..used.len()).map(|i| forward_kinematics(nominal, used.joints(i)).position).collect();
     let task_scale = options.task_scale.unwrap_or_else(|| crate::evidence::normalisation_of(data).task_scale);

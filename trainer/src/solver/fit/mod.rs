@@ -1,4 +1,7 @@
-//! Levenberg–Marquardt on E(P0) = ½ P0ᵀ K_lin P0 + 1/(2σ²) Σ |k1(x_i) − y_i|² (energy 16).
+//! CbD's fit: the momenta (or the expansion's weights) minimising
+//! E(P0) = ½ P0ᵀ K_lin P0 + 1/(2σ²) Σ |k1(x_i) − y_i|² (energy 16). Euler × 1 with the Hamiltonian
+//! law is linear and solved in closed form (docs/DESIGN.md §3); every other scheme starts there and
+//! iterates Levenberg–Marquardt (`iterate`).
 //!
 //! Undamped Gauss–Newton first (the regulariser keeps each step well posed; damping only after a
 //! failed step and not relaxed back to a level that failed until a step matches the model's
@@ -52,30 +55,49 @@ pub struct CbdOptions {
 }
 
 impl CbdOptions {
-    /// The paper's RR kernels (docs/DESIGN.md §6) with our default scheme (Euler × 2) and σ = 1e-6,
-    /// written as momenta (the kernel form).
-    pub fn paper_rr() -> Self {
+    /// A fit of the given kernels, noise, scheme and normalisation with the solver's defaults: the
+    /// Hamiltonian law, Levenberg–Marquardt's stopping rules, up to two threads, the method chosen
+    /// by size, the fields as momenta (the pipeline, `calibrate::options_for`, sets the user's
+    /// representation), no memory budget.
+    pub fn new(
+        joint_kernel: JointKernel,
+        task_kernel: TaskKernel,
+        sigma: f64,
+        integrator: Integrator,
+        normalisation: Normalisation,
+    ) -> Self {
         CbdOptions {
-            joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
-            task_kernel: cbd_protocol::paper_rr::task_kernel(),
-            sigma: 1e-6,
-            // Two Euler steps: a genuine (transported) flow that generalises best on the RR
-            // benchmark; more stages add nonlinearity that the ill-conditioned momenta amplify.
-            integrator: Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 2 },
+            joint_kernel,
+            task_kernel,
+            sigma,
+            integrator,
             // v = −K_V Jᵀ P: the linearisation is the GP with covariance K_lin (see MomentumLaw).
             law: MomentumLaw::Hamiltonian,
-            normalisation: Normalisation::IDENTITY,
+            normalisation,
             max_iterations: 30,
             relative_tolerance: 1e-5,
             prediction_tolerance: 1e-10,
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
             method: SolverMethod::Auto,
             verbose: false,
-            // The paper's method: the fields as momenta. The pipeline (`calibrate::options_for`)
-            // sets the user's choice, `auto` by default.
             representation: crate::expansion::Representation::Kernel,
             memory_budget: None,
         }
+    }
+
+    /// The paper's RR kernels (docs/DESIGN.md §6) with the paper's scheme here (Euler × 2) and
+    /// σ = 1e-6, written as momenta (the kernel form), in the paper's units (no normalisation).
+    pub fn paper_rr() -> Self {
+        // Two Euler steps: a genuine (transported) flow that generalises best on the RR
+        // benchmark; more stages add nonlinearity that the ill-conditioned momenta amplify.
+        let integrator = Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 2 };
+        CbdOptions::new(
+            cbd_protocol::paper_rr::joint_kernel(),
+            cbd_protocol::paper_rr::task_kernel(),
+            1e-6,
+            integrator,
+            Normalisation::IDENTITY,
+        )
     }
 }
 
