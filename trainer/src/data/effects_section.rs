@@ -204,9 +204,13 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
             if !(norm.is_finite() && norm > 0.0) {
                 return Err(FieldError::new("[gravity] direction", format!("{d:?} has no direction")));
             }
+            // A direction already of unit length to rounding (as `--write-model` writes one) is
+            // kept as written: dividing by a norm of 1 ± a few ulp would move its last bits, so a
+            // written file would not read back to the model it came from.
+            let scale = if (norm - 1.0).abs() <= 4.0 * f64::EPSILON { 1.0 } else { norm };
             let mut unit = [0.0; 3];
             for (u, v) in unit.iter_mut().zip(d) {
-                *u = v / norm;
+                *u = v / scale;
             }
             target.gravity.direction = unit;
         }
@@ -366,6 +370,21 @@ mod tests {
         let mut out = nominal.clone();
         apply(sections.gravity.as_ref(), &sections.effects, rad_per_unit, &mut out)?;
         Ok(out)
+    }
+
+    /// A written direction of unit length to rounding reads back bit for bit (a `[planar]` file
+    /// written by `diagnose --write-model` once read back 1 ulp off and wrote different text); any
+    /// other length is normalised.
+    #[test]
+    fn a_unit_gravity_direction_reads_back_as_written() {
+        let planar = NominalModel::planar(&[1.0, 0.5]).unwrap();
+        for g in [[-0.02199072373954877, -0.9997581747949905], [0.6, -0.8], [-0.7071067811865476, -0.7071067811865475]] {
+            let text = format!("[gravity]\ndirection = [{:?}, {:?}]\n", g[0], g[1]);
+            let read_back = read(&text, &planar, 1.0).unwrap().effects().gravity.direction;
+            assert_eq!(read_back, [g[0], g[1], 0.0], "{text}");
+        }
+        let read_back = read("[gravity]\ndirection = [0, 0, -2]\n", &six(), 1.0).unwrap().effects().gravity.direction;
+        assert_eq!(read_back, [0.0, 0.0, -1.0]);
     }
 
     #[test]
