@@ -120,7 +120,8 @@ fn is_ident(c: char) -> bool {
     c.is_ascii_alphanumeric() || c == '_'
 }
 
-/// Every path a use tree or an inline path spells from `start` (just after its `::`).
+/// Every path the use tree or inline path at the start of `text` spells (`text` begins just after
+/// the first `::`), each appended to `prefix`.
 fn expand_paths(prefix: Vec<String>, text: &str, out: &mut Vec<Vec<String>>) {
     let text = text.trim_start();
     if let Some(group) = text.strip_prefix('{') {
@@ -162,11 +163,10 @@ fn expand_paths(prefix: Vec<String>, text: &str, out: &mut Vec<Vec<String>>) {
 /// The absolute module paths a file's product code names.
 fn imports(module: &[String], code: &str) -> Vec<Vec<String>> {
     let mut found = Vec::new();
-    let text = code;
-    for (i, _) in text.match_indices("::") {
+    for (i, _) in code.match_indices("::") {
         // The path's first segment ends here: read it backwards.
-        let head: String = text[..i].chars().rev().take_while(|&c| is_ident(c)).collect::<String>().chars().rev().collect();
-        let before = text[..i - head.len()].chars().next_back();
+        let head: String = code[..i].chars().rev().take_while(|&c| is_ident(c)).collect::<String>().chars().rev().collect();
+        let before = code[..i - head.len()].chars().next_back();
         if before.is_some_and(|c| is_ident(c) || c == ':') {
             continue; // not the first segment of a path
         }
@@ -181,7 +181,7 @@ fn imports(module: &[String], code: &str) -> Vec<Vec<String>> {
             _ => continue,
         };
         let mut paths = Vec::new();
-        expand_paths(Vec::new(), &text[i + 2..], &mut paths);
+        expand_paths(Vec::new(), &code[i + 2..], &mut paths);
         for p in paths {
             let mut full = base.clone();
             let mut segments = p.into_iter().peekable();
