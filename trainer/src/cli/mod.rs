@@ -69,7 +69,7 @@ pub fn register_base_if_unknown(
     if !file.register_base {
         return Ok(None);
     }
-    let r = crate::nominal::register::register_base(nominal, data).context(data_path.display())?;
+    let r = crate::parametric::register::register_and_refine(nominal, data).context(data_path.display())?;
     eprintln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
     Ok(Some(r))
 }

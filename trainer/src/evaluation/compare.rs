@@ -132,15 +132,13 @@ pub fn read_compare_files(
     let mut warnings = train.warnings(train_csv.as_ref());
     warnings.extend(test.warnings(test_csv.as_ref()));
     let mut nominal = model.nominal;
-    let registration = match model.register_base {
-        true => Some(crate::nominal::register::register_base(&mut nominal, &train.measurements).map_err(|e| ImportError::Csv {
-            file: train_csv.as_ref().to_path_buf(),
-            line: None,
-            column: None,
-            message: e.to_string(),
-        })?),
-        false => None,
-    };
+    let registration =
+        match model.register_base {
+            true => Some(crate::parametric::register::register_and_refine(&mut nominal, &train.measurements).map_err(|e| {
+                ImportError::Csv { file: train_csv.as_ref().to_path_buf(), line: None, column: None, message: e.to_string() }
+            })?),
+            false => None,
+        };
     Ok(CompareInputs { nominal, train, test, warnings, registration })
 }
 

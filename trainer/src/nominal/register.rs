@@ -1,8 +1,9 @@
 //! Tracker frames: a base declared unknown (`[chain] base = { register = true }`) is registered
 //! on the training data before anything else — the rigid motion that best carries the nominal
 //! positions (base = identity) onto the measured ones (Kabsch/Horn) — so that "nominal" means
-//! nominal in the registered frame. The DH and diagnose pipelines then refine that base with the
-//! rest of the geometric group, as they do a declared one.
+//! nominal in the registered frame. `parametric::register` refines it with the geometric group
+//! (the pipelines call that); the DH and diagnose pipelines then fit the base with the rest of the
+//! geometric group, as they do a declared one.
 
 use super::Frame;
 use crate::data::Measurements;
@@ -18,6 +19,8 @@ pub struct Registration {
     /// base, and with the registered one.
     pub rms_before: f64,
     pub rms_after: f64,
+    /// Whether the rigid fit was refined by the geometric group (`parametric::register`).
+    pub refined: bool,
 }
 
 impl Registration {
@@ -26,7 +29,8 @@ impl Registration {
         let (axis, angle) = axis_angle(&self.base);
         let t = self.base.translation();
         format!(
-            "registered base: translation [{:.6}, {:.6}, {:.6}] {unit}, rotation {:.6}° about [{:.6}, {:.6}, {:.6}]; nominal RMS {:.4e} → {:.4e} {unit}",
+            "registered base{}: translation [{:.6}, {:.6}, {:.6}] {unit}, rotation {:.6}° about [{:.6}, {:.6}, {:.6}]; nominal RMS {:.4e} → {:.4e} {unit}",
+            if self.refined { " (rigid fit refined by the geometric group)" } else { " (rigid fit)" },
             t[0],
             t[1],
             t[2],
@@ -46,7 +50,7 @@ impl Registration {
     pub fn to_json(&self) -> serde_json::Value {
         let (axis, angle) = axis_angle(&self.base);
         serde_json::json!({"translation": self.base.translation(), "rotation": self.base.rotation(), "axis": axis, "angle_deg": angle.to_degrees(),
-                           "rms_before": self.rms_before, "rms_after": self.rms_after})
+                           "rms_before": self.rms_before, "rms_after": self.rms_after, "refined": self.refined})
     }
 }
 
@@ -89,24 +93,32 @@ pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Frame> {
     pose.iter().flatten().all(|v| v.is_finite()).then_some(pose)
 }
 
+/// RMS distance of `chain`'s nominal positions from the measured ones.
+pub fn rms_from(chain: &cbd_protocol::DhChain, data: &Measurements) -> f64 {
+    let model = NominalModel::DhChain(chain.clone());
+    let s: f64 = (0..data.len())
+        .map(|i| {
+            let p = forward_kinematics(&model, data.joints(i)).position;
+            (0..3).map(|c| (p[c] - data.position(i)[c]).powi(2)).sum::<f64>()
+        })
+        .sum();
+    (s / data.len().max(1) as f64).sqrt()
+}
+
 /// Registers the base of `nominal` (a DH chain whose base is the identity) on `data`: the base
 /// becomes the rigid fit of its positions to the measured ones.
 pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, RegisterError> {
     let NominalModel::DhChain(chain) = nominal else {
         return Err(RegisterError::NotADhChain);
     };
-    let p: Vec<[f64; 3]> =
-        (0..data.len()).map(|i| forward_kinematics(&NominalModel::DhChain(chain.clone()), data.joints(i)).position).collect();
+    let model = NominalModel::DhChain(chain.clone());
+    let p: Vec<[f64; 3]> = (0..data.len()).map(|i| forward_kinematics(&model, data.joints(i)).position).collect();
     let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
-    let rms = |pose: &Frame| -> f64 {
-        let s: f64 = p.iter().zip(&y).map(|(pi, yi)| super::norm(super::sub(pose.apply(*pi), *yi)).powi(2)).sum();
-        (s / p.len().max(1) as f64).sqrt()
-    };
     let base = rigid_fit(&p, &y).ok_or(RegisterError::Degenerate { rows: data.len() })?;
     let declared = Frame::from_transform(&chain.base);
-    let registration = Registration { rms_before: rms(&declared), rms_after: rms(&base), base: base.compose(&declared) };
-    chain.base = registration.base.to_transform();
-    Ok(registration)
+    let rms_before = rms_from(chain, data);
+    chain.base = base.compose(&declared).to_transform();
+    Ok(Registration { rms_before, rms_after: rms_from(chain, data), base: base.compose(&declared), refined: false })
 }
 
 /// Why [`register_base`] could not register the base.

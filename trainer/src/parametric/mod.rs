@@ -6,8 +6,8 @@
 //!
 //! One operation per file: the residuals k(p; x_i) − y_i (`residuals`), their analytic
 //! identification Jacobian ∂k/∂p (`jacobian`), the identifiable parameters by column-pivoted QR
-//! (`identifiable`), the damped least-squares loop (`least_squares`) and the fit itself
-//! (`calibrate_dh`).
+//! (`identifiable`), the damped least-squares loop (`least_squares`), the fit itself
+//! (`calibrate_dh`) and a tracker frame's base refined by it (`register`).
 //!
 //! Columns are scaled to unit norm; the damped steps come from the SVD of the scaled Jacobian
 //! (`solver::least_squares::TruncatedSvd`, never JᵀJ itself), and directions whose eigenvalue of
@@ -19,6 +19,7 @@ mod calibrate_dh;
 pub mod identifiable;
 pub mod jacobian;
 pub mod least_squares;
+pub mod register;
 mod residuals;
 #[cfg(test)]
 pub(crate) mod tests;
