@@ -170,18 +170,18 @@ fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
     let dir = scratch("tracker-frame");
     let motion = rotation_about([0.0, 0.6, 0.8], 0.5).with_translation([2500.0, -3000.0, 800.0]);
     let text = std::fs::read_to_string(ur5_dir().join("train.csv")).unwrap();
-    let mut out = String::new();
-    for (k, line) in text.lines().take(61).enumerate() {
-        if k == 0 {
-            out += &format!("{line}\n");
-            continue;
+    let moved_rows = |rows: std::ops::Range<usize>| {
+        let mut out = format!("{}\n", text.lines().next().unwrap());
+        for line in text.lines().skip(1).skip(rows.start).take(rows.len()) {
+            let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+            let y = motion.apply([v[6], v[7], v[8]]);
+            let row: Vec<String> = v[..6].iter().chain(&y).map(|x| format!("{x:?}")).collect();
+            out += &(row.join(",") + "\n");
         }
-        let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
-        let y = motion.apply([v[6], v[7], v[8]]);
-        let row: Vec<String> = v[..6].iter().chain(&y).map(|x| format!("{x:?}")).collect();
-        out += &(row.join(",") + "\n");
-    }
-    write(&dir, "tracker.csv", out);
+        out
+    };
+    write(&dir, "tracker.csv", moved_rows(0..60));
+    write(&dir, "tracker-test.csv", moved_rows(60..160));
     let model = std::fs::read_to_string(ur5_model()).unwrap();
     write(&dir, "declared.toml", &model);
     write(&dir, "unknown.toml", model.replace("base = { translation = [0, 0, 0], rpy = [0, 0, 0] }", "base = { register = true }"));
@@ -199,6 +199,7 @@ fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
         "{err}"
     );
     let err = succeeds(&fit("unknown.toml"));
+    let fit_line = err.lines().find(|l| l.contains("registered base")).unwrap_or_default().to_string();
     assert!(
         err.contains("tracker.csv: registered base (rigid fit refined by the geometric group): translation [2499.")
             && err.contains("rotation 28."),
@@ -215,6 +216,9 @@ fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
     let rms_after = d["registered_base"]["rms_after"].as_f64().unwrap();
     assert!((angle - 28.648).abs() < 0.5 && rms_after < 10.0 && d["registered_base"]["refined"] == true, "{d}");
     // eval reports in the registered frame too.
-    let err = succeeds(&cbd(&dir, &["eval", "--model", "unknown.toml", "--blob", "a.blob", "--data", "tracker.csv"]));
-    assert!(err.contains("registered base ("), "{err}");
+    let err = succeeds(&cbd(&dir, &["eval", "--model", "unknown.toml", "--blob", "a.blob", "--data", "tracker-test.csv"]));
+    // eval takes the base the fit registered on its training rows (from the blob), not one
+    // registered on the rows it evaluates.
+    let fitted = fit_line.split("translation").nth(1).and_then(|t| t.split(';').next()).unwrap().to_string();
+    assert!(err.contains(&fitted) && err.contains("(as fitted, from a.blob)"), "{err}\nwant {fitted}");
 }

@@ -41,10 +41,10 @@ pub fn run(args: EvalArgs) -> Result<()> {
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
-    crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
+    take_registered_base(&args, &mut nominal, &model.nominal, &data)?;
     if model.nominal != nominal {
         eprintln!(
             "note: {} carries its own nominal model (e.g. DH-calibrated); errors are reported against the model file's nominal",
@@ -106,6 +106,40 @@ pub fn run(args: EvalArgs) -> Result<()> {
             args.extrapolation_threshold
         );
     }
+    Ok(())
+}
+
+/// A base declared unknown was registered when the blob was fitted, on its training rows: the
+/// nominal row uses that base (joint 1's constant part folded in when the blob's chain is
+/// DH-calibrated), never one registered on the rows being evaluated.
+fn take_registered_base(
+    args: &EvalArgs,
+    nominal: &mut cbd_protocol::NominalModel,
+    fitted: &cbd_protocol::NominalModel,
+    data: &crate::data::Measurements,
+) -> Result<()> {
+    let Some(path) = &args.model.model else { return Ok(()) };
+    let file = crate::data::model_file::load_model_file(path)?;
+    if !file.register_base {
+        return Ok(());
+    }
+    let (cbd_protocol::NominalModel::DhChain(chain), cbd_protocol::NominalModel::DhChain(fitted)) = (&mut *nominal, fitted) else {
+        return Err(Error::InvalidInput(format!(
+            "{}: the base is declared unknown but {} holds no DH chain to take the registered base from",
+            path.display(),
+            args.blob.display()
+        )));
+    };
+    let rms_before = crate::nominal::register::rms_from(chain, data);
+    let base = crate::parametric::register::folded_base(chain, fitted);
+    chain.base = base.to_transform();
+    let r = crate::nominal::register::Registration {
+        base,
+        rms_before,
+        rms_after: crate::nominal::register::rms_from(chain, data),
+        refined: true,
+    };
+    eprintln!("{}: {} (as fitted, from {})", args.data.display(), r.describe(file.length_unit.name()), args.blob.display());
     Ok(())
 }
 
