@@ -216,7 +216,17 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         return Err(model_err(format!("exactly one of [chain], [urdf] and [planar] must be given ({given} found)")));
     }
     let mut planar_frame = None;
-    let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).is_some_and(|b| b.register == Some(true));
+    let urdf_base = raw.urdf.as_ref().and_then(|u| u.base.as_ref());
+    if let Some(b) = urdf_base {
+        if b.register != Some(true) || b.translation.is_some() || b.rpy.is_some() || b.rotation.is_some() {
+            return Err(ImportError::Field {
+                file: file.clone(),
+                field: "[urdf.base]".into(),
+                message: "a URDF chain's base is its base_link's frame; only `base = { register = true }` (data in a tracker's frame) may be given here".into(),
+            });
+        }
+    }
+    let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).or(urdf_base).is_some_and(|b| b.register == Some(true));
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
         sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
@@ -527,6 +537,17 @@ compliance = 0.5
         let k = forward_kinematics(&m.nominal, &q);
         for c in 0..3 {
             assert!((k.position[c] - reference.translation()[c]).abs() < 1e-9);
+        }
+        assert!(!m.register_base);
+        // A tracker's frame: `[urdf] base = { register = true }`; no other base may be given there.
+        let urdf = "length_unit = \"mm\"\nangle_unit = \"deg\"\n[urdf]\npath = \"arm.urdf\"\nbase_link = \"world\"\ntip_link = \"tool0\"\n";
+        std::fs::write(dir.join("tracker.toml"), format!("{urdf}base = {{ register = true }}\n")).unwrap();
+        let tracker = load_model_file(dir.join("tracker.toml")).unwrap();
+        assert!(tracker.register_base && tracker.nominal == m.nominal);
+        for bad in ["base = { register = false }", "base = { register = true, translation = [1, 2, 3] }", "base = { rpy = [0, 0, 1] }"] {
+            std::fs::write(dir.join("bad.toml"), format!("{urdf}{bad}\n")).unwrap();
+            let e = load_model_file(dir.join("bad.toml")).unwrap_err().to_string();
+            assert!(e.contains("bad.toml") && e.contains("[urdf.base]") && e.contains("only `base = { register = true }`"), "{e}");
         }
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -72,6 +72,9 @@ pub(super) struct RawUrdf {
     pub(super) path: PathBuf,
     pub(super) base_link: String,
     pub(super) tip_link: String,
+    /// `base = { register = true }`: the data are in a tracker's frame (the chain's base is
+    /// `base_link`'s frame otherwise; no other base may be given here).
+    pub(super) base: Option<RawTransform>,
 }
 
 #[derive(Debug, Deserialize)]
