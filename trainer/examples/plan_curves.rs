@@ -10,7 +10,8 @@
 //! ```sh
 //! cargo run --release -p cbd-trainer --example plan_curves -- [six|rr|both] [seeds, e.g. 1,2,3,4,5]
 //! ```
-//! `CBD_PLAN_WORKSPACE` / `CBD_PLAN_CANDIDATES` override the planner's workspace and candidate counts.
+//! `CBD_PLAN_WORKSPACE` / `CBD_PLAN_CANDIDATES` override the planner's workspace and candidate counts,
+//! `CBD_PLAN_MAX_K` ends the curves early.
 
 use cbd_protocol::{IntegratorMethod, NominalModel};
 use cbd_trainer::calibrate::{calibrate, Settings};
@@ -214,11 +215,14 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let which = args.get(1).map_or("both", |s| s.as_str());
     let seeds: Vec<u64> = args.get(2).map_or(vec![1, 2, 3, 4, 5], |s| s.split(',').filter_map(|v| v.parse().ok()).collect());
-    let arms: Vec<Arm> = match which {
+    let mut arms: Vec<Arm> = match which {
         "six" => vec![Arm::six()],
         "rr" => vec![Arm::rr()],
         _ => vec![Arm::rr(), Arm::six()],
     };
+    // CBD_PLAN_MAX_K: stop the curves there (a quicker look).
+    let max_k = env_usize("CBD_PLAN_MAX_K", usize::MAX);
+    arms.iter_mut().for_each(|a| a.sizes.retain(|k| *k <= max_k));
     for arm in &arms {
         let results: Vec<(u64, Vec<Row>)> = seeds.iter().map(|&s| (s, run(arm, s))).collect();
         println!("\n{} arm (noise {}), RMS error against the truth at 1000 fresh configurations, dh+cbd Euler × 1", arm.name, arm.noise);
