@@ -48,3 +48,41 @@ fn bad_plan_inputs_name_the_file_and_line() {
         &["prismatic.toml", "joint 2 has no finite limits"],
     );
 }
+
+/// With `[measurements.joint_map]` the limits apply to the controller's values, so the plan samples
+/// there, checks the model's joints for singular configurations and writes the controller's
+/// values: here the controller's J5 is the model's q5 + 90°, its range [80°, 100°], so the model's
+/// wrist is within 10° of its singular q5 = 0 and about a tenth of the candidates are left out.
+#[test]
+fn plan_writes_the_controllers_values_through_a_joint_map() {
+    let dir = scratch("plan-joint-map");
+    let model = std::fs::read_to_string(ur5_dir().join("simulated-six.toml")).unwrap();
+    let model =
+        model.replace("[-180, 180], [-180, 180]]", "[80, 100], [-180, 180]]") + "\n[measurements.joint_map]\noffset = { q5 = -90 }\n";
+    write(&dir, "mapped.toml", model);
+    succeeds(&cbd(
+        &dir,
+        &[
+            "plan",
+            "--model",
+            "mapped.toml",
+            "--count",
+            "12",
+            "--candidates",
+            "1000",
+            "--noise",
+            "0.02",
+            "--out",
+            "p.csv",
+            "--json",
+            "p.json",
+        ],
+    ));
+    let text = std::fs::read_to_string(dir.join("p.csv")).unwrap();
+    let j5: Vec<f64> = text.lines().skip(1).map(|l| l.split(',').nth(4).unwrap().parse().unwrap()).collect();
+    assert_eq!(j5.len(), 12);
+    assert!(j5.iter().all(|v| (80.0..=100.0).contains(v) && (v - 90.0).abs() > 0.9), "{j5:?}");
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
+    let rejected = json["plan"]["rejected_singular"].as_u64().unwrap();
+    assert!(rejected >= 70, "{rejected} of 1000 candidates left out as singular (about 3 % without the map)");
+}

@@ -80,9 +80,33 @@ pub fn run(args: PlanArgs) -> Result<()> {
         Some(path) => Some(read_measurements(path, &spec)?.measurements),
         None => None,
     };
+    // The controller's values (the columns, in model units: where the limits apply) → the model's
+    // joints, as the import maps them: the joint map, then a planar frame's offsets.
+    let joint_factor: Vec<f64> = spec
+        .joint_kinds
+        .iter()
+        .map(|k| match k {
+            JointKind::Revolute => spec.angle_unit.radians(),
+            JointKind::Prismatic => spec.length_unit.factor_to(spec.model_length_unit),
+        })
+        .collect();
+    let to_model = |c: &[f64]| -> Vec<f64> {
+        let mut q = c.to_vec();
+        if let Some(map) = &spec.joint_map {
+            let columns: Vec<f64> = c.iter().zip(&joint_factor).map(|(v, f)| v / f).collect();
+            map.to_model(&columns, &mut q);
+            q.iter_mut().zip(&joint_factor).for_each(|(v, f)| *v *= f);
+        }
+        if let Some(frame) = &spec.planar_frame {
+            q.iter_mut().zip(&frame.offsets).for_each(|(v, o)| *v += o);
+        }
+        q
+    };
+    let mapped = spec.joint_map.is_some() || spec.planar_frame.as_ref().is_some_and(|f| f.offsets.iter().any(|o| *o != 0.0));
     let user_candidates = match &args.candidate_file {
         Some(path) => {
-            let joints_only = ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() };
+            // Read as the controller's values: units converted and limits checked, not mapped.
+            let joints_only = ColumnSpec { position_columns: Vec::new(), min_rows: 1, joint_map: None, planar_frame: None, ..spec.clone() };
             read_measurements(path, &joints_only)?.measurements.joints
         }
         None => Vec::new(),
@@ -94,7 +118,10 @@ pub fn run(args: PlanArgs) -> Result<()> {
         workspace: args.workspace,
         ..PlanOptions::default()
     };
-    let sample = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2));
+    let sample: Vec<f64> = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2))
+        .chunks_exact(limits.len())
+        .flat_map(to_model)
+        .collect();
     let reach = crate::plan::candidates::reach(&nominal, &sample);
     let hyperparameters = match &measured {
         Some(data) if data.len() >= 3 => {
@@ -107,23 +134,21 @@ pub fn run(args: PlanArgs) -> Result<()> {
             prior::StatedPrior { error: args.prior_error.unwrap_or(3e-4 * reach), noise: args.noise.unwrap_or(1e-5 * reach) },
         ),
     };
-    let input =
-        PlanInput { nominal: &nominal, limits: &limits, user_candidates: &user_candidates, measured: measured.as_ref(), hyperparameters };
+    let input = PlanInput {
+        nominal: &nominal,
+        limits: &limits,
+        to_model: if mapped { Some(&to_model) } else { None },
+        user_candidates: &user_candidates,
+        measured: measured.as_ref(),
+        hyperparameters,
+    };
     let result = plan(&input, &options).context(&model_name)?;
 
-    // The poses in the file's units.
-    let to_file: Vec<f64> = spec
-        .joint_kinds
-        .iter()
-        .map(|k| match k {
-            JointKind::Revolute => 1.0 / spec.angle_unit.radians(),
-            JointKind::Prismatic => 1.0 / spec.length_unit.factor_to(spec.model_length_unit),
-        })
-        .collect();
+    // The poses as the controller's values, in the file's units.
     let mut text = spec.joint_columns.join(",");
     text.push('\n');
     for pose in &result.poses {
-        let row: Vec<String> = pose.joints.iter().zip(&to_file).map(|(q, f)| format!("{:?}", q * f)).collect();
+        let row: Vec<String> = pose.controller.iter().zip(&joint_factor).map(|(c, f)| format!("{:?}", c / f)).collect();
         text.push_str(&row.join(","));
         text.push('\n');
     }
@@ -132,7 +157,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let unit = spec.model_length_unit.name();
     let geometric = result.poses.iter().filter(|p| p.stage == Stage::Geometric).count();
     eprintln!(
-        "planned {} poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s: {} for the geometric group ({} parameters), {} for CbD's posterior",
+        "planned {} poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s: {} before the geometric group ({} parameters) is identified, {} after",
         result.poses.len(),
         result.candidates,
         result.rejected_singular,
@@ -159,7 +184,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
             .poses
             .iter()
             .enumerate()
-            .map(|(k, p)| serde_json::json!({"poses": k + 1, "predicted_rms": p.predicted_rms, "predicted_rms_cbd": p.predicted_rms_cbd, "stage": p.stage}))
+            .map(|(k, p)| serde_json::json!({"poses": k + 1, "predicted_rms": p.predicted_rms, "stage": p.stage}))
             .collect();
         let json = serde_json::json!({
             "length_unit": unit,

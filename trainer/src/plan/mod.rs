@@ -1,11 +1,12 @@
 //! Where to measure next (issue 28): a greedy choice of poses within the joint limits and away from
-//! singular configurations — first D-optimal for the geometric group while it is not identified, then
-//! the largest reduction of CbD's posterior variance over the workspace — and the RMS position error
-//! the posterior predicts after calibrating on every prefix (docs/DESIGN.md §13).
+//! singular configurations, each the largest reduction of the mean posterior variance over the
+//! workspace of dh+cbd's linearised model (CbD's Gaussian process plus the geometric group's
+//! Jacobian as basis functions), and the RMS position error that posterior predicts after
+//! calibrating on every prefix (docs/DESIGN.md §13).
 //!
 //! In pipeline order: `candidates` (sampling, limits, singular distance), `prior` (hyperparameters),
-//! `identifiability` (the DH Jacobian's information), `posterior` (the Gaussian process), here the
-//! greedy loop.
+//! `identifiability` (the DH Jacobian and its information), `posterior` (the Gaussian process),
+//! here the greedy loop.
 
 pub mod candidates;
 pub mod identifiability;
@@ -44,11 +45,15 @@ impl Default for PlanOptions {
 /// What the planner is given.
 pub struct PlanInput<'a> {
     pub nominal: &'a NominalModel,
-    /// `[lo, hi]` per joint, model units; finite.
+    /// `[lo, hi]` per joint of the controller's values (model units); finite.
     pub limits: &'a [[f64; 2]],
-    /// The user's own candidates (row-major), already checked against the limits.
+    /// The controller's values → the model's joints (a model file's joint map, a planar frame's
+    /// offsets); `None`: the identity. Candidates, workspace and evaluation points are uniform in
+    /// the controller's values, as the limits are.
+    pub to_model: Option<&'a dyn Fn(&[f64]) -> Vec<f64>>,
+    /// The user's own candidates (row-major, controller values), already checked against the limits.
     pub user_candidates: &'a [f64],
-    /// Poses already measured.
+    /// Poses already measured (model joints, as imported).
     pub measured: Option<&'a Measurements>,
     pub hyperparameters: CbdHyperparameters,
 }
@@ -57,9 +62,10 @@ pub struct PlanInput<'a> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stage {
-    /// D-optimality of the geometric group's Jacobian.
+    /// Reduction of the posterior variance over the workspace while the geometric group is not yet
+    /// identified (its information rank deficient).
     Geometric,
-    /// Reduction of CbD's posterior variance over the workspace.
+    /// Reduction of the posterior variance over the workspace, the geometric group identified.
     Posterior,
 }
 
@@ -69,13 +75,14 @@ pub struct PlannedPose {
     /// Model units (radians, or the length unit for prismatic joints).
     pub joints: Vec<f64>,
     pub stage: Stage,
+    /// The controller's joint values (model units; where the limits apply): `joints` unless a
+    /// joint map ([`PlanInput::to_model`]) is given.
+    pub controller: Vec<f64>,
     /// Linearised distance to the nearest singular configuration, radians.
     pub singular_distance: f64,
     /// Predicted RMS position error on the workspace after calibrating (dh+cbd) on the measured
     /// poses and the planned ones up to this one; `None` while the geometric group is rank deficient.
     pub predicted_rms: Option<f64>,
-    /// Its non-parametric part alone (CbD's posterior).
-    pub predicted_rms_cbd: f64,
 }
 
 /// The plan.
@@ -114,6 +121,12 @@ impl From<PlanError> for crate::Error {
     }
 }
 
+/// The parameters' prior standard deviation in units of the noise: broad enough that the prediction
+/// is the least-squares fit's wherever the poses identify the group (posterior variance σ²/λ for
+/// information λ ≫ 1e-6), and not so broad that the rank-m updates lose the noise-level variances
+/// to cancellation (prior/posterior variance ≈ 1e8–1e10, 1e-6–1e-8 of f64's 16 digits).
+const GEOMETRIC_PRIOR: f64 = 1e3;
+
 /// Plans `options.count` poses (see the module documentation).
 pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError> {
     let start = std::time::Instant::now();
@@ -128,18 +141,30 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     if let Some(data) = input.measured.filter(|d| d.n_joints != n || d.task_dim != m) {
         return Err(PlanError::Shape { model: n, given: data.n_joints, what: "the measured data" });
     }
-    let workspace = candidates::uniform_within(input.limits, options.workspace, options.seed.wrapping_add(1));
-    let evaluation = candidates::uniform_within(input.limits, options.evaluation, options.seed.wrapping_add(2));
+    if input.user_candidates.len() % n != 0 {
+        return Err(PlanError::Shape { model: n, given: input.user_candidates.len() % n, what: "the last candidate" });
+    }
+    // Controller values (where the limits apply) and the model's joints.
+    let to_model = |c: &[f64]| -> Vec<f64> {
+        match input.to_model {
+            Some(f) => c.chunks_exact(n).flat_map(f).collect(),
+            None => c.to_vec(),
+        }
+    };
+    let workspace = to_model(&candidates::uniform_within(input.limits, options.workspace, options.seed.wrapping_add(1)));
+    let evaluation = to_model(&candidates::uniform_within(input.limits, options.evaluation, options.seed.wrapping_add(2)));
     let reach = candidates::reach(nominal, &evaluation);
 
     // Candidates: the user's and random ones, each at least 1° from a singular configuration.
     let mut pool: Vec<f64> = input.user_candidates.to_vec();
     pool.extend(candidates::uniform_within(input.limits, options.candidates, options.seed));
-    let (mut kept, mut distances, mut rejected_singular) = (Vec::new(), Vec::new(), 0);
-    for q in pool.chunks_exact(n) {
+    let pool_model = to_model(&pool);
+    let (mut kept, mut kept_controller, mut distances, mut rejected_singular) = (Vec::new(), Vec::new(), Vec::new(), 0);
+    for (c, q) in pool.chunks_exact(n).zip(pool_model.chunks_exact(n)) {
         let d = candidates::singular_distance(nominal, q, reach);
-        if d >= candidates::SINGULAR_MARGIN && candidates::within_limits(q, input.limits) {
+        if d >= candidates::SINGULAR_MARGIN && candidates::within_limits(c, input.limits) {
             kept.extend_from_slice(q);
+            kept_controller.extend_from_slice(c);
             distances.push(d);
         } else {
             rejected_singular += 1;
@@ -150,84 +175,75 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         return Err(PlanError::TooFewCandidates { count: options.count, available: count_c });
     }
 
-    // The geometric group on [candidates | measured | evaluation].
+    // Every tracked point: [candidates | workspace | evaluation | measured].
     let measured_joints: &[f64] = input.measured.map(|d| d.joints.as_slice()).unwrap_or(&[]);
     let count_d = measured_joints.len() / n;
-    let mut all = kept.clone();
-    all.extend_from_slice(measured_joints);
-    all.extend_from_slice(&evaluation);
-    let mut geometric = crate::parametric::identification_jacobian(nominal, &all)
-        .map(|(jac, identifiable)| Identifiability::new(&jac, m, count_c, count_c + count_d, &identifiable));
-
-    // The posterior on [candidates | workspace | evaluation | measured (at most max_conditioning)].
-    let prior = Prior::new(&input.hyperparameters, m);
-    let conditioned = crate::data::evenly_spaced_rows(count_d, options.max_conditioning);
-    let mut points: Vec<_> = kept.chunks_exact(n).map(|q| prior.point(nominal, q)).collect();
-    points.extend(workspace.chunks_exact(n).map(|q| prior.point(nominal, q)));
-    points.extend(evaluation.chunks_exact(n).map(|q| prior.point(nominal, q)));
-    points.extend(conditioned.iter().map(|&i| prior.point(nominal, &measured_joints[i * n..(i + 1) * n])));
-    let eval_range = count_c + options.workspace..count_c + options.workspace + options.evaluation;
+    let (count_w, count_e) = (options.workspace, options.evaluation);
+    let eval_range = count_c + count_w..count_c + count_w + count_e;
     let measured_start = eval_range.end;
-    let mut gp = Posterior::new(prior, points, count_c, options.workspace);
-    let prior_rms_cbd = gp.mean_variance(eval_range.clone()).sqrt();
+    let mut all = kept.clone();
+    all.extend_from_slice(&workspace);
+    all.extend_from_slice(&evaluation);
+    all.extend_from_slice(measured_joints);
+    let mut geometric = crate::parametric::identification_jacobian(nominal, &all)
+        .map(|(jac, identifiable)| Identifiability::new(&jac, m, count_c, &identifiable));
+
+    // The Gaussian process, conditioned on at most `max_conditioning` measured poses (evenly
+    // spaced); the rest inform the geometric group's prior.
+    let prior = Prior::new(&input.hyperparameters, m);
+    let sigma2 = prior.sigma2.max(f64::MIN_POSITIVE);
+    let conditioned = crate::data::evenly_spaced_rows(count_d, options.max_conditioning);
+    let unconditioned: Vec<usize> = (0..count_d).filter(|i| conditioned.binary_search(i).is_err()).map(|i| measured_start + i).collect();
+    let (p, factor) = match &geometric {
+        Some(g) => (g.parameters(), g.prior_factor(GEOMETRIC_PRIOR * GEOMETRIC_PRIOR * sigma2, sigma2, &unconditioned)),
+        None => (0, Vec::new()),
+    };
+    let basis = |i: usize| -> Vec<f64> {
+        let Some(g) = &geometric else { return Vec::new() };
+        let j = g.block(i);
+        // G = J L (m × p).
+        (0..m * p).map(|k| (0..p).map(|t| j[(k / p) * p + t] * factor[t * p + k % p]).sum()).collect()
+    };
+    let mut points: Vec<_> = (0..count_c + count_w + count_e).map(|i| prior.point(nominal, &all[i * n..(i + 1) * n], basis(i))).collect();
+    points.extend(conditioned.iter().map(|&i| prior.point(nominal, &measured_joints[i * n..(i + 1) * n], basis(measured_start + i))));
+    let prior_rms_cbd = (eval_range.clone().map(|i| prior.cbd_variance(&points[i])).sum::<f64>() / count_e.max(1) as f64).sqrt();
+    let mut gp = Posterior::new(prior, points, count_c, count_w);
 
     if let Some(g) = geometric.as_mut() {
         for i in 0..count_d {
-            g.add(count_c + i);
+            g.add(measured_start + i);
         }
     }
     for k in 0..conditioned.len() {
         gp.add(measured_start + k);
     }
-    let sigma2 = gp.sigma2();
-    let predict = |gp: &Posterior, g: &Option<Identifiability>| -> (Option<f64>, f64) {
-        let cbd = gp.mean_variance(eval_range.clone());
-        let parametric = match g {
-            Some(g) => g.predicted_variance(sigma2),
-            None => Some(0.0),
-        };
-        (parametric.map(|p| (p + cbd).sqrt()), cbd.sqrt())
-    };
-    let measured_predicted_rms = if count_d > 0 { predict(&gp, &geometric).0 } else { None };
+    let identified = |g: &Option<Identifiability>| g.as_ref().is_none_or(|g| g.full_rank());
+    let predict = |gp: &Posterior, g: &Option<Identifiability>| identified(g).then(|| gp.mean_variance(eval_range.clone()).sqrt());
+    let measured_predicted_rms = if count_d > 0 { predict(&gp, &geometric) } else { None };
 
     let mut chosen = vec![false; count_c];
     let mut poses = Vec::with_capacity(options.count);
-    let mut geometric_identified_after = None;
-    for step in 0..options.count {
-        // Identified: full rank, and its parametric error no larger than the non-parametric one.
-        let identified = match &geometric {
-            None => true,
-            Some(g) => match g.predicted_variance(sigma2) {
-                Some(p) => p <= gp.mean_variance(eval_range.clone()),
-                None => false,
-            },
-        };
-        if identified && geometric_identified_after.is_none() {
-            geometric_identified_after = Some(step);
-        }
-        let stage = if identified { Stage::Posterior } else { Stage::Geometric };
-        let score = |c: usize| match (stage, &geometric) {
-            (Stage::Geometric, Some(g)) => g.gain(c),
-            _ => gp.gain(c),
-        };
-        let best = (0..count_c).filter(|&c| !chosen[c]).map(|c| (c, score(c))).max_by(|a, b| a.1.total_cmp(&b.1));
+    let mut geometric_identified_after = identified(&geometric).then_some(0);
+    for _ in 0..options.count {
+        let stage = if identified(&geometric) { Stage::Posterior } else { Stage::Geometric };
+        let best = (0..count_c).filter(|&c| !chosen[c]).map(|c| (c, gp.gain(c))).max_by(|a, b| a.1.total_cmp(&b.1));
         let Some((c, _)) = best else { break };
         chosen[c] = true;
         if let Some(g) = geometric.as_mut() {
             g.add(c);
         }
         gp.add(c);
-        let (predicted_rms, predicted_rms_cbd) = predict(&gp, &geometric);
+        let predicted_rms = predict(&gp, &geometric);
+        if predicted_rms.is_some() && geometric_identified_after.is_none() {
+            geometric_identified_after = Some(poses.len() + 1);
+        }
         poses.push(PlannedPose {
             joints: kept[c * n..(c + 1) * n].to_vec(),
+            controller: kept_controller[c * n..(c + 1) * n].to_vec(),
             stage,
             singular_distance: distances[c],
             predicted_rms,
-            predicted_rms_cbd,
         });
-    }
-    if geometric_identified_after.is_none() && geometric.as_ref().is_some_and(|g| g.predicted_variance(sigma2).is_some()) {
-        geometric_identified_after = Some(poses.len());
     }
     Ok(Plan {
         poses,
@@ -235,7 +251,7 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         prior_rms_cbd,
         candidates: count_c,
         rejected_singular,
-        geometric_parameters: geometric.as_ref().map_or(0, |g| g.parameters()),
+        geometric_parameters: p,
         geometric_identified_after,
         reach,
         hyperparameters: input.hyperparameters.clone(),

@@ -1,17 +1,21 @@
-//! CbD's linearised model as a Gaussian process (docs/DESIGN.md §3) conditioned pose by pose: the
-//! posterior covariance at every tracked point kept by rank-m Cholesky updates, never refactorised
-//! (docs/DESIGN.md §13).
+//! dh+cbd's linearised model as one Gaussian process conditioned pose by pose: CbD's kernel
+//! (docs/DESIGN.md §3) plus the geometric group's Jacobian as basis functions with a broad prior
+//! (the DH fit's least squares in the limit), so the two parts' errors are neither counted twice nor
+//! chosen for separately; the posterior covariance at every tracked point kept by rank-m Cholesky
+//! updates, never refactorised (docs/DESIGN.md §13).
 
 use crate::evidence::CbdHyperparameters;
 use cbd_protocol::{JointKernel, NominalModel, TaskKernel, MAX_JOINTS};
 use cbd_runtime::kernel::{joint_features, joint_kernel_from_features, FEATURES_PER_JOINT};
 use cbd_runtime::kinematics::forward_kinematics;
 
-/// A configuration with what the kernel needs: k0, Dk0 (m × n, row-major) and the joint features.
+/// A configuration with what the kernel needs: k0, Dk0 (m × n, row-major), the joint features and
+/// the geometric basis G = J_dh L (m × p, row-major; L L^T the parameters' prior covariance).
 pub struct Point {
     position: [f64; 3],
     jacobian: Vec<f64>,
     features: [[f64; FEATURES_PER_JOINT]; MAX_JOINTS],
+    geometric: Vec<f64>,
 }
 
 /// The prior: K_lin in the data's units, and the noise.
@@ -37,17 +41,39 @@ impl Prior {
         }
     }
 
-    pub fn point(&self, nominal: &NominalModel, q: &[f64]) -> Point {
+    /// `geometric`: G = J_dh L at `q` (m × p, row-major; empty without a geometric group).
+    pub fn point(&self, nominal: &NominalModel, q: &[f64], geometric: Vec<f64>) -> Point {
         let k = forward_kinematics(nominal, q);
         let mut features = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
         joint_features(&self.joint, q, &mut features);
         let mut position = [0.0; 3];
         position[..self.m].copy_from_slice(&k.position[..self.m]);
-        Point { position, jacobian: (0..self.m).flat_map(|c| (0..self.n).map(move |d| k.jacobian[c][d])).collect(), features }
+        Point { position, jacobian: (0..self.m).flat_map(|c| (0..self.n).map(move |d| k.jacobian[c][d])).collect(), features, geometric }
+    }
+
+    /// tr K_lin(x, x): CbD's prior variance at `x`, the geometric part left out.
+    pub fn cbd_variance(&self, x: &Point) -> f64 {
+        let mut out = [0.0; 9];
+        self.cbd_block(x, x, &mut out);
+        (0..self.m).map(|r| out[r * self.m + r]).sum()
+    }
+
+    /// K_lin(x, x') + G(x) G(x')ᵀ, m × m row-major.
+    fn block(&self, a: &Point, b: &Point, out: &mut [f64]) {
+        self.cbd_block(a, b, out);
+        let m = self.m;
+        let p = a.geometric.len() / m;
+        if p > 0 {
+            for r in 0..m {
+                for s in 0..m {
+                    out[r * m + s] += (0..p).map(|k| a.geometric[r * p + k] * b.geometric[s * p + k]).sum::<f64>();
+                }
+            }
+        }
     }
 
     /// K_lin(x, x') = K_V(x, x') Dk0(x) Dk0(x')ᵀ + γ_W K_W(k0(x), k0(x')) I, m × m row-major.
-    fn block(&self, a: &Point, b: &Point, out: &mut [f64]) {
+    fn cbd_block(&self, a: &Point, b: &Point, out: &mut [f64]) {
         let (m, n) = (self.m, self.n);
         let mut grad = [0.0; MAX_JOINTS];
         let kv = joint_kernel_from_features(&self.joint, &a.features[..n], &b.features[..n], &mut grad);
@@ -271,9 +297,9 @@ mod tests {
         };
         let q = super::super::candidates::uniform_within(&[[-3.0, 3.0], [-3.0, 3.0]], 9, 5);
         let prior = Prior::new(&h, 2);
-        let points: Vec<Point> = q.chunks_exact(2).map(|x| prior.point(&rr, x)).collect();
+        let points: Vec<Point> = q.chunks_exact(2).map(|x| prior.point(&rr, x, vec![0.3 * x[0], x[1].cos(), 0.1, x[0].sin()])).collect();
         let prior2 = Prior::new(&h, 2);
-        let pts2: Vec<Point> = q.chunks_exact(2).map(|x| prior2.point(&rr, x)).collect();
+        let pts2: Vec<Point> = q.chunks_exact(2).map(|x| prior2.point(&rr, x, vec![0.3 * x[0], x[1].cos(), 0.1, x[0].sin()])).collect();
         let mut post = Posterior::new(prior, points, 5, 2);
         let gain = post.gain(1);
         let before = post.mean_variance(5..7);

@@ -24,7 +24,7 @@ fn planned_poses_respect_limits_and_singular_margin() {
         let h = prior::stated(nominal, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise });
         // The user's candidates include exactly singular poses (q2 = 0 for RR; q3 = q5 = 0 for the UR5).
         let singular: Vec<f64> = if nominal.n_joints() == 2 { vec![0.4, 0.0, 1.0, 0.01] } else { vec![0.1, -1.0, 0.0, 0.2, 0.0, 0.3] };
-        let input = PlanInput { nominal, limits: &limits, user_candidates: &singular, measured: None, hyperparameters: h };
+        let input = PlanInput { nominal, limits: &limits, to_model: None, user_candidates: &singular, measured: None, hyperparameters: h };
         let options = PlanOptions { count: 25, candidates: 1500, seed: 3, workspace: 32, evaluation: 100, ..PlanOptions::default() };
         let plan = plan(&input, &options).unwrap();
         assert_eq!(plan.poses.len(), 25);
@@ -47,7 +47,7 @@ fn unbounded_joint_is_refused() {
     let rr = crate::simulate::rr::nominal();
     let limits = [[-1.0, 1.0], [f64::NEG_INFINITY, f64::INFINITY]];
     let h = prior::stated(&rr, &[0.0, 0.5], 1.5, prior::StatedPrior { error: 1e-3, noise: 1e-5 });
-    let input = PlanInput { nominal: &rr, limits: &limits, user_candidates: &[], measured: None, hyperparameters: h };
+    let input = PlanInput { nominal: &rr, limits: &limits, to_model: None, user_candidates: &[], measured: None, hyperparameters: h };
     assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::UnboundedJoint { joint: 2 });
 }
 
@@ -62,7 +62,8 @@ fn predicted_error_matches_the_error_reached() {
     robot.noise_std = 0.02;
     let first = robot.measure(&random_configurations(30, 11), 12);
     let h = prior::from_measurements(&six, &first).unwrap();
-    let input = PlanInput { nominal: &six, limits: &limits, user_candidates: &[], measured: Some(&first), hyperparameters: h };
+    let input =
+        PlanInput { nominal: &six, limits: &limits, to_model: None, user_candidates: &[], measured: Some(&first), hyperparameters: h };
     let options = PlanOptions { count: 30, candidates: 2000, seed: 5, ..PlanOptions::default() };
     let plan = plan(&input, &options).unwrap();
     let predicted = plan.poses.last().unwrap().predicted_rms.unwrap();
@@ -95,42 +96,4 @@ fn reached_rms(six: &NominalModel, robot: &SixJointRobot, joints: &[f64], noise_
         .sum::<f64>()
         / count as f64;
     mse.sqrt()
-}
-
-/// Issue 28's learning curves on the six-joint arm (0.02 mm noise, 1000 fresh test configurations):
-/// planned (20 poses from the stated prior, measured, then continued from them with the evidence's
-/// hyperparameters) against uniformly random poses, dh+cbd (Euler × 1) on each prefix.
-/// `cargo test --release -p cbd-trainer --lib plan::tests::learning_curves -- --ignored --nocapture`
-#[test]
-#[ignore]
-fn learning_curves() {
-    let (six, limits) = ur5_limits();
-    let seeds: Vec<u64> =
-        std::env::var("CBD_PLAN_SEEDS").ok().map_or(vec![1, 2], |s| s.split(',').filter_map(|v| v.parse().ok()).collect());
-    let sizes = [20usize, 30, 40, 60, 90, 120, 160, 200];
-    for seed in seeds {
-        let mut robot = SixJointRobot::ur5_like(1);
-        robot.noise_std = 0.02;
-        let test = random_configurations(1000, 1000 + seed);
-        let sample = candidates::uniform_within(&limits, 500, seed);
-        let reach = candidates::reach(&six, &sample);
-        let stated = prior::stated(&six, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: 0.02 });
-        let options = |count| PlanOptions { count, candidates: 10_000, seed, ..PlanOptions::default() };
-        let first_input = PlanInput { nominal: &six, limits: &limits, user_candidates: &[], measured: None, hyperparameters: stated };
-        let first = plan(&first_input, &options(20)).unwrap();
-        let first_joints: Vec<f64> = first.poses.iter().flat_map(|p| p.joints.clone()).collect();
-        let measured = robot.measure(&first_joints, 50 + seed);
-        let h = prior::from_measurements(&six, &measured).unwrap();
-        let more_input = PlanInput { nominal: &six, limits: &limits, user_candidates: &[], measured: Some(&measured), hyperparameters: h };
-        let more = plan(&more_input, &options(180)).unwrap();
-        let mut planned = first_joints.clone();
-        planned.extend(more.poses.iter().flat_map(|p| p.joints.clone()));
-        let random = random_configurations(200, 200 + seed);
-        for &k in &sizes {
-            let predicted = if k > 20 { more.poses[k - 21].predicted_rms } else { more.measured_predicted_rms };
-            let p = reached_rms(&six, &robot, &planned[..6 * k], 50 + seed, &test);
-            let r = reached_rms(&six, &robot, &random[..6 * k], 300 + seed, &test);
-            eprintln!("seed {seed} K {k:>3}: planned {p:.4e} mm (predicted {:.4e}), random {r:.4e} mm", predicted.unwrap_or(f64::NAN));
-        }
-    }
 }
