@@ -8,8 +8,9 @@
 //! let (y, dy) = (e.position(), e.jacobian());
 //! ```
 //!
-//! The controller's API is at the crate root: [`Calibrator`] (load, `evaluate`, `compensate`),
-//! [`Evaluation`], [`storage_len_for`] (and the kernel form's [`storage_len`]), [`Error`]. The modules are the building blocks the trainer
+//! The controller's API is at the crate root: [`Calibrator`] (load, `evaluate`, `compensate`; with
+//! several tool points per pose `evaluate_point`, `evaluate_pose`, `compensate_pose`),
+//! [`Evaluation`], [`PoseEvaluation`], [`storage_len_for`] (and the kernel form's [`storage_len`]), [`Error`]. The modules are the building blocks the trainer
 //! shares so that it optimises exactly what the controller evaluates (same code, same bits):
 //! `kinematics` (k0 and its derivatives), `kernel`, `flow` (eq. 17, 19, 20, the control points'
 //! integration, the query's derivatives, the inverse flows), `expansion` (format 5: the fields in
@@ -29,12 +30,14 @@ pub mod integrate;
 pub mod inverse_kinematics;
 pub mod kernel;
 pub mod kinematics;
+pub mod pose;
 pub mod precision;
 pub mod real;
 
 pub use calibrator::{storage_len, storage_len_for, Calibrator, Evaluation};
 pub use cbd_protocol as protocol;
 pub use compensate::{CompensateOptions, Compensation};
+pub use pose::PoseEvaluation;
 
 /// Why loading or evaluation failed. The runtime returns these; it never panics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

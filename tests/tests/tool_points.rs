@@ -140,3 +140,99 @@ fn one_tool_point_at_the_origin_evaluates_as_a_model_without_tool_points() {
         assert_eq!(a.evaluate_point(&q, 1), Err(Error::ToolPoint { index: 1, count: 1 }));
     }
 }
+
+#[test]
+fn without_a_deformation_the_pose_is_the_nominal_tool_frame() {
+    let (x, _) = arrays(8, 3, 0.0);
+    let zeros = vec![0.0; 8 * 3 * 3];
+    let (xb, pb) = (f64_le_bytes(&x), f64_le_bytes(&zeros));
+    let nominal = ur5_with(&THREE);
+    let blob = encode_to_vec(&model(nominal.clone(), &xb, &pb, RK4)).unwrap();
+    let mut storage = vec![0.0; 200_000];
+    let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+    let NominalModel::DhChain(chain) = &nominal else { unreachable!() };
+    let q = [0.3, -1.1, 1.4, 0.2, -0.7, 2.1];
+    let pose = cal.evaluate_pose(&q).unwrap();
+    let walk = cbd_runtime::kinematics::rigid::dh_walk(chain, &q);
+    for a in 0..3 {
+        assert!((pose.origin()[a] - walk.tool[a]).abs() < 1e-9, "origin");
+        for b in 0..3 {
+            assert!((pose.rotation()[a][b] - walk.tool_rotation[a][b]).abs() < 1e-12, "rotation");
+        }
+    }
+    assert!(pose.fit_residual() < 1e-9);
+    // The nominal geometric Jacobian: z_i × (t − o_i) and z_i for revolute joints.
+    for d in 0..6 {
+        let lin =
+            cross3(walk.axes[d], [walk.tool[0] - walk.origins[d][0], walk.tool[1] - walk.origins[d][1], walk.tool[2] - walk.origins[d][2]]);
+        for a in 0..3 {
+            assert!((pose.jacobian()[(a, d)] - lin[a]).abs() < 1e-8, "linear [{a}][{d}]");
+            assert!((pose.jacobian()[(3 + a, d)] - walk.axes[d][a]).abs() < 1e-10, "angular [{a}][{d}]");
+        }
+    }
+}
+
+fn cross3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// The rotation vector of R_a R_bᵀ (small angles: vee of the skew part).
+fn small_rotation(a: [[f64; 3]; 3], b: [[f64; 3]; 3]) -> [f64; 3] {
+    let m = |i: usize, j: usize| (0..3).map(|k| a[i][k] * b[j][k]).sum::<f64>();
+    [0.5 * (m(2, 1) - m(1, 2)), 0.5 * (m(0, 2) - m(2, 0)), 0.5 * (m(1, 0) - m(0, 1))]
+}
+
+#[test]
+fn the_pose_jacobian_matches_finite_differences() {
+    let (x, p) = arrays(10, 3, 0.05);
+    let (xb, pb) = (f64_le_bytes(&x), f64_le_bytes(&p));
+    for integrator in [Integrator { method: IntegratorMethod::Euler, steps: 1 }, RK4] {
+        let blob = encode_to_vec(&model(ur5_with(&THREE), &xb, &pb, integrator)).unwrap();
+        let mut storage = vec![0.0; 200_000];
+        let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+        let mut s = 21u64;
+        let (mut worst_lin, mut worst_ang, mut residual): (f64, f64, f64) = (0.0, 0.0, 0.0);
+        for _ in 0..4 {
+            let q: Vec<f64> = (0..6).map(|_| 3.0 * lcg(&mut s)).collect();
+            let pose = cal.evaluate_pose(&q).unwrap();
+            residual = residual.max(pose.fit_residual());
+            for j in 0..3 {
+                assert_eq!(pose.point(j).unwrap(), &cal.evaluate_point(&q, j).unwrap());
+            }
+            let scale_lin = (0..6).flat_map(|d| (0..3).map(move |a| (a, d))).fold(0.0f64, |m, (a, d)| m.max(pose.jacobian()[(a, d)].abs()));
+            let scale_ang = (0..6).flat_map(|d| (3..6).map(move |a| (a, d))).fold(0.0f64, |m, (a, d)| m.max(pose.jacobian()[(a, d)].abs()));
+            let h = 1e-6;
+            for d in 0..6 {
+                let (mut qa, mut qb) = (q.clone(), q.clone());
+                qa[d] += h;
+                qb[d] -= h;
+                let (pa, pb) = (cal.evaluate_pose(&qa).unwrap(), cal.evaluate_pose(&qb).unwrap());
+                let omega = small_rotation(pa.rotation(), pb.rotation());
+                for a in 0..3 {
+                    let fd = (pa.origin()[a] - pb.origin()[a]) / (2.0 * h);
+                    worst_lin = worst_lin.max((fd - pose.jacobian()[(a, d)]).abs() / scale_lin);
+                    worst_ang = worst_ang.max((omega[a] / (2.0 * h) - pose.jacobian()[(3 + a, d)]).abs() / scale_ang);
+                }
+            }
+        }
+        eprintln!(
+            "{integrator:?}: pose Jacobian vs central differences, worst linear {worst_lin:.1e}, angular {worst_ang:.1e} (relative); fit residual up to {residual:.2e} mm"
+        );
+        assert!(worst_lin < 1e-7 && worst_ang < 1e-7, "{worst_lin:e} {worst_ang:e}");
+    }
+}
+
+#[test]
+fn two_or_collinear_tool_points_leave_the_orientation_undetermined() {
+    for points in [&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]][..], &[[0.0; 3], [100.0, 0.0, 0.0], [200.0, 0.0, 0.0]][..], &[][..]] {
+        let m_p = points.len().max(1);
+        let (x, p) = arrays(6, m_p, 0.02);
+        let (xb, pb) = (f64_le_bytes(&x), f64_le_bytes(&p));
+        let blob = encode_to_vec(&model(ur5_with(points), &xb, &pb, RK4)).unwrap();
+        let mut storage = vec![0.0; 200_000];
+        let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+        let q = [0.3, -1.1, 1.4, 0.2, -0.7, 2.1];
+        assert_eq!(cal.evaluate_pose(&q), Err(Error::OrientationUndetermined), "{points:?}");
+        assert!(cal.evaluate_point(&q, m_p - 1).is_ok());
+    }
+}
