@@ -24,6 +24,7 @@
 
 pub mod calibrator;
 pub mod compensate;
+pub mod compensate_pose;
 pub mod expansion;
 pub mod flow;
 pub mod integrate;
@@ -37,6 +38,7 @@ pub mod real;
 pub use calibrator::{storage_len, storage_len_for, Calibrator, Evaluation};
 pub use cbd_protocol as protocol;
 pub use compensate::{CompensateOptions, Compensation};
+pub use compensate_pose::{PoseCompensateOptions, PoseCompensation};
 pub use pose::PoseEvaluation;
 
 /// Why loading or evaluation failed. The runtime returns these; it never panics.
@@ -84,6 +86,15 @@ pub enum Error {
     },
     /// The tool frame's orientation is undetermined: fewer than 3 tool points, or all on one line.
     OrientationUndetermined,
+    /// A pose target on an arm with too few joints ([`compensate_pose::MIN_POSE_JOINTS`]).
+    TooFewJoints {
+        /// The model's joints.
+        found: usize,
+        /// The joints a pose target needs.
+        needed: usize,
+    },
+    /// A target rotation that is not a rotation (not orthonormal, or a reflection).
+    InvalidRotation,
     /// The control points' flow produced a non-finite value.
     Diverged,
     /// The query's flow produced a non-finite value.
@@ -105,6 +116,8 @@ impl core::fmt::Display for Error {
             Error::OrientationUndetermined => {
                 write!(f, "the tool frame's orientation is undetermined (fewer than 3 tool points, or all on one line)")
             }
+            Error::TooFewJoints { found, needed } => write!(f, "a pose target needs {needed} joints; the model has {found}"),
+            Error::InvalidRotation => write!(f, "the target rotation is not a rotation (not orthonormal, or a reflection)"),
             Error::Diverged => write!(f, "the control points' flow diverged (non-finite state)"),
             Error::NonFiniteResult => write!(f, "evaluation produced a non-finite value"),
             Error::Internal => write!(f, "internal size invariant failed"),

@@ -236,3 +236,98 @@ fn two_or_collinear_tool_points_leave_the_orientation_undetermined() {
         assert!(cal.evaluate_point(&q, m_p - 1).is_ok());
     }
 }
+
+/// Pose compensation on reachable targets (the calibrated pose at a known configuration), from a
+/// seed 0.2 rad off per joint: counts of reached targets, worst residuals.
+fn pose_compensation_on(nominal: NominalModel, momentum: f64, label: &str) -> (usize, usize) {
+    let (x, p) = arrays(40, 3, momentum);
+    let (xb, pb) = (f64_le_bytes(&x), f64_le_bytes(&p));
+    let blob = encode_to_vec(&model(nominal, &xb, &pb, RK4)).unwrap();
+    let mut storage = vec![0.0; 200_000];
+    let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+    let options = cbd_runtime::PoseCompensateOptions::for_model(&cal);
+    let mut s = 77u64;
+    let (mut reached, total) = (0, 200);
+    let (mut worst_p, mut worst_a, mut worst_start_p): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    for _ in 0..total {
+        // Away from the wrist singularity (|sin q5| > 0.3) so that the target is regular.
+        let mut q: Vec<f64> = (0..6).map(|_| 2.5 * lcg(&mut s)).collect();
+        if q[4].sin().abs() < 0.3 {
+            q[4] = 1.2;
+        }
+        let pose = cal.evaluate_pose(&q).unwrap();
+        let seed: Vec<f64> = q.iter().map(|v| v + 0.2 * lcg(&mut s)).collect();
+        let mut out = [0.0; 6];
+        let c = cal.compensate_pose(&pose.origin(), &pose.rotation(), &seed, &mut out).unwrap();
+        // The start alone: no Gauss–Newton step.
+        let start = cal
+            .compensate_pose_with(
+                &pose.origin(),
+                &pose.rotation(),
+                &seed,
+                &mut [0.0; 6],
+                &cbd_runtime::PoseCompensateOptions { iterations: 0, ..options },
+            )
+            .unwrap();
+        worst_start_p = worst_start_p.max(start.position_residual);
+        // The command's pose, re-evaluated, is what the residuals report.
+        let back = cal.evaluate_pose(&out).unwrap();
+        let miss: f64 = (0..3).map(|a| (back.origin()[a] - pose.origin()[a]).powi(2)).sum::<f64>().sqrt();
+        assert!((miss - c.position_residual).abs() <= 1e-12 * (1.0 + miss), "{miss} vs {}", c.position_residual);
+        if c.reached {
+            reached += 1;
+        } else {
+            eprintln!(
+                "  unreached: q {q:.3?} start {:.2e} mm, final {:.2e} mm {:.2e} rad, conditioning {:.1e}",
+                start.position_residual, c.position_residual, c.angle_residual, c.conditioning
+            );
+            worst_p = worst_p.max(c.position_residual);
+            worst_a = worst_a.max(c.angle_residual);
+        }
+    }
+    eprintln!(
+        "{label}: pose compensation reached {reached}/{total} (tolerances {:.1e} mm, {:.1e} rad); unreached worst {worst_p:.2e} mm, {worst_a:.2e} rad; the start alone within {worst_start_p:.2e} mm",
+        options.position_tolerance, options.angle_tolerance
+    );
+    (reached, total)
+}
+
+#[test]
+fn pose_compensation_reaches_reachable_poses() {
+    // UR-type (closed-form start) and with a bending effect (no closed form: Gauss–Newton on k0).
+    let (r, t) = pose_compensation_on(ur5_with(&THREE), 0.02, "UR5, three tool points");
+    assert!(r * 100 >= 98 * t, "{r}/{t}");
+    let NominalModel::DhChain(mut c) = ur5_with(&THREE) else { unreachable!() };
+    c.effects.list.push(Effect::LinkBending { link: 2, compliance: 2e-6 }).unwrap();
+    let (r, t) = pose_compensation_on(NominalModel::DhChain(c), 0.02, "UR5 with link bending (no closed form)");
+    assert!(r * 100 >= 95 * t, "{r}/{t}");
+}
+
+#[test]
+fn pose_compensation_refuses_what_it_cannot_do() {
+    let (x, p) = arrays(6, 3, 0.02);
+    let (xb, pb) = (f64_le_bytes(&x), f64_le_bytes(&p));
+    let blob = encode_to_vec(&model(ur5_with(&THREE), &xb, &pb, RK4)).unwrap();
+    let mut storage = vec![0.0; 200_000];
+    let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+    let id = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let mut out = [0.0; 6];
+    let seed = [0.0; 6];
+    let mirror = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]];
+    assert_eq!(cal.compensate_pose(&[100.0, 0.0, 300.0], &mirror, &seed, &mut out), Err(Error::InvalidRotation));
+    assert_eq!(cal.compensate_pose(&[100.0, f64::NAN, 300.0], &id, &seed, &mut out), Err(Error::NonFiniteTarget { index: 1 }));
+    assert_eq!(cal.compensate_pose(&[100.0, 0.0, 300.0], &id, &seed[..5], &mut out), Err(Error::QueryDimension { expected: 6, found: 5 }));
+    // One tool point: no orientation.
+    let (x1, p1) = arrays(6, 1, 0.02);
+    let (xb1, pb1) = (f64_le_bytes(&x1), f64_le_bytes(&p1));
+    let blob = encode_to_vec(&model(ur5_with(&[]), &xb1, &pb1, RK4)).unwrap();
+    let mut storage = vec![0.0; 200_000];
+    let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+    assert_eq!(cal.compensate_pose(&[100.0, 0.0, 300.0], &id, &seed, &mut out), Err(Error::OrientationUndetermined));
+    // A planar arm has too few joints.
+    let blob = cbd_tests::reference_blob();
+    let mut storage = vec![0.0; 200_000];
+    let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
+    let mut out2 = [0.0; 2];
+    assert_eq!(cal.compensate_pose(&[1.0, 0.0, 0.0], &id, &[0.0; 2], &mut out2), Err(Error::TooFewJoints { found: 2, needed: 6 }));
+}
