@@ -248,7 +248,7 @@ fn pose_compensation_on(nominal: NominalModel, momentum: f64, label: &str) -> (u
     let options = cbd_runtime::PoseCompensateOptions::for_model(&cal);
     let mut s = 77u64;
     let (mut reached, total) = (0, 200);
-    let (mut worst_p, mut worst_a, mut worst_start_p): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    let (mut worst_p, mut worst_a, mut worst_start_p, mut deformation): (f64, f64, f64, f64) = (0.0, 0.0, 0.0, 0.0);
     for _ in 0..total {
         // Away from the wrist singularity (|sin q5| > 0.3) so that the target is regular.
         let mut q: Vec<f64> = (0..6).map(|_| 2.5 * lcg(&mut s)).collect();
@@ -256,6 +256,9 @@ fn pose_compensation_on(nominal: NominalModel, momentum: f64, label: &str) -> (u
             q[4] = 1.2;
         }
         let pose = cal.evaluate_pose(&q).unwrap();
+        let (nominal_frame, _) = cbd_runtime::kinematics::tool_point::nominal_tool_frame(&cal.model().nominal, &q).unwrap();
+        let shift: f64 = (0..3).map(|a| (pose.origin()[a] - nominal_frame.origin[a]).powi(2)).sum::<f64>().sqrt();
+        deformation = deformation.max(shift);
         let seed: Vec<f64> = q.iter().map(|v| v + 0.2 * lcg(&mut s)).collect();
         let mut out = [0.0; 6];
         let c = cal.compensate_pose(&pose.origin(), &pose.rotation(), &seed, &mut out).unwrap();
@@ -286,7 +289,7 @@ fn pose_compensation_on(nominal: NominalModel, momentum: f64, label: &str) -> (u
         }
     }
     eprintln!(
-        "{label}: pose compensation reached {reached}/{total} (tolerances {:.1e} mm, {:.1e} rad); unreached worst {worst_p:.2e} mm, {worst_a:.2e} rad; the start alone within {worst_start_p:.2e} mm",
+        "{label}: pose compensation reached {reached}/{total} (tolerances {:.1e} mm, {:.1e} rad); unreached worst {worst_p:.2e} mm, {worst_a:.2e} rad; the start alone within {worst_start_p:.2e} mm; k1 − k0 at the origin up to {deformation:.2} mm",
         options.position_tolerance, options.angle_tolerance
     );
     (reached, total)
