@@ -135,10 +135,11 @@ summary=()
 # six-effects (the 6-joint blob with all four physical effect types) runs sp on the M4 and dp on
 # the M7 only, to keep the check short. rr-ws and six-ws hold the fields in the kernels' own basis
 # (format 5, docs/DESIGN.md §11): the runtime evaluates the expansion instead of the kernel form.
-# chain10 (10 joints, the longest chain the firmware check holds) runs like six-effects.
-for name in rr rr256 six six-effects rr-ws six-ws chain10; do
+# chain10 (10 joints, the longest chain the firmware check holds) and six-points (three tool points,
+# format 6: every query also prints the tool frame and its Jacobian, `qp` lines) run like six-effects.
+for name in rr rr256 six six-effects rr-ws six-ws chain10 six-points; do
     variants="sp dp f32"
-    case "$name" in six-effects | chain10) variants="sp dp" ;; esac
+    case "$name" in six-effects | chain10 | six-points) variants="sp dp" ;; esac
     "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
     "$HOST_F32" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name-f32.txt"
     values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
@@ -151,7 +152,7 @@ for name in rr rr256 six six-effects rr-ws six-ws chain10; do
         elf="$(fw_build "$name" "$variant")"
         cpus="m4 m7"
         [ "$variant" = dp ] && cpus="m7"
-        case "$name" in six-effects | chain10) [ "$variant" = sp ] && cpus="m4" ;; esac
+        case "$name" in six-effects | chain10 | six-points) [ "$variant" = sp ] && cpus="m4" ;; esac
         host="$OUT/host-$name.txt"
         [ "$variant" = f32 ] && host="$OUT/host-$name-f32.txt"
         for cpu in $cpus; do
@@ -219,4 +220,4 @@ if [ "$failures" -ne 0 ]; then
     echo "firmware check: $failures failed"
     exit 1
 fi
-echo "firmware check: passed (M4 and M7, software and hardware f64 and f32, RR (Heun × 5 and Euler × 2) and 6-joint blobs, 6-joint with physical effects, RR and 6-joint expansions (format 5))"
+echo "firmware check: passed (M4 and M7, software and hardware f64 and f32, RR (Heun × 5 and Euler × 2) and 6-joint blobs, 6-joint with physical effects, RR and 6-joint expansions (format 5), 10-joint chain, 6-joint with three tool points and its tool frame (format 6))"

@@ -190,6 +190,18 @@ fn run(out: &mut hio::HostStream) -> Result<(), ()> {
         }
         .map_err(|_| ())?;
         line.flush(out)?;
+        // The tool frame of a model with ≥ 3 tool points (issue 26): its stack counts, its time does not.
+        if cal.model().nominal.tool_point_count() >= 3 {
+            let painted = stack_paint::paint();
+            let pose = black_box(cal.evaluate_pose(black_box(q)));
+            stack = stack.zip(stack_paint::used_since(&painted)).map(|(a, b)| a.max(b));
+            match pose {
+                Ok(p) => shared::write_pose(&mut line, i, &p),
+                Err(_) => shared::write_pose_error(&mut line, i),
+            }
+            .map_err(|_| ())?;
+            line.flush(out)?;
+        }
     }
     // Compensation (issue 15): the cost of `compensate` alone (its inputs are made before the clock starts).
     let mut compensate_costs = [0u32; shared::COMPENSATE_COUNT];

@@ -50,6 +50,36 @@ pub fn write_result(w: &mut impl Write, i: usize, position: impl Iterator<Item =
     w.write_str("\n")
 }
 
+/// One pose line (models with ≥ 3 tool points, issue 26): `qp<i> <every point's position…> |
+/// <rotation, row-major…> <origin…> | <the frame's 6 × n Jacobian, row-major…>`, values as in
+/// [`write_result`].
+pub fn write_pose(w: &mut impl Write, i: usize, pose: &cbd_runtime::PoseEvaluation) -> fmt::Result {
+    write!(w, "qp{i:03}")?;
+    for e in (0..pose.point_count()).filter_map(|j| pose.point(j)) {
+        for v in e.position().iter() {
+            write!(w, " {:016x}", v.to_bits())?;
+        }
+    }
+    w.write_str(" |")?;
+    for v in pose.rotation().iter().flatten().chain(pose.origin().iter()) {
+        write!(w, " {:016x}", v.to_bits())?;
+    }
+    w.write_str(" |")?;
+    let jac = pose.jacobian();
+    let (rows, cols) = jac.shape();
+    for (a, d) in (0..rows).flat_map(|a| (0..cols).map(move |d| (a, d))) {
+        if let Some(v) = jac.get((a, d)) {
+            write!(w, " {:016x}", v.to_bits())?;
+        }
+    }
+    w.write_str("\n")
+}
+
+/// The line printed when pose evaluation `i` fails.
+pub fn write_pose_error(w: &mut impl Write, i: usize) -> fmt::Result {
+    writeln!(w, "qp{i:03} error")
+}
+
 /// The line printed when evaluation `i` fails.
 pub fn write_error(w: &mut impl Write, i: usize) -> fmt::Result {
     writeln!(w, "q{i:03} error")

@@ -132,8 +132,7 @@ pub fn chain10_blob() -> Vec<u8> {
 
 /// The UR5 (mm) with three tool points 100 mm apart (format 6, issue 26 item 1): 21 poses, each
 /// configuration repeated for its three control points, small pseudo-random momenta, Heun × 5.
-/// Used by the C library's tests; not yet one of the firmware check's blobs.
-#[allow(dead_code)]
+/// One of the firmware check's blobs (poses printed as `qp` lines) and the C library's tests.
 pub fn six_tool_points_blob() -> Vec<u8> {
     const POSES: usize = 21;
     let mut chain = cbd_protocol::ur5::chain();

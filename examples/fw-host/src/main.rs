@@ -3,7 +3,7 @@
 //! ```text
 //! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, six-effects.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2),
 //!                                  # rr-ws.blob (Euler × 1), six-ws.blob (Heun × 2): the fields in the kernels' own basis (format 5),
-//!                                  # chain10.blob (10 joints, Heun × 2)
+//!                                  # chain10.blob (10 joints, Heun × 2), six-points.blob (3 tool points, format 6)
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
 //! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
 //! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len_for blob_bytes
@@ -21,7 +21,10 @@ use std::process::ExitCode;
 mod blobs;
 #[path = "../../firmware/src/shared.rs"]
 mod shared;
-use blobs::{chain10_blob, rr_grid_blob, rr_reference_blob, rr_ws_blob, six_effects_blob, six_joint_blob, six_ws_blob, DEMO_SCHEME};
+use blobs::{
+    chain10_blob, rr_grid_blob, rr_reference_blob, rr_ws_blob, six_effects_blob, six_joint_blob, six_tool_points_blob, six_ws_blob,
+    DEMO_SCHEME,
+};
 
 fn make_blobs(out_dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
@@ -35,6 +38,7 @@ fn make_blobs(out_dir: &Path) -> Result<(), String> {
         ("rr-ws.blob", rr_ws_blob()),
         ("six-ws.blob", six_ws_blob()),
         ("chain10.blob", chain10_blob()),
+        ("six-points.blob", six_tool_points_blob()),
     ] {
         let path = out_dir.join(name);
         std::fs::write(&path, &blob).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -86,6 +90,13 @@ fn eval(path: &Path, transported: bool) -> Result<(), String> {
             Err(_) => shared::write_error(&mut out, i),
         };
         written.map_err(|e| e.to_string())?;
+        if cal.model().nominal.tool_point_count() >= 3 {
+            let written = match cal.evaluate_pose(q) {
+                Ok(p) => shared::write_pose(&mut out, i, &p),
+                Err(_) => shared::write_pose_error(&mut out, i),
+            };
+            written.map_err(|e| e.to_string())?;
+        }
     }
     // Compensation cases, as the firmware prints them (after its evaluations).
     let (mut seed, mut command, mut target) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS], [0.0; cbd_runtime::protocol::MAX_TASK_DIM]);

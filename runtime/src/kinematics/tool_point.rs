@@ -32,6 +32,13 @@ pub fn with_tool_point<R>(model: &NominalModel, j: usize, f: impl FnOnce(&Nomina
     if model.tool_points().is_empty() {
         return (j == 0).then(|| f(model));
     }
+    with_copied_tool_point(model, j, f)
+}
+
+/// The copy of [`with_tool_point`], in its own frame: inlined, the copy (several kB with effects)
+/// would be reserved in every caller's stack frame, tool points or not.
+#[inline(never)]
+fn with_copied_tool_point<R>(model: &NominalModel, j: usize, f: impl FnOnce(&NominalModel) -> R) -> Option<R> {
     at_tool_point(model, j).map(|m| f(&m))
 }
 
