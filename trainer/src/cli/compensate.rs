@@ -56,13 +56,15 @@ fn targets_spec(spec: &ColumnSpec) -> ColumnSpec {
         joint_limits: Vec::new(),
         min_rows: 1,
         joint_map: None,
+        tool_points: Vec::new(),
+        orientation_columns: None,
         ..spec.clone()
     }
 }
 
 /// The columns of a file of seeds: `spec`'s joints alone (in their ranges), at least one row.
 fn seeds_spec(spec: &ColumnSpec) -> ColumnSpec {
-    ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() }
+    ColumnSpec { position_columns: Vec::new(), min_rows: 1, tool_points: Vec::new(), orientation_columns: None, ..spec.clone() }
 }
 
 /// The rows of `path` read as measurement files are (`csv_import`: the size and line caps, the

@@ -82,7 +82,13 @@ pub fn run(args: PlanArgs) -> Result<()> {
     };
     let user_candidates = match &args.candidate_file {
         Some(path) => {
-            let joints_only = ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() };
+            let joints_only = ColumnSpec {
+                position_columns: Vec::new(),
+                min_rows: 1,
+                tool_points: Vec::new(),
+                orientation_columns: None,
+                ..spec.clone()
+            };
             read_measurements(path, &joints_only)?.measurements.joints
         }
         None => Vec::new(),

@@ -8,6 +8,7 @@ pub mod planar;
 mod positions;
 pub use positions::positions;
 pub mod register;
+pub mod tool_points;
 pub mod urdf;
 
 pub use cbd_runtime::kinematics::spatial::Frame;

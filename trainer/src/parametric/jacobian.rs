@@ -85,7 +85,13 @@ pub(super) fn jacobian_at(chain0: &DhChain, p: &[f64], data: &Measurements, jac:
 pub fn geometric_jacobian(chain: &DhChain, joints: &[f64], m: usize) -> Mat<f64> {
     let n = chain.joints.len().max(1);
     let count = joints.len() / n;
-    let data = Measurements { n_joints: n, task_dim: m, joints: joints[..count * n].to_vec(), positions: vec![0.0; count * m] };
+    let data = Measurements {
+        n_joints: n,
+        task_dim: m,
+        points_per_pose: 1,
+        joints: joints[..count * n].to_vec(),
+        positions: vec![0.0; count * m],
+    };
     let np = crate::nominal::dh_parameters::parameter_count(chain.joints.len());
     let mut jac = Mat::zeros(m * count, np);
     let (mut rp, mut rm) = (vec![0.0; m * count], vec![0.0; m * count]);
