@@ -75,6 +75,10 @@ typedef enum {
   CBD_ERR_BAD_HANDLE = 16,
   // An internal size invariant failed (a bug, reported instead of crashing).
   CBD_ERR_INTERNAL = 17,
+  // A tool point beyond the model's (see `cbd_tool_point_count`).
+  CBD_ERR_TOOL_POINT = 18,
+  // The tool frame's orientation is undetermined: fewer than 3 tool points, or all on one line.
+  CBD_ERR_ORIENTATION_UNDETERMINED = 19,
 } CbdStatus;
 
 // A loaded model (opaque). It lives at the start of the caller's storage and borrows the blob:

@@ -89,6 +89,10 @@ pub enum CbdStatus {
     CBD_ERR_BAD_HANDLE = 16,
     /// An internal size invariant failed (a bug, reported instead of crashing).
     CBD_ERR_INTERNAL = 17,
+    /// A tool point beyond the model's (see `cbd_tool_point_count`).
+    CBD_ERR_TOOL_POINT = 18,
+    /// The tool frame's orientation is undetermined: fewer than 3 tool points, or all on one line.
+    CBD_ERR_ORIENTATION_UNDETERMINED = 19,
 }
 
 use CbdStatus::*;
@@ -118,6 +122,8 @@ impl From<Error> for CbdStatus {
             Error::Diverged => CBD_ERR_DIVERGED,
             Error::NonFiniteResult => CBD_ERR_NON_FINITE_RESULT,
             Error::Internal => CBD_ERR_INTERNAL,
+            Error::ToolPoint { .. } => CBD_ERR_TOOL_POINT,
+            Error::OrientationUndetermined => CBD_ERR_ORIENTATION_UNDETERMINED,
         }
     }
 }
@@ -424,6 +430,8 @@ pub extern "C" fn cbd_status_name(status: i32) -> *const c_char {
         15 => "CBD_ERR_NON_FINITE_RESULT\0",
         16 => "CBD_ERR_BAD_HANDLE\0",
         17 => "CBD_ERR_INTERNAL\0",
+        18 => "CBD_ERR_TOOL_POINT\0",
+        19 => "CBD_ERR_ORIENTATION_UNDETERMINED\0",
         _ => "CBD_UNKNOWN_STATUS\0",
     };
     name.as_ptr().cast()

@@ -7,7 +7,8 @@
 //! ```
 //!
 //! The payload is a postcard encoding of [`Model`] (format 5: followed by the postcard encoding
-//! of its `Option<`[`FieldExpansion`]`>`; formats 2–4 end after the model). The CRC-32 (ISO-HDLC) covers everything
+//! of its `Option<`[`FieldExpansion`]`>`; format 6: then the DH chain's tool points, a varint count
+//! and three f64 per point; formats 2–4 end after the model). The CRC-32 (ISO-HDLC) covers everything
 //! before it. The large arrays (measurement configurations, momenta) are stored as raw
 //! little-endian `f64` bytes that the runtime reads in place, so a blob in flash is never copied.
 #![no_std]
@@ -23,6 +24,7 @@ mod f64_slice;
 mod limits;
 mod model;
 pub mod paper_rr;
+mod tool_points;
 pub mod ur5;
 mod validate;
 
@@ -36,11 +38,15 @@ pub use validate::ModelError;
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
+/// Format 6 appends the DH chain's tool points ([`DhChain::tool_points`]) after the format-5
+/// payload; [`encode`] writes it only for a model that names tool points (older models keep their bytes).
 /// Format 5 appends the fields' expansions ([`FieldExpansion`]) after the format-4 payload;
 /// format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
 /// the same layout without it and load unchanged. [`encode`] writes format 4 when a model has no
 /// expansion (byte-identical to the encoders before format 5), format 5 when it has one.
-pub const FORMAT_VERSION: u16 = 5;
+pub const FORMAT_VERSION: u16 = 6;
+/// The format of a model with an expansion and without tool points.
+pub const FORMAT_WITH_EXPANSION: u16 = 5;
 /// The format of a model without an expansion.
 pub const FORMAT_WITHOUT_EXPANSION: u16 = 4;
 /// The oldest format this build reads (format 2 lacks the Hamiltonian momentum laws, formats 2
@@ -148,9 +154,22 @@ impl std::error::Error for DecodeError {}
 #[cfg(feature = "std")]
 impl std::error::Error for EncodeError {}
 
+/// The format [`encode`] writes for `model`: 6 when it names tool points, else 5 when it has an
+/// expansion, else 4 (so a model of an older format keeps its bytes).
+pub fn format_for(model: &Model<'_>) -> u16 {
+    if !model.nominal.tool_points().is_empty() {
+        FORMAT_VERSION
+    } else if model.expansion.is_some() {
+        FORMAT_WITH_EXPANSION
+    } else {
+        FORMAT_WITHOUT_EXPANSION
+    }
+}
+
 /// Encodes `model` into `out`, returning the number of bytes written.
 /// The model is validated first: an invalid model is never written. Without an expansion the blob
-/// is format 4 (the payload is the model), with one format 5 (the model, then `Some(expansion)`).
+/// is format 4 (the payload is the model), with one format 5 (the model, then `Some(expansion)`);
+/// with tool points format 6 (the model, its `Option<expansion>`, then the tool points).
 pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     model.validate().map_err(EncodeError::Invalid)?;
     if out.len() < HEADER_LEN + TRAILER_LEN {
@@ -161,14 +180,19 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     let payload_len = {
         let body = out.get_mut(HEADER_LEN..HEADER_LEN + room).ok_or(EncodeError::BufferTooSmall)?;
         let mut written = postcard::to_slice(model, &mut *body).map_err(|_| EncodeError::BufferTooSmall)?.len();
-        if model.expansion.is_some() {
+        let version = format_for(model);
+        if version >= FORMAT_WITH_EXPANSION {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += postcard::to_slice(&model.expansion, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
+        }
+        if version >= FORMAT_VERSION {
+            let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
+            written += tool_points::write(model.nominal.tool_points(), tail).ok_or(EncodeError::BufferTooSmall)?;
         }
         written
     };
     let payload_end = HEADER_LEN + payload_len;
-    let version = if model.expansion.is_some() { FORMAT_VERSION } else { FORMAT_WITHOUT_EXPANSION };
+    let version = format_for(model);
     let (framed, trailer) = out.split_at_mut_checked(payload_end).ok_or(EncodeError::BufferTooSmall)?;
     let header = MAGIC.into_iter().chain(version.to_le_bytes()).chain((payload_len as u32).to_le_bytes());
     for (byte, value) in framed.iter_mut().zip(header) {
@@ -225,10 +249,24 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     }
     let payload = framed.get(HEADER_LEN..).ok_or(DecodeError::Payload)?;
     let (mut model, rest): (Model<'_>, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| payload_error(payload))?;
-    let rest = if version >= 5 {
+    let rest = if version >= FORMAT_WITH_EXPANSION {
         // Format 5: the expansion follows the model (`None` allowed, absence not).
         let (expansion, rest): (Option<FieldExpansion<'_>>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
         model.expansion = expansion;
+        rest
+    } else {
+        rest
+    };
+    let rest = if version >= FORMAT_VERSION {
+        // Format 6: the tool points follow (an empty list allowed, absence not).
+        let (points, rest) = tool_points::read(rest)?;
+        match &mut model.nominal {
+            NominalModel::DhChain(chain) => chain.tool_points = points,
+            NominalModel::PlanarChain { .. } if points.is_empty() => {}
+            NominalModel::PlanarChain { .. } => {
+                return Err(DecodeError::Invalid(ModelError::OutOfRange { field: "nominal.tool_points (on a planar chain)" }))
+            }
+        }
         rest
     } else {
         rest
@@ -254,6 +292,8 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
 mod tests;
 #[cfg(test)]
 mod tests_expansion;
+#[cfg(test)]
+mod tests_tool_points;
 
 /// Why a payload did not decode: a chain longer than this build holds is named (its joint count is
 /// the first length in the payload: the nominal model's variant, then the planar lengths' count or

@@ -22,3 +22,8 @@ pub const MAX_STEPS: u16 = 64;
 pub const MAX_EXPANSION_ORDER: u8 = 63;
 /// Most basis functions a field expansion may have per field (joint and task each).
 pub const MAX_EXPANSION_FEATURES: u32 = 65_535;
+/// Most tool points (measured points per pose) a DH chain may name (format 6).
+pub const MAX_TOOL_POINTS: usize = 4;
+/// Largest magnitude of a tool point's coordinate, in the model's length unit (1000 km in mm):
+/// anything larger is not a lever on an arm, and would overflow the kinematics' squares in f32.
+pub const MAX_TOOL_POINT_COORDINATE: f64 = 1e9;

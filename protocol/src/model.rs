@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::effects::Effects;
 use crate::expansion::FieldExpansion;
 use crate::f64_slice::F64Slice;
-use crate::limits::{MAX_JOINTS, MAX_TASK_DIM};
+use crate::limits::{MAX_JOINTS, MAX_TASK_DIM, MAX_TOOL_POINTS};
 
 /// A calibrated model: nominal kinematics, kernels, integrator, control points and momenta.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -25,9 +25,11 @@ pub struct Model<'a> {
     pub momentum_law: MomentumLaw,
     /// Noise level σ of energy (16), internal units (kept for provenance; not used to evaluate).
     pub sigma: f64,
-    /// N, the number of control points (measured configurations).
+    /// The number of control points: N·m_p for N measured poses of m_p tool points
+    /// ([`NominalModel::tool_point_count`]); control point c = pose·m_p + j is tool point j = c % m_p.
     pub n_points: u32,
-    /// Measurement configurations, `n_points × n_joints`, row-major, joint units of the nominal model.
+    /// Each control point's configuration, `n_points × n_joints`, row-major, joint units of the
+    /// nominal model (pose-major: a pose's configuration is repeated for each of its m_p tool points).
     #[serde(borrow)]
     pub points: F64Slice<'a>,
     /// Optimal initial momenta P0, `n_points × task_dim`, row-major, internal units.
@@ -100,6 +102,29 @@ impl NominalModel {
             NominalModel::DhChain(_) => 3,
         }
     }
+    /// m_p, the number of measured points per pose: the DH chain's tool points (1 when it names
+    /// none: the tool frame's origin); 1 for a planar chain.
+    pub fn tool_point_count(&self) -> usize {
+        match self {
+            NominalModel::PlanarChain { .. } => 1,
+            NominalModel::DhChain(c) => c.tool_points.len().max(1),
+        }
+    }
+    /// Tool point `j`'s offset in the tool frame: the stored offset, or [0, 0, 0] for `j = 0` of a
+    /// model without tool points (planar chains: `j = 0` only); `None` beyond [`Self::tool_point_count`].
+    pub fn tool_point(&self, j: usize) -> Option<[f64; 3]> {
+        match self {
+            NominalModel::DhChain(c) if !c.tool_points.is_empty() => c.tool_points.get(j).copied(),
+            _ => (j == 0).then_some([0.0; 3]),
+        }
+    }
+    /// The tool points of a DH chain (empty for a planar chain and for a chain without any).
+    pub fn tool_points(&self) -> &[[f64; 3]] {
+        match self {
+            NominalModel::PlanarChain { .. } => &[],
+            NominalModel::DhChain(c) => &c.tool_points,
+        }
+    }
     /// Whether joint `d` is an angle (periodic).
     pub fn is_revolute(&self, d: usize) -> bool {
         match self {
@@ -170,6 +195,12 @@ pub struct DhChain {
     pub tool: Transform,
     /// Physical effects on top of the rigid chain.
     pub effects: Effects,
+    /// The measured points' offsets in the tool frame (the `tool` transform's frame, the model's
+    /// length unit), at most [`MAX_TOOL_POINTS`] (format 6). Empty: one point at the tool frame's
+    /// origin, the meaning of every blob before format 6. Encoded after the format-5 payload (see
+    /// [`crate::encode`]), so it is skipped here.
+    #[serde(skip)]
+    pub tool_points: HVec<[f64; 3], MAX_TOOL_POINTS>,
 }
 
 /// Task-space normalisation: internal = (user − offset) / scale.

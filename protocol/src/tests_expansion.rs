@@ -180,6 +180,7 @@ fn a_sine_on_a_gaussian_axis_is_refused() {
         base: Transform::IDENTITY,
         tool: Transform::IDENTITY,
         effects: Effects::NONE,
+        tool_points: heapless::Vec::new(),
     });
     model.joint_kernel.axes =
         heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }, JointKernelAxis::Gaussian { width: 0.3 }]).unwrap();

@@ -35,5 +35,12 @@ pub fn chain() -> DhChain {
         // Six rows always fit (checked at compile time above).
         let _ = joints.push(joint);
     }
-    DhChain { convention: DhConvention::Standard, joints, base: Transform::IDENTITY, tool, effects: Effects::NONE }
+    DhChain {
+        convention: DhConvention::Standard,
+        joints,
+        base: Transform::IDENTITY,
+        tool,
+        effects: Effects::NONE,
+        tool_points: heapless::Vec::new(),
+    }
 }

@@ -2,7 +2,7 @@
 
 use crate::effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
 use crate::expansion::{code_is_sin, code_order, FieldExpansion};
-use crate::limits::{MAX_EXPANSION_FEATURES, MAX_EXPANSION_ORDER, MAX_STEPS};
+use crate::limits::{MAX_EXPANSION_FEATURES, MAX_EXPANSION_ORDER, MAX_STEPS, MAX_TOOL_POINT_COORDINATE};
 use crate::model::*;
 
 /// What is wrong with a model, naming the field.
@@ -167,6 +167,10 @@ impl Model<'_> {
                 for (name, t) in [("nominal.base", &c.base), ("nominal.tool", &c.tool)] {
                     finite(name, t.rotation.iter().chain(t.translation.iter()).copied())?;
                 }
+                finite("nominal.tool_points", c.tool_points.iter().flatten().copied())?;
+                if let Some(index) = c.tool_points.iter().flatten().position(|v| v.abs() > MAX_TOOL_POINT_COORDINATE) {
+                    return Err(ModelError::OutOfRangeAt { field: "nominal.tool_points (beyond MAX_TOOL_POINT_COORDINATE)", index });
+                }
             }
         }
         self.nominal.effects().validate(n)?;
@@ -194,6 +198,9 @@ impl Model<'_> {
             return Err(ModelError::OutOfRange { field: "n_points" });
         }
         let n_points = self.n_points as usize;
+        if !n_points.is_multiple_of(self.nominal.tool_point_count()) {
+            return Err(ModelError::OutOfRange { field: "n_points (not a multiple of the tool points)" });
+        }
         dimension("points", n_points * n * 8, self.points.byte_len())?;
         dimension("momenta", n_points * m * 8, self.momenta.byte_len())?;
         finite("points", self.points.iter())?;

@@ -206,8 +206,17 @@ impl<'a> Calibrator<'a> {
 
     /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint
     /// configuration `q` (see [`crate::flow::query_derivatives`]); also the paper's transported J(1).
+    /// For a model with several tool points this is tool point 0 ([`Calibrator::evaluate_point`]).
     pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_query::<true>(q)
+        self.evaluate_query::<true>(q, 0)
+    }
+
+    /// eq. (20) for tool point `j` (`j` < [`cbd_protocol::NominalModel::tool_point_count`]): the
+    /// query flow started from k0_j(ξ), Dk0_j(ξ) — the same joint field v(ξ) and task field w, so
+    /// every tool point is carried by the same ψ ∘ · ∘ φ⁻¹ — with its exact Jacobian.
+    /// `evaluate_point(q, 0)` is [`Calibrator::evaluate`].
+    pub fn evaluate_point(&mut self, q: &[f64], j: usize) -> Result<Evaluation, Error> {
+        self.evaluate_query::<true>(q, j)
     }
 
     /// eq. (20) without tangents, cheaper: the calibrated position k1(ξ) and the paper's
@@ -215,6 +224,6 @@ impl<'a> Calibrator<'a> {
     /// [`Evaluation::jacobian`] and [`Evaluation::transported_jacobian`] hold J(1).
     /// The position is bit-identical to [`Calibrator::evaluate`]'s.
     pub fn evaluate_transported(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_query::<false>(q)
+        self.evaluate_query::<false>(q, 0)
     }
 }

@@ -72,6 +72,15 @@ pub enum Error {
         /// The coordinate.
         index: usize,
     },
+    /// A tool point beyond the model's ([`cbd_protocol::NominalModel::tool_point_count`]).
+    ToolPoint {
+        /// The tool point asked for.
+        index: usize,
+        /// The model's tool points.
+        count: usize,
+    },
+    /// The tool frame's orientation is undetermined: fewer than 3 tool points, or all on one line.
+    OrientationUndetermined,
     /// The control points' flow produced a non-finite value.
     Diverged,
     /// The query's flow produced a non-finite value.
@@ -89,6 +98,10 @@ impl core::fmt::Display for Error {
             Error::NonFiniteQuery { index } => write!(f, "query joint {index} is not finite"),
             Error::TargetDimension { expected, found } => write!(f, "target has {found} coordinates, model has {expected}"),
             Error::NonFiniteTarget { index } => write!(f, "target coordinate {index} is not finite"),
+            Error::ToolPoint { index, count } => write!(f, "tool point {index} asked for; the model has {count}"),
+            Error::OrientationUndetermined => {
+                write!(f, "the tool frame's orientation is undetermined (fewer than 3 tool points, or all on one line)")
+            }
             Error::Diverged => write!(f, "the control points' flow diverged (non-finite state)"),
             Error::NonFiniteResult => write!(f, "evaluation produced a non-finite value"),
             Error::Internal => write!(f, "internal size invariant failed"),

@@ -9,7 +9,7 @@
 //! expansion the stages' Σ_f |c_f| J + Σ_g |d_g| (|φ_f| ≤ 1, |ψ_g| ≤ 1) times their step.
 //! Internal units throughout, scaled by the task scale at the end.
 
-use crate::kinematics::forward_kinematics;
+use crate::kinematics::{forward_kinematics, with_tool_point};
 use crate::real::Real;
 use cbd_protocol::{Model, MAX_JOINTS};
 
@@ -25,7 +25,13 @@ pub fn evaluation_precision(model: &Model<'_>) -> f64 {
         for (d, xd) in x.iter_mut().enumerate().take(n) {
             *xd = model.points.get(i * n + d).unwrap_or(0.0);
         }
-        let k0 = forward_kinematics(&model.nominal, x.get(..n).unwrap_or(&[])).normalised(&model.normalisation);
+        // Control point i is tool point i % m_p (one point: the model itself, no copy).
+        let m_p = model.nominal.tool_point_count();
+        let Some(k0) = with_tool_point(&model.nominal, i % m_p.max(1), |nominal| forward_kinematics(nominal, x.get(..n).unwrap_or(&[])))
+        else {
+            continue;
+        };
+        let k0 = k0.normalised(&model.normalisation);
         let r2: f64 = k0.position.iter().take(m).map(|v| v * v).sum();
         let j2: f64 = k0.jacobian.iter().take(m).flat_map(|row| row.iter().take(n)).map(|v| v * v).sum();
         radius = radius.max(libm::sqrt(r2));

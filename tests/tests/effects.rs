@@ -76,6 +76,7 @@ fn modified_chain() -> NominalModel {
         base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
         tool,
         effects: Effects::NONE,
+        tool_points: heapless::Vec::new(),
     })
 }
 

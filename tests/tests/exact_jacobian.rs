@@ -24,6 +24,7 @@ fn six_joint(convention: DhConvention) -> NominalModel {
         base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
         tool,
         effects: cbd_protocol::Effects::NONE,
+        tool_points: heapless::Vec::new(),
     })
 }
 

@@ -124,6 +124,7 @@ pub fn chain10_blob() -> Vec<u8> {
         base: Transform::IDENTITY,
         tool,
         effects: Effects::NONE,
+        tool_points: heapless::Vec::new(),
     };
     let integrator = Integrator { method: IntegratorMethod::Heun, steps: 2 };
     dh_chain_blob(chain, [0.0, 0.0, 600.0], 800.0, integrator, 0x000c_4a10)

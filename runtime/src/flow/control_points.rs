@@ -5,30 +5,45 @@
 use crate::flow::{control_point_rates, control_point_rates_with_features, write_samples, Dims, FlowParams};
 use crate::integrate::{integrate_checked, scratch_len};
 use crate::kernel::features_len;
-use crate::kinematics::{forward_kinematics, Kinematics};
+use crate::kinematics::{forward_kinematics, with_tool_point, Kinematics};
 use crate::real::Real;
 use crate::Error;
-use cbd_protocol::{Integrator, Model, MAX_JOINTS};
+use cbd_protocol::{Integrator, Model, NominalModel, MAX_JOINTS};
 
-/// Sets the initial control-point state: k_i = k0(x_i), J_i = Dk0(x_i), P_i = P0_i (internal units).
+/// Sets the initial control-point state: k_i = k0(x_i), J_i = Dk0(x_i), P_i = P0_i (internal units);
+/// with m_p tool points, k0 and Dk0 of control point i are tool point i % m_p's (one copy of the
+/// nominal model per tool point; none for a model without tool points).
 pub fn initial_state(model: &Model<'_>, state: &mut [Real]) -> Result<(), Error> {
     let dims = Dims { n: model.n_joints(), m: model.task_dim() };
-    let (m, n) = (dims.m, dims.n);
-    let mut x = [0.0; MAX_JOINTS];
     if dims.state_len() == 0 {
         return Err(Error::Internal);
     }
-    for (i, s) in state.chunks_exact_mut(dims.state_len().max(1)).enumerate() {
-        for (d, xd) in x.iter_mut().enumerate().take(n) {
-            *xd = model.points.get(i * n + d).ok_or(Error::Internal)?;
-        }
-        let k0 = forward_kinematics(&model.nominal, x.get(..n).ok_or(Error::Internal)?).normalised(&model.normalisation);
-        let (s_k, rest) = s.split_at_mut_checked(m).ok_or(Error::Internal)?;
-        let (s_jac, s_p) = rest.split_at_mut_checked(m * n).ok_or(Error::Internal)?;
-        copy_kinematics(&k0, s_k, s_jac, n);
-        for (a, p) in s_p.iter_mut().enumerate() {
-            *p = model.momenta.get(i * m + a).ok_or(Error::Internal)? as Real;
-        }
+    let m_p = model.nominal.tool_point_count();
+    for j in 0..m_p {
+        with_tool_point(&model.nominal, j, |nominal| {
+            for (i, s) in state.chunks_exact_mut(dims.state_len()).enumerate().skip(j).step_by(m_p) {
+                initial_point(model, nominal, i, s)?;
+            }
+            Ok::<(), Error>(())
+        })
+        .ok_or(Error::Internal)??;
+    }
+    Ok(())
+}
+
+/// Control point i's initial state, k0 and Dk0 from `nominal` (the model of its tool point).
+fn initial_point(model: &Model<'_>, nominal: &NominalModel, i: usize, s: &mut [Real]) -> Result<(), Error> {
+    let (m, n) = (model.task_dim(), model.n_joints());
+    let mut x = [0.0; MAX_JOINTS];
+    for (d, xd) in x.iter_mut().enumerate().take(n) {
+        *xd = model.points.get(i * n + d).ok_or(Error::Internal)?;
+    }
+    let k0 = forward_kinematics(nominal, x.get(..n).ok_or(Error::Internal)?).normalised(&model.normalisation);
+    let (s_k, rest) = s.split_at_mut_checked(m).ok_or(Error::Internal)?;
+    let (s_jac, s_p) = rest.split_at_mut_checked(m * n).ok_or(Error::Internal)?;
+    copy_kinematics(&k0, s_k, s_jac, n);
+    for (a, p) in s_p.iter_mut().enumerate() {
+        *p = model.momenta.get(i * m + a).ok_or(Error::Internal)? as Real;
     }
     Ok(())
 }

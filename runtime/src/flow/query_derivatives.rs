@@ -346,17 +346,28 @@ impl crate::Calibrator<'_> {
     /// `evaluate_transported` in one firmware (compensation calls both), a run-time flag kept
     /// the tangent branches inside the per-point loop and cost the M7 (dp) 6 % and the f32 build
     /// 27 % per `evaluate` (RR N = 256 Heun × 5; BENCHMARKS.md "Firmware (QEMU)").
-    pub(crate) fn evaluate_query<const EXACT_JACOBIAN: bool>(&mut self, q: &[f64]) -> Result<crate::Evaluation, crate::Error> {
+    /// `tool_point` is j of [`cbd_protocol::NominalModel::tool_point`]: the query starts from k0_j(ξ),
+    /// Dk0_j(ξ), D²k0_j(ξ) (the joint field v(ξ) and the task field are the same for every point).
+    pub(crate) fn evaluate_query<const EXACT_JACOBIAN: bool>(
+        &mut self,
+        q: &[f64],
+        tool_point: usize,
+    ) -> Result<crate::Evaluation, crate::Error> {
         // The common shapes get loops unrolled at compile time; the arithmetic is the same.
         match (self.dims.m, self.dims.n) {
-            (2, 2) => self.evaluate_shaped::<_, EXACT_JACOBIAN>(Fixed::<2, 2>, q),
-            (3, 6) => self.evaluate_shaped::<_, EXACT_JACOBIAN>(Fixed::<3, 6>, q),
-            _ => self.evaluate_shaped::<_, EXACT_JACOBIAN>(self.dims, q),
+            (2, 2) => self.evaluate_shaped::<_, EXACT_JACOBIAN>(Fixed::<2, 2>, q, tool_point),
+            (3, 6) => self.evaluate_shaped::<_, EXACT_JACOBIAN>(Fixed::<3, 6>, q, tool_point),
+            _ => self.evaluate_shaped::<_, EXACT_JACOBIAN>(self.dims, q, tool_point),
         }
     }
 
     #[inline(always)]
-    fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(&mut self, shape: S, q: &[f64]) -> Result<crate::Evaluation, crate::Error> {
+    fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
+        &mut self,
+        shape: S,
+        q: &[f64],
+        tool_point: usize,
+    ) -> Result<crate::Evaluation, crate::Error> {
         let exact_jacobian = EXACT_JACOBIAN;
         use crate::Error;
         let dims = shape.dims();
@@ -369,6 +380,10 @@ impl crate::Calibrator<'_> {
         }
         if let Some(index) = q.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFiniteQuery { index });
+        }
+        let count = self.model.nominal.tool_point_count();
+        if tool_point >= count {
+            return Err(Error::ToolPoint { index: tool_point, count });
         }
         let n_points = self.model.n_points as usize;
         // K_V(ξ, x_j) (or the joint basis at ξ), its gradient and Hessian do not change along the
@@ -402,11 +417,16 @@ impl crate::Calibrator<'_> {
         };
         let rows: &[Real] = rows;
         let norm = &self.model.normalisation;
-        let k0 = crate::kinematics::forward_kinematics(&self.model.nominal, q).normalised(norm);
         let mut h0 = [[[0.0; NJ]; NJ]; MT];
-        if exact_jacobian {
-            write_nominal_hessian(&self.model.nominal, q, &mut h0);
-        }
+        // k0_j, Dk0_j (and D²k0_j): the model itself for a model without tool points (no copy).
+        let k0 = crate::kinematics::with_tool_point(&self.model.nominal, tool_point, |nominal| {
+            if exact_jacobian {
+                write_nominal_hessian(nominal, q, &mut h0);
+            }
+            crate::kinematics::forward_kinematics(nominal, q)
+        })
+        .ok_or(Error::Internal)?
+        .normalised(norm);
         let ql = dims.query_len();
         let state_len = if exact_jacobian { query_tangent_len(dims) } else { ql };
         let (y, rest) = rest.split_at_mut_checked(state_len).ok_or(Error::Internal)?;

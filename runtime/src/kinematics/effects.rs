@@ -239,6 +239,7 @@ pub(crate) fn without_effects(model: &NominalModel) -> NominalModel {
             base: c.base,
             tool: c.tool,
             effects: Effects::NONE,
+            tool_points: c.tool_points.clone(),
         }),
     }
 }
@@ -342,6 +343,7 @@ pub(crate) mod tests {
             base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [0.1, 0.0, 0.2] },
             tool,
             effects: all_effects(6, gravity),
+            tool_points: HVec::new(),
         })
     }
 

@@ -10,11 +10,13 @@ pub mod gravity;
 pub mod rigid;
 pub mod rigid_derivatives;
 pub mod spatial;
+pub mod tool_point;
 
 use cbd_protocol::NominalModel;
 
 pub use rigid::{dh_frames, Kinematics};
 pub use spatial::Frame;
+pub use tool_point::{forward_kinematics_at, with_tool_point};
 
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
 /// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::kinematics::effects::kinematics`]).
@@ -79,6 +81,7 @@ mod tests {
             base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [0.1, 0.0, 0.2] },
             tool,
             effects: Effects::NONE,
+            tool_points: HVec::new(),
         })
     }
 

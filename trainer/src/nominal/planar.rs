@@ -22,6 +22,7 @@ pub fn as_dh(model: &NominalModel) -> NominalModel {
                 base: Transform::IDENTITY,
                 tool: Transform::IDENTITY,
                 effects,
+                tool_points: heapless::Vec::new(),
             })
         }
     }

@@ -236,6 +236,7 @@ fn dh_from_axis_lines(lines: &[AxisLine], tip: &Frame) -> DhChain {
         base: base.to_transform(),
         tool: tool.to_transform(),
         effects: cbd_protocol::Effects::NONE,
+        tool_points: heapless::Vec::new(),
     }
 }
 

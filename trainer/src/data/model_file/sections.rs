@@ -66,7 +66,14 @@ pub(super) fn dh_chain(chain: &RawChain, deg: f64, path: &Path) -> Result<Sectio
     };
     let n = joints.len();
     Ok((
-        NominalModel::DhChain(DhChain { convention, joints, base, tool, effects: cbd_protocol::Effects::NONE }),
+        NominalModel::DhChain(DhChain {
+            convention,
+            joints,
+            base,
+            tool,
+            effects: cbd_protocol::Effects::NONE,
+            tool_points: heapless::Vec::new(),
+        }),
         (1..=n).map(|i| format!("q{i}")).collect(),
     ))
 }
