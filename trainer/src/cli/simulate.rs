@@ -215,7 +215,7 @@ fn simulate_six_points(
     joints: &[f64],
     tool_points: &[[f64; 3]],
 ) -> Result<()> {
-    use crate::nominal::tool_points::{point_chain, quaternion_of, tool_frame};
+    use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
     let p = tool_points.len();
     if args.pose && p < 3 {
         return Err(Error::InvalidInput(format!("--pose needs at least 3 tool points (a frame from {p} is not determined)")));
@@ -255,12 +255,16 @@ fn simulate_six_points(
         if args.pose {
             let frame = tool_frame(tool_points, &measured)
                 .ok_or_else(|| Error::InvalidInput("--tool-points on a line: no tool frame for --pose".into()))?;
-            // The point columns are the frame's points: both column sets hold the same data.
+            // The point columns are the points of the pose as written (its quaternion's rotation):
+            // both column sets hold the same data, to the last bit.
+            let (origin, quaternion) = (frame.translation(), quaternion_of(&frame.rotation()));
+            let norm = quaternion.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let rotation = rotation_of_quaternion(quaternion.map(|v| v / norm));
             for pj in tool_points {
-                fields.extend(frame.apply(*pj).iter().map(|v| format!("{v:?}")));
+                fields.extend(point_of_pose(&origin, &rotation, pj).iter().map(|v| format!("{v:?}")));
             }
-            fields.extend(frame.translation().iter().map(|v| format!("{v:?}")));
-            fields.extend(quaternion_of(&frame.rotation()).iter().map(|v| format!("{v:?}")));
+            fields.extend(origin.iter().map(|v| format!("{v:?}")));
+            fields.extend(quaternion.iter().map(|v| format!("{v:?}")));
         } else {
             fields.extend(measured.iter().flatten().map(|v| format!("{v:?}")));
         }

@@ -203,9 +203,7 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             row.rotation(&record, line, &mut rotation)?;
             // y_j = p + R p_j (the measured pose read as its tool points).
             for (j, pj) in spec.tool_points.iter().chain(spec.tool_points.is_empty().then_some(&[0.0; 3])).enumerate() {
-                for a in 0..3 {
-                    point_values[3 * j + a] = y[a] + (rotation[a][0] * pj[0] + rotation[a][1] * pj[1] + rotation[a][2] * pj[2]);
-                }
+                point_values[3 * j..3 * j + 3].copy_from_slice(&crate::nominal::tool_points::point_of_pose(&y, &rotation, pj));
             }
         } else {
             point_values.copy_from_slice(&y);
@@ -330,13 +328,7 @@ impl<'a> RowReader<'a> {
                 if !((norm - 1.0).abs() <= ROTATION_TOLERANCE) {
                     return Err(refuse(format!("the quaternion's norm is {norm:.6}; a rotation's is 1 (within {ROTATION_TOLERANCE:e})")));
                 }
-                let [w, x, y, z] = [v[0] / norm, v[1] / norm, v[2] / norm, v[3] / norm];
-                // R(q) of a unit quaternion (w, x, y, z).
-                *r = [
-                    [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-                    [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-                    [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
-                ];
+                *r = crate::nominal::tool_points::rotation_of_quaternion([v[0] / norm, v[1] / norm, v[2] / norm, v[3] / norm]);
             }
             OrientationColumns::Rotation(_) => {
                 *r = [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]];

@@ -93,9 +93,6 @@ pub struct ModelFile {
     /// `[chain] base = { register = true }`: the base is unknown (identity in `nominal`) and is
     /// registered on the training data (`nominal::register`).
     pub register_base: bool,
-    /// `[chain] tool = { points = … }`: the measured tool points, offsets in the tool frame (length
-    /// unit); empty: one point at the tool origin.
-    pub tool_points: Vec<[f64; 3]>,
 }
 
 /// `[measurements] pose`: a measured tool pose's columns — its position and a unit quaternion
@@ -149,7 +146,7 @@ impl ModelFile {
             None => (section.positions.clone(), None),
         };
         let spec = ColumnSpec {
-            tool_points: self.tool_points.clone(),
+            tool_points: self.nominal.tool_points().to_vec(),
             orientation_columns: orientation,
             ..self.column_spec_with(section.joints.clone(), positions)
         };
@@ -257,9 +254,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     }
     let mut planar_frame = None;
     let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).is_some_and(|b| b.register == Some(true));
-    let mut tool_points = Vec::new();
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
-        tool_points = sections::tool_points(&chain, path)?;
         sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
         sections::urdf_chain(&u, raw.length_unit, path)?
@@ -281,7 +276,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
                 nominal.n_joints()
             )));
         }
-        let points = tool_points.len().max(1);
+        let points = nominal.tool_point_count();
         match &m.pose {
             Some(pose) => check_pose_section(m, pose, nominal.task_dim(), &file)?,
             None if m.positions.len() != nominal.task_dim() * points => {
@@ -305,7 +300,6 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         joint_map,
         planar_frame,
         register_base,
-        tool_points,
         path: file,
         name: raw.name,
         nominal,
@@ -595,9 +589,9 @@ compliance = 0.5
                 "positions = [\"x1\", \"y1\", \"z1\", \"x2\", \"y2\", \"z2\", \"x3\", \"y3\", \"z3\"]",
             );
         let m = parse_model_file(&points, Path::new("p.toml")).unwrap();
-        assert_eq!(m.tool_points, vec![[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0]]);
+        assert_eq!(m.nominal.tool_points(), &[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0]]);
         let back = parse_model_file(&write_model_file(&m, "h"), Path::new("p.toml")).unwrap();
-        assert_eq!((back.tool_points.clone(), back.measurements.clone()), (m.tool_points.clone(), m.measurements.clone()));
+        assert_eq!((&back.nominal, &back.measurements), (&m.nominal, &m.measurements));
         let csv = "q1,q2,x1,y1,z1,x2,y2,z2,x3,y3,z3\n0.1,0.2,1,2,3,101,2,3,1,202,3\n0.3,0.4,4,5,6,104,5,6,4,205,6\n";
         let read = |spec: &ColumnSpec, csv: &str| crate::data::csv_import::read_measurements_from(csv.as_bytes(), Path::new("t.csv"), spec);
         let data = read(&m.column_spec().unwrap(), csv).unwrap().measurements;

@@ -7,7 +7,6 @@
 use super::Frame;
 use crate::data::Measurements;
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::forward_kinematics;
 
 /// A registered base and what it did.
 #[derive(Debug, Clone, PartialEq)]
@@ -96,7 +95,7 @@ pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<
         return Err(RegisterError::NotADhChain);
     };
     let p: Vec<[f64; 3]> =
-        (0..data.len()).map(|i| forward_kinematics(&NominalModel::DhChain(chain.clone()), data.joints(i)).position).collect();
+        (0..data.len()).map(|i| super::row_kinematics(&NominalModel::DhChain(chain.clone()), data.joints(i), i).position).collect();
     let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
     let rms = |pose: &Frame| -> f64 {
         let s: f64 = p.iter().zip(&y).map(|(pi, yi)| super::norm(super::sub(pose.apply(*pi), *yi)).powi(2)).sum();

@@ -3,14 +3,17 @@
 
 use super::register::{axis_angle, rigid_fit};
 use super::Frame;
-use cbd_protocol::DhChain;
+use cbd_protocol::{DhChain, NominalModel};
 
 /// `chain` with its tool frame moved to the tool point `p` (offset in the tool frame): its tool
-/// position is that point's, y_j = walk · tool · (p_j, 1).
+/// position is that point's, y_j = walk · tool · (p_j, 1) (the runtime's `at_tool_point`).
 pub fn point_chain(chain: &DhChain, p: [f64; 3]) -> DhChain {
-    let tool = Frame::from_transform(&chain.tool);
-    let moved = tool.compose(&Frame::new(Frame::IDENTITY.rotation(), p));
-    DhChain { tool: moved.to_transform(), ..chain.clone() }
+    let mut with_point = chain.clone();
+    with_point.tool_points = heapless::Vec::from_slice(&[p]).expect("one point");
+    match cbd_runtime::kinematics::tool_point::at_tool_point(&NominalModel::DhChain(with_point), 0) {
+        Some(NominalModel::DhChain(moved)) => moved,
+        _ => unreachable!("a DH chain with one tool point"),
+    }
 }
 
 /// The unit quaternion (w, x, y, z), w ≥ 0, of a rotation matrix (Shepperd's method: the largest
@@ -35,6 +38,20 @@ pub fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {
     q.map(|v| sign * v / norm)
 }
 
+/// R(q) of a unit quaternion q = (w, x, y, z).
+pub fn rotation_of_quaternion([w, x, y, z]: [f64; 4]) -> [[f64; 3]; 3] {
+    [
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+    ]
+}
+
+/// Tool point `p` of a measured pose (position `origin`, rotation `r`): y = origin + R p.
+pub fn point_of_pose(origin: &[f64], r: &[[f64; 3]; 3], p: &[f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|a| origin[a] + (r[a][0] * p[0] + r[a][1] * p[1] + r[a][2] * p[2]))
+}
+
 /// The least-squares tool frame of one pose's measured `points` (in the task frame), the rigid
 /// motion carrying the tool points onto them (Kabsch/Horn, `register::rigid_fit`); `None` for
 /// fewer than 3 points or points on a line.
@@ -55,12 +72,7 @@ mod tests {
     fn quaternions_round_trip_every_branch_and_frames_fit_exact_points() {
         for (axis, angle) in [([0.0, 0.0, 1.0], 0.3), ([1.0, 0.0, 0.0], 3.0), ([0.0, 1.0, 0.0], 3.1), ([0.0, 0.6, 0.8], 3.14)] {
             let f = super::super::rotation_about(axis, angle);
-            let [w, x, y, z] = quaternion_of(&f.rotation());
-            let r = [
-                [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-                [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-                [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
-            ];
+            let r = rotation_of_quaternion(quaternion_of(&f.rotation()));
             for a in 0..3 {
                 for b in 0..3 {
                     assert!((r[a][b] - f.rotation()[a][b]).abs() < 1e-14, "{axis:?} {angle}");

@@ -17,9 +17,17 @@ pub(super) fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut 
     use cbd_runtime::kinematics::rigid::dh_walk;
     let (n, m) = (chain.joints.len(), data.task_dim);
     let column = |r: &[[f64; 3]; 3], c: usize| [r[0][c], r[1][c], r[2][c]];
+    let model = cbd_protocol::NominalModel::DhChain(chain.clone());
     for row in 0..data.len() {
         let walk = dh_walk(chain, data.joints(row));
-        let p = walk.tool;
+        // The row's tool point (row mod m_p, docs/DESIGN.md §12): y = o_tool + R_tool p_j.
+        let pj = model.tool_point(row % model.tool_point_count()).unwrap_or([0.0; 3]);
+        let p = if pj == [0.0; 3] {
+            walk.tool
+        } else {
+            let r = &walk.tool_rotation;
+            std::array::from_fn(|a| walk.tool[a] + (r[a][0] * pj[0] + r[a][1] * pj[1] + r[a][2] * pj[2]))
+        };
         // Frame i (0 = base, i = after joint i): its rotation's column c and its origin.
         let axis = |i: usize, c: usize| if i == 0 { column(&walk.start_rotation, c) } else { column(&walk.end_rotations[i - 1], c) };
         let origin = |i: usize| if i == 0 { walk.start } else { walk.ends[i - 1] };

@@ -72,7 +72,7 @@ pub(super) fn dh_chain(chain: &RawChain, deg: f64, path: &Path) -> Result<Sectio
             base,
             tool,
             effects: cbd_protocol::Effects::NONE,
-            tool_points: heapless::Vec::new(),
+            tool_points: heapless::Vec::from_slice(&tool_points(chain, path)?).map_err(|_| model_err("too many tool points".into()))?,
         }),
         (1..=n).map(|i| format!("q{i}")).collect(),
     ))

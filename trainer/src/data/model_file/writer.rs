@@ -63,8 +63,8 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
                 }
                 let r = &t.rotation;
                 let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
-                let points = if name == "tool" && !m.tool_points.is_empty() {
-                    let points: Vec<String> = m.tool_points.iter().map(|p| effects_section::list(p)).collect();
+                let points = if name == "tool" && !c.tool_points.is_empty() {
+                    let points: Vec<String> = c.tool_points.iter().map(|p| effects_section::list(p)).collect();
                     format!(", points = [{}]", points.join(", "))
                 } else {
                     String::new()
