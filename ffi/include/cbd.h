@@ -79,6 +79,10 @@ typedef enum {
   CBD_ERR_TOOL_POINT = 18,
   // The tool frame's orientation is undetermined: fewer than 3 tool points, or all on one line.
   CBD_ERR_ORIENTATION_UNDETERMINED = 19,
+  // A pose target on an arm with fewer than six joints.
+  CBD_ERR_TOO_FEW_JOINTS = 20,
+  // A target rotation that is not a rotation (not orthonormal within 1e-6, or a reflection).
+  CBD_ERR_INVALID_ROTATION = 21,
 } CbdStatus;
 
 // A loaded model (opaque). It lives at the start of the caller's storage and borrows the blob:
@@ -148,6 +152,85 @@ CbdStatus cbd_evaluate(CbdCalibrator *calibrator,
                        double *jacobian,
                        size_t jacobian_len,
                        double *support);
+
+// Tool points of the loaded model (measured points per pose, 1 for a model that names none), 0 for
+// NULL or a handle that is not loaded. `tool_point` of [`cbd_evaluate_point`] is below it.
+//
+// # Safety
+// `calibrator` is NULL or a pointer into storage passed to `cbd_load`.
+size_t cbd_tool_point_count(const CbdCalibrator *calibrator);
+
+// As [`cbd_evaluate`], for tool point `tool_point` (below [`cbd_tool_point_count`]): its calibrated
+// position and exact Jacobian. `tool_point` 0 is `cbd_evaluate`, bit for bit.
+//
+// Returns `cbd_evaluate`'s statuses and `CBD_ERR_TOOL_POINT`.
+//
+// # Safety
+// As [`cbd_evaluate`].
+CbdStatus cbd_evaluate_point(CbdCalibrator *calibrator,
+                             const double *q,
+                             size_t n_joints,
+                             size_t tool_point,
+                             double *position,
+                             size_t position_len,
+                             double *jacobian,
+                             size_t jacobian_len,
+                             double *support);
+
+// The calibrated tool frame at `q` (a model with at least three tool points, not all on one
+// line): writes its rotation (9 values, row-major, task frame) into `rotation`, its origin
+// (3 values: where the frame puts the tool-frame point 0) into `origin`, and its 6 × `n_joints`
+// Jacobian (row-major; rows 0–2 the origin's linear velocity, rows 3–5 the angular velocity ω,
+// dR = [ω]× R) into `jacobian`. If `points` is not NULL, also every tool point's calibrated
+// position (3 × `cbd_tool_point_count` values, point after point; `points_len` values writable);
+// if `fit_residual` is not NULL, the RMS distance of the calibrated points from the fitted rigid frame.
+//
+// On an error nothing is written. Returns `CBD_OK`, `CBD_ERR_NULL_POINTER`, `CBD_ERR_BAD_HANDLE`,
+// `CBD_ERR_QUERY_DIMENSION`, `CBD_ERR_BUFFER_TOO_SMALL`, `CBD_ERR_NON_FINITE_QUERY`,
+// `CBD_ERR_ORIENTATION_UNDETERMINED` or `CBD_ERR_NON_FINITE_RESULT`.
+//
+// # Safety
+// `calibrator` is a handle from `cbd_load`; `q` points to `n_joints` readable values, `rotation`
+// to 9 and `origin` to 3 writable values, `jacobian` to `jacobian_len` writable values, `points`
+// is NULL or points to `points_len` writable values, `fit_residual` is NULL or writable. One
+// handle per thread.
+CbdStatus cbd_evaluate_pose(CbdCalibrator *calibrator,
+                            const double *q,
+                            size_t n_joints,
+                            double *rotation,
+                            double *origin,
+                            double *jacobian,
+                            size_t jacobian_len,
+                            double *points,
+                            size_t points_len,
+                            double *fit_residual);
+
+// Pose compensation: writes to `command` (`n_joints` values, at least six) the joint command q
+// whose calibrated tool frame (as [`cbd_evaluate_pose`]) has origin `position` (3 values) and
+// rotation `rotation` (9 values, row-major), by the runtime's fixed number of damped Gauss–Newton
+// steps on the 6-D pose error from the pose form of the inverse flows (`seed`, `n_joints` values,
+// choosing the nominal branch). Writes the origin's miss (model length unit) to
+// `position_residual`, the orientation's miss (radians) to `angle_residual`, and the
+// `CBD_COMPENSATE_*` bits to `flags` (`REACHED`: both within the model's tolerances). A target that
+// is not reached is a successful call with the `REACHED` bit clear.
+//
+// Returns `CBD_OK`, `CBD_ERR_NULL_POINTER`, `CBD_ERR_BAD_HANDLE`, `CBD_ERR_QUERY_DIMENSION`,
+// `CBD_ERR_NON_FINITE_QUERY` (also for a non-finite target), `CBD_ERR_TOO_FEW_JOINTS`,
+// `CBD_ERR_ORIENTATION_UNDETERMINED`, `CBD_ERR_INVALID_ROTATION` or an evaluation's error.
+//
+// # Safety
+// `calibrator` is a handle from `cbd_load`; `position` points to 3 and `rotation` to 9 readable
+// values, `seed` to `n_joints` readable values, `command` to `n_joints` writable values; the
+// residuals and `flags` are NULL or writable. One handle per thread.
+CbdStatus cbd_compensate_pose(CbdCalibrator *calibrator,
+                              const double *position,
+                              const double *rotation,
+                              const double *seed,
+                              double *command,
+                              size_t n_joints,
+                              double *position_residual,
+                              double *angle_residual,
+                              uint32_t *flags);
 
 // Compensation (issue 15): writes to `command` (`n_joints` values) the joint command q with
 // k1(q) = `target` (`task_dim` values), by the runtime's fixed number of damped minimum-norm

@@ -93,6 +93,10 @@ pub enum CbdStatus {
     CBD_ERR_TOOL_POINT = 18,
     /// The tool frame's orientation is undetermined: fewer than 3 tool points, or all on one line.
     CBD_ERR_ORIENTATION_UNDETERMINED = 19,
+    /// A pose target on an arm with fewer than six joints.
+    CBD_ERR_TOO_FEW_JOINTS = 20,
+    /// A target rotation that is not a rotation (not orthonormal within 1e-6, or a reflection).
+    CBD_ERR_INVALID_ROTATION = 21,
 }
 
 use CbdStatus::*;
@@ -124,6 +128,8 @@ impl From<Error> for CbdStatus {
             Error::Internal => CBD_ERR_INTERNAL,
             Error::ToolPoint { .. } => CBD_ERR_TOOL_POINT,
             Error::OrientationUndetermined => CBD_ERR_ORIENTATION_UNDETERMINED,
+            Error::TooFewJoints { .. } => CBD_ERR_TOO_FEW_JOINTS,
+            Error::InvalidRotation => CBD_ERR_INVALID_ROTATION,
         }
     }
 }
@@ -311,6 +317,219 @@ pub unsafe extern "C" fn cbd_evaluate(
     CBD_OK
 }
 
+/// Tool points of the loaded model (measured points per pose, 1 for a model that names none), 0 for
+/// NULL or a handle that is not loaded. `tool_point` of [`cbd_evaluate_point`] is below it.
+///
+/// # Safety
+/// `calibrator` is NULL or a pointer into storage passed to `cbd_load`.
+#[no_mangle]
+pub unsafe extern "C" fn cbd_tool_point_count(calibrator: *const CbdCalibrator) -> usize {
+    loaded(calibrator).map_or(0, |h| h.cal.model().nominal.tool_point_count())
+}
+
+/// As [`cbd_evaluate`], for tool point `tool_point` (below [`cbd_tool_point_count`]): its calibrated
+/// position and exact Jacobian. `tool_point` 0 is `cbd_evaluate`, bit for bit.
+///
+/// Returns `cbd_evaluate`'s statuses and `CBD_ERR_TOOL_POINT`.
+///
+/// # Safety
+/// As [`cbd_evaluate`].
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn cbd_evaluate_point(
+    calibrator: *mut CbdCalibrator,
+    q: *const f64,
+    n_joints: usize,
+    tool_point: usize,
+    position: *mut f64,
+    position_len: usize,
+    jacobian: *mut f64,
+    jacobian_len: usize,
+    support: *mut f64,
+) -> CbdStatus {
+    let handle = match loaded(calibrator) {
+        Ok(_) => &mut *calibrator,
+        Err(e) => return e,
+    };
+    if q.is_null() || position.is_null() || jacobian.is_null() {
+        return CBD_ERR_NULL_POINTER;
+    }
+    let (n, m) = (handle.cal.model().n_joints(), handle.cal.model().task_dim());
+    if n_joints != n {
+        return CBD_ERR_QUERY_DIMENSION;
+    }
+    if position_len < m || jacobian_len < m * n {
+        return CBD_ERR_BUFFER_TOO_SMALL;
+    }
+    let q = core::slice::from_raw_parts(q, n);
+    let e = match handle.cal.evaluate_point(q, tool_point) {
+        Ok(e) => e,
+        Err(e) => return e.into(),
+    };
+    let position = core::slice::from_raw_parts_mut(position, m);
+    for (dst, src) in position.iter_mut().zip(e.position().iter()) {
+        *dst = *src;
+    }
+    let jacobian = core::slice::from_raw_parts_mut(jacobian, m * n);
+    let jac = e.jacobian();
+    for (a, row) in jacobian.chunks_exact_mut(n.max(1)).enumerate() {
+        for (d, dst) in row.iter_mut().enumerate() {
+            *dst = jac.get((a, d)).copied().unwrap_or(f64::NAN);
+        }
+    }
+    if let Some(s) = support.as_mut() {
+        *s = e.support();
+    }
+    CBD_OK
+}
+
+/// The calibrated tool frame at `q` (a model with at least three tool points, not all on one
+/// line): writes its rotation (9 values, row-major, task frame) into `rotation`, its origin
+/// (3 values: where the frame puts the tool-frame point 0) into `origin`, and its 6 × `n_joints`
+/// Jacobian (row-major; rows 0–2 the origin's linear velocity, rows 3–5 the angular velocity ω,
+/// dR = [ω]× R) into `jacobian`. If `points` is not NULL, also every tool point's calibrated
+/// position (3 × `cbd_tool_point_count` values, point after point; `points_len` values writable);
+/// if `fit_residual` is not NULL, the RMS distance of the calibrated points from the fitted rigid frame.
+///
+/// On an error nothing is written. Returns `CBD_OK`, `CBD_ERR_NULL_POINTER`, `CBD_ERR_BAD_HANDLE`,
+/// `CBD_ERR_QUERY_DIMENSION`, `CBD_ERR_BUFFER_TOO_SMALL`, `CBD_ERR_NON_FINITE_QUERY`,
+/// `CBD_ERR_ORIENTATION_UNDETERMINED` or `CBD_ERR_NON_FINITE_RESULT`.
+///
+/// # Safety
+/// `calibrator` is a handle from `cbd_load`; `q` points to `n_joints` readable values, `rotation`
+/// to 9 and `origin` to 3 writable values, `jacobian` to `jacobian_len` writable values, `points`
+/// is NULL or points to `points_len` writable values, `fit_residual` is NULL or writable. One
+/// handle per thread.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn cbd_evaluate_pose(
+    calibrator: *mut CbdCalibrator,
+    q: *const f64,
+    n_joints: usize,
+    rotation: *mut f64,
+    origin: *mut f64,
+    jacobian: *mut f64,
+    jacobian_len: usize,
+    points: *mut f64,
+    points_len: usize,
+    fit_residual: *mut f64,
+) -> CbdStatus {
+    let handle = match loaded(calibrator) {
+        Ok(_) => &mut *calibrator,
+        Err(e) => return e,
+    };
+    if q.is_null() || rotation.is_null() || origin.is_null() || jacobian.is_null() {
+        return CBD_ERR_NULL_POINTER;
+    }
+    let n = handle.cal.model().n_joints();
+    let count = handle.cal.model().nominal.tool_point_count();
+    if n_joints != n {
+        return CBD_ERR_QUERY_DIMENSION;
+    }
+    if jacobian_len < 6 * n || (!points.is_null() && points_len < 3 * count) {
+        return CBD_ERR_BUFFER_TOO_SMALL;
+    }
+    let q = core::slice::from_raw_parts(q, n);
+    let pose = match handle.cal.evaluate_pose(q) {
+        Ok(p) => p,
+        Err(e) => return e.into(),
+    };
+    let rotation = core::slice::from_raw_parts_mut(rotation, 9);
+    for (dst, src) in rotation.iter_mut().zip(pose.rotation().iter().flatten()) {
+        *dst = *src;
+    }
+    core::slice::from_raw_parts_mut(origin, 3).copy_from_slice(&pose.origin());
+    let jacobian = core::slice::from_raw_parts_mut(jacobian, 6 * n);
+    let jac = pose.jacobian();
+    for (a, row) in jacobian.chunks_exact_mut(n.max(1)).enumerate() {
+        for (d, dst) in row.iter_mut().enumerate() {
+            *dst = jac.get((a, d)).copied().unwrap_or(f64::NAN);
+        }
+    }
+    if !points.is_null() {
+        let points = core::slice::from_raw_parts_mut(points, 3 * count);
+        for (j, dst) in points.chunks_exact_mut(3).enumerate() {
+            let Some(e) = pose.point(j) else { return CBD_ERR_INTERNAL };
+            for (d, v) in dst.iter_mut().zip(e.position().iter()) {
+                *d = *v;
+            }
+        }
+    }
+    if let Some(r) = fit_residual.as_mut() {
+        *r = pose.fit_residual();
+    }
+    CBD_OK
+}
+
+/// Pose compensation: writes to `command` (`n_joints` values, at least six) the joint command q
+/// whose calibrated tool frame (as [`cbd_evaluate_pose`]) has origin `position` (3 values) and
+/// rotation `rotation` (9 values, row-major), by the runtime's fixed number of damped Gauss–Newton
+/// steps on the 6-D pose error from the pose form of the inverse flows (`seed`, `n_joints` values,
+/// choosing the nominal branch). Writes the origin's miss (model length unit) to
+/// `position_residual`, the orientation's miss (radians) to `angle_residual`, and the
+/// `CBD_COMPENSATE_*` bits to `flags` (`REACHED`: both within the model's tolerances). A target that
+/// is not reached is a successful call with the `REACHED` bit clear.
+///
+/// Returns `CBD_OK`, `CBD_ERR_NULL_POINTER`, `CBD_ERR_BAD_HANDLE`, `CBD_ERR_QUERY_DIMENSION`,
+/// `CBD_ERR_NON_FINITE_QUERY` (also for a non-finite target), `CBD_ERR_TOO_FEW_JOINTS`,
+/// `CBD_ERR_ORIENTATION_UNDETERMINED`, `CBD_ERR_INVALID_ROTATION` or an evaluation's error.
+///
+/// # Safety
+/// `calibrator` is a handle from `cbd_load`; `position` points to 3 and `rotation` to 9 readable
+/// values, `seed` to `n_joints` readable values, `command` to `n_joints` writable values; the
+/// residuals and `flags` are NULL or writable. One handle per thread.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn cbd_compensate_pose(
+    calibrator: *mut CbdCalibrator,
+    position: *const f64,
+    rotation: *const f64,
+    seed: *const f64,
+    command: *mut f64,
+    n_joints: usize,
+    position_residual: *mut f64,
+    angle_residual: *mut f64,
+    flags: *mut u32,
+) -> CbdStatus {
+    let handle = match loaded(calibrator) {
+        Ok(_) => &mut *calibrator,
+        Err(e) => return e,
+    };
+    if position.is_null() || rotation.is_null() || seed.is_null() || command.is_null() {
+        return CBD_ERR_NULL_POINTER;
+    }
+    let n = handle.cal.model().n_joints();
+    if n_joints != n {
+        return CBD_ERR_QUERY_DIMENSION;
+    }
+    let position = core::slice::from_raw_parts(position, 3);
+    let r = core::slice::from_raw_parts(rotation, 9);
+    let mut rows = [[0.0; 3]; 3];
+    for (dst, src) in rows.iter_mut().flatten().zip(r.iter()) {
+        *dst = *src;
+    }
+    let seed = core::slice::from_raw_parts(seed, n);
+    let mut out = [0.0; cbd_runtime::protocol::MAX_JOINTS];
+    let Some(out) = out.get_mut(..n) else { return CBD_ERR_INTERNAL };
+    let c = match handle.cal.compensate_pose(position, &rows, seed, out) {
+        Ok(c) => c,
+        Err(e) => return e.into(),
+    };
+    core::slice::from_raw_parts_mut(command, n).copy_from_slice(out);
+    if let Some(r) = position_residual.as_mut() {
+        *r = c.position_residual;
+    }
+    if let Some(r) = angle_residual.as_mut() {
+        *r = c.angle_residual;
+    }
+    if let Some(f) = flags.as_mut() {
+        *f = u32::from(c.reached) * CBD_COMPENSATE_REACHED
+            + u32::from(c.singular) * CBD_COMPENSATE_SINGULAR
+            + u32::from(c.extrapolating) * CBD_COMPENSATE_EXTRAPOLATING;
+    }
+    CBD_OK
+}
+
 /// `flags` bit of [`cbd_compensate`]: the residual is within the tolerance.
 pub const CBD_COMPENSATE_REACHED: u32 = 1;
 /// `flags` bit of [`cbd_compensate`]: the Jacobian at the command is nearly singular.
@@ -432,6 +651,8 @@ pub extern "C" fn cbd_status_name(status: i32) -> *const c_char {
         17 => "CBD_ERR_INTERNAL\0",
         18 => "CBD_ERR_TOOL_POINT\0",
         19 => "CBD_ERR_ORIENTATION_UNDETERMINED\0",
+        20 => "CBD_ERR_TOO_FEW_JOINTS\0",
+        21 => "CBD_ERR_INVALID_ROTATION\0",
         _ => "CBD_UNKNOWN_STATUS\0",
     };
     name.as_ptr().cast()

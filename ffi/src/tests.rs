@@ -154,7 +154,15 @@ fn versions_and_names() {
     assert_eq!(version.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
     assert_eq!(cbd_format_version(), FORMAT_VERSION);
     assert_eq!(cbd_oldest_format_version(), OLDEST_FORMAT_VERSION);
-    for (status, name) in [(CBD_OK, "CBD_OK"), (CBD_ERR_CHECKSUM, "CBD_ERR_CHECKSUM"), (CBD_ERR_INTERNAL, "CBD_ERR_INTERNAL")] {
+    for (status, name) in [
+        (CBD_OK, "CBD_OK"),
+        (CBD_ERR_CHECKSUM, "CBD_ERR_CHECKSUM"),
+        (CBD_ERR_INTERNAL, "CBD_ERR_INTERNAL"),
+        (CBD_ERR_TOOL_POINT, "CBD_ERR_TOOL_POINT"),
+        (CBD_ERR_ORIENTATION_UNDETERMINED, "CBD_ERR_ORIENTATION_UNDETERMINED"),
+        (CBD_ERR_TOO_FEW_JOINTS, "CBD_ERR_TOO_FEW_JOINTS"),
+        (CBD_ERR_INVALID_ROTATION, "CBD_ERR_INVALID_ROTATION"),
+    ] {
         assert_eq!(unsafe { core::ffi::CStr::from_ptr(cbd_status_name(status as i32)) }.to_str().unwrap(), name);
     }
     assert_eq!(unsafe { core::ffi::CStr::from_ptr(cbd_status_name(-1)) }.to_str().unwrap(), "CBD_UNKNOWN_STATUS");
@@ -191,4 +199,116 @@ fn compensate_gives_the_runtimes_bits_and_its_errors() {
         cbd_compensate(h, core::ptr::null(), 2, seed.as_ptr(), command.as_mut_ptr(), 2, core::ptr::null_mut(), core::ptr::null_mut())
     };
     assert_eq!(s, CBD_ERR_NULL_POINTER);
+}
+
+#[test]
+fn tool_points_and_the_pose_give_the_runtimes_bits() {
+    let blob = blobs::six_tool_points_blob();
+    let (mut storage, bytes) = storage_for(&blob);
+    let (s, h) = load(&blob, &mut storage, bytes);
+    assert_eq!(s, CBD_OK);
+    let model = decode(&blob).unwrap();
+    let mut reals = vec![0.0 as Real; storage_len_for(&model)];
+    let mut cal = Calibrator::load(&blob, &mut reals).unwrap();
+    assert_eq!(unsafe { cbd_tool_point_count(h) }, 3);
+    assert_eq!(unsafe { cbd_tool_point_count(core::ptr::null()) }, 0);
+    let null: *mut f64 = core::ptr::null_mut();
+    let q = [0.3, -1.1, 1.4, 0.2, -0.7, 2.1];
+    let (mut pos, mut jac, mut support) = ([0.0; 3], [0.0; 18], 0.0);
+    for j in 0..3 {
+        let s = unsafe { cbd_evaluate_point(h, q.as_ptr(), 6, j, pos.as_mut_ptr(), 3, jac.as_mut_ptr(), 18, &mut support) };
+        assert_eq!(s, CBD_OK);
+        let e = cal.evaluate_point(&q, j).unwrap();
+        for a in 0..3 {
+            assert_eq!(pos[a].to_bits(), e.position()[a].to_bits());
+            for d in 0..6 {
+                assert_eq!(jac[a * 6 + d].to_bits(), e.jacobian()[(a, d)].to_bits());
+            }
+        }
+    }
+    let s = unsafe { cbd_evaluate_point(h, q.as_ptr(), 6, 3, pos.as_mut_ptr(), 3, jac.as_mut_ptr(), 18, null) };
+    assert_eq!(s, CBD_ERR_TOOL_POINT);
+    let (mut rotation, mut origin, mut pose_jac, mut points, mut residual) = ([0.0; 9], [0.0; 3], [0.0; 36], [0.0; 9], 0.0);
+    let s = unsafe {
+        cbd_evaluate_pose(
+            h,
+            q.as_ptr(),
+            6,
+            rotation.as_mut_ptr(),
+            origin.as_mut_ptr(),
+            pose_jac.as_mut_ptr(),
+            36,
+            points.as_mut_ptr(),
+            9,
+            &mut residual,
+        )
+    };
+    assert_eq!(s, CBD_OK);
+    let pose = cal.evaluate_pose(&q).unwrap();
+    assert_eq!(rotation.map(f64::to_bits).to_vec(), pose.rotation().iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>());
+    assert_eq!(origin.map(f64::to_bits), pose.origin().map(f64::to_bits));
+    for a in 0..6 {
+        for d in 0..6 {
+            assert_eq!(pose_jac[a * 6 + d].to_bits(), pose.jacobian()[(a, d)].to_bits());
+        }
+    }
+    for j in 0..3 {
+        for a in 0..3 {
+            assert_eq!(points[3 * j + a].to_bits(), pose.point(j).unwrap().position()[a].to_bits());
+        }
+    }
+    assert_eq!(residual.to_bits(), pose.fit_residual().to_bits());
+    let s = unsafe {
+        cbd_evaluate_pose(h, q.as_ptr(), 6, rotation.as_mut_ptr(), origin.as_mut_ptr(), pose_jac.as_mut_ptr(), 35, null, 0, null)
+    };
+    assert_eq!(s, CBD_ERR_BUFFER_TOO_SMALL);
+    let s = unsafe {
+        cbd_evaluate_pose(
+            h,
+            q.as_ptr(),
+            6,
+            rotation.as_mut_ptr(),
+            origin.as_mut_ptr(),
+            pose_jac.as_mut_ptr(),
+            36,
+            points.as_mut_ptr(),
+            8,
+            null,
+        )
+    };
+    assert_eq!(s, CBD_ERR_BUFFER_TOO_SMALL);
+    // Pose compensation to the pose just evaluated, from a nearby seed.
+    let seed = [0.35, -1.0, 1.3, 0.25, -0.6, 2.0];
+    let (mut command, mut pr, mut ar, mut flags) = ([0.0; 6], 0.0, 0.0, 0u32);
+    let s = unsafe {
+        cbd_compensate_pose(h, origin.as_ptr(), rotation.as_ptr(), seed.as_ptr(), command.as_mut_ptr(), 6, &mut pr, &mut ar, &mut flags)
+    };
+    assert_eq!(s, CBD_OK);
+    let rows = [[rotation[0], rotation[1], rotation[2]], [rotation[3], rotation[4], rotation[5]], [rotation[6], rotation[7], rotation[8]]];
+    let mut expected = [0.0; 6];
+    let c = cal.compensate_pose(&origin, &rows, &seed, &mut expected).unwrap();
+    assert_eq!(command.map(f64::to_bits), expected.map(f64::to_bits));
+    assert_eq!((pr.to_bits(), ar.to_bits()), (c.position_residual.to_bits(), c.angle_residual.to_bits()));
+    assert!(c.reached && flags & CBD_COMPENSATE_REACHED != 0, "{c:?}");
+    let mirror = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0];
+    let s = unsafe {
+        cbd_compensate_pose(h, origin.as_ptr(), mirror.as_ptr(), seed.as_ptr(), command.as_mut_ptr(), 6, null, null, core::ptr::null_mut())
+    };
+    assert_eq!(s, CBD_ERR_INVALID_ROTATION);
+    // A model with one tool point: no orientation.
+    let blob = blobs::six_joint_blob();
+    let (mut storage, bytes) = storage_for(&blob);
+    let (_, h) = load(&blob, &mut storage, bytes);
+    let s = unsafe {
+        cbd_evaluate_pose(h, q.as_ptr(), 6, rotation.as_mut_ptr(), origin.as_mut_ptr(), pose_jac.as_mut_ptr(), 36, null, 0, null)
+    };
+    assert_eq!(s, CBD_ERR_ORIENTATION_UNDETERMINED);
+    // A planar arm: too few joints for a pose.
+    let blob = blobs::rr_reference_blob();
+    let (mut storage, bytes) = storage_for(&blob);
+    let (_, h) = load(&blob, &mut storage, bytes);
+    let s = unsafe {
+        cbd_compensate_pose(h, origin.as_ptr(), mirror.as_ptr(), seed.as_ptr(), command.as_mut_ptr(), 2, null, null, core::ptr::null_mut())
+    };
+    assert_eq!(s, CBD_ERR_TOO_FEW_JOINTS);
 }

@@ -130,6 +130,43 @@ pub fn chain10_blob() -> Vec<u8> {
     dh_chain_blob(chain, [0.0, 0.0, 600.0], 800.0, integrator, 0x000c_4a10)
 }
 
+/// The UR5 (mm) with three tool points 100 mm apart (format 6, issue 26 item 1): 21 poses, each
+/// configuration repeated for its three control points, small pseudo-random momenta, Heun × 5.
+/// Used by the C library's tests; not yet one of the firmware check's blobs.
+#[allow(dead_code)]
+pub fn six_tool_points_blob() -> Vec<u8> {
+    const POSES: usize = 21;
+    let mut chain = cbd_protocol::ur5::chain();
+    chain.tool_points = heapless::Vec::from_slice(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [0.0, 100.0, 0.0]]).expect("3 ≤ MAX_TOOL_POINTS");
+    let mut rng = Lcg(0x0007_0013);
+    let mut x = Vec::new();
+    for _ in 0..POSES {
+        let q: Vec<f64> = (0..6).map(|_| PI * rng.symmetric()).collect();
+        for _ in 0..3 {
+            x.extend_from_slice(&q);
+        }
+    }
+    let p0: Vec<f64> = (0..POSES * 3 * 3).map(|_| 1e-3 * rng.symmetric()).collect();
+    let (pb, mb) = (f64_le_bytes(&x), f64_le_bytes(&p0));
+    let model = Model {
+        nominal: NominalModel::DhChain(chain),
+        normalisation: Normalisation { task_offset: [0.0, 0.0, 400.0], task_scale: 500.0 },
+        joint_kernel: JointKernel {
+            gamma: 1.0,
+            axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 1.0 }; 6]).expect("6 axes"),
+        },
+        task_kernel: TaskKernel { width: 1.0 },
+        integrator: Integrator { method: IntegratorMethod::Heun, steps: 5 },
+        momentum_law: MomentumLaw::Hamiltonian,
+        sigma: 1.0,
+        n_points: (POSES * 3) as u32,
+        points: F64Slice::from_le_bytes(&pb),
+        momenta: F64Slice::from_le_bytes(&mb),
+        expansion: None,
+    };
+    encode_to_vec(&model).expect("encode the tool-points blob")
+}
+
 /// A kernel-form blob on `chain`: 64 configurations uniform on the torus, momenta ~1e-3, periodic
 /// joint kernel (b = 1 on every axis), the trainer's default momentum law.
 fn dh_chain_blob(chain: DhChain, task_offset: [f64; 3], task_scale: f64, integrator: Integrator, seed: u32) -> Vec<u8> {

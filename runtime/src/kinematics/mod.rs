@@ -10,6 +10,7 @@ pub mod gravity;
 pub mod rigid;
 pub mod rigid_derivatives;
 pub mod spatial;
+pub mod tool_frame;
 pub mod tool_point;
 
 use cbd_protocol::NominalModel;

@@ -3,8 +3,9 @@
 //! with the tool translation t + R p_j (R, t the `tool` transform) — every existing kinematics path
 //! (rigid chain, effects, Hessians) evaluates it unchanged.
 
+use crate::kinematics::tool_frame::{fit_frame, FrameFit, FrameVelocity};
 use crate::kinematics::{forward_kinematics, Kinematics};
-use cbd_protocol::{NominalModel, MAX_JOINTS, MAX_TASK_DIM};
+use cbd_protocol::{NominalModel, MAX_JOINTS, MAX_TASK_DIM, MAX_TOOL_POINTS};
 
 /// `model` with its tool frame's origin at tool point `j` (no tool points left), or `None` when
 /// `j` ≥ [`NominalModel::tool_point_count`].
@@ -39,6 +40,40 @@ pub fn with_tool_point<R>(model: &NominalModel, j: usize, f: impl FnOnce(&Nomina
 pub fn forward_kinematics_at(model: &NominalModel, x: &[f64], j: usize) -> Kinematics {
     with_tool_point(model, j, |m| forward_kinematics(m, x))
         .unwrap_or(Kinematics { position: [f64::NAN; MAX_TASK_DIM], jacobian: [[f64::NAN; MAX_JOINTS]; MAX_TASK_DIM] })
+}
+
+/// The nominal tool frame at joints `x`: the least-squares frame of the nominal tool points k0_j(x)
+/// ([`crate::kinematics::tool_frame::fit_frame`]; for a rigid chain exactly the DH walk's tool frame)
+/// and its 6 × n Jacobian (rows: the origin's linear velocity, the angular velocity). `None` when
+/// the tool points do not determine an orientation or a value is not finite.
+pub fn nominal_tool_frame(model: &NominalModel, x: &[f64]) -> Option<(FrameFit, [[f64; MAX_JOINTS]; 6])> {
+    let count = model.tool_point_count();
+    let mut nominal = [[0.0; 3]; MAX_TOOL_POINTS];
+    let mut points = [[0.0; 3]; MAX_TOOL_POINTS];
+    let mut jacobians = [[[0.0; MAX_JOINTS]; MAX_TASK_DIM]; MAX_TOOL_POINTS];
+    for (j, ((p, y), jac)) in nominal.iter_mut().zip(points.iter_mut()).zip(jacobians.iter_mut()).enumerate().take(count) {
+        *p = model.tool_point(j)?;
+        let k = forward_kinematics_at(model, x, j);
+        *y = k.position;
+        *jac = k.jacobian;
+    }
+    let (nominal, points) = (nominal.get(..count)?, points.get(..count)?);
+    let fit = fit_frame(nominal, points)?;
+    let velocity = FrameVelocity::new(&fit, nominal, points)?;
+    let mut out = [[0.0; MAX_JOINTS]; 6];
+    for d in 0..x.len().min(MAX_JOINTS) {
+        let mut column = [[0.0; 3]; MAX_TOOL_POINTS];
+        for (dy, jac) in column.iter_mut().zip(jacobians.iter()).take(count) {
+            for (v, row) in dy.iter_mut().zip(jac.iter()) {
+                *v = row.get(d).copied().unwrap_or(0.0);
+            }
+        }
+        let (dt, omega) = velocity.apply(column.get(..count)?)?;
+        for (row, v) in out.iter_mut().zip(dt.iter().chain(omega.iter())) {
+            *row.get_mut(d)? = *v;
+        }
+    }
+    out.iter().flatten().all(|v| v.is_finite()).then_some((fit, out))
 }
 
 #[cfg(test)]
