@@ -221,8 +221,13 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
                 }
             }
         }
-        for point in point_values.chunks_exact(m.max(1)).take(points) {
-            data.push(&q, if m == 0 { &[] } else { point });
+        if m == 0 {
+            // A file of joints alone (seeds, poses to measure).
+            data.push(&q, &[]);
+            lines.push(line);
+        }
+        for point in point_values.chunks_exact(m.max(1)).take(if m == 0 { 0 } else { points }) {
+            data.push(&q, point);
             lines.push(line);
         }
     }
