@@ -296,7 +296,10 @@ impl Calibrator<'_> {
     ) -> Option<SVector<f64, NJ>> {
         let mut dq = damped_min_norm_direction(jacobian, r, m, scale)?;
         if let Some((sigma, u, v)) = smallest_singular_pair(jacobian, m) {
-            let curvature = nominal_curvature(&self.model.nominal, q, &u, &v, m, n);
+            // Of tool point 0, the point `evaluate` compensates (the model itself without tool points).
+            let curvature =
+                crate::kinematics::with_tool_point(&self.model.nominal, 0, |nominal| nominal_curvature(nominal, q, &u, &v, m, n))
+                    .unwrap_or(f64::NAN);
             let rho = u.dot(r);
             if let (true, Some(t)) = (curvature.is_finite(), fold_root(sigma, curvature, rho)) {
                 dq += v * (t - v.dot(&dq));

@@ -144,11 +144,11 @@ fn every_bit_flip_is_rejected(blob: &[u8], stride: usize) {
     assert_eq!(damaged, blob);
     // Every class of field was exercised.
     assert_eq!(counts["BadMagic"], 32);
-    // 16 version bits: a flip that lands on a format this build reads (format 4's bit 0 gives 5) is
-    // caught by the checksum (the CRC covers the header); the others are refused as versions.
+    // 16 version bits: a flip that lands on a format this build reads (format 4's bit 0 gives 5, its
+    // bit 1 gives 6) is caught by the checksum (the CRC covers the header); the others are refused as versions.
     let own = u16::from_le_bytes([blob[4], blob[5]]);
     let readable = (0..16).filter(|b| (cbd_protocol::OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&(own ^ (1 << b)))).count();
-    assert_eq!((own, readable), (FORMAT_WITHOUT_EXPANSION, 1));
+    assert_eq!((own, readable), (FORMAT_WITHOUT_EXPANSION, 2));
     assert_eq!(counts["UnsupportedVersion"], 16 - readable);
     assert_eq!(counts["Truncated"] + counts["TrailingBytes"], 32);
     assert!(counts["Truncated"] > 0 && counts["TrailingBytes"] > 0, "{counts:?}");

@@ -21,7 +21,8 @@ pub fn initial_state(model: &Model<'_>, state: &mut [Real]) -> Result<(), Error>
     let m_p = model.nominal.tool_point_count();
     for j in 0..m_p {
         with_tool_point(&model.nominal, j, |nominal| {
-            for (i, s) in state.chunks_exact_mut(dims.state_len()).enumerate().skip(j).step_by(m_p) {
+            // Control points j, j + m_p, …: i mod m_p = j (checked_rem: no division-by-zero path).
+            for (i, s) in state.chunks_exact_mut(dims.state_len().max(1)).enumerate().filter(|(i, _)| i.checked_rem(m_p) == Some(j)) {
                 initial_point(model, nominal, i, s)?;
             }
             Ok::<(), Error>(())

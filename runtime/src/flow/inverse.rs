@@ -249,8 +249,12 @@ impl Calibrator<'_> {
         let mut nominal = [0.0; NJ];
         let nominal = nominal.get_mut(..n).ok_or(Error::Internal)?;
         let scale = self.model.normalisation.task_scale;
-        crate::inverse_kinematics::nominal_position(&self.model.nominal, pulled, seed, nominal, nominal_iterations, scale)
-            .ok_or(Error::NonFiniteResult)?;
+        // k0⁻¹ of tool point 0, the point `evaluate` gives (the model itself without tool points).
+        crate::kinematics::with_tool_point(&self.model.nominal, 0, |k0| {
+            crate::inverse_kinematics::nominal_position(k0, pulled, seed, nominal, nominal_iterations, scale)
+        })
+        .flatten()
+        .ok_or(Error::NonFiniteResult)?;
         self.joint_flow(nominal, Direction::Forward, out)
     }
 }
