@@ -75,7 +75,7 @@ fn refine_from(per_axis: usize, factors: &[f64]) -> (f64, Vec<(f64, Theta, usize
     let (h, s) = (&e.hyperparameters, norm.task_scale);
     let chosen = -e.log_evidence - (data.len() * 2) as f64 * s.ln();
     let b: Vec<f64> = h.joint_axes.iter().map(|a| if let cbd_protocol::JointKernelAxis::Periodic { b } = a { *b } else { 0.0 }).collect();
-    let rows = crate::evidence::evidence_rows(data.len(), 2, 1200);
+    let rows = crate::evidence::evidence_rows(&data, 1200);
     let table = PairTable::new(&nominal, &data.subset(&rows), &norm);
     let (lower, upper) = DataScales::of(&table).bounds(&table);
     let found = factors
