@@ -23,6 +23,8 @@ fn ur5_spec(flags: u8) -> ColumnSpec {
         repeat_tolerance: None,
         joint_map: None,
         planar_frame: None,
+        tool_points: Vec::new(),
+        orientation_columns: None,
         joint_kinds: kinds,
         angle_unit: if flags & 2 != 0 { AngleUnit::Rad } else { AngleUnit::Deg },
         length_unit: if flags & 4 != 0 { LengthUnit::M } else { LengthUnit::Mm },

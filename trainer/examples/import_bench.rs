@@ -28,6 +28,8 @@ fn ur5_spec() -> ColumnSpec {
         repeat_tolerance: None,
         joint_map: None,
         planar_frame: None,
+        tool_points: Vec::new(),
+        orientation_columns: None,
     }
 }
 

@@ -58,8 +58,10 @@ pub fn evaluate_blob(blob: &[u8], joints: &[f64]) -> Result<Vec<f64>> {
         return Err(Error::InvalidInput(format!("configurations have {} values, not a multiple of {n} joints", joints.len())));
     }
     let mut out = Vec::with_capacity(joints.len() / n * m);
+    // Row r of data with several tool points is tool point r mod m_p (pose-major rows).
+    let points = cal.model().nominal.tool_point_count();
     for (row, q) in joints.chunks_exact(n).enumerate() {
-        let e = cal.evaluate(q).map_err(|error| Error::Evaluate { row, error })?;
+        let e = cal.evaluate_point(q, row % points).map_err(|error| Error::Evaluate { row, error })?;
         out.extend(e.position().iter());
     }
     Ok(out)

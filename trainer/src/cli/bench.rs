@@ -349,6 +349,15 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     let evidence_threads: Vec<usize> = args.evidence_sizes.iter().map(|&n| check_size(n, "--evidence-sizes")).collect::<Result<_, _>>()?;
     let budget = crate::cli::memory::kernel_form_budget(evidence_threads.iter().copied().max().unwrap_or(1));
+    // The UR5 example's files are checked before any fit, not after minutes of them.
+    if !args.no_ur5 {
+        for file in ["ur5.toml", "train.csv", "test.csv"] {
+            let path = args.ur5.join(file);
+            if !path.is_file() {
+                return Err(Error::Path { path, reason: "the UR5 example (--ur5 DIR) needs this file; --no-ur5 skips it".into() });
+            }
+        }
+    }
     let exe = std::env::current_exe().map_err(|e| Error::stage("bench", e))?;
     let mut report = BenchReport {
         machine: machine(),

@@ -49,20 +49,96 @@ pub struct CompensateArgs {
 const NOMINAL_IK_ITERATIONS: usize = 8;
 
 /// The columns of a file of targets: `spec`'s positions alone, at least one row.
+/// With at least 3 tool points the targets are poses (their points, or position + orientation
+/// columns, read as the points: `pose_targets`).
 fn targets_spec(spec: &ColumnSpec) -> ColumnSpec {
+    let poses = spec.tool_points.len() >= 3;
     ColumnSpec {
         joint_columns: Vec::new(),
         joint_kinds: Vec::new(),
         joint_limits: Vec::new(),
         min_rows: 1,
         joint_map: None,
+        tool_points: if poses { spec.tool_points.clone() } else { Vec::new() },
+        orientation_columns: if poses { spec.orientation_columns.clone() } else { None },
         ..spec.clone()
     }
 }
 
+/// Target poses (docs/DESIGN.md §12): each target row's tool points (as read: the point columns,
+/// or p + R p_j of a pose's columns) and their least-squares tool frame, the target the runtime's
+/// `Calibrator::compensate_pose` takes; with the file lines.
+fn pose_targets(path: &Path, spec: &ColumnSpec) -> Result<(Vec<crate::nominal::Frame>, Vec<u64>)> {
+    let imported = crate::data::csv_import::read_measurements(path, &targets_spec(spec))?;
+    let data = &imported.measurements;
+    let p = data.points_per_pose;
+    let mut frames = Vec::with_capacity(data.pose_count());
+    for k in 0..data.pose_count() {
+        let points: Vec<[f64; 3]> = (0..p).map(|j| std::array::from_fn(|c| data.position(k * p + j)[c])).collect();
+        let frame = crate::nominal::tool_points::tool_frame(&spec.tool_points, &points).ok_or_else(|| Error::AtLine {
+            file: path.to_path_buf(),
+            line: imported.lines[k * p],
+            message: "the target's tool points determine no frame (on a line?)".into(),
+        })?;
+        frames.push(frame);
+    }
+    Ok((frames, imported.lines.iter().step_by(p.max(1)).copied().collect()))
+}
+
+/// One pose target's command and outcome.
+pub struct PoseCommandRow {
+    pub joints: Vec<f64>,
+    pub compensation: cbd_runtime::PoseCompensation,
+}
+
+/// Compensates every target pose (model units) with `Calibrator::compensate_pose` from `seeds`
+/// (or the training configuration whose nominal tool origin is nearest the target's).
+pub fn compensate_all_poses(
+    blob: &[u8],
+    targets: &[crate::nominal::Frame],
+    seeds: Option<&[Vec<f64>]>,
+) -> std::result::Result<Vec<PoseCommandRow>, CompensateError> {
+    let model = cbd_protocol::decode(blob).map_err(|e| CompensateError::Model(e.into()))?;
+    let n = model.n_joints();
+    let hints: Vec<Vec<f64>> = match seeds {
+        Some(s) => s.to_vec(),
+        None => targets.iter().map(|t| nearest_training_configuration(&model, &t.translation())).collect(),
+    };
+    let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
+    let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| CompensateError::Model(e.into()))?;
+    crate::predict::check_calibrator(&mut cal).map_err(|e| CompensateError::Model(e.into()))?;
+    let mut out = Vec::with_capacity(targets.len());
+    for (row, (target, hint)) in targets.iter().zip(&hints).enumerate() {
+        let mut joints = vec![0.0; n];
+        let compensation = cal
+            .compensate_pose(&target.translation(), &target.rotation(), hint, &mut joints)
+            .map_err(|e| CompensateError::Row { row, message: e.to_string() })?;
+        if !joints.iter().all(|v| v.is_finite()) {
+            return Err(CompensateError::Row {
+                row,
+                message: "the compensation is not finite: the model cannot be used at this target".into(),
+            });
+        }
+        out.push(PoseCommandRow { joints, compensation });
+    }
+    Ok(out)
+}
+
+/// The flags column of a pose command.
+fn pose_flags(c: &cbd_runtime::PoseCompensation) -> String {
+    flags(&Compensation {
+        residual: c.position_residual,
+        reached: c.reached,
+        singular: c.singular,
+        extrapolating: c.extrapolating,
+        support: c.support,
+        conditioning: c.conditioning,
+    })
+}
+
 /// The columns of a file of seeds: `spec`'s joints alone (in their ranges), at least one row.
 fn seeds_spec(spec: &ColumnSpec) -> ColumnSpec {
-    ColumnSpec { position_columns: Vec::new(), min_rows: 1, ..spec.clone() }
+    ColumnSpec { position_columns: Vec::new(), min_rows: 1, tool_points: Vec::new(), orientation_columns: None, ..spec.clone() }
 }
 
 /// The rows of `path` read as measurement files are (`csv_import`: the size and line caps, the
@@ -217,6 +293,9 @@ pub fn run(args: CompensateArgs) -> Result<()> {
         )));
     }
     let length = spec.length_unit.factor_to(spec.model_length_unit);
+    if spec.tool_points.len() >= 3 {
+        return run_poses(&args, &spec, &blob, length);
+    }
     let (targets, target_lines) = read_rows(&args.targets, &targets_spec(&spec))?;
     let seeds = match &args.seeds {
         Some(path) => {
@@ -272,6 +351,66 @@ pub fn run(args: CompensateArgs) -> Result<()> {
             "rows": rows.len(), "reached": reached, "singular": singular, "extrapolating": extrapolating,
             "iterations": args.iterations, "unit": unit,
             "residual": {"mean": stats.mean, "median": stats.median, "p99": stats.p99, "max": stats.max},
+        });
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// `cbd compensate` with target poses (a model file with ≥ 3 tool points): the joint columns, then
+/// `position_residual` (length unit), `angle_residual` (degrees) and `flags`.
+fn run_poses(args: &CompensateArgs, spec: &ColumnSpec, blob: &[u8], length: f64) -> Result<()> {
+    let (targets, target_lines) = pose_targets(&args.targets, spec)?;
+    let seeds = match &args.seeds {
+        Some(path) => Some(read_rows(path, &seeds_spec(spec))?.0),
+        None => None,
+    };
+    if let Some(seeds) = &seeds {
+        if seeds.len() != targets.len() {
+            return Err(Error::InvalidInput(format!("{} seed rows for {} target poses (one seed per target)", seeds.len(), targets.len())));
+        }
+    }
+    let rows = compensate_all_poses(blob, &targets, seeds.as_deref()).map_err(|e| match e {
+        CompensateError::Model(e) => e.context(args.blob.display().to_string()),
+        CompensateError::Row { row, message } => Error::AtLine { file: args.targets.clone(), line: target_lines[row], message },
+    })?;
+    let joint_scale = joint_scales(spec);
+    let mut text = format!("{},position_residual,angle_residual_deg,flags\n", spec.joint_columns.join(","));
+    for r in &rows {
+        let mut columns: Vec<f64> = r.joints.iter().zip(&joint_scale).map(|(v, s)| v / s).collect();
+        if let Some(map) = &spec.joint_map {
+            let model = columns.clone();
+            map.to_columns(&model, &mut columns);
+        }
+        let q: Vec<String> = columns.iter().map(|v| format!("{v:?}")).collect();
+        let c = &r.compensation;
+        text.push_str(&format!(
+            "{},{:?},{:?},{}\n",
+            q.join(","),
+            c.position_residual / length,
+            c.angle_residual.to_degrees(),
+            pose_flags(c)
+        ));
+    }
+    crate::cli::write_atomically(&args.out, text.as_bytes())?;
+    let reached = rows.iter().filter(|r| r.compensation.reached).count();
+    let position =
+        crate::report::stats::ErrorStats::of_errors(&rows.iter().map(|r| r.compensation.position_residual / length).collect::<Vec<_>>());
+    let angle =
+        crate::report::stats::ErrorStats::of_errors(&rows.iter().map(|r| r.compensation.angle_residual.to_degrees()).collect::<Vec<_>>());
+    eprintln!(
+        "{} target poses: {reached} reached; position residual max {:.3e} {}, angle residual max {:.3e}°",
+        rows.len(),
+        position.max,
+        spec.length_unit.name(),
+        angle.max
+    );
+    if let Some(path) = &args.json {
+        let json = serde_json::json!({
+            "rows": rows.len(), "reached": reached, "unit": spec.length_unit.name(),
+            "position_residual": {"mean": position.mean, "median": position.median, "max": position.max},
+            "angle_residual_deg": {"mean": angle.mean, "median": angle.median, "max": angle.max},
         });
         let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;

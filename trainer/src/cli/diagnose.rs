@@ -67,6 +67,13 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
+    if nominal.tool_point_count() > 1 {
+        // The effect library's regressors evaluate the tool origin only (issue 26 item 1: not yet).
+        return Err(Error::InvalidInput(format!(
+            "the model has {} tool points; `cbd diagnose` takes one tool point for now (`cbd compare` and `cbd fit --dh-first` take several)",
+            nominal.tool_point_count()
+        )));
+    }
     type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
     let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
         let imported = crate::data::csv_import::read_measurements(path, &spec)?;

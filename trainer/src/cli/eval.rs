@@ -68,9 +68,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
     crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
     let mut predicted = Vec::with_capacity(data.positions.len());
     let mut far = 0;
+    // Row i is tool point i mod m_p (pose-major rows, docs/DESIGN.md §12).
+    let points = cal.model().nominal.tool_point_count();
+    let tool_points = cal.model().nominal.tool_points().to_vec();
     for i in 0..data.len() {
         let line = lines.get(i).copied().unwrap_or(0);
-        let e = cal.evaluate(data.joints(i)).map_err(|e| evaluation_error(e, &args.blob, &args.data, line))?;
+        let e = cal.evaluate_point(data.joints(i), i % points).map_err(|e| evaluation_error(e, &args.blob, &args.data, line))?;
         if e.is_extrapolating(args.extrapolation_threshold) {
             far += 1;
         }
@@ -83,8 +86,27 @@ pub fn run(args: EvalArgs) -> Result<()> {
     for (name, s) in [("nominal", before), ("calibrated", after)] {
         println!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
     }
+    use crate::evaluation::pose_errors::PoseErrors;
+    let poses = [("nominal", &nominal_pred), ("calibrated", &predicted)]
+        .map(|(name, p)| (name, PoseErrors::of(&tool_points, p, &data.positions, m)));
+    if poses[0].1.is_some() {
+        println!("\nper tool point (mean) and the tool frame (its origin; orientation in degrees):");
+        for (name, pose) in &poses {
+            let Some(pose) = pose else { continue };
+            let points: Vec<String> = pose.per_point.iter().enumerate().map(|(j, s)| format!("point {} {:.4e}", j + 1, s.mean)).collect();
+            let frame = match (&pose.frame_position, &pose.orientation_deg, pose.orientation_rms_deg) {
+                (Some(f), Some(o), Some(rms)) => format!("; frame {:.4e}, orientation mean {:.4e} rms {rms:.4e}", f.mean, o.mean),
+                _ => String::new(),
+            };
+            println!("{name:<12} {}{frame}", points.join(", "));
+        }
+    }
     if let Some(path) = &args.json {
-        let v = serde_json::json!({"rows": data.len(), "extrapolating": far, "nominal": before, "calibrated": after});
+        let pose_json = |k: usize| poses[k].1.as_ref().map(PoseErrors::to_json);
+        let mut v = serde_json::json!({"rows": data.len(), "extrapolating": far, "nominal": before, "calibrated": after});
+        if poses[0].1.is_some() {
+            v["pose"] = serde_json::json!({"nominal": pose_json(0), "calibrated": pose_json(1)});
+        }
         let text = serde_json::to_string_pretty(&v).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }

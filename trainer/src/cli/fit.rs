@@ -182,7 +182,7 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
 /// At most `max_rows` of `data`'s rows, evenly spaced (all of them without a limit).
 fn evenly_spaced_rows(data: crate::data::Measurements, max_rows: Option<usize>) -> crate::data::Measurements {
     match max_rows {
-        Some(k) if k < data.len() => data.subset(&crate::data::evenly_spaced_rows(data.len(), k)),
+        Some(k) if k < data.len() => data.subset(&data.evenly_spaced_pose_rows(k)),
         _ => data,
     }
 }

@@ -97,6 +97,8 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
                 repeat_tolerance: None,
                 joint_map: None,
                 planar_frame: None,
+                tool_points: Vec::new(),
+                orientation_columns: None,
             },
         )),
     }

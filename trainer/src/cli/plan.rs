@@ -106,7 +106,15 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let user_candidates = match &args.candidate_file {
         Some(path) => {
             // Read as the controller's values: units converted and limits checked, not mapped.
-            let joints_only = ColumnSpec { position_columns: Vec::new(), min_rows: 1, joint_map: None, planar_frame: None, ..spec.clone() };
+            let joints_only = ColumnSpec {
+                position_columns: Vec::new(),
+                min_rows: 1,
+                joint_map: None,
+                planar_frame: None,
+                tool_points: Vec::new(),
+                orientation_columns: None,
+                ..spec.clone()
+            };
             read_measurements(path, &joints_only)?.measurements.joints
         }
         None => Vec::new(),

@@ -44,6 +44,37 @@ pub struct SimulateArgs {
     /// --count are then ignored.
     #[arg(long)]
     pub poses: Option<PathBuf>,
+    /// Six-joint robot: measure several points on the tool, offsets in the tool frame (mm),
+    /// `x,y,z;x,y,z;…` (at most 4; e.g. `0,0,0;100,0,0;50,86.60254037844386,0`: three points 100 mm
+    /// apart). Columns x1_mm, y1_mm, z1_mm, x2_mm, …; the noise is per coordinate of every point.
+    #[arg(long = "tool-points")]
+    pub tool_points: Option<String>,
+    /// With --tool-points (at least 3): also write each pose as measured by a 6-D probe — the
+    /// least-squares tool frame of the noisy points, x_mm, y_mm, z_mm and qw, qx, qy, qz — and the
+    /// point columns as that frame's points (so both sets of columns hold the same data).
+    #[arg(long)]
+    pub pose: bool,
+}
+
+/// `--tool-points`: `x,y,z;x,y,z;…`, 1 to 4 distinct finite points.
+pub fn parse_tool_points(text: &str) -> Result<Vec<[f64; 3]>> {
+    let bad = |why: String| Error::InvalidInput(format!("--tool-points `{text}`: {why} (expected x,y,z;x,y,z;… in mm)"));
+    let mut points = Vec::new();
+    for (j, part) in text.split(';').enumerate() {
+        let v: Vec<f64> = part
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| bad(format!("point {}: {e}", j + 1)))?;
+        if v.len() != 3 || v.iter().any(|x| !(x.is_finite() && x.abs() <= MAX_MAGNITUDE)) {
+            return Err(bad(format!("point {} needs 3 finite coordinates", j + 1)));
+        }
+        points.push([v[0], v[1], v[2]]);
+    }
+    if points.len() > crate::data::MAX_TOOL_POINTS {
+        return Err(bad(format!("{} points; at most {}", points.len(), crate::data::MAX_TOOL_POINTS)));
+    }
+    Ok(points)
 }
 
 /// The joint columns `cbd simulate` writes for `robot`, read back as a file of poses.
@@ -68,6 +99,8 @@ fn poses_spec(robot: &str) -> crate::data::csv_import::ColumnSpec {
         repeat_tolerance: None,
         joint_map: None,
         planar_frame: None,
+        tool_points: Vec::new(),
+        orientation_columns: None,
     }
 }
 
@@ -101,6 +134,9 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     }
     check_simulation_memory(&args, crate::cli::memory::available_bytes())?;
     match args.robot.as_str() {
+        "rr" if args.tool_points.is_some() || args.pose => {
+            return Err(Error::InvalidInput("--tool-points and --pose are for the six-joint robot (--robot six)".into()))
+        }
         "rr" => {}
         "six" => return simulate_six(&args),
         other => return Err(Error::InvalidInput(format!("unknown robot `{other}` (expected rr or six)"))),
@@ -146,6 +182,12 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         Some(poses) => poses,
         None => random_configurations(args.count, args.seed),
     };
+    if let Some(points) = &args.tool_points {
+        return simulate_six_points(args, &robot, &joints, &parse_tool_points(points)?);
+    }
+    if args.pose {
+        return Err(Error::InvalidInput("--pose needs --tool-points (at least 3 points)".into()));
+    }
     let data = if args.effects.is_empty() {
         robot.measure(&joints, args.seed.wrapping_add(0x5eed))
     } else {
@@ -161,6 +203,75 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
     }
     crate::cli::write_atomically(&args.out, text.as_bytes())?;
     eprintln!("wrote {} measurements of the simulated six-joint arm to {}", data.len(), args.out.display());
+    Ok(())
+}
+
+/// The six-joint arm measured at several tool points: each point's noise-free position (the real
+/// chain with its tool moved to the point, `nominal::tool_points::point_chain`), then noise on every
+/// coordinate; with `--pose`, the least-squares tool frame of each pose's noisy points as well.
+fn simulate_six_points(
+    args: &SimulateArgs,
+    robot: &crate::simulate::six_joint::SixJointRobot,
+    joints: &[f64],
+    tool_points: &[[f64; 3]],
+) -> Result<()> {
+    use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
+    let p = tool_points.len();
+    if args.pose && p < 3 {
+        return Err(Error::InvalidInput(format!("--pose needs at least 3 tool points (a frame from {p} is not determined)")));
+    }
+    let mut per_point = Vec::with_capacity(p);
+    for point in tool_points {
+        let mut moved = robot.clone();
+        moved.real = point_chain(&robot.real, *point);
+        let truth: Vec<f64> = if args.effects.is_empty() {
+            joints.chunks_exact(6).flat_map(|q| moved.true_position(q)).collect()
+        } else {
+            let rigid = cbd_protocol::NominalModel::DhChain(moved.real.clone());
+            effect_arm(rigid, &args.effects)?.measure(joints, 0.0, 0).positions
+        };
+        per_point.push(truth);
+    }
+    let poses = joints.len() / 6;
+    // Pose-major: pose k's points in turn, then noise on every coordinate.
+    let mut values: Vec<f64> = (0..poses).flat_map(|k| per_point.iter().flat_map(move |t| t[3 * k..3 * k + 3].to_vec())).collect();
+    add_noise(&mut values, robot.noise_std, args.seed.wrapping_add(0x5eed));
+    let mut data = crate::data::Measurements::with_points(6, 3, p);
+    for (k, q) in joints.chunks_exact(6).enumerate() {
+        for j in 0..p {
+            data.push(q, &values[3 * (k * p + j)..3 * (k * p + j) + 3]);
+        }
+    }
+    check_readable(&data)?;
+    let mut header: Vec<String> = (1..=6).map(|k| format!("q{k}_deg")).collect();
+    header.extend((1..=p).flat_map(|j| ["x", "y", "z"].map(|c| format!("{c}{j}_mm"))));
+    if args.pose {
+        header.extend(["x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz"].map(String::from));
+    }
+    let mut text = header.join(",") + "\n";
+    for k in 0..poses {
+        let mut fields: Vec<String> = data.joints(k * p).iter().map(|v| format!("{:?}", v.to_degrees())).collect();
+        let measured: Vec<[f64; 3]> = (0..p).map(|j| std::array::from_fn(|c| data.position(k * p + j)[c])).collect();
+        if args.pose {
+            let frame = tool_frame(tool_points, &measured)
+                .ok_or_else(|| Error::InvalidInput("--tool-points on a line: no tool frame for --pose".into()))?;
+            // The point columns are the points of the pose as written (its quaternion's rotation):
+            // both column sets hold the same data, to the last bit.
+            let (origin, quaternion) = (frame.translation(), quaternion_of(&frame.rotation()));
+            let norm = quaternion.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let rotation = rotation_of_quaternion(quaternion.map(|v| v / norm));
+            for pj in tool_points {
+                fields.extend(point_of_pose(&origin, &rotation, pj).iter().map(|v| format!("{v:?}")));
+            }
+            fields.extend(origin.iter().map(|v| format!("{v:?}")));
+            fields.extend(quaternion.iter().map(|v| format!("{v:?}")));
+        } else {
+            fields.extend(measured.iter().flatten().map(|v| format!("{v:?}")));
+        }
+        text.push_str(&(fields.join(",") + "\n"));
+    }
+    crate::cli::write_atomically(&args.out, text.as_bytes())?;
+    eprintln!("wrote {poses} poses ({p} tool points each) of the simulated six-joint arm to {}", args.out.display());
     Ok(())
 }
 

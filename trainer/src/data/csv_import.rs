@@ -40,7 +40,36 @@ pub struct ColumnSpec {
     /// A `[planar]` arm's base, yaw and joint offsets: rows are read into its chain's frame
     /// (joints + offsets, positions R(−yaw)(y − base)) after the units and the joint map.
     pub planar_frame: Option<PlanarFrame>,
+    /// The model's tool points (offsets in the tool frame, model length unit): each file row is a
+    /// pose and becomes one data row per point (pose-major, `Measurements::points_per_pose`).
+    /// Empty: one point, today's rows. Without `orientation_columns`, `position_columns` holds
+    /// each point's coordinates in turn (x1, y1, z1, x2, …).
+    pub tool_points: Vec<[f64; 3]>,
+    /// A measured pose's orientation: `position_columns` is then the tool origin and the rows are
+    /// the points y_j = p + R p_j.
+    pub orientation_columns: Option<OrientationColumns>,
 }
+
+/// The orientation columns of a measured pose.
+#[derive(Debug, Clone, PartialEq)]
+pub enum OrientationColumns {
+    /// A unit quaternion (w, x, y, z).
+    Quaternion(Vec<String>),
+    /// A rotation matrix, row-major.
+    Rotation(Vec<String>),
+}
+
+impl OrientationColumns {
+    fn names(&self) -> &[String] {
+        match self {
+            OrientationColumns::Quaternion(v) | OrientationColumns::Rotation(v) => v,
+        }
+    }
+}
+
+/// Largest departure of a measured quaternion's norm from 1, or of a rotation matrix's rows from
+/// orthonormal, before it is refused as not a rotation (a few printed digits stay well inside).
+pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
 /// One full turn each way for revolute joints (beyond that no arm we know of turns, and a larger
 /// value is a unit or column mistake); no limit for prismatic joints.
@@ -141,14 +170,19 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         return Err(err.at(Some(1), None, "empty file: no header row".into()));
     }
     let row = RowReader::new(&header, spec, err)?;
-    let (n, m) = (spec.joint_columns.len(), spec.position_columns.len());
-    let mut data = Measurements::new(n, m);
+    let points = spec.tool_points.len().max(1);
+    let (n, columns) = (spec.joint_columns.len(), spec.position_columns.len());
+    // Task coordinates per data row: a pose's origin has 3, a point's columns come in turn.
+    let m = if spec.orientation_columns.is_some() { columns } else { columns / points };
+    let mut data = Measurements::with_points(n, m, points);
+    let mut point_values = vec![0.0; m * points];
     let mut lines = Vec::new();
     // Joint configuration bits → row index of its first occurrence.
     let mut seen: HashMap<Vec<u64>, usize> = HashMap::new();
     let mut repeats: Vec<(usize, usize)> = Vec::new();
     let mut record = csv::StringRecord::new();
-    let (mut c, mut q, mut y) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+    let (mut c, mut q, mut y) = (vec![0.0; n], vec![0.0; n], vec![0.0; columns]);
+    let mut rotation = [[0.0; 3]; 3];
     loop {
         let more = rdr.read_record(&mut record).map_err(|e| {
             let line = e.position().map(line_of);
@@ -165,8 +199,17 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
             return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
         row.convert(&record, line, &mut c, &mut q, &mut y)?;
+        if spec.orientation_columns.is_some() {
+            row.rotation(&record, line, &mut rotation)?;
+            // y_j = p + R p_j (the measured pose read as its tool points).
+            for (j, pj) in spec.tool_points.iter().chain(spec.tool_points.is_empty().then_some(&[0.0; 3])).enumerate() {
+                point_values[3 * j..3 * j + 3].copy_from_slice(&crate::nominal::tool_points::point_of_pose(&y, &rotation, pj));
+            }
+        } else {
+            point_values.copy_from_slice(&y);
+        }
         if let Some(frame) = &spec.planar_frame {
-            frame.move_row(&mut q, &mut y);
+            frame.move_row(&mut q, &mut point_values);
         }
         // A repeat is a configuration measured twice: a file of targets or seeds alone has none.
         if n > 0 && m > 0 {
@@ -178,11 +221,18 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
                 }
             }
         }
-        data.push(&q, &y);
-        lines.push(line);
+        if m == 0 {
+            // A file of joints alone (seeds, poses to measure).
+            data.push(&q, &[]);
+            lines.push(line);
+        }
+        for point in point_values.chunks_exact(m.max(1)).take(if m == 0 { 0 } else { points }) {
+            data.push(&q, point);
+            lines.push(line);
+        }
     }
-    if data.len() < spec.min_rows.max(1) {
-        return Err(err.at(None, None, format!("{} data rows; at least {} needed", data.len(), spec.min_rows.max(1))));
+    if data.pose_count() < spec.min_rows.max(1) {
+        return Err(err.at(None, None, format!("{} data rows; at least {} needed", data.pose_count(), spec.min_rows.max(1))));
     }
     let duplicates = check_repeats(&data, &lines, &repeats, spec, err)?;
     Ok(ImportedMeasurements { measurements: data, lines, duplicates })
@@ -239,6 +289,8 @@ struct RowReader<'a> {
     /// Record index of each joint column and each position column.
     joint_idx: Vec<usize>,
     pos_idx: Vec<usize>,
+    /// Record index of each orientation column (a measured pose).
+    orientation_idx: Vec<usize>,
     /// File unit → model unit, per joint and for lengths.
     joint_factor: Vec<f64>,
     length_factor: f64,
@@ -257,10 +309,50 @@ impl<'a> RowReader<'a> {
         };
         let joint_idx = spec.joint_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         let pos_idx = spec.position_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
+        let orientation_idx = spec.orientation_columns.iter().flat_map(|o| o.names()).map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         let rad = spec.angle_unit.radians();
         let length_factor = spec.length_unit.factor_to(spec.model_length_unit);
         let joint_factor = spec.joint_kinds.iter().map(|k| if *k == JointKind::Revolute { rad } else { length_factor }).collect();
-        Ok(RowReader { spec, err, joint_idx, pos_idx, joint_factor, length_factor })
+        Ok(RowReader { spec, err, joint_idx, pos_idx, orientation_idx, joint_factor, length_factor })
+    }
+
+    /// The measured pose's rotation at file `line`: from a quaternion (w, x, y, z) of norm 1 within
+    /// [`ROTATION_TOLERANCE`], normalised, or a rotation matrix whose rows are orthonormal within it
+    /// and whose determinant is positive.
+    fn rotation(&self, record: &csv::StringRecord, line: u64, r: &mut [[f64; 3]; 3]) -> Result<(), ImportError> {
+        let Some(orientation) = &self.spec.orientation_columns else { return Ok(()) };
+        let names = orientation.names();
+        let mut v = [0.0; 9];
+        for (k, (&idx, name)) in self.orientation_idx.iter().zip(names).enumerate() {
+            v[k] = self.raw_value(record, line, idx, name)?;
+        }
+        let refuse = |message: String| self.err.at(Some(line), Some(&names.join(",")), message);
+        match orientation {
+            OrientationColumns::Quaternion(_) => {
+                let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3]).sqrt();
+                if !((norm - 1.0).abs() <= ROTATION_TOLERANCE) {
+                    return Err(refuse(format!("the quaternion's norm is {norm:.6}; a rotation's is 1 (within {ROTATION_TOLERANCE:e})")));
+                }
+                *r = crate::nominal::tool_points::rotation_of_quaternion([v[0] / norm, v[1] / norm, v[2] / norm, v[3] / norm]);
+            }
+            OrientationColumns::Rotation(_) => {
+                *r = [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let dot: f64 = (0..3).map(|k| r[i][k] * r[j][k]).sum();
+                        if !((dot - if i == j { 1.0 } else { 0.0 }).abs() <= ROTATION_TOLERANCE) {
+                            return Err(refuse(format!("not a rotation: rows {} and {} have dot product {dot:.6}", i + 1, j + 1)));
+                        }
+                    }
+                }
+                let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+                    + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+                if det <= 0.0 {
+                    return Err(refuse(format!("not a rotation: determinant {det:.6} (a reflection)")));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The record at file `line` into `q` (model joints) and `y` (position); `c` holds the
@@ -369,8 +461,12 @@ fn check_repeats(
 ) -> Result<Vec<Duplicate>, ImportError> {
     let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * bounding_box_diagonal(data));
     let mut duplicates = Vec::new();
+    let points = data.points_per_pose.max(1);
     for &(first, row) in repeats {
-        let distance = data.position(first).iter().zip(data.position(row)).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+        // The farthest of the pose's points (a repeat of a pose repeats all of them).
+        let distance = (0..points)
+            .map(|j| data.position(first + j).iter().zip(data.position(row + j)).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
         let (line, first_line) = (lines[row], lines[first]);
         if distance > tolerance {
             return Err(err.at(
@@ -472,6 +568,8 @@ mod tests {
             repeat_tolerance: None,
             joint_map: None,
             planar_frame: None,
+            tool_points: Vec::new(),
+            orientation_columns: None,
         }
     }
 

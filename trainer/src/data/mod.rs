@@ -3,10 +3,17 @@
 /// N measured pairs (x_i, y_i): joint configurations (`n` per row) and positions (`m` per row),
 /// in the nominal model's units (radians / length unit of the model). A file of targets alone
 /// (`cbd compensate --targets`) has n = 0, one of seeds alone m = 0.
+///
+/// With several tool points per pose (docs/DESIGN.md §12) a row is one (pose, tool point): pose-major,
+/// row r = pose · `points_per_pose` + j holds tool point j, the pose's configuration repeated. Folds
+/// and subsets of whole poses ([`Measurements::fold`], [`Measurements::pose_rows`]) keep a pose's
+/// points together, so the nominal model's point of row r is always r mod `points_per_pose`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Measurements {
     pub n_joints: usize,
     pub task_dim: usize,
+    /// Tool points measured per pose (1: one point, today's data).
+    pub points_per_pose: usize,
     /// N × n, row-major.
     pub joints: Vec<f64>,
     /// N × m, row-major.
@@ -15,7 +22,32 @@ pub struct Measurements {
 
 impl Measurements {
     pub fn new(n_joints: usize, task_dim: usize) -> Self {
-        Measurements { n_joints, task_dim, joints: Vec::new(), positions: Vec::new() }
+        Measurements { n_joints, task_dim, points_per_pose: 1, joints: Vec::new(), positions: Vec::new() }
+    }
+    /// Empty, for `points_per_pose` tool points per pose.
+    pub fn with_points(n_joints: usize, task_dim: usize, points_per_pose: usize) -> Self {
+        Measurements { points_per_pose: points_per_pose.max(1), ..Measurements::new(n_joints, task_dim) }
+    }
+    /// Number of poses (rows / points per pose).
+    pub fn pose_count(&self) -> usize {
+        self.len() / self.points_per_pose.max(1)
+    }
+    /// The row indices of the poses at `poses` (every point of each, in order).
+    pub fn pose_rows(&self, poses: &[usize]) -> Vec<usize> {
+        let p = self.points_per_pose.max(1);
+        poses.iter().flat_map(|&k| k * p..(k + 1) * p).collect()
+    }
+    /// The rows of at most `limit` rows' worth of evenly spaced whole poses
+    /// ([`evenly_spaced_rows`] over the poses; the rows themselves with one point per pose).
+    pub fn evenly_spaced_pose_rows(&self, limit: usize) -> Vec<usize> {
+        let p = self.points_per_pose.max(1);
+        self.pose_rows(&evenly_spaced_rows(self.pose_count(), (limit / p).max(1)))
+    }
+    /// The rows of tool point `j` (one per pose), as one-point data.
+    pub fn point(&self, j: usize) -> Measurements {
+        let p = self.points_per_pose.max(1);
+        let rows: Vec<usize> = (0..self.pose_count()).map(|k| k * p + j).collect();
+        Measurements { points_per_pose: 1, ..self.subset(&rows) }
     }
     pub fn len(&self) -> usize {
         if self.n_joints > 0 {
@@ -37,21 +69,26 @@ impl Measurements {
     pub fn position(&self, i: usize) -> &[f64] {
         &self.positions[i * self.task_dim..(i + 1) * self.task_dim]
     }
-    /// Fold `fold` of `folds` interleaved folds (row i is held out when i mod folds = fold):
-    /// (the other rows, the held-out rows).
+    /// Fold `fold` of `folds` interleaved folds (pose k is held out when k mod folds = fold; a
+    /// pose's points stay together): (the other rows, the held-out rows).
     pub fn fold(&self, folds: usize, fold: usize) -> (Measurements, Measurements) {
-        let (rest, held): (Vec<usize>, Vec<usize>) = (0..self.len()).partition(|i| i % folds != fold);
+        let p = self.points_per_pose.max(1);
+        let (rest, held): (Vec<usize>, Vec<usize>) = (0..self.len()).partition(|i| (i / p) % folds != fold);
         (self.subset(&rest), self.subset(&held))
     }
-    /// The rows at `indices`, in that order.
+    /// The rows at `indices`, in that order (with several points per pose: whole poses, e.g.
+    /// [`Measurements::pose_rows`], or the result's points no longer match its rows).
     pub fn subset(&self, indices: &[usize]) -> Measurements {
-        let mut out = Measurements::new(self.n_joints, self.task_dim);
+        let mut out = Measurements::with_points(self.n_joints, self.task_dim, self.points_per_pose);
         for &i in indices {
             out.push(self.joints(i), self.position(i));
         }
         out
     }
 }
+
+/// Most tool points a pose may have (the protocol's `MAX_TOOL_POINTS`).
+pub const MAX_TOOL_POINTS: usize = 4;
 
 /// Largest blob read: a blob of the largest model the trainer fits (N = 4096 points, 6 joints,
 /// 3-D task) is under 1 MiB; 64 MiB leaves room and stops `--blob /dev/zero` at once.

@@ -14,6 +14,8 @@
 //! base = { translation = [0, 0, 0], rpy = [0, 0, 0] }   # optional (absent: identity); rpy = URDF's Rz(y) Ry(p) Rx(r)
 //!                             # base = { register = true }: unknown (a tracker's frame), registered on the data
 //! tool = { translation = [0, 0, 31] }                    # or rotation = [[..], [..], [..]] (rows)
+//!                             # tool = { …, points = [[0, 0, 0], [100, 0, 0], [50, 86.6, 0]] }: several
+//!                             # measured points (offsets in the tool frame, length_unit; at most 4)
 //!
 //! # [urdf]                    # … or a URDF chain (exactly one of [chain], [urdf], [planar])
 //! # path = "robot.urdf"       # relative to this file; URDF lengths are metres, converted to length_unit
@@ -28,7 +30,11 @@
 //!
 //! [measurements]              # optional: the CSV columns
 //! joints = ["q1_deg", "q2_deg"]        # one per joint, in chain order
-//! positions = ["x_mm", "y_mm", "z_mm"] # one per task coordinate
+//! positions = ["x_mm", "y_mm", "z_mm"] # one per task coordinate (per tool point, in the order of
+//!                             # tool.points: x1, y1, z1, x2, …)
+//! # pose = { position = ["x", "y", "z"], quaternion = ["qw", "qx", "qy", "qz"] }  # instead of
+//! #                           # positions: a measured tool pose (or rotation = 9 columns, row-major),
+//! #                           # read as the tool points y_j = p + R p_j
 //! angle_unit = "deg"          # unit of revolute joint columns (default: angle_unit above)
 //! length_unit = "mm"          # unit of position and prismatic joint columns (default: length_unit above)
 //! min_rows = 10               # fewer data rows is an error (default 1)
@@ -47,7 +53,7 @@
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
-use super::csv_import::{default_joint_limits, ColumnSpec};
+use super::csv_import::{default_joint_limits, ColumnSpec, OrientationColumns};
 use super::effects_section;
 use super::joint_map::{JointMap, RawJointMap};
 use crate::nominal::planar::PlanarFrame;
@@ -89,12 +95,26 @@ pub struct ModelFile {
     pub register_base: bool,
 }
 
+/// `[measurements] pose`: a measured tool pose's columns — its position and a unit quaternion
+/// (w, x, y, z) or a rotation matrix (9 columns, row-major), the tool frame in the task frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSection {
+    pub position: Vec<String>,
+    pub quaternion: Option<Vec<String>>,
+    pub rotation: Option<Vec<String>>,
+}
+
 /// The `[measurements]` section: CSV column names and units.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeasurementSection {
     pub joints: Vec<String>,
+    /// One per task coordinate, per tool point (x1, y1, z1, x2, …); empty when `pose` is given.
+    #[serde(default)]
     pub positions: Vec<String>,
+    /// A measured pose instead of `positions`, read as the tool points.
+    pub pose: Option<PoseSection>,
     pub angle_unit: Option<AngleUnit>,
     pub length_unit: Option<LengthUnit>,
     pub min_rows: Option<usize>,
@@ -114,7 +134,22 @@ impl ModelFile {
             file: self.path.clone(),
             message: "no [measurements] section: name the CSV columns in one, e.g. `[measurements]` `joints = [\"q1\", \"q2\"]` `positions = [\"x\", \"y\"]`".into(),
         })?;
-        let spec = self.column_spec_with(section.joints.clone(), section.positions.clone());
+        let (positions, orientation) = match &section.pose {
+            Some(pose) => {
+                let orientation = match (&pose.quaternion, &pose.rotation) {
+                    (Some(q), _) => OrientationColumns::Quaternion(q.clone()),
+                    (None, Some(r)) => OrientationColumns::Rotation(r.clone()),
+                    (None, None) => unreachable!("checked when the file was read"),
+                };
+                (pose.position.clone(), Some(orientation))
+            }
+            None => (section.positions.clone(), None),
+        };
+        let spec = ColumnSpec {
+            tool_points: self.nominal.tool_points().to_vec(),
+            orientation_columns: orientation,
+            ..self.column_spec_with(section.joints.clone(), positions)
+        };
         let angle_unit = section.angle_unit.unwrap_or(self.angle_unit);
         let length_unit = section.length_unit.unwrap_or(self.length_unit);
         let model_err = |message: String| ImportError::Model { file: self.path.clone(), message };
@@ -176,6 +211,8 @@ impl ModelFile {
             repeat_tolerance: None,
             joint_map: None,
             planar_frame: self.planar_frame.clone(),
+            tool_points: Vec::new(),
+            orientation_columns: None,
         }
     }
 }
@@ -249,12 +286,18 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
                 nominal.n_joints()
             )));
         }
-        if m.positions.len() != nominal.task_dim() {
-            return Err(model_err(format!(
-                "[measurements] names {} position columns; the task space has {} coordinates",
-                m.positions.len(),
-                nominal.task_dim()
-            )));
+        let points = nominal.tool_point_count();
+        match &m.pose {
+            Some(pose) => check_pose_section(m, pose, nominal.task_dim(), &file)?,
+            None if m.positions.len() != nominal.task_dim() * points => {
+                let per_point = if points > 1 { format!(" × {points} tool points") } else { String::new() };
+                return Err(model_err(format!(
+                    "[measurements] names {} position columns; the task space has {} coordinates{per_point}",
+                    m.positions.len(),
+                    nominal.task_dim()
+                )));
+            }
+            None => {}
         }
     }
     let joint_map = match raw.measurements.as_ref().and_then(|m| m.joint_map.as_ref()) {
@@ -275,6 +318,28 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         joint_names,
         measurements: raw.measurements,
     })
+}
+
+/// `[measurements] pose`: no `positions` beside it, 3 position columns, a quaternion (4) or a
+/// rotation (9 columns), not both; a 3-D task space.
+fn check_pose_section(m: &MeasurementSection, pose: &PoseSection, task_dim: usize, file: &Path) -> Result<(), ImportError> {
+    let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: "[measurements] pose".into(), message };
+    if !m.positions.is_empty() {
+        return Err(bad("give either positions or pose, not both".into()));
+    }
+    if task_dim != 3 {
+        return Err(bad(format!("a pose needs a 3-D task space; this model's has {task_dim} coordinates")));
+    }
+    if pose.position.len() != 3 {
+        return Err(bad(format!("position names {} columns; a pose's position has 3", pose.position.len())));
+    }
+    match (&pose.quaternion, &pose.rotation) {
+        (Some(_), Some(_)) => Err(bad("give either quaternion or rotation, not both".into())),
+        (None, None) => Err(bad("needs quaternion = [\"qw\", \"qx\", \"qy\", \"qz\"] or rotation = [9 columns, row-major]".into())),
+        (Some(q), None) if q.len() != 4 => Err(bad(format!("quaternion names {} columns; it has 4 (w, x, y, z)", q.len()))),
+        (None, Some(r)) if r.len() != 9 => Err(bad(format!("rotation names {} columns; it has 9 (row-major)", r.len()))),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]
@@ -517,6 +582,65 @@ compliance = 0.5
         }
         let e = parse_model_file(&SMALL.replace("tool = {", "tool = { register = true,"), Path::new("r.toml")).unwrap_err().to_string();
         assert!(e.contains("[chain.tool]: register applies to the base only"), "{e}");
+    }
+
+    /// Issue 26 item 1: tool points and their columns, or a measured pose read as the points
+    /// (y_j = p + R p_j); one row per (pose, point), pose-major; written back as read; bad
+    /// sections name the field, bad rows the file, line and columns.
+    #[test]
+    fn tool_points_and_poses_read_as_point_rows_and_round_trip() {
+        let points = SMALL
+            .replace(
+                "tool = { translation = [0, 0, 0.05], rpy = [0.1, 0.2, 0.3] }",
+                "tool = { translation = [0, 0, 0.05], points = [[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0]] }",
+            )
+            .replace(
+                "positions = [\"x\", \"y\", \"z\"]",
+                "positions = [\"x1\", \"y1\", \"z1\", \"x2\", \"y2\", \"z2\", \"x3\", \"y3\", \"z3\"]",
+            );
+        let m = parse_model_file(&points, Path::new("p.toml")).unwrap();
+        assert_eq!(m.nominal.tool_points(), &[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0]]);
+        let back = parse_model_file(&write_model_file(&m, "h"), Path::new("p.toml")).unwrap();
+        assert_eq!((&back.nominal, &back.measurements), (&m.nominal, &m.measurements));
+        let csv = "q1,q2,x1,y1,z1,x2,y2,z2,x3,y3,z3\n0.1,0.2,1,2,3,101,2,3,1,202,3\n0.3,0.4,4,5,6,104,5,6,4,205,6\n";
+        let read = |spec: &ColumnSpec, csv: &str| crate::data::csv_import::read_measurements_from(csv.as_bytes(), Path::new("t.csv"), spec);
+        let data = read(&m.column_spec().unwrap(), csv).unwrap().measurements;
+        assert_eq!((data.len(), data.pose_count(), data.points_per_pose, data.task_dim), (6, 2, 3, 3));
+        // q2 is prismatic (mm columns, m model), as are the positions.
+        assert_eq!(data.joints(4), data.joints(3));
+        assert!(data.position(4).iter().zip([0.104, 0.005, 0.006]).all(|(a, b)| (a - b).abs() < 1e-15), "{:?}", data.position(4));
+        // The pose (p, q) of a rotation of 90° about z: point 2 (0.1, 0, 0) lands at p + (0, 0.1, 0).
+        let pose = points.replace(
+            "positions = [\"x1\", \"y1\", \"z1\", \"x2\", \"y2\", \"z2\", \"x3\", \"y3\", \"z3\"]",
+            "pose = { position = [\"x\", \"y\", \"z\"], quaternion = [\"qw\", \"qx\", \"qy\", \"qz\"] }",
+        );
+        let m = parse_model_file(&pose, Path::new("q.toml")).unwrap();
+        let back = parse_model_file(&write_model_file(&m, "h"), Path::new("q.toml")).unwrap();
+        assert_eq!(back.measurements, m.measurements);
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let csv = format!("q1,q2,x,y,z,qw,qx,qy,qz\n0.1,0.2,1000,2000,3000,{h},0,0,{h}\n");
+        let data = read(&m.column_spec().unwrap(), &csv).unwrap().measurements;
+        assert_eq!(data.len(), 3);
+        for (row, want) in [(0, [1.0, 2.0, 3.0]), (1, [1.0, 2.1, 3.0]), (2, [0.8, 2.0, 3.0])] {
+            assert!(data.position(row).iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-15), "{row}: {:?}", data.position(row));
+        }
+        let e = read(&m.column_spec().unwrap(), "q1,q2,x,y,z,qw,qx,qy,qz\n0.1,0.2,1,2,3,0.9,0,0,0\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.csv:2: column 'qw,qx,qy,qz'") && e.contains("norm is 0.900000"), "{e}");
+        for (from, to, needle) in [
+            ("points = [[0, 0, 0],", "points = [[0, 0, 0], [0, 0, 0],", "[chain.tool] points: points 1 and 2 are the same point"),
+            ("quaternion = [\"qw\", \"qx\", \"qy\", \"qz\"]", "quaternion = [\"qw\"]", "[measurements] pose: quaternion names 1 columns"),
+            ("quaternion = [", "rotation = [\"r\"], quaternion = [", "[measurements] pose: give either quaternion or rotation"),
+            (
+                "base = { translation = [1, 2, 3],",
+                "base = { points = [[1, 2, 3]], translation = [1, 2, 3],",
+                "[chain.base]: points belong to the tool",
+            ),
+        ] {
+            let e = parse_model_file(&pose.replace(from, to), Path::new("q.toml")).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+        let e = parse_model_file(&points.replace("\"z3\"]", "]"), Path::new("p.toml")).unwrap_err().to_string();
+        assert!(e.contains("names 8 position columns; the task space has 3 coordinates × 3 tool points"), "{e}");
     }
 
     #[test]

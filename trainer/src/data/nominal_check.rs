@@ -28,7 +28,7 @@ pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u6
     let mut predicted = Measurements::new(data.n_joints, m);
     let mut squared = 0.0;
     for i in 0..data.len() {
-        let p = &cbd_runtime::kinematics::forward_kinematics(nominal, data.joints(i)).position[..m];
+        let p = &crate::nominal::row_kinematics(nominal, data.joints(i), i).position[..m];
         if let Some(v) = p.iter().find(|v| !(v.abs() <= MAX_MAGNITUDE)) {
             let line = lines.get(i).copied().unwrap_or(0);
             let message = format!(

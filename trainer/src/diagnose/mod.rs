@@ -253,14 +253,16 @@ fn shape_outside_library(
 pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurements, Measurements) {
     use rand::seq::SliceRandom;
     use rand::SeedableRng;
-    let mut order: Vec<usize> = (0..data.len()).collect();
+    // By whole poses (a pose's tool points stay together).
+    let poses = data.pose_count();
+    let mut order: Vec<usize> = (0..poses).collect();
     order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
-    let held = ((data.len() as f64 * fraction).round() as usize).clamp(1, data.len().saturating_sub(2).max(1));
+    let held = ((poses as f64 * fraction).round() as usize).clamp(1, poses.saturating_sub(2).max(1));
     let (test, train) = order.split_at(held);
     let (mut train, mut test) = (train.to_vec(), test.to_vec());
     train.sort_unstable();
     test.sort_unstable();
-    (data.subset(&train), data.subset(&test))
+    (data.subset(&data.pose_rows(&train)), data.subset(&data.pose_rows(&test)))
 }
 
 fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {

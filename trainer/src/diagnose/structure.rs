@@ -90,6 +90,7 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
     let norm = crate::evidence::normalisation_of(&Measurements {
         n_joints: n,
         task_dim: m,
+        points_per_pose: data.points_per_pose,
         joints: data.joints.clone(),
         positions: predicted.clone(),
     });

@@ -366,6 +366,12 @@ pub fn fit_and_command(
 /// calls it before any fit (an unknown name was refused only after all six fits).
 pub fn commanded_arm(robot: &str, nominal: &NominalModel) -> crate::Result<SimulatedArm> {
     let arm = SimulatedArm::named(robot).map_err(|e| e.context("--commanded"))?;
+    if nominal.tool_point_count() > 1 {
+        return Err(Error::InvalidInput(format!(
+            "--commanded {robot}: the table commands tool positions; this model has {} tool points (pose compensation: `cbd compensate`, trainer/tests/tool_points.rs)",
+            nominal.tool_point_count()
+        )));
+    }
     if arm.n_joints() != nominal.n_joints() {
         return Err(Error::InvalidInput(format!(
             "--commanded {robot}: that arm has {} joints, the model file's {}",

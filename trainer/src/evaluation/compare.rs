@@ -2,7 +2,8 @@
 //! caller fills — the kernel-ridge peer of the residual, Calibration by Diffeomorphisms, and the
 //! hybrids DH + KRR and DH + CbD.
 
-use super::correction::{fit_on, CorrectionFitter, FittedCorrection, Predictor};
+use super::correction::{fit_on, fit_per_tool_point, CorrectionFitter, FittedCorrection, Predictor};
+use super::pose_errors::PoseErrors;
 use crate::calibrate::dh_not_converged;
 use crate::data::import_error::ImportError;
 use crate::data::Measurements;
@@ -28,6 +29,8 @@ pub struct PeerResult {
     pub note: String,
     /// The chosen hyperparameters for the JSON (the kernel-ridge rows).
     pub hyperparameters: Option<serde_json::Value>,
+    /// With several tool points per pose: test errors per point and of the tool frame.
+    pub pose: Option<PoseErrors>,
 }
 
 /// Everything [`compare_peers`] found, besides the table.
@@ -44,13 +47,14 @@ impl Comparison {
         use serde_json::json;
         let mut methods = serde_json::Map::new();
         for r in &self.rows {
-            methods.insert(
-                r.name.clone(),
-                json!({
-                    "mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max,
-                    "fit_seconds": r.fit_seconds, "train_mean": r.train_stats.mean, "note": r.note,
-                }),
-            );
+            let mut method = json!({
+                "mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max,
+                "fit_seconds": r.fit_seconds, "train_mean": r.train_stats.mean, "note": r.note,
+            });
+            if let Some(pose) = &r.pose {
+                method["pose"] = pose.to_json();
+            }
+            methods.insert(r.name.clone(), method);
         }
         let hyper = |name: &str| self.rows.iter().find(|r| r.name == name).and_then(|r| r.hyperparameters.clone());
         json!({
@@ -88,6 +92,29 @@ impl Comparison {
                 cell(r.stats.max),
                 r.fit_seconds
             );
+        }
+        out += &self.pose_table(unit);
+        out
+    }
+
+    /// With several tool points per pose: each method's mean error per tool point, of the tool
+    /// frame's origin and of its orientation (degrees: mean and RMS); empty otherwise.
+    pub fn pose_table(&self, unit: &str) -> String {
+        let Some(points) = self.rows.iter().find_map(|r| r.pose.as_ref().map(|p| p.per_point.len())) else { return String::new() };
+        let mut out = format!("\nmean test error per tool point and of the tool frame ({unit}; orientation in degrees):\n{:<8}", "method");
+        for j in 1..=points {
+            out += &format!(" {:>10}", format!("point {j}"));
+        }
+        out += &format!(" {:>10} {:>11} {:>11}\n", "frame", "orient mean", "orient rms");
+        for r in &self.rows {
+            let Some(p) = &r.pose else { continue };
+            out += &format!("{:<8}", r.name);
+            for s in &p.per_point {
+                out += &format!(" {:>10.4e}", s.mean);
+            }
+            let frame = p.frame_position.map_or(f64::NAN, |s| s.mean);
+            let (mean, rms) = (p.orientation_deg.map_or(f64::NAN, |s| s.mean), p.orientation_rms_deg.unwrap_or(f64::NAN));
+            out += &format!(" {frame:>10.4e} {mean:>11.4e} {rms:>11.4e}\n");
         }
         out
     }
@@ -161,19 +188,29 @@ pub fn compare_peers(
     let m = nominal.task_dim();
     let mut rows = Vec::new();
     let mut push = |name: &str, fitted: crate::Result<FittedCorrection>, seconds: f64| {
-        let (stats, train_stats, note, test_errors, hyperparameters) = match fitted {
+        let (stats, train_stats, note, test_errors, hyperparameters, pose) = match fitted {
             Ok(FittedCorrection { predict: p, note, hyperparameters }) => {
                 let predicted = p(&test.joints);
                 let test_errors = crate::report::plots::position_errors(&predicted, &test.positions, m);
                 let train_stats = ErrorStats::of_positions(&p(&train.joints), &train.positions, m);
-                (ErrorStats::of_errors(&test_errors), train_stats, note, test_errors, hyperparameters)
+                let pose = PoseErrors::of(nominal.tool_points(), &predicted, &test.positions, m);
+                (ErrorStats::of_errors(&test_errors), train_stats, note, test_errors, hyperparameters, pose)
             }
             Err(e) => {
                 let nan = ErrorStats::of_errors(&[]);
-                (nan, nan, format!("failed: {e}"), Vec::new(), None)
+                (nan, nan, format!("failed: {e}"), Vec::new(), None, None)
             }
         };
-        rows.push(PeerResult { name: name.to_string(), stats, train_stats, fit_seconds: seconds, test_errors, note, hyperparameters });
+        rows.push(PeerResult {
+            name: name.to_string(),
+            stats,
+            train_stats,
+            fit_seconds: seconds,
+            test_errors,
+            note,
+            hyperparameters,
+            pose,
+        });
     };
     push("nominal", Ok(FittedCorrection::new(nominal_predictor(nominal.clone(), m), String::new())), 0.0);
 
@@ -205,11 +242,11 @@ pub fn compare_peers(
     // The kernel-ridge peer (filled by the caller: `cli::compare` passes the peer's correction).
     if let Some(fit) = krr {
         let t = Instant::now();
-        let fitted = fit(nominal, train);
+        let fitted = fit_per_tool_point(fit, nominal, train);
         push("krr", fitted, t.elapsed().as_secs_f64());
         if let Some(dh_model) = &dh_model {
             let t = Instant::now();
-            let fitted = fit(dh_model, train);
+            let fitted = fit_per_tool_point(fit, dh_model, train);
             push("dh+krr", fitted, dh_seconds + t.elapsed().as_secs_f64());
         }
     }
@@ -246,6 +283,7 @@ mod tests {
             test_errors: vec![],
             note: String::new(),
             hyperparameters: None,
+            pose: None,
         };
         let table = |rows| Comparison { rows, dh: None }.table("m");
         let small = table(vec![row("nominal", 0.1083), row("cbd", 1.2916e-5)]);

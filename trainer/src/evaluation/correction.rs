@@ -52,3 +52,37 @@ pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -
     }
     Err(Error::InvalidInput(format!("a model of {full} task coordinates for data of {m} that is not a planar arm's DH form")))
 }
+
+/// `fit` once per tool point of `base` (docs/DESIGN.md §12: kernel ridge is a function of the
+/// joints alone, so a pose's points — one configuration, several residuals — get a correction
+/// each): point j's on `base` at that point and the rows of point j. Prediction row r is point
+/// r mod m_p. A model without tool points is `fit` itself.
+pub fn fit_per_tool_point(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -> crate::Result<FittedCorrection> {
+    let points = base.tool_point_count();
+    if points == 1 {
+        return fit(base, data);
+    }
+    let mut predictors = Vec::with_capacity(points);
+    let mut notes = Vec::with_capacity(points);
+    for j in 0..points {
+        let model = cbd_runtime::kinematics::tool_point::at_tool_point(base, j)
+            .ok_or_else(|| Error::Internal(format!("tool point {j} of {points}")))?;
+        let fitted = fit(&model, &data.point(j))?;
+        notes.push(format!("point {}: {}", j + 1, fitted.note));
+        predictors.push(fitted.predict);
+    }
+    let (n, m) = (data.n_joints, data.task_dim);
+    let predict: Predictor = Box::new(move |joints: &[f64]| {
+        let rows = joints.len() / n.max(1);
+        let mut out = vec![0.0; rows * m];
+        for (j, predict) in predictors.iter().enumerate() {
+            let mine: Vec<usize> = (j..rows).step_by(points).collect();
+            let q: Vec<f64> = mine.iter().flat_map(|&r| joints[r * n..(r + 1) * n].to_vec()).collect();
+            for (k, p) in mine.iter().zip(predict(&q).chunks_exact(m)) {
+                out[k * m..(k + 1) * m].copy_from_slice(p);
+            }
+        }
+        out
+    });
+    Ok(FittedCorrection::new(predict, notes.join("; ")))
+}

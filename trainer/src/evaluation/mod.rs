@@ -5,3 +5,4 @@
 pub mod commanded;
 pub mod compare;
 pub mod correction;
+pub mod pose_errors;

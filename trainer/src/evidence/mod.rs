@@ -125,9 +125,9 @@ impl Default for EvidenceOptions {
     }
 }
 
-/// The rows used: all, or evenly spaced ones when N m exceeds `max_unknowns`.
-pub fn evidence_rows(count: usize, task_dim: usize, max_unknowns: usize) -> Vec<usize> {
-    crate::data::evenly_spaced_rows(count, (max_unknowns / task_dim.max(1)).max(3))
+/// The rows used: all, or evenly spaced whole poses when N m exceeds `max_unknowns`.
+pub fn evidence_rows(data: &Measurements, max_unknowns: usize) -> Vec<usize> {
+    data.evenly_spaced_pose_rows((max_unknowns / data.task_dim.max(1)).max(3))
 }
 
 /// Chooses CbD's hyperparameters for `nominal` on `data` (training rows only), with the task space
@@ -142,7 +142,7 @@ pub fn choose_cbd_hyperparameters(
     if data.len() < 3 {
         return Err(EvidenceError::TooFewRows(data.len()));
     }
-    let rows = evidence_rows(data.len(), data.task_dim, options.max_unknowns);
+    let rows = evidence_rows(data, options.max_unknowns);
     let used = data.subset(&rows);
     let table = PairTable::new(nominal, &used, norm);
     let (n, m) = (table.n, table.m);
@@ -152,7 +152,7 @@ pub fn choose_cbd_hyperparameters(
     // Every start on a coarse subset of the rows (each evaluation there is cheap), then the best
     // refined on all the evidence rows.
     let evaluations = RefCell::new(0usize);
-    let coarse_rows = evidence_rows(used.len(), m, options.coarse_unknowns);
+    let coarse_rows = evidence_rows(&used, options.coarse_unknowns);
     let coarse_table = (coarse_rows.len() < used.len()).then(|| PairTable::new(nominal, &used.subset(&coarse_rows), norm));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {

@@ -12,6 +12,11 @@ pub(super) trait Criterion {
     fn observations(&self) -> usize;
     /// Value and gradient; `None` where the covariance is not positive definite.
     fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)>;
+    /// Where L-BFGS stops, per unknown: (change of the value, gradient). Default TOLERANCE for
+    /// both, the kernel form's own rounding.
+    fn tolerances(&self) -> (f64, f64) {
+        (TOLERANCE, TOLERANCE)
+    }
 }
 
 /// The objective argmin sees: nlml plus a quadratic wall outside the bounds; value and gradient
@@ -41,6 +46,10 @@ impl Objective<'_> {
             if at.as_slice() == p {
                 return (*v, g.clone());
             }
+        }
+        // A non-finite trial point (an L-BFGS update from a vanishing step) is rejected, never evaluated.
+        if p.iter().any(|v| !v.is_finite()) {
+            return (INFEASIBLE, vec![0.0; p.len()]);
         }
         *self.evaluations.borrow_mut() += 1;
         let clamped: Vec<f64> = p.iter().zip(self.lower.iter().zip(&self.upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect();
@@ -107,7 +116,9 @@ pub(super) fn minimise(
         let condition = ArmijoCondition::new(1e-4).ok()?;
         // Backtrack by 1/5 (argmin's default 0.9 spends many evaluations on a first step of |g|).
         let linesearch = BacktrackingLineSearch::new(condition).rho(0.2).ok()?;
-        let solver = LBFGS::new(linesearch, 8).with_tolerance_grad(TOLERANCE).and_then(|s| s.with_tolerance_cost(TOLERANCE)).ok()?;
+        let (cost_tolerance, gradient_tolerance) = table.tolerances();
+        let solver =
+            LBFGS::new(linesearch, 8).with_tolerance_grad(gradient_tolerance).and_then(|s| s.with_tolerance_cost(cost_tolerance)).ok()?;
         // A failed line search still leaves the start usable.
         if let Ok(result) = Executor::new(&objective, solver).configure(|s| s.param(init.clone()).max_iters(max_iterations)).run() {
             if let Some(p) = result.state().get_best_param() {

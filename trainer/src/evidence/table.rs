@@ -5,7 +5,6 @@ use crate::data::Measurements;
 use crate::evidence::joint_pair_table::JointPairTable;
 use crate::solver::regulariser::assemble_k_lin;
 use cbd_protocol::{NominalModel, Normalisation};
-use cbd_runtime::kinematics::forward_kinematics;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::cholesky::llt::inverse::{inverse as llt_inverse, inverse_scratch as llt_inverse_scratch};
@@ -32,7 +31,7 @@ impl PairTable {
     pub(crate) fn new(nominal: &NominalModel, data: &Measurements, norm: &Normalisation) -> Self {
         let (n, m, count) = (data.n_joints, data.task_dim, data.len());
         let periodic: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
-        let kin: Vec<_> = (0..count).map(|i| forward_kinematics(nominal, data.joints(i)).normalised(norm)).collect();
+        let kin: Vec<_> = (0..count).map(|i| crate::nominal::row_kinematics(nominal, data.joints(i), i).normalised(norm)).collect();
         let residual: Vec<f64> = (0..count)
             .flat_map(|i| {
                 let (y, k) = (data.position(i), &kin[i]);

@@ -3,7 +3,6 @@
 
 use cbd_protocol::{Integrator, JointKernel, MomentumLaw, NominalModel, Normalisation, TaskKernel};
 use cbd_runtime::flow::{Dims, FlowParams};
-use cbd_runtime::kinematics::forward_kinematics;
 
 /// The fixed part of a flow: configurations, their nominal kinematics, kernels and scheme.
 #[derive(Debug, Clone)]
@@ -46,8 +45,9 @@ impl ControlPoints {
         let dims = Dims { n: nominal.n_joints(), m: nominal.task_dim() };
         let (m, n) = (dims.m, dims.n);
         let mut initial = vec![0.0; points.len() / n * dims.state_len()];
-        for (x, s) in points.chunks_exact(n).zip(initial.chunks_exact_mut(dims.state_len())) {
-            let k0 = forward_kinematics(nominal, x).normalised(normalisation);
+        // Control point c is tool point c mod m_p (the blob's convention, the runtime's initial state).
+        for (c, (x, s)) in points.chunks_exact(n).zip(initial.chunks_exact_mut(dims.state_len())).enumerate() {
+            let k0 = crate::nominal::row_kinematics(nominal, x, c).normalised(normalisation);
             s[..m].copy_from_slice(&k0.position[..m]);
             for a in 0..m {
                 s[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);

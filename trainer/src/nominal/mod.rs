@@ -6,8 +6,9 @@
 pub mod dh_parameters;
 pub mod planar;
 mod positions;
-pub use positions::positions;
+pub use positions::{positions, row_kinematics};
 pub mod register;
+pub mod tool_points;
 pub mod urdf;
 
 pub use cbd_runtime::kinematics::spatial::Frame;

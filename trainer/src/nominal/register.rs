@@ -8,7 +8,6 @@
 use super::Frame;
 use crate::data::Measurements;
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::forward_kinematics;
 
 /// A registered base and what it did.
 #[derive(Debug, Clone, PartialEq)]
@@ -98,7 +97,7 @@ pub fn rms_from(chain: &cbd_protocol::DhChain, data: &Measurements) -> f64 {
     let model = NominalModel::DhChain(chain.clone());
     let s: f64 = (0..data.len())
         .map(|i| {
-            let p = forward_kinematics(&model, data.joints(i)).position;
+            let p = super::row_kinematics(&model, data.joints(i), i).position;
             (0..3).map(|c| (p[c] - data.position(i)[c]).powi(2)).sum::<f64>()
         })
         .sum();
@@ -112,7 +111,7 @@ pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<
         return Err(RegisterError::NotADhChain);
     };
     let model = NominalModel::DhChain(chain.clone());
-    let p: Vec<[f64; 3]> = (0..data.len()).map(|i| forward_kinematics(&model, data.joints(i)).position).collect();
+    let p: Vec<[f64; 3]> = (0..data.len()).map(|i| super::row_kinematics(&model, data.joints(i), i).position).collect();
     let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
     let base = rigid_fit(&p, &y).ok_or(RegisterError::Degenerate { rows: data.len() })?;
     let declared = Frame::from_transform(&chain.base);

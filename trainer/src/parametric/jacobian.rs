@@ -17,9 +17,17 @@ pub(super) fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut 
     use cbd_runtime::kinematics::rigid::dh_walk;
     let (n, m) = (chain.joints.len(), data.task_dim);
     let column = |r: &[[f64; 3]; 3], c: usize| [r[0][c], r[1][c], r[2][c]];
+    let model = cbd_protocol::NominalModel::DhChain(chain.clone());
     for row in 0..data.len() {
         let walk = dh_walk(chain, data.joints(row));
-        let p = walk.tool;
+        // The row's tool point (row mod m_p, docs/DESIGN.md §12): y = o_tool + R_tool p_j.
+        let pj = model.tool_point(row % model.tool_point_count()).unwrap_or([0.0; 3]);
+        let p = if pj == [0.0; 3] {
+            walk.tool
+        } else {
+            let r = &walk.tool_rotation;
+            std::array::from_fn(|a| walk.tool[a] + (r[a][0] * pj[0] + r[a][1] * pj[1] + r[a][2] * pj[2]))
+        };
         // Frame i (0 = base, i = after joint i): its rotation's column c and its origin.
         let axis = |i: usize, c: usize| if i == 0 { column(&walk.start_rotation, c) } else { column(&walk.end_rotations[i - 1], c) };
         let origin = |i: usize| if i == 0 { walk.start } else { walk.ends[i - 1] };
@@ -85,7 +93,13 @@ pub(super) fn jacobian_at(chain0: &DhChain, p: &[f64], data: &Measurements, jac:
 pub fn geometric_jacobian(chain: &DhChain, joints: &[f64], m: usize) -> Mat<f64> {
     let n = chain.joints.len().max(1);
     let count = joints.len() / n;
-    let data = Measurements { n_joints: n, task_dim: m, joints: joints[..count * n].to_vec(), positions: vec![0.0; count * m] };
+    let data = Measurements {
+        n_joints: n,
+        task_dim: m,
+        points_per_pose: 1,
+        joints: joints[..count * n].to_vec(),
+        positions: vec![0.0; count * m],
+    };
     let np = crate::nominal::dh_parameters::parameter_count(chain.joints.len());
     let mut jac = Mat::zeros(m * count, np);
     let (mut rp, mut rm) = (vec![0.0; m * count], vec![0.0; m * count]);

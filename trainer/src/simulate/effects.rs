@@ -285,7 +285,7 @@ impl EffectArm {
         let n = self.rigid.n_joints();
         let mut positions: Vec<f64> = joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i)).collect();
         super::add_noise(&mut positions, noise, seed);
-        crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), joints: joints.to_vec(), positions }
+        crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), points_per_pose: 1, joints: joints.to_vec(), positions }
     }
 
     /// [`measure`](Self::measure) in the plane: the first two coordinates, for a planar arm whose
@@ -297,7 +297,7 @@ impl EffectArm {
             joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i).into_iter().take(2).collect::<Vec<_>>()).collect();
         super::add_noise(&mut positions, noise, seed);
         debug_assert!(full >= 2);
-        crate::data::Measurements { n_joints: n, task_dim: 2, joints: joints.to_vec(), positions }
+        crate::data::Measurements { n_joints: n, task_dim: 2, points_per_pose: 1, joints: joints.to_vec(), positions }
     }
 }
 

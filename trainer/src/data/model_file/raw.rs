@@ -64,6 +64,9 @@ pub(super) struct RawTransform {
     pub(super) translation: Option<[f64; 3]>,
     pub(super) rpy: Option<[f64; 3]>,
     pub(super) rotation: Option<[[f64; 3]; 3]>,
+    /// `tool = { …, points = [[x, y, z], …] }`: the measured points, offsets in the tool frame
+    /// (length unit); absent: one point at the tool origin.
+    pub(super) points: Option<Vec<[f64; 3]>>,
 }
 
 #[derive(Debug, Deserialize)]

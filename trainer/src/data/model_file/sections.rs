@@ -13,6 +13,25 @@ use std::path::Path;
 /// The nominal model and its joint names.
 type Section = (NominalModel, Vec<String>);
 
+/// `[chain] tool = { points = … }`: the tool points (length unit), each finite and within
+/// [`MAX_MAGNITUDE`], at most `cbd_protocol::MAX_TOOL_POINTS`, no two equal.
+pub(super) fn tool_points(chain: &RawChain, path: &Path) -> Result<Vec<[f64; 3]>, ImportError> {
+    let bad = |message: String| ImportError::Field { file: path.to_path_buf(), field: "[chain.tool] points".into(), message };
+    let Some(points) = chain.tool.as_ref().and_then(|t| t.points.clone()) else { return Ok(Vec::new()) };
+    if points.is_empty() || points.len() > crate::data::MAX_TOOL_POINTS {
+        return Err(bad(format!("{} points; 1 to {} are supported", points.len(), crate::data::MAX_TOOL_POINTS)));
+    }
+    for (j, p) in points.iter().enumerate() {
+        if let Some(v) = p.iter().find(|v| !(v.is_finite() && v.abs() <= MAX_MAGNITUDE)) {
+            return Err(bad(format!("point {}: {v:e} is not a finite value within ±{MAX_MAGNITUDE:e}", j + 1)));
+        }
+        if let Some(k) = points[..j].iter().position(|o| o == p) {
+            return Err(bad(format!("points {} and {} are the same point", k + 1, j + 1)));
+        }
+    }
+    Ok(points)
+}
+
 fn model_error(path: &Path, message: String) -> ImportError {
     ImportError::Model { file: path.to_path_buf(), message }
 }
@@ -53,7 +72,7 @@ pub(super) fn dh_chain(chain: &RawChain, deg: f64, path: &Path) -> Result<Sectio
             base,
             tool,
             effects: cbd_protocol::Effects::NONE,
-            tool_points: heapless::Vec::new(),
+            tool_points: heapless::Vec::from_slice(&tool_points(chain, path)?).map_err(|_| model_err("too many tool points".into()))?,
         }),
         (1..=n).map(|i| format!("q{i}")).collect(),
     ))
@@ -110,6 +129,9 @@ pub(super) fn planar(lengths: &[f64], path: &Path) -> Result<Section, ImportErro
 fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> Result<Transform, ImportError> {
     let bad = |message: String| ImportError::Field { file: file.to_path_buf(), field: field.to_string(), message };
     let Some(raw) = raw else { return Ok(Transform::IDENTITY) };
+    if raw.points.is_some() && field != "[chain.tool]" {
+        return Err(bad("points belong to the tool (`tool = { …, points = [[x, y, z], …] }`)".into()));
+    }
     if let Some(register) = raw.register {
         if field != "[chain.base]" {
             return Err(bad("register applies to the base only".into()));

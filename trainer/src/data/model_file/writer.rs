@@ -63,9 +63,15 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
                 }
                 let r = &t.rotation;
                 let rows: Vec<String> = (0..3).map(|i| effects_section::list(&r[3 * i..3 * i + 3])).collect();
+                let points = if name == "tool" && !c.tool_points.is_empty() {
+                    let points: Vec<String> = c.tool_points.iter().map(|p| effects_section::list(p)).collect();
+                    format!(", points = [{}]", points.join(", "))
+                } else {
+                    String::new()
+                };
                 let _ = writeln!(
                     out,
-                    "{name} = {{ translation = {}, rotation = [{}] }}",
+                    "{name} = {{ translation = {}, rotation = [{}]{points} }}",
                     effects_section::list(&t.translation),
                     rows.join(", ")
                 );
@@ -83,7 +89,20 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
     }
     if let Some(s) = &m.measurements {
         let names = |v: &[String]| v.iter().map(|n| quoted(n)).collect::<Vec<_>>().join(", ");
-        let _ = writeln!(out, "\n[measurements]\njoints = [{}]\npositions = [{}]", names(&s.joints), names(&s.positions));
+        let _ = writeln!(out, "\n[measurements]\njoints = [{}]", names(&s.joints));
+        match &s.pose {
+            None => {
+                let _ = writeln!(out, "positions = [{}]", names(&s.positions));
+            }
+            Some(pose) => {
+                let orientation = match (&pose.quaternion, &pose.rotation) {
+                    (Some(q), _) => format!("quaternion = [{}]", names(q)),
+                    (None, Some(r)) => format!("rotation = [{}]", names(r)),
+                    (None, None) => String::new(),
+                };
+                let _ = writeln!(out, "pose = {{ position = [{}], {orientation} }}", names(&pose.position));
+            }
+        }
         if let Some(u) = s.angle_unit {
             let _ = writeln!(out, "angle_unit = \"{}\"", u.name());
         }

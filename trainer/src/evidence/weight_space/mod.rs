@@ -20,7 +20,6 @@ use crate::expansion::{task_radius_of, tolerance_for};
 use crate::solver::FIXED_SPLIT;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
 use cbd_runtime::expansion::{joint_row_len, write_joint_basis};
-use cbd_runtime::kinematics::forward_kinematics;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat};
 use std::cell::RefCell;
@@ -106,7 +105,7 @@ impl WeightSpaceTable {
             return Err(Declined::Prismatic { joint: d + 1 });
         }
         let theta = Theta::unpack(theta, n);
-        let kin: Vec<_> = (0..count).map(|i| forward_kinematics(nominal, data.joints(i)).normalised(norm)).collect();
+        let kin: Vec<_> = (0..count).map(|i| crate::nominal::row_kinematics(nominal, data.joints(i), i).normalised(norm)).collect();
         let nominal_positions: Vec<f64> = kin.iter().flat_map(|k| k.position[..m].to_vec()).collect();
         let (gv, gw, sigma) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp(), theta.log_sigma.exp());
         let mean_j2 = kin.iter().map(|k| (0..m).map(|c| k.jacobian[c][..n].iter().map(|v| v * v).sum::<f64>()).sum::<f64>()).sum::<f64>()
