@@ -281,40 +281,8 @@ pub unsafe extern "C" fn cbd_evaluate(
     jacobian_len: usize,
     support: *mut f64,
 ) -> CbdStatus {
-    let handle = match loaded(calibrator) {
-        Ok(_) => &mut *calibrator,
-        Err(e) => return e,
-    };
-    if q.is_null() || position.is_null() || jacobian.is_null() {
-        return CBD_ERR_NULL_POINTER;
-    }
-    let (n, m) = (handle.cal.model().n_joints(), handle.cal.model().task_dim());
-    if n_joints != n {
-        return CBD_ERR_QUERY_DIMENSION;
-    }
-    if position_len < m || jacobian_len < m * n {
-        return CBD_ERR_BUFFER_TOO_SMALL;
-    }
-    let q = core::slice::from_raw_parts(q, n);
-    let e = match handle.cal.evaluate(q) {
-        Ok(e) => e,
-        Err(e) => return e.into(),
-    };
-    let position = core::slice::from_raw_parts_mut(position, m);
-    for (dst, src) in position.iter_mut().zip(e.position().iter()) {
-        *dst = *src;
-    }
-    let jacobian = core::slice::from_raw_parts_mut(jacobian, m * n);
-    let jac = e.jacobian();
-    for (a, row) in jacobian.chunks_exact_mut(n.max(1)).enumerate() {
-        for (d, dst) in row.iter_mut().enumerate() {
-            *dst = jac.get((a, d)).copied().unwrap_or(f64::NAN);
-        }
-    }
-    if let Some(s) = support.as_mut() {
-        *s = e.support();
-    }
-    CBD_OK
+    // Tool point 0 is the model's only point when it names none: the same evaluation, bit for bit.
+    cbd_evaluate_point(calibrator, q, n_joints, 0, position, position_len, jacobian, jacobian_len, support)
 }
 
 /// Tool points of the loaded model (measured points per pose, 1 for a model that names none), 0 for
