@@ -222,3 +222,39 @@ fn cli_registers_an_unknown_base_and_warns_about_a_far_nominal() {
     let fitted = fit_line.split("translation").nth(1).and_then(|t| t.split(';').next()).unwrap().to_string();
     assert!(err.contains(&fitted) && err.contains("(as fitted, from a.blob)"), "{err}\nwant {fitted}");
 }
+
+/// `cbd simulate --tracker-frame` (README's tracker-frame example): every point of every pose is the
+/// base-frame measurement moved by the stated frame (same noise draws), and bad frames are refused
+/// naming the flag.
+#[test]
+fn simulate_writes_the_measurements_in_the_tracker_frame() {
+    use cli_support::{cbd, fails_with, scratch, succeeds};
+    let dir = scratch("tracker_frame_simulate");
+    let common = ["simulate", "--robot", "six", "--sampling", "uniform", "--count", "20", "--tool-points", "0,0,0;100,0,0;0,100,0"];
+    succeeds(&cbd(&dir, &[&common[..], &["--out", "base.csv"]].concat()));
+    succeeds(&cbd(&dir, &[&common[..], &["--out", "tracker.csv", "--tracker-frame", "2500,-3000,800;0,3,4,30"]].concat()));
+    let read = |name: &str| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(dir.join(name))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let (base, tracker) = (read("base.csv"), read("tracker.csv"));
+    let motion = rotation_about([0.0, 0.6, 0.8], 30f64.to_radians()).with_translation([2500.0, -3000.0, 800.0]);
+    assert_eq!(base.len(), 20);
+    for (b, t) in base.iter().zip(&tracker) {
+        assert_eq!(b[..6], t[..6], "the joints are not moved");
+        for j in 0..3 {
+            let y = motion.apply([b[6 + 3 * j], b[7 + 3 * j], b[8 + 3 * j]]);
+            for c in 0..3 {
+                assert!((y[c] - t[6 + 3 * j + c]).abs() < 1e-9, "point {j}: {y:?} vs {:?}", &t[6 + 3 * j..9 + 3 * j]);
+            }
+        }
+    }
+    for bad in ["1,2,3", "1,2,3;0,0,0,30", "1,2;0,0,1,30", "1,2,3;0,0,1,nan", "a,2,3;0,0,1,3"] {
+        fails_with(&cbd(&dir, &[&common[..], &["--out", "bad.csv", "--tracker-frame", bad]].concat()), &["--tracker-frame"]);
+    }
+    fails_with(&cbd(&dir, &["simulate", "--out", "rr.csv", "--tracker-frame", "0,0,0;0,0,1,0"]), &["--tracker-frame", "six-joint"]);
+}

@@ -54,6 +54,48 @@ pub struct SimulateArgs {
     /// point columns as that frame's points (so both sets of columns hold the same data).
     #[arg(long)]
     pub pose: bool,
+    /// Six-joint robot: report the measurements in a tracker's frame instead of the robot's base
+    /// frame, `tx,ty,tz;ax,ay,az,angle`: a point y of the base frame reads R y + t, R the turn by
+    /// `angle` degrees about the axis (ax, ay, az) (any length but zero), t in mm. For a model file with
+    /// `[chain] base = { register = true }` (README "Tracker frames").
+    #[arg(long = "tracker-frame")]
+    pub tracker_frame: Option<String>,
+}
+
+/// `--tracker-frame`: `tx,ty,tz;ax,ay,az,angle_deg` → the motion y ↦ R y + t.
+pub fn parse_tracker_frame(text: &str) -> Result<crate::nominal::Frame> {
+    let bad = |why: &str| {
+        Error::InvalidInput(format!(
+            "--tracker-frame `{text}`: {why} (expected tx,ty,tz;ax,ay,az,angle: a translation in mm, an axis and an angle in degrees)"
+        ))
+    };
+    let groups: Vec<Vec<f64>> = text
+        .split(';')
+        .map(|g| g.split(',').map(|x| x.trim().parse::<f64>()).collect::<std::result::Result<Vec<f64>, _>>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| bad(&e.to_string()))?;
+    let [t, r] = groups.as_slice() else { return Err(bad("two groups separated by `;`")) };
+    if t.len() != 3 || r.len() != 4 {
+        return Err(bad("3 numbers, then 4"));
+    }
+    if t.iter().chain(r).any(|v| !(v.is_finite() && v.abs() <= MAX_MAGNITUDE)) {
+        return Err(bad("every number finite"));
+    }
+    let length = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+    if !(length > 0.0 && length.is_finite()) {
+        return Err(bad("the axis must not be zero"));
+    }
+    let axis = [r[0] / length, r[1] / length, r[2] / length];
+    Ok(crate::nominal::rotation_about(axis, r[3].to_radians()).with_translation([t[0], t[1], t[2]]))
+}
+
+/// Every measured position (3 coordinates per row) seen from `frame` (`--tracker-frame`).
+fn into_tracker_frame(positions: &mut [f64], frame: &Option<crate::nominal::Frame>) {
+    if let Some(frame) = frame {
+        for y in positions.chunks_exact_mut(3) {
+            y.copy_from_slice(&frame.apply([y[0], y[1], y[2]]));
+        }
+    }
 }
 
 /// `--tool-points`: `x,y,z;x,y,z;…`, 1 to 4 distinct finite points.
@@ -134,8 +176,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     }
     check_simulation_memory(&args, crate::cli::memory::available_bytes())?;
     match args.robot.as_str() {
-        "rr" if args.tool_points.is_some() || args.pose => {
-            return Err(Error::InvalidInput("--tool-points and --pose are for the six-joint robot (--robot six)".into()))
+        "rr" if args.tool_points.is_some() || args.pose || args.tracker_frame.is_some() => {
+            return Err(Error::InvalidInput("--tool-points, --pose and --tracker-frame are for the six-joint robot (--robot six)".into()))
         }
         "rr" => {}
         "six" => return simulate_six(&args),
@@ -178,22 +220,24 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
     if let Some(noise) = args.noise {
         robot.noise_std = noise;
     }
+    let tracker = args.tracker_frame.as_deref().map(parse_tracker_frame).transpose()?;
     let joints = match read_poses(args)? {
         Some(poses) => poses,
         None => random_configurations(args.count, args.seed),
     };
     if let Some(points) = &args.tool_points {
-        return simulate_six_points(args, &robot, &joints, &parse_tool_points(points)?);
+        return simulate_six_points(args, &robot, &joints, &parse_tool_points(points)?, &tracker);
     }
     if args.pose {
         return Err(Error::InvalidInput("--pose needs --tool-points (at least 3 points)".into()));
     }
-    let data = if args.effects.is_empty() {
+    let mut data = if args.effects.is_empty() {
         robot.measure(&joints, args.seed.wrapping_add(0x5eed))
     } else {
         let rigid = cbd_protocol::NominalModel::DhChain(robot.real.clone());
         effect_arm(rigid, &args.effects)?.measure(&joints, robot.noise_std, args.seed.wrapping_add(0x5eed))
     };
+    into_tracker_frame(&mut data.positions, &tracker);
     check_readable(&data)?;
     let mut text = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
     for i in 0..data.len() {
@@ -208,12 +252,14 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
 
 /// The six-joint arm measured at several tool points: each point's noise-free position (the real
 /// chain with its tool moved to the point, `nominal::tool_points::point_chain`), then noise on every
-/// coordinate; with `--pose`, the least-squares tool frame of each pose's noisy points as well.
+/// coordinate, all seen from `tracker` if given; with `--pose`, the least-squares tool frame of each
+/// pose's noisy points as well.
 fn simulate_six_points(
     args: &SimulateArgs,
     robot: &crate::simulate::six_joint::SixJointRobot,
     joints: &[f64],
     tool_points: &[[f64; 3]],
+    tracker: &Option<crate::nominal::Frame>,
 ) -> Result<()> {
     use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
     let p = tool_points.len();
@@ -236,6 +282,7 @@ fn simulate_six_points(
     // Pose-major: pose k's points in turn, then noise on every coordinate.
     let mut values: Vec<f64> = (0..poses).flat_map(|k| per_point.iter().flat_map(move |t| t[3 * k..3 * k + 3].to_vec())).collect();
     add_noise(&mut values, robot.noise_std, args.seed.wrapping_add(0x5eed));
+    into_tracker_frame(&mut values, tracker);
     let mut data = crate::data::Measurements::with_points(6, 3, p);
     for (k, q) in joints.chunks_exact(6).enumerate() {
         for j in 0..p {

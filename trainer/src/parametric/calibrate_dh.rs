@@ -1,11 +1,12 @@
-//! The parametric fit: every DH parameter plus base and tool, fitted to measured positions.
+//! The parametric fit: every DH parameter plus base and tool (its rotation too when tool points lie
+//! off its origin), fitted to measured positions.
 
 use super::identifiable::out_of_plane_parameters;
 use super::least_squares::{minimise, Minimum};
 use super::residuals::residuals;
 use super::{DhCalibration, DhCalibrationError, DhCalibrationOptions, DhFitStats};
 use crate::data::Measurements;
-use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
+use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for, parameter_names_for};
 use cbd_protocol::{DhChain, NominalModel};
 
 fn rms(r: &[f64], m: usize) -> f64 {
@@ -45,14 +46,14 @@ pub fn calibrate_dh(
     let dh_form = crate::nominal::planar::as_dh(nominal);
     let NominalModel::DhChain(chain0) = &dh_form else { return Err(DhCalibrationError::NotADhChain) };
     let n = chain0.joints.len();
-    let np = parameter_count(n);
+    let np = parameter_count_for(chain0);
     let m = nominal.task_dim();
     let rows = m * data.len();
     if data.len() < 2 || data.task_dim != m {
         return Err(DhCalibrationError::TooFewMeasurements { rows: data.len() });
     }
     let out_of_plane = out_of_plane_parameters(n, m);
-    let names = parameter_names(n);
+    let names = parameter_names_for(chain0);
     let mut r = vec![0.0; rows];
     residuals(chain0, data, &mut r);
     let initial_rms = rms(&r, m);

@@ -3,7 +3,7 @@
 
 use super::jacobian::{column_scales, geometric_jacobian, zero_columns};
 use super::DhCalibrationOptions;
-use crate::nominal::dh_parameters::parameter_count;
+use crate::nominal::dh_parameters::{parameter_count, parameter_count_for};
 use cbd_protocol::NominalModel;
 use faer::{Mat, MatRef};
 
@@ -68,7 +68,7 @@ pub fn identification_jacobian(nominal: &NominalModel, joints: &[f64]) -> Option
     let dh_form = crate::nominal::planar::as_dh(nominal);
     let NominalModel::DhChain(chain0) = &dh_form else { return None };
     let (n, m) = (chain0.joints.len(), nominal.task_dim());
-    let np = parameter_count(n);
+    let np = parameter_count_for(chain0);
     let mut jac = geometric_jacobian(chain0, joints, m);
     let out_of_plane = out_of_plane_parameters(n, m);
     zero_columns(&mut jac, &out_of_plane);

@@ -67,13 +67,13 @@ pub(super) fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut 
 }
 
 /// The Jacobian of the residuals at parameter changes `p` from `chain0`: analytic columns for the
-/// DH rows, base translation and tool; central differences for the base rotation (its axis-angle
-/// parametrisation), with `scratch` for the two residual vectors.
+/// DH rows, base translation and tool translation; central differences for the base and tool
+/// rotations (their axis-angle parametrisations), with `scratch` for the two residual vectors.
 pub(super) fn jacobian_at(chain0: &DhChain, p: &[f64], data: &Measurements, jac: &mut Mat<f64>, scratch: (&mut [f64], &mut [f64])) {
     let (rp, rm) = scratch;
     let n = chain0.joints.len();
     analytic_jacobian(&apply_parameters(chain0, p), data, jac);
-    for k in 4 * n + 3..4 * n + 6 {
+    for k in (4 * n + 3..4 * n + 6).chain(4 * n + 9..p.len()) {
         let h = 1e-6;
         let mut q = p.to_vec();
         q[k] = p[k] + h;
@@ -100,7 +100,7 @@ pub fn geometric_jacobian(chain: &DhChain, joints: &[f64], m: usize) -> Mat<f64>
         joints: joints[..count * n].to_vec(),
         positions: vec![0.0; count * m],
     };
-    let np = crate::nominal::dh_parameters::parameter_count(chain.joints.len());
+    let np = crate::nominal::dh_parameters::parameter_count_for(chain);
     let mut jac = Mat::zeros(m * count, np);
     let (mut rp, mut rm) = (vec![0.0; m * count], vec![0.0; m * count]);
     jacobian_at(chain, &vec![0.0; np], &data, &mut jac, (&mut rp, &mut rm));

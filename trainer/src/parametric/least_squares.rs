@@ -7,7 +7,7 @@ use super::jacobian::{column_scales, jacobian_at, zero_columns};
 use super::residuals::residuals;
 use super::{DhCalibrationError, DhCalibrationOptions};
 use crate::data::Measurements;
-use crate::nominal::dh_parameters::{apply_parameters, parameter_count};
+use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for};
 use crate::solver::least_squares::TruncatedSvd;
 use cbd_protocol::DhChain;
 use faer::Mat;
@@ -45,7 +45,7 @@ pub(super) fn minimise(
     options: &DhCalibrationOptions,
     mut r: Vec<f64>,
 ) -> Result<Minimum, DhCalibrationError> {
-    let (rows, np) = (r.len(), parameter_count(chain0.joints.len()));
+    let (rows, np) = (r.len(), parameter_count_for(chain0));
     let mut p = vec![0.0; np];
     let mut cost = 0.5 * r.iter().map(|v| v * v).sum::<f64>();
     let mut mu = -1.0;

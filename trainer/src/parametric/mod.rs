@@ -1,7 +1,7 @@
 //! Parametric (geometric) calibration: Levenberg–Marquardt over every Denavit–Hartenberg parameter
 //! (a, α, d, θ_offset of each joint), the base transform (3 translations + 3 small rotations,
-//! applied on the left of the nominal base) and the tool translation (the tool's rotation does
-//! not move a measured position, so it is not a parameter). A stage of the product: `--dh-first`
+//! applied on the left of the nominal base), the tool translation and, when tool points lie off the
+//! tool origin, the tool's rotation (at the origin it moves no measured point). A stage of the product: `--dh-first`
 //! before CbD, diagnose's geometric group, plan's identifiability.
 //!
 //! One operation per file: the residuals k(p; x_i) − y_i (`residuals`), their analytic

@@ -106,3 +106,97 @@ fn a_planar_arm_is_calibrated_as_its_dh_form_in_its_plane() {
     // Out of the plane nothing moved: the result is exactly a planar chain in a moved frame.
     assert!(crate::nominal::planar::as_planar_in_frame(&fit.model).is_some(), "{:?}", fit.model);
 }
+
+/// Three tool points 100 mm apart measured on a chain whose tool frame is turned (and moved):
+/// the fit's tool rotation (three columns, only for tool points off the origin) recovers every
+/// point exactly, and the rotation it found is needed (the fitted chain with the nominal tool
+/// rotation put back misses by the lever × the turn).
+#[test]
+fn tool_points_off_the_origin_identify_the_tool_rotation() {
+    use crate::nominal::dh_parameters::{has_tool_rotation, parameter_count_for, parameter_names_for};
+    use crate::nominal::row_kinematics;
+    let mut nominal = ur5_like(DhConvention::Standard);
+    nominal.tool_points = heapless::Vec::from_slice(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [0.0, 100.0, 0.0]]).unwrap();
+    assert!(has_tool_rotation(&nominal));
+    assert_eq!(parameter_count_for(&nominal), parameter_count(6) + 3);
+    assert_eq!(parameter_names_for(&nominal)[parameter_count(6)..], ["tool_rx", "tool_ry", "tool_rz"]);
+    let mut p_true = vec![0.0; parameter_count_for(&nominal)];
+    p_true[2] = 0.7; // d1
+    p_true[13] = -0.002; // alpha4
+    p_true[32] = 1.5; // tool_tz
+    p_true[33] = 0.002; // tool_rx
+    p_true[34] = 0.0035; // tool_ry (0.2°)
+    p_true[35] = -0.001; // tool_rz
+    let truth = NominalModel::DhChain(apply_parameters(&nominal, &p_true));
+    let measure = |seed: u64, count: usize| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut m = Measurements::with_points(6, 3, 3);
+        for _ in 0..count {
+            let q: Vec<f64> = (0..6).map(|_| rng.gen_range(-3.0..3.0)).collect();
+            for j in 0..3 {
+                m.push(&q, &row_kinematics(&truth, &q, j).position[..3]);
+            }
+        }
+        m
+    };
+    let (train, test) = (measure(5, 80), measure(6, 200));
+    let fit = calibrate_dh(&NominalModel::DhChain(nominal.clone()), &train, &DhCalibrationOptions::default()).unwrap();
+    assert_eq!(fit.stats.parameter_changes.len(), parameter_count(6) + 3);
+    let worst = |model: &NominalModel| {
+        let test = &test;
+        (0..test.len())
+            .flat_map(|i| {
+                let k = row_kinematics(model, test.joints(i), i);
+                (0..3).map(move |c| (k.position[c] - test.position(i)[c]).abs()).collect::<Vec<_>>()
+            })
+            .fold(0.0f64, f64::max)
+    };
+    let calibrated = worst(&fit.model);
+    assert!(calibrated < 1e-6, "worst test error {calibrated} mm; stats {:?}", fit.stats);
+    let NominalModel::DhChain(fitted) = &fit.model else { unreachable!() };
+    let mut turned_back = fitted.clone();
+    turned_back.tool.rotation = nominal.tool.rotation;
+    assert!(worst(&NominalModel::DhChain(turned_back)) > 0.05, "the tool rotation matters here");
+}
+
+/// The tool rotation's central-difference columns against the analytic derivative at r = 0: a turn
+/// δ about the tool frame's axis k moves point j by (R_tool e_k) × (y_j − o_tool) δ.
+#[test]
+fn tool_rotation_columns_match_the_analytic_derivative() {
+    use super::jacobian::jacobian_at;
+    use crate::nominal::dh_parameters::parameter_count_for;
+    use crate::nominal::row_kinematics;
+    use cbd_runtime::kinematics::rigid::dh_walk;
+    let mut chain = ur5_like(DhConvention::Modified);
+    chain.tool_points = heapless::Vec::from_slice(&[[30.0, -20.0, 50.0], [-80.0, 10.0, 5.0]]).unwrap();
+    chain.tool.rotation = crate::nominal::rpy(0.3, -0.2, 1.1).to_transform().rotation;
+    let model = NominalModel::DhChain(chain.clone());
+    let mut data = Measurements::with_points(6, 3, 2);
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    for _ in 0..4 {
+        let q: Vec<f64> = (0..6).map(|_| rng.gen_range(-3.0..3.0)).collect();
+        for j in 0..2 {
+            data.push(&q, &row_kinematics(&model, &q, j).position[..3]);
+        }
+    }
+    let np = parameter_count_for(&chain);
+    let mut jac = faer::Mat::<f64>::zeros(3 * data.len(), np);
+    let (mut rp, mut rm) = (vec![0.0; 3 * data.len()], vec![0.0; 3 * data.len()]);
+    jacobian_at(&chain, &vec![0.0; np], &data, &mut jac, (&mut rp, &mut rm));
+    for row in 0..data.len() {
+        let walk = dh_walk(&chain, data.joints(row));
+        let y = data.position(row);
+        for k in 0..3 {
+            let axis: [f64; 3] = std::array::from_fn(|a| walk.tool_rotation[a][k]);
+            let expected = crate::nominal::cross(axis, crate::nominal::sub([y[0], y[1], y[2]], walk.tool));
+            for c in 0..3 {
+                let got = jac[(3 * row + c, parameter_count(6) + k)];
+                assert!(
+                    (got - expected[c]).abs() < 1e-6 * (1.0 + expected[c].abs()),
+                    "row {row} axis {k} coordinate {c}: {got} vs {}",
+                    expected[c]
+                );
+            }
+        }
+    }
+}

@@ -35,8 +35,10 @@ pub use cbd_protocol::ur5::chain as ur5_nominal;
 
 impl SixJointRobot {
     /// UR5-like robot with geometric errors drawn from `seed`: lengths ±0.5 mm, angles ±0.1°
-    /// per DH parameter, base ±1 mm / ±0.05°, tool ±0.5 mm; UR5 link masses; compliance giving
-    /// gravity deflections of order 0.1 mm at the tool; noise 0.01 mm.
+    /// per DH parameter, base ±1 mm / ±0.05°, tool ±0.5 mm and turned ±0.1° about each of its
+    /// axes (a mounting error: it moves tool points off the tool origin only, so single-point data
+    /// are as before it was added); UR5 link masses; compliance giving gravity deflections of order
+    /// 0.1 mm at the tool; noise 0.01 mm.
     pub fn ur5_like(seed: u64) -> SixJointRobot {
         let nominal = ur5_nominal();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -55,6 +57,8 @@ impl SixJointRobot {
             p[o + 3 + k] = rng.gen_range(-0.05..0.05) * deg;
             p[o + 6 + k] = rng.gen_range(-0.5..0.5);
         }
+        // Drawn last, so every other draw is what it was before tool points existed.
+        p.extend((0..3).map(|_| rng.gen_range(-0.1..0.1) * deg));
         let real = crate::nominal::dh_parameters::apply_parameters(&real, &p);
         SixJointRobot {
             nominal: NominalModel::DhChain(nominal),

@@ -29,7 +29,7 @@ pub fn describe(h: &Hyperparameters) -> String {
         })
         .collect();
     format!(
-        "{} gamma={:.3e} sigma={:.3e} (normalised, scale {:.4}; sigma {:.4} in data units) lml={:.2} after {} evaluations on {} rows",
+        "{} gamma={:.3e} sigma={:.3e} (normalised, scale {:.4}; sigma {:.4e} in data units) lml={:.2} after {} evaluations on {} rows",
         widths.join(" "),
         h.kernel.gamma,
         h.noise_sigma,
