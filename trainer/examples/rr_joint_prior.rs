@@ -1,0 +1,307 @@
+//! Issue 25 prototype: other joint priors for CbD on the noisy RR benchmark (the data of
+//! `rr_bias_noise`: √N × √N grid, σ = 1e-4, noise seed 0x5eee; 3000 random noise-free test
+//! configurations, seed 7), each with hyperparameters chosen by its OWN weight-space evidence on
+//! every row, against plain CbD's evidence choice and kernel ridge with its own evidence.
+//!
+//!     cargo run --release -p cbd-trainer --example rr_joint_prior -- PER_AXIS [B_BOX [q|u|uu [A_FACTOR]]]
+//!
+//! Joint prior (on one fixed basis of joint harmonics, those of exp(b_box (cos Δ − 1)) per axis; the
+//! task basis at plain CbD's a × A_FACTOR): λ_f = γ₁ Π_d ω_{h_d}(b_d) + γ₂ Π_d ω_{h_d}(c_d), a flat
+//! plus a narrower periodic kernel summed (γ₂ → 0 is plain CbD); the kernel in the joint angles (q) or
+//! in the absolute link angles u = (q1, q1 + q2) (u: the field's components stay in q; uu: they are in
+//! u too, V_q = A⁻¹ V_u with V_u's components independent, so the design takes J_q A⁻¹ = J_u).
+//! The search (Nelder–Mead on ln θ) starts from plain CbD's own evidence choice (`cbd fit`'s).
+//! nlml = ½ (|r|²/σ² − |L⁻¹ Λ^½ s|²/σ⁴) + ½ ln det B + N m ln σ + const, B = I + Λ^½ AᵀA Λ^½ / σ², s = Aᵀ r.
+//!
+//! Measured (B_BOX 0.2; kernel ridge with its evidence: 6.2414e-5 at N = 256, 1.6810e-5 at 4096):
+//! N = 4096, log evidence / test mean: q one kernel (`cbd fit`'s) 63362.85 / 1.4852e-5 (0.884×), q sum
+//! 63364.19 / 1.5154e-5 (0.902×); u 63242.44 / 1.3454e-5 (0.800×), u with a × 1.83 63254.67 /
+//! 1.3239e-5, uu 63258.71 / 1.3543e-5. N = 256: q 3570.46 / 4.9467e-5 (0.793×), u (a × 1.84) 3471.40 /
+//! 5.0666e-5, uu 3461.75 / 4.8881e-5. Link angles lower the bias (5.4e-6 → 0.8e-6 at 4096) but lose
+//! the evidence by 100–120 nats at both sizes, so an evidence choice between q and u keeps q; the sum
+//! kernel's narrow part gets no weight (in q its optimum at c = b_box loses 127 nats at N = 256, 276 at 4096).
+
+use cbd_protocol::*;
+use cbd_trainer::baselines::kernel_ridge::fit_kernel_ridge_peer;
+use cbd_trainer::expansion::basis::{truncate, AxisSeries};
+use cbd_trainer::expansion::solve::{apply, design, LinearProblem};
+use cbd_trainer::expansion::weights::periodic_weights;
+use cbd_trainer::expansion::{task_radius_of, tolerance_for};
+use cbd_trainer::flow::ControlPoints;
+use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::{Accum, Mat, Par};
+
+fn mean_error(pred: &[f64], truth: &[f64]) -> f64 {
+    let e: f64 = pred.chunks_exact(2).zip(truth.chunks_exact(2)).map(|(p, t)| ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2)).sqrt()).sum();
+    e / (pred.len() / 2) as f64
+}
+
+/// The linear model r = A w + e on a fixed basis; θ = ln(γ_W, γ₁, b₁, b₂, γ₂, c₁, c₂, σ), normalised units.
+struct Model {
+    joint_orders: Vec<[usize; 2]>,
+    task_functions: usize,
+    gram: Mat<f64>,
+    s: Vec<f64>,
+    rr: f64,
+    obs: usize,
+    b_box: f64,
+}
+
+impl Model {
+    fn variances(&self, t: &[f64]) -> Vec<f64> {
+        let e: Vec<f64> = t.iter().map(|v| v.exp()).collect();
+        let max_h = self.joint_orders.iter().flat_map(|o| o.iter().copied()).max().unwrap_or(0);
+        let w = |b: f64| periodic_weights(b, max_h);
+        let (b1, b2, c1, c2) = (w(e[2]), w(e[3]), w(e[5]), w(e[6]));
+        let mut v = Vec::with_capacity(self.gram.nrows());
+        for o in &self.joint_orders {
+            let lam = e[0] * (e[1] * b1[o[0]] * b2[o[1]] + e[4] * c1[o[0]] * c2[o[1]]);
+            v.push(lam);
+            v.push(lam);
+        }
+        v.extend(std::iter::repeat_n(e[0], self.task_functions * 2));
+        v
+    }
+
+    /// (nlml, posterior mean weights w = Λ^½ B⁻¹ Λ^½ s / σ²) at θ, for the residual whose Aᵀ r is `clean_s` if given.
+    fn evaluate(&self, t: &[f64], clean_s: Option<&[f64]>) -> Option<(f64, Vec<f64>)> {
+        if t[2..4].iter().chain(&t[5..7]).any(|lb| lb.exp() > self.b_box) || t.iter().any(|v| !v.is_finite() || v.abs() > 60.0) {
+            return None;
+        }
+        let r = self.gram.nrows();
+        let lam = self.variances(t);
+        let sq: Vec<f64> = lam.iter().map(|v| v.sqrt()).collect();
+        let sigma2 = (2.0 * t[7]).exp();
+        let mut b = Mat::from_fn(r, r, |i, j| sq[i] * self.gram[(i, j)] * sq[j] / sigma2 + if i == j { 1.0 } else { 0.0 });
+        let par = Par::Seq;
+        let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(r, par, Default::default()));
+        cholesky_in_place(b.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default()).ok()?;
+        let logdet: f64 = (0..r).map(|i| 2.0 * b[(i, i)].ln()).sum();
+        let s = clean_s.unwrap_or(&self.s);
+        let mut x = Mat::from_fn(r, 1, |i, _| sq[i] * s[i]);
+        solve_lower_triangular_in_place(b.as_ref(), x.as_mut(), par);
+        let quad: f64 = (0..r).map(|i| x[(i, 0)] * x[(i, 0)]).sum();
+        solve_upper_triangular_in_place(b.as_ref().transpose(), x.as_mut(), par);
+        let w: Vec<f64> = (0..r).map(|i| sq[i] * x[(i, 0)] / sigma2).collect();
+        let nlml = 0.5 * (self.rr / sigma2 - quad / (sigma2 * sigma2)) + 0.5 * logdet + self.obs as f64 * t[7];
+        Some((nlml, w))
+    }
+}
+
+/// Nelder–Mead on `f` from `x0` with initial steps `step`, restarted until no gain.
+fn nelder_mead(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: f64, free: &[bool]) -> (f64, Vec<f64>) {
+    let idx: Vec<usize> = (0..x0.len()).filter(|&k| free[k]).collect();
+    let k = idx.len();
+    let embed = |y: &[f64]| {
+        let mut x = x0.to_vec();
+        for (j, &i) in idx.iter().enumerate() {
+            x[i] = y[j];
+        }
+        x
+    };
+    let mut best_x: Vec<f64> = idx.iter().map(|&i| x0[i]).collect();
+    let mut best_f = f(&embed(&best_x));
+    for _restart in 0..3 {
+        let mut simplex: Vec<(f64, Vec<f64>)> = vec![(best_f, best_x.clone())];
+        for j in 0..k {
+            let mut y = best_x.clone();
+            y[j] += step;
+            simplex.push((f(&embed(&y)), y));
+        }
+        for _ in 0..150 * k {
+            simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let centroid: Vec<f64> = (0..k).map(|j| simplex[..k].iter().map(|p| p.1[j]).sum::<f64>() / k as f64).collect();
+            let worst = simplex[k].clone();
+            let at = |a: f64| -> Vec<f64> { (0..k).map(|j| centroid[j] + a * (worst.1[j] - centroid[j])).collect() };
+            let xr = at(-1.0);
+            let fr = f(&embed(&xr));
+            if fr < simplex[0].0 {
+                let xe = at(-2.0);
+                let fe = f(&embed(&xe));
+                simplex[k] = if fe < fr { (fe, xe) } else { (fr, xr) };
+            } else if fr < simplex[k - 1].0 {
+                simplex[k] = (fr, xr);
+            } else {
+                let xc = at(0.5);
+                let fc = f(&embed(&xc));
+                if fc < worst.0 {
+                    simplex[k] = (fc, xc);
+                } else {
+                    let x0 = simplex[0].1.clone();
+                    for p in simplex.iter_mut().skip(1) {
+                        p.1 = (0..k).map(|j| x0[j] + 0.5 * (p.1[j] - x0[j])).collect();
+                        p.0 = f(&embed(&p.1));
+                    }
+                }
+            }
+            let spread = simplex.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max) - simplex[0].0;
+            if spread < 1e-6 {
+                break;
+            }
+        }
+        simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let gain = best_f - simplex[0].0;
+        best_f = simplex[0].0;
+        best_x = simplex[0].1.clone();
+        if gain < 1e-4 {
+            break;
+        }
+    }
+    (best_f, embed(&best_x))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let per_axis: usize = args.get(1).map_or(16, |s| s.parse().unwrap());
+    let b_box: f64 = args.get(2).map_or(0.5, |s| s.parse().unwrap());
+    let (m, n) = (2usize, 2usize);
+    let real = rr::RealRr::default();
+    let nominal = rr::nominal();
+    let clean = real.measure(&configurations(Sampling::Grid { per_axis }, 2));
+    let mut noisy = clean.clone();
+    add_noise(&mut noisy.positions, 1e-4, 1u64.wrapping_add(0x5eed));
+    let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
+    if std::env::var_os("CBD_DIAG_NO_KRR").is_none() {
+        let peer = fit_kernel_ridge_peer(&nominal, &noisy, &Default::default()).unwrap();
+        let pn = peer.regression.predict(&nominal, &test.joints);
+        println!("krr: test mean {:.4e} (lml {:.2})", mean_error(&pn, &test.positions), peer.hyperparameters.log_marginal_likelihood);
+    }
+    let norm = cbd_trainer::evidence::normalisation_of(&noisy);
+    let e = cbd_trainer::evidence::choose_cbd_hyperparameters(&nominal, &noisy, &norm, &Default::default()).unwrap();
+    let h = &e.hyperparameters;
+    println!("plain cbd evidence {:.2} ({}), {:?}", e.log_evidence, e.form, h);
+    let jk = h.blob_joint_kernel(&norm);
+    let tk = TaskKernel { width: h.blob_task_width(&norm) };
+    let integ = Integrator { method: IntegratorMethod::Euler, steps: 1 };
+    let link_angles = args.get(3).is_some_and(|s| s == "u" || s == "uu");
+    let components_in_u = args.get(3).is_some_and(|s| s == "uu");
+    // J_u = J_q A⁻¹: column 1 − column 2, column 2 (m × n row-major blocks).
+    let to_u = |jac: &mut Vec<f64>| {
+        if components_in_u {
+            for row in jac.chunks_exact_mut(n) {
+                row[0] -= row[1];
+            }
+        }
+    };
+    let a_factor: f64 = args.get(4).map_or(1.0, |s| s.parse().unwrap());
+    // u = A q, A unit lower-triangular of ones (one group of parallel axes).
+    let map = |cp: &mut ControlPoints| {
+        if link_angles {
+            for q in cp.points.chunks_exact_mut(n) {
+                q[1] += q[0];
+            }
+        }
+    };
+    let tk = TaskKernel { width: tk.width * a_factor };
+    println!(
+        "joint kernel coordinates: {}, task width × {a_factor}",
+        match (link_angles, components_in_u) {
+            (false, _) => "joint angles q",
+            (true, false) => "link angles u, components in q",
+            (true, true) => "link angles u, components in u",
+        }
+    );
+    let mut cp = ControlPoints::new(&nominal, &norm, noisy.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
+    let nom = cp.nominal_positions();
+    let mut jac = cp.nominal_jacobians();
+    to_u(&mut jac);
+    map(&mut cp);
+    let mut tcp = ControlPoints::new(&nominal, &norm, test.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
+    let tnom = tcp.nominal_positions();
+    let mut tjac = tcp.nominal_jacobians();
+    to_u(&mut tjac);
+    map(&mut tcp);
+    // Bases: joint harmonics of the box's narrowest kernel (b_box per axis), task at plain CbD's a × A_FACTOR.
+    let sigma_n = h.blob_sigma();
+    let mean_j2 = jac.iter().map(|v| v * v).sum::<f64>() / nom.len() as f64;
+    let tolerance = tolerance_for(sigma_n / 3.0, 1.0 + jk.gamma * mean_j2).max(1e-16);
+    let joint = truncate(&vec![AxisSeries::periodic(b_box); n], tolerance).expect("joint basis");
+    let task = truncate(&vec![AxisSeries::gaussian(task_radius_of(&nom, m) / tk.width); m], tolerance).expect("task basis");
+    let joint_orders: Vec<[usize; 2]> = joint.codes.chunks_exact(n).map(|c| [(c[0] >> 1) as usize, (c[1] >> 1) as usize]).collect();
+    let target = |d: &cbd_trainer::data::Measurements| -> Vec<f64> {
+        d.positions
+            .chunks_exact(m)
+            .flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale))
+            .zip(&nom)
+            .map(|(y, k)| y - k)
+            .collect()
+    };
+    let (res, res_clean) = (target(&noisy), target(&clean));
+    let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nom, jacobians: &jac, residual: &res };
+    let a = design(&problem, &jk, &tk, &joint, &task);
+    let zero = vec![0.0; tnom.len()];
+    let tproblem = LinearProblem { dims: tcp.dims, points: &tcp.points, nominal: &tnom, jacobians: &tjac, residual: &zero };
+    let at = design(&tproblem, &jk, &tk, &joint, &task);
+    let r = a.ncols();
+    let mut gram = Mat::zeros(r, r);
+    matmul(gram.as_mut(), Accum::Replace, a.transpose(), a.as_ref(), 1.0, Par::Seq);
+    let proj = |v: &[f64]| -> Vec<f64> { (0..r).map(|j| (0..a.nrows()).map(|i| a[(i, j)] * v[i]).sum()).collect() };
+    let (s, s_clean) = (proj(&res), proj(&res_clean));
+    println!(
+        "basis: {} joint functions × {n} + {} task functions × {m} = {r} weights (tolerance {tolerance:.1e}, b_box {b_box})",
+        joint.len(),
+        task.len()
+    );
+    let model = Model { joint_orders, task_functions: task.len(), gram, s, rr: res.iter().map(|v| v * v).sum(), obs: res.len(), b_box };
+    let predict = |w: &[f64]| -> Vec<f64> {
+        let d = apply(&at, w);
+        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.task_offset[i % m] + norm.task_scale * (k + d)).collect()
+    };
+    // Data units: ln p(y) = −nlml − N m ln scale − ½ N m ln 2π.
+    let to_lml = |nlml: f64| -nlml - model.obs as f64 * (norm.task_scale.ln() + 0.5 * (2.0 * std::f64::consts::PI).ln());
+    let report = |name: &str, t: &[f64], nlml: f64| {
+        let (_, w) = model.evaluate(t, None).unwrap();
+        let (_, wc) = model.evaluate(t, Some(&s_clean)).unwrap();
+        let (pn, pc) = (predict(&w), predict(&wc));
+        let e: Vec<f64> = t.iter().map(|v| v.exp()).collect();
+        println!(
+            "{name}: lml {:.2} test mean {:.4e} bias {:.4e} | γW {:.3e} γ1 {:.3e} b ({:.2e}, {:.2e}) γ2 {:.3e} c ({:.2e}, {:.2e}) σ {:.3e}",
+            to_lml(nlml),
+            mean_error(&pn, &test.positions),
+            mean_error(&pc, &test.positions),
+            e[0],
+            e[1],
+            e[2],
+            e[3],
+            e[4],
+            e[5],
+            e[6],
+            e[7] * norm.task_scale
+        );
+    };
+    let b_of = |k: usize| if let JointKernelAxis::Periodic { b } = jk.axes[k] { b } else { 1.0 };
+    let gw = h.task_gamma / (norm.task_scale * norm.task_scale);
+    let t_plain = vec![
+        gw.ln(),
+        jk.gamma.ln(),
+        b_of(0).ln(),
+        b_of(1).ln(),
+        -50.0,
+        b_box.ln() - 1.0,
+        b_box.ln() - 1.0,
+        (h.sigma / norm.task_scale).ln(),
+    ];
+    let f = |t: &[f64]| model.evaluate(t, None).map_or(f64::INFINITY, |v| v.0);
+    report("plain CbD's θ (its own evidence) on this basis", &t_plain, f(&t_plain));
+    let single_free = [true, true, true, true, false, false, false, true];
+    let (v, t1) = nelder_mead(&f, &t_plain, 0.5, &single_free);
+    report("one kernel, searched on this basis", &t1, v);
+    let all = [true; 8];
+    let mut best = (v, t1.clone());
+    for (lg2, lc) in [(-6.0, -1.0), (-6.0, -3.0), (-8.0, 0.0)] {
+        let mut t = t1.clone();
+        t[4] = t1[1] + lg2;
+        t[5] = b_box.ln() + lc;
+        t[6] = b_box.ln() + lc;
+        let (v, t) = nelder_mead(&f, &t, 0.7, &all);
+        report(&format!("sum, start γ2 = γ1 e^{lg2}, c = b_box e^{lc}"), &t, v);
+        if v < best.0 {
+            best = (v, t);
+        }
+    }
+    report("sum, best evidence", &best.1, best.0);
+}
