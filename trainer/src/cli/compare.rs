@@ -72,7 +72,8 @@ fn commanded_table(
     let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
         crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
     };
-    let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, 1000, 15)?;
+    let command = crate::evaluation::commanded_pose::commander_for(nominal);
+    let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, command, 1000, 15)?;
     println!("{}", c.table(unit));
     Ok(c)
 }
@@ -155,7 +156,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::evaluation::commanded::SimulatedArm;
+    use crate::evaluation::commanded::{commanded_accuracy, SimulatedArm};
 
     fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> crate::Result<Vec<u8>> {
         let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
@@ -189,7 +190,9 @@ mod tests {
         let SimulatedArm::Rr(real) = &arm else { unreachable!() };
         let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 16 }, 2));
         let nominal = crate::simulate::rr::nominal();
-        let c = fit_and_command(&arm, &nominal, &train, &kernel_ridge_correction(&SearchOptions::default()), &cbd_fit, 1000, 7).unwrap();
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, commanded_accuracy, 1000, 7).unwrap();
         check(&c, "m", "cbd");
     }
 
@@ -198,8 +201,62 @@ mod tests {
         let arm = SimulatedArm::named("six").unwrap();
         let SimulatedArm::Six(robot) = &arm else { unreachable!() };
         let train = robot.measure(&crate::simulate::six_joint::random_configurations(250, 22), 23);
-        let c =
-            fit_and_command(&arm, &robot.nominal, &train, &kernel_ridge_correction(&SearchOptions::default()), &cbd_fit, 1000, 7).unwrap();
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &robot.nominal, &train, &krr, &cbd_fit, commanded_accuracy, 1000, 7).unwrap();
         check(&c, "mm", "dh+cbd");
+    }
+
+    /// Issue 26 item 1: a model with three tool points on the six-joint arm commands poses — every
+    /// method through pose compensation (CbD: `Calibrator::compensate_pose`), the true tool frame's
+    /// origin and orientation reported; dh+cbd within 1.2× its forward error in both, ahead of DH.
+    #[test]
+    fn commanded_poses_on_the_simulated_six_joint_arm_with_three_tool_points() {
+        use crate::nominal::tool_points::point_chain;
+        let arm = SimulatedArm::named("six").unwrap();
+        let SimulatedArm::Six(robot) = &arm else { unreachable!() };
+        let points = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.60254037844386, 0.0]];
+        let joints = crate::simulate::six_joint::random_configurations(250, 22);
+        // Each point measured on the real chain moved to it, noise per point; rows pose-major.
+        let per_point: Vec<Measurements> = points
+            .iter()
+            .enumerate()
+            .map(|(j, p)| {
+                let mut moved = (**robot).clone();
+                moved.real = point_chain(&robot.real, *p);
+                moved.measure(&joints, 23 + j as u64)
+            })
+            .collect();
+        let mut train = Measurements::with_points(6, 3, 3);
+        for k in 0..joints.len() / 6 {
+            for m in &per_point {
+                train.push(m.joints(k), m.position(k));
+            }
+        }
+        let NominalModel::DhChain(mut chain) = robot.nominal.clone() else { unreachable!() };
+        chain.tool_points = heapless::Vec::from_slice(&points).unwrap();
+        let nominal = NominalModel::DhChain(chain);
+        let command = crate::evaluation::commanded_pose::commander_for(&nominal);
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
+        eprintln!("{}", c.table("mm"));
+        assert!(c.target.contains("pose"), "{}", c.target);
+        let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap_or_else(|| panic!("no row {n}"));
+        for name in ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"] {
+            assert!(row(name).orientation_deg.is_some_and(|o| o.mean.is_finite()), "{name}: orientation");
+        }
+        let best = row("dh+cbd");
+        let (forward, forward_angle) = (best.forward.unwrap().mean, best.forward_orientation_deg.unwrap().mean);
+        let (position, angle) = (best.stats.mean, best.orientation_deg.unwrap().mean);
+        assert!(
+            position <= 1.2 * forward && angle <= 1.2 * forward_angle,
+            "dh+cbd {position} mm {angle}° vs forward {forward} {forward_angle}"
+        );
+        let dh = row("dh");
+        assert!(position < dh.stats.mean && angle < dh.orientation_deg.unwrap().mean, "dh+cbd against dh");
+        assert!(dh.stats.mean < row("nominal").stats.mean);
+        let json = c.to_json();
+        assert!(json["methods"]["dh+cbd"]["orientation_deg"]["mean"].is_number(), "{json}");
     }
 }

@@ -67,13 +67,6 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
-    if nominal.tool_point_count() > 1 {
-        // The effect library's regressors evaluate the tool origin only (issue 26 item 1: not yet).
-        return Err(Error::InvalidInput(format!(
-            "the model has {} tool points; `cbd diagnose` takes one tool point for now (`cbd compare` and `cbd fit --dh-first` take several)",
-            nominal.tool_point_count()
-        )));
-    }
     type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
     let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
         let imported = crate::data::csv_import::read_measurements(path, &spec)?;
@@ -202,8 +195,8 @@ fn planar_gap(
     let n = data.n_joints;
     (0..data.len())
         .map(|i| {
-            let pa = frame.from_chain(&crate::diagnose::kinematics::position(chain, &joints[i * n..(i + 1) * n], 2));
-            let pb = crate::diagnose::kinematics::position(b, data.joints(i), 2);
+            let pa = frame.from_chain(&crate::diagnose::kinematics::position(chain, &joints[i * n..(i + 1) * n], 2, 0));
+            let pb = crate::diagnose::kinematics::position(b, data.joints(i), 2, 0);
             pa.iter().zip(&pb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
         })
         .fold(0.0, f64::max)
@@ -214,8 +207,8 @@ fn max_position_gap(a: &cbd_protocol::NominalModel, b: &cbd_protocol::NominalMod
     let m = data.task_dim;
     (0..data.len())
         .map(|i| {
-            let (pa, pb) =
-                (crate::diagnose::kinematics::position(a, data.joints(i), m), crate::diagnose::kinematics::position(b, data.joints(i), m));
+            use crate::diagnose::kinematics::{point_of_row, position};
+            let (pa, pb) = (position(a, data.joints(i), m, point_of_row(a, i)), position(b, data.joints(i), m, point_of_row(b, i)));
             pa.iter().zip(&pb).take(m).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
         })
         .fold(0.0, f64::max)
