@@ -74,7 +74,7 @@ fn commanded_table(
     };
     let command = crate::evaluation::commanded_pose::commander_for(nominal);
     let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, command, 1000, 15)?;
-    println!("{}", c.table(unit));
+    outln!("{}", c.table(unit));
     Ok(c)
 }
 
@@ -117,20 +117,20 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     let comparison =
         crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, Some(&krr), Some(&cbd)));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
-    println!("{}", comparison.table(unit));
+    outln!("{}", comparison.table(unit));
     for w in comparison.warnings() {
         eprintln!("warning: {w}");
     }
     for r in &comparison.rows {
         if !r.note.is_empty() {
-            println!("{}: {}", r.name, r.note);
+            outln!("{}: {}", r.name, r.note);
         }
     }
     if let Some(dir) = &args.plots {
         let methods: Vec<(String, Vec<f64>)> =
             comparison.rows.iter().filter(|r| !r.test_errors.is_empty()).map(|r| (r.name.clone(), r.test_errors.clone())).collect();
         let files = crate::report::plots::method_comparison(dir, &methods, unit)?;
-        println!("figures written to {} ({} files)", dir.display(), files.len());
+        outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     let commanded = match &args.commanded {
         Some(robot) => {

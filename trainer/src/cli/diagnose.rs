@@ -109,7 +109,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     let unit = model_file.as_ref().map(|m| m.length_unit.name()).unwrap_or("length units");
     // The file's units; without a model file, the data's (joint angles in radians).
     let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
-    println!("{}", report::text(&d, &d.model_start, &units));
+    outln!("{}", report::text(&d, &d.model_start, &units));
     if let Some(path) = &args.json {
         let mut json = report::to_json(&d, &d.model_start, &units);
         if let Some(r) = &registration {
@@ -131,7 +131,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             })
             .unzip();
         let files = report::plots(dir, &d, &d.model_start, &names, &scales, unit)?;
-        println!("figures written to {} ({} files)", dir.display(), files.len());
+        outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
         // A registered base is written as the pose the diagnosis found.
@@ -179,7 +179,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             )));
         }
         crate::cli::write_atomically(path, text.as_bytes())?;
-        println!("model with the found effects written to {}", path.display());
+        outln!("model with the found effects written to {}", path.display());
     }
     Ok(())
 }
