@@ -151,6 +151,9 @@ pub fn commanded_pose_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: u
     Ok(CommandedAccuracy { targets: count, rows, target: "tool pose (the tool frame's origin and orientation)".into() })
 }
 
+/// A pose inverse kinematics: model, target frame, seed → (command, reached by the model's account).
+type PoseIk<'a> = dyn Fn(&NominalModel, &Frame, &[f64]) -> (Vec<f64>, bool) + 'a;
+
 /// Kernel-ridge compensation of a pose target by pose redefinition on the tool points: the
 /// shifted points y'_j (first y*_j) → their frame → `ik` on `model` → y'_j += y*_j − krr_j(q).
 fn pose_redefinition(
@@ -159,7 +162,7 @@ fn pose_redefinition(
     points: &[[f64; 3]],
     target: &Frame,
     start: &[f64],
-    ik: &dyn Fn(&NominalModel, &Frame, &[f64]) -> (Vec<f64>, bool),
+    ik: &PoseIk<'_>,
 ) -> (Vec<f64>, bool) {
     let wanted: Vec<[f64; 3]> = points.iter().map(|p| target.apply(*p)).collect();
     let mut shifted = wanted.clone();
