@@ -207,17 +207,13 @@ mod tests {
         check(&c, "mm", "dh+cbd");
     }
 
-    /// Issue 26 item 1: a model with three tool points on the six-joint arm commands poses — every
-    /// method through pose compensation (CbD: `Calibrator::compensate_pose`), the true tool frame's
-    /// origin and orientation reported; dh+cbd within 1.2× its forward error in both, ahead of DH.
-    #[test]
-    fn commanded_poses_on_the_simulated_six_joint_arm_with_three_tool_points() {
+    /// The six-joint arm measured at `points` (250 poses, each point on the real chain moved to it,
+    /// noise per point, rows pose-major) and its nominal model naming those points.
+    fn six_arm_at_points(points: &[[f64; 3]]) -> (SimulatedArm, NominalModel, Measurements) {
         use crate::nominal::tool_points::point_chain;
         let arm = SimulatedArm::named("six").unwrap();
         let SimulatedArm::Six(robot) = &arm else { unreachable!() };
-        let points = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.60254037844386, 0.0]];
         let joints = crate::simulate::six_joint::random_configurations(250, 22);
-        // Each point measured on the real chain moved to it, noise per point; rows pose-major.
         let per_point: Vec<Measurements> = points
             .iter()
             .enumerate()
@@ -227,15 +223,37 @@ mod tests {
                 moved.measure(&joints, 23 + j as u64)
             })
             .collect();
-        let mut train = Measurements::with_points(6, 3, 3);
+        let mut train = Measurements::with_points(6, 3, points.len());
         for k in 0..joints.len() / 6 {
             for m in &per_point {
                 train.push(m.joints(k), m.position(k));
             }
         }
         let NominalModel::DhChain(mut chain) = robot.nominal.clone() else { unreachable!() };
-        chain.tool_points = heapless::Vec::from_slice(&points).unwrap();
-        let nominal = NominalModel::DhChain(chain);
+        chain.tool_points = heapless::Vec::from_slice(points).unwrap();
+        (arm, NominalModel::DhChain(chain), train)
+    }
+
+    /// Two tool points determine no orientation: the table commands tool point 1's position (here
+    /// off the tool origin, so that commanding the origin would show), and says so.
+    #[test]
+    fn commanded_point_one_with_two_tool_points() {
+        let (arm, nominal, train) = six_arm_at_points(&[[20.0, 0.0, 10.0], [100.0, 0.0, 0.0]]);
+        let command = crate::evaluation::commanded_pose::commander_for(&nominal);
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
+        assert!(c.target.contains("tool point 1"), "{}", c.target);
+        assert!(c.rows.iter().all(|r| r.orientation_deg.is_none()));
+        check(&c, "mm", "dh+cbd");
+    }
+
+    /// Issue 26 item 1: a model with three tool points on the six-joint arm commands poses — every
+    /// method through pose compensation (CbD: `Calibrator::compensate_pose`), the true tool frame's
+    /// origin and orientation reported; dh+cbd within 1.2× its forward error in both, ahead of DH.
+    #[test]
+    fn commanded_poses_on_the_simulated_six_joint_arm_with_three_tool_points() {
+        let (arm, nominal, train) = six_arm_at_points(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.60254037844386, 0.0]]);
         let command = crate::evaluation::commanded_pose::commander_for(&nominal);
         let search = SearchOptions::default();
         let krr = kernel_ridge_correction(&search);
