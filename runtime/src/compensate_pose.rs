@@ -378,28 +378,87 @@ impl Calibrator<'_> {
         let fit = fit_frame(nominal.get(..count).ok_or(Error::Internal)?, pulled.get(..count).ok_or(Error::Internal)?)
             .ok_or(Error::OrientationUndetermined)?;
         let nominal_target = Target { position: fit.origin, rotation: fit.rotation };
-        let mut q = SVector::<f64, NJ>::zeros();
-        for (dst, s) in q.iter_mut().zip(seed.iter()) {
-            *dst = *s;
+        let scale = self.model.normalisation.task_scale;
+        let q = nominal_pose_solve(&self.model.nominal, &nominal_target, seed, n, nominal_iterations, revolute, scale)?;
+        self.joint_flow(q.as_slice().get(..n).ok_or(Error::Internal)?, Direction::Forward, out)
+    }
+}
+
+/// The nominal pose inverse kinematics of `target` from `seed`: the UR closed form's solution
+/// nearest the seed, or `iterations` damped Gauss–Newton steps on k0's tool frame ([`pose_newton`]).
+fn nominal_pose_solve(
+    nominal: &NominalModel,
+    target: &Target,
+    seed: &[f64],
+    n: usize,
+    iterations: usize,
+    revolute: &[bool; NJ],
+    scale: f64,
+) -> Result<SVector<f64, NJ>, Error> {
+    let mut q = SVector::<f64, NJ>::zeros();
+    for (dst, s) in q.iter_mut().zip(seed.iter()) {
+        *dst = *s;
+    }
+    let closed = match (nominal, seed.first_chunk::<6>()) {
+        (NominalModel::DhChain(chain), Some(hint)) if ur::is_ur_type(chain) => {
+            nearest_solution(ur::solutions(chain, &Frame::new(target.rotation, target.position)), hint)
         }
-        let closed = match (&self.model.nominal, seed.first_chunk::<6>()) {
-            (NominalModel::DhChain(chain), Some(hint)) if ur::is_ur_type(chain) => {
-                nearest_solution(ur::solutions(chain, &Frame::new(nominal_target.rotation, nominal_target.position)), hint)
-            }
-            _ => None,
-        };
-        if let Some(closed) = closed {
+        _ => None,
+    };
+    match closed {
+        Some(closed) => {
             for (dst, c) in q.iter_mut().zip(closed.iter()) {
                 *dst = *c;
             }
-        } else {
-            let nominal_model = &self.model.nominal;
-            let lever = tool_lever(nominal_model);
-            let scale = self.model.normalisation.task_scale;
-            q = pose_newton(|qs| nominal_pose(nominal_model, qs), q, n, &nominal_target, lever, scale, nominal_iterations, revolute)?.q;
+            Ok(q)
         }
-        self.joint_flow(q.as_slice().get(..n).ok_or(Error::Internal)?, Direction::Forward, out)
+        None => Ok(pose_newton(|qs| nominal_pose(nominal, qs), q, n, target, tool_lever(nominal), scale, iterations, revolute)?.q),
     }
+}
+
+/// Writes to `out` the joints whose nominal tool frame (`kinematics::tool_point::nominal_tool_frame`)
+/// has origin `position` and rotation `rotation` (rows): the nominal half of
+/// [`Calibrator::compensate_pose`]'s start — the UR closed form's solution nearest `seed`, or
+/// `iterations` damped Gauss–Newton steps on the 6-D pose error from `seed` (`scale`: the task
+/// scale of the damping, ρ = |e| / scale). Returns the miss (|t(q) − t*|, |log(R* R(q)ᵀ)| radians).
+/// Errors as [`Calibrator::compensate_pose_with`]'s (joints, orientation, target, seed).
+pub fn nominal_pose_inverse(
+    nominal: &NominalModel,
+    position: &[f64],
+    rotation: &[[f64; 3]; 3],
+    seed: &[f64],
+    out: &mut [f64],
+    iterations: usize,
+    scale: f64,
+) -> Result<(f64, f64), Error> {
+    let n = nominal.n_joints();
+    if n < MIN_POSE_JOINTS {
+        return Err(Error::TooFewJoints { found: n, needed: MIN_POSE_JOINTS });
+    }
+    if !determines_orientation(nominal.tool_points()) {
+        return Err(Error::OrientationUndetermined);
+    }
+    let target = validated_target(position, rotation)?;
+    if seed.len() != n || out.len() != n {
+        return Err(Error::QueryDimension { expected: n, found: if seed.len() != n { seed.len() } else { out.len() } });
+    }
+    if let Some(index) = seed.iter().position(|v| !v.is_finite()) {
+        return Err(Error::NonFiniteQuery { index });
+    }
+    if n > NJ {
+        return Err(Error::Internal);
+    }
+    let mut revolute = [true; NJ];
+    for (d, r) in revolute.iter_mut().enumerate().take(n) {
+        *r = nominal.is_revolute(d);
+    }
+    let q = nominal_pose_solve(nominal, &target, seed, n, iterations, &revolute, scale)?;
+    for (dst, v) in out.iter_mut().zip(q.iter()) {
+        *dst = *v;
+    }
+    // The miss at the command, as the Gauss–Newton iterates are judged.
+    let (_, _, position_miss, angle_miss) = weighted(&target, &nominal_pose(nominal, out)?, tool_lever(nominal));
+    Ok((position_miss, angle_miss))
 }
 
 /// The closed-form solution nearest `hint` (squared angle differences, whole turns from the hint).
@@ -445,6 +504,42 @@ fn validated_target(position: &[f64], rotation: &[[f64; 3]; 3]) -> Result<Target
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The nominal pose inverse on a UR-type chain (closed form) and on one that is not (α2 off by
+    /// 0.01 rad: Gauss–Newton from the seed): the target frame is reached from a seed 0.05 rad
+    /// away; too few joints and points on a line are refused.
+    #[test]
+    fn the_nominal_pose_inverse_reaches_a_reachable_frame() {
+        let points = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.6, 0.0]];
+        let mut ur = cbd_protocol::ur5::chain();
+        ur.tool.translation = [0.0, 0.0, 31.0];
+        ur.tool_points = heapless::Vec::from_slice(&points).unwrap();
+        let mut bent = ur.clone();
+        if let Some(j) = bent.joints.get_mut(1) {
+            j.alpha += 0.01;
+        }
+        assert!(ur::is_ur_type(&ur) && !ur::is_ur_type(&bent));
+        let q_star = [0.4, -1.1, 1.3, -0.7, 1.2, 0.5];
+        let seed: [f64; 6] = core::array::from_fn(|d| q_star[d] + if d % 2 == 0 { 0.05 } else { -0.05 });
+        for chain in [ur, bent] {
+            let model = NominalModel::DhChain(chain);
+            let (frame, _) = nominal_tool_frame(&model, &q_star).unwrap();
+            let mut q = [0.0; 6];
+            let (position, angle) = nominal_pose_inverse(&model, &frame.origin, &frame.rotation, &seed, &mut q, 16, 500.0).unwrap();
+            let (at, _) = nominal_tool_frame(&model, &q).unwrap();
+            let miss = libm::sqrt(dot(sub(at.origin, frame.origin), sub(at.origin, frame.origin)));
+            assert!(position < 1e-9 && angle < 1e-11 && (miss - position).abs() < 1e-12, "{position} {angle} {miss}");
+            for (a, b) in q.iter().zip(q_star) {
+                assert!((a - b).abs() < 1e-9, "{q:?} against {q_star:?}");
+            }
+        }
+        let mut line = cbd_protocol::ur5::chain();
+        line.tool_points = heapless::Vec::from_slice(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]]).unwrap();
+        let id = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let mut q = [0.0; 6];
+        let refused = nominal_pose_inverse(&NominalModel::DhChain(line), &[0.0; 3], &id, &seed, &mut q, 16, 500.0);
+        assert_eq!(refused.err(), Some(Error::OrientationUndetermined));
+    }
 
     #[test]
     fn targets_that_are_not_rotations_are_refused() {

@@ -414,3 +414,26 @@ fn demo_sizes_too_large_for_memory_are_refused_up_front() {
         assert!(!dir.join("d.blob").exists());
     }
 }
+
+/// `cbd eval ... | head -1`: a reader that closed its end of the pipe made `println!` panic
+/// ("failed printing to stdout: Broken pipe"). Stdout is here a pipe whose read end is closed before
+/// `cbd` starts, so every write fails with EPIPE: a quiet, successful exit (nothing on stderr but
+/// what a normal run writes there), and the same run into an open pipe still prints the table.
+#[test]
+fn a_closed_stdout_pipe_is_a_quiet_exit() {
+    let dir = scratch("broken-pipe");
+    let model = ur5_model();
+    let train = ur5_head(&dir, "train.csv", 60);
+    succeeds(&cbd(&dir, &["fit", "--quiet", "--model", &model, "--data", &train, "--out", "m.blob"]));
+    let eval = ["eval", "--model", model.as_str(), "--blob", "m.blob", "--data", train.as_str()];
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = std::process::Command::new(CBD).args(eval).current_dir(&dir).stdout(writer).output().unwrap();
+    let err = stderr(&out);
+    assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{err}");
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let open = succeeds(&cbd(&dir, &eval));
+    assert!(!open.contains("panicked"));
+    let printed = String::from_utf8_lossy(&cbd(&dir, &eval).stdout).into_owned();
+    assert!(printed.lines().next().is_some_and(|l| l.starts_with("model")), "{printed}");
+}

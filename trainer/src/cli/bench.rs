@@ -331,12 +331,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if let Some(n) = args.single {
         let blob_out = args.blob_out.clone().ok_or_else(|| Error::InvalidInput("--single needs --blob-out".into()))?;
         let fit = fit_one(n, &blob_out)?;
-        println!("{}", serde_json::to_string(&fit).map_err(Error::JsonOutput)?);
+        outln!("{}", serde_json::to_string(&fit).map_err(Error::JsonOutput)?);
         return Ok(());
     }
     if args.single_ur5 {
         let fit = fit_ur5(&args.ur5)?;
-        println!("{}", serde_json::to_string(&fit).map_err(Error::JsonOutput)?);
+        outln!("{}", serde_json::to_string(&fit).map_err(Error::JsonOutput)?);
         return Ok(());
     }
     // `--markdown` is edited in place: an output, and read only to keep its other sections.
@@ -431,7 +431,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         crate::cli::write_atomically(path, serde_json::to_string_pretty(&report).map_err(Error::JsonOutput)?.as_bytes())?;
     }
     let table = markdown(&report);
-    println!("{table}");
+    outln!("{table}");
     if let Some(path) = &args.markdown {
         replace_section(path, "## Trainer and runtime", &table)?;
     }

@@ -72,8 +72,9 @@ fn commanded_table(
     let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
         crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
     };
-    let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, 1000, 15)?;
-    println!("{}", c.table(unit));
+    let command = crate::evaluation::commanded_pose::commander_for(nominal);
+    let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, command, 1000, 15)?;
+    outln!("{}", c.table(unit));
     Ok(c)
 }
 
@@ -116,20 +117,20 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     let comparison =
         crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, Some(&krr), Some(&cbd)));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
-    println!("{}", comparison.table(unit));
+    outln!("{}", comparison.table(unit));
     for w in comparison.warnings() {
         eprintln!("warning: {w}");
     }
     for r in &comparison.rows {
         if !r.note.is_empty() {
-            println!("{}: {}", r.name, r.note);
+            outln!("{}: {}", r.name, r.note);
         }
     }
     if let Some(dir) = &args.plots {
         let methods: Vec<(String, Vec<f64>)> =
             comparison.rows.iter().filter(|r| !r.test_errors.is_empty()).map(|r| (r.name.clone(), r.test_errors.clone())).collect();
         let files = crate::report::plots::method_comparison(dir, &methods, unit)?;
-        println!("figures written to {} ({} files)", dir.display(), files.len());
+        outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     let commanded = match &args.commanded {
         Some(robot) => {
@@ -155,7 +156,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::evaluation::commanded::SimulatedArm;
+    use crate::evaluation::commanded::{commanded_accuracy, SimulatedArm};
 
     fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> crate::Result<Vec<u8>> {
         let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
@@ -189,7 +190,9 @@ mod tests {
         let SimulatedArm::Rr(real) = &arm else { unreachable!() };
         let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 16 }, 2));
         let nominal = crate::simulate::rr::nominal();
-        let c = fit_and_command(&arm, &nominal, &train, &kernel_ridge_correction(&SearchOptions::default()), &cbd_fit, 1000, 7).unwrap();
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, commanded_accuracy, 1000, 7).unwrap();
         check(&c, "m", "cbd");
     }
 
@@ -198,8 +201,80 @@ mod tests {
         let arm = SimulatedArm::named("six").unwrap();
         let SimulatedArm::Six(robot) = &arm else { unreachable!() };
         let train = robot.measure(&crate::simulate::six_joint::random_configurations(250, 22), 23);
-        let c =
-            fit_and_command(&arm, &robot.nominal, &train, &kernel_ridge_correction(&SearchOptions::default()), &cbd_fit, 1000, 7).unwrap();
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &robot.nominal, &train, &krr, &cbd_fit, commanded_accuracy, 1000, 7).unwrap();
         check(&c, "mm", "dh+cbd");
+    }
+
+    /// The six-joint arm measured at `points` (250 poses, each point on the real chain moved to it,
+    /// noise per point, rows pose-major) and its nominal model naming those points.
+    fn six_arm_at_points(points: &[[f64; 3]]) -> (SimulatedArm, NominalModel, Measurements) {
+        use crate::nominal::tool_points::point_chain;
+        let arm = SimulatedArm::named("six").unwrap();
+        let SimulatedArm::Six(robot) = &arm else { unreachable!() };
+        let joints = crate::simulate::six_joint::random_configurations(250, 22);
+        let per_point: Vec<Measurements> = points
+            .iter()
+            .enumerate()
+            .map(|(j, p)| {
+                let mut moved = (**robot).clone();
+                moved.real = point_chain(&robot.real, *p);
+                moved.measure(&joints, 23 + j as u64)
+            })
+            .collect();
+        let mut train = Measurements::with_points(6, 3, points.len());
+        for k in 0..joints.len() / 6 {
+            for m in &per_point {
+                train.push(m.joints(k), m.position(k));
+            }
+        }
+        let NominalModel::DhChain(mut chain) = robot.nominal.clone() else { unreachable!() };
+        chain.tool_points = heapless::Vec::from_slice(points).unwrap();
+        (arm, NominalModel::DhChain(chain), train)
+    }
+
+    /// Two tool points determine no orientation: the table commands tool point 1's position (here
+    /// off the tool origin, so that commanding the origin would show), and says so.
+    #[test]
+    fn commanded_point_one_with_two_tool_points() {
+        let (arm, nominal, train) = six_arm_at_points(&[[20.0, 0.0, 10.0], [100.0, 0.0, 0.0]]);
+        let command = crate::evaluation::commanded_pose::commander_for(&nominal);
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
+        assert!(c.target.contains("tool point 1"), "{}", c.target);
+        assert!(c.rows.iter().all(|r| r.orientation_deg.is_none()));
+        check(&c, "mm", "dh+cbd");
+    }
+
+    /// Issue 26 item 1: a model with three tool points on the six-joint arm commands poses — every
+    /// method through pose compensation (CbD: `Calibrator::compensate_pose`), the true tool frame's
+    /// origin and orientation reported; dh+cbd within 1.2× its forward error in both, ahead of DH.
+    #[test]
+    fn commanded_poses_on_the_simulated_six_joint_arm_with_three_tool_points() {
+        let (arm, nominal, train) = six_arm_at_points(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.60254037844386, 0.0]]);
+        let command = crate::evaluation::commanded_pose::commander_for(&nominal);
+        let search = SearchOptions::default();
+        let krr = kernel_ridge_correction(&search);
+        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
+        eprintln!("{}", c.table("mm"));
+        assert!(c.target.contains("pose"), "{}", c.target);
+        let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap_or_else(|| panic!("no row {n}"));
+        for name in ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"] {
+            assert!(row(name).orientation_deg.is_some_and(|o| o.mean.is_finite()), "{name}: orientation");
+        }
+        let best = row("dh+cbd");
+        let (forward, forward_angle) = (best.forward.unwrap().mean, best.forward_orientation_deg.unwrap().mean);
+        let (position, angle) = (best.stats.mean, best.orientation_deg.unwrap().mean);
+        assert!(
+            position <= 1.2 * forward && angle <= 1.2 * forward_angle,
+            "dh+cbd {position} mm {angle}° vs forward {forward} {forward_angle}"
+        );
+        let dh = row("dh");
+        assert!(position < dh.stats.mean && angle < dh.orientation_deg.unwrap().mean, "dh+cbd against dh");
+        assert!(dh.stats.mean < row("nominal").stats.mean);
+        let json = c.to_json();
+        assert!(json["methods"]["dh+cbd"]["orientation_deg"]["mean"].is_number(), "{json}");
     }
 }

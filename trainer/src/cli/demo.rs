@@ -191,9 +191,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
             workspace_per_axis: 16,
         };
         let files = demo_figures(dir, &inputs)?;
-        println!("figures written to {} ({} files)", dir.display(), files.len());
+        outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
-    println!("model written to {}", args.out.display());
+    outln!("model written to {}", args.out.display());
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&report).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
@@ -202,30 +202,31 @@ pub fn run(args: DemoArgs) -> Result<()> {
 }
 
 fn print_report(r: &DemoReport) {
-    println!("Calibration by Diffeomorphisms — planar RR benchmark (paper §4)");
-    println!("train: {} grid configurations; test: {} uniform random configurations", r.n_train, r.n_test);
-    println!("flow: {} × {} steps, σ = {:.2e}; {} iterations ({})", r.integrator, r.steps, r.sigma, r.iterations, r.fit.stop_reason);
-    println!();
-    println!("{:<28} {:>11} {:>11} {:>11} {:>11}", "position error (length units)", "mean", "median", "p99", "max");
-    let row = |name: &str, s: &ErrorStats| println!("{:<28} {:>11.3e} {:>11.3e} {:>11.3e} {:>11.3e}", name, s.mean, s.median, s.p99, s.max);
+    outln!("Calibration by Diffeomorphisms — planar RR benchmark (paper §4)");
+    outln!("train: {} grid configurations; test: {} uniform random configurations", r.n_train, r.n_test);
+    outln!("flow: {} × {} steps, σ = {:.2e}; {} iterations ({})", r.integrator, r.steps, r.sigma, r.iterations, r.fit.stop_reason);
+    outln!();
+    outln!("{:<28} {:>11} {:>11} {:>11} {:>11}", "position error (length units)", "mean", "median", "p99", "max");
+    let row = |name: &str, s: &ErrorStats| outln!("{:<28} {:>11.3e} {:>11.3e} {:>11.3e} {:>11.3e}", name, s.mean, s.median, s.p99, s.max);
     row("random: nominal", &r.nominal);
     row("random: CbD (runtime)", &r.calibrated);
     row("random: kernel ridge", &r.krr);
     row("grid: nominal", &r.nominal_grid);
     row("grid: CbD (runtime)", &r.calibrated_grid);
     row("grid: kernel ridge", &r.krr_grid);
-    println!();
-    println!(
+    outln!();
+    outln!(
         "orders of magnitude (random, mean): CbD {:.2}, kernel ridge {:.2}",
         (r.nominal.mean / r.calibrated.mean).log10(),
         (r.nominal.mean / r.krr.mean).log10()
     );
-    println!(
+    outln!(
         "fit time: CbD {:.2} s (flow {:.2} s, tangent {:.2} s, solves {:.2} s) after {:.2} s choosing its hyperparameters; kernel ridge {:.3} s with its own",
         r.fit_seconds, r.fit.seconds_flow, r.fit.seconds_tangent, r.fit.seconds_solve, r.selection_seconds, r.krr_fit_seconds
     );
-    println!(
+    outln!(
         "blob: {} bytes; largest runtime/trainer difference at the training points: {:.1e} (relative)",
-        r.blob_bytes, r.max_runtime_trainer_diff
+        r.blob_bytes,
+        r.max_runtime_trainer_diff
     );
 }

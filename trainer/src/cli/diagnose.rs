@@ -67,13 +67,6 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
-    if nominal.tool_point_count() > 1 {
-        // The effect library's regressors evaluate the tool origin only (issue 26 item 1: not yet).
-        return Err(Error::InvalidInput(format!(
-            "the model has {} tool points; `cbd diagnose` takes one tool point for now (`cbd compare` and `cbd fit --dh-first` take several)",
-            nominal.tool_point_count()
-        )));
-    }
     type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
     let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
         let imported = crate::data::csv_import::read_measurements(path, &spec)?;
@@ -116,7 +109,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     let unit = model_file.as_ref().map(|m| m.length_unit.name()).unwrap_or("length units");
     // The file's units; without a model file, the data's (joint angles in radians).
     let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
-    println!("{}", report::text(&d, &d.model_start, &units));
+    outln!("{}", report::text(&d, &d.model_start, &units));
     if let Some(path) = &args.json {
         let mut json = report::to_json(&d, &d.model_start, &units);
         if let Some(r) = &registration {
@@ -138,7 +131,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             })
             .unzip();
         let files = report::plots(dir, &d, &d.model_start, &names, &scales, unit)?;
-        println!("figures written to {} ({} files)", dir.display(), files.len());
+        outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
         // A registered base is written as the pose the diagnosis found.
@@ -186,7 +179,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             )));
         }
         crate::cli::write_atomically(path, text.as_bytes())?;
-        println!("model with the found effects written to {}", path.display());
+        outln!("model with the found effects written to {}", path.display());
     }
     Ok(())
 }
@@ -202,8 +195,8 @@ fn planar_gap(
     let n = data.n_joints;
     (0..data.len())
         .map(|i| {
-            let pa = frame.from_chain(&crate::diagnose::kinematics::position(chain, &joints[i * n..(i + 1) * n], 2));
-            let pb = crate::diagnose::kinematics::position(b, data.joints(i), 2);
+            let pa = frame.from_chain(&crate::diagnose::kinematics::position(chain, &joints[i * n..(i + 1) * n], 2, 0));
+            let pb = crate::diagnose::kinematics::position(b, data.joints(i), 2, 0);
             pa.iter().zip(&pb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
         })
         .fold(0.0, f64::max)
@@ -214,8 +207,8 @@ fn max_position_gap(a: &cbd_protocol::NominalModel, b: &cbd_protocol::NominalMod
     let m = data.task_dim;
     (0..data.len())
         .map(|i| {
-            let (pa, pb) =
-                (crate::diagnose::kinematics::position(a, data.joints(i), m), crate::diagnose::kinematics::position(b, data.joints(i), m));
+            use crate::diagnose::kinematics::{point_of_row, position};
+            let (pa, pb) = (position(a, data.joints(i), m, point_of_row(a, i)), position(b, data.joints(i), m, point_of_row(b, i)));
             pa.iter().zip(&pb).take(m).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
         })
         .fold(0.0, f64::max)

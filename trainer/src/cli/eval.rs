@@ -82,15 +82,15 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let nominal_pred = crate::nominal::positions(&nominal, &data.joints, m);
     let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
     let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;
-    println!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
+    outln!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
     for (name, s) in [("nominal", before), ("calibrated", after)] {
-        println!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
+        outln!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
     }
     use crate::evaluation::pose_errors::PoseErrors;
     let poses = [("nominal", &nominal_pred), ("calibrated", &predicted)]
         .map(|(name, p)| (name, PoseErrors::of(&tool_points, p, &data.positions, m)));
     if poses[0].1.is_some() {
-        println!("\nper tool point (mean) and the tool frame (its origin; orientation in degrees):");
+        outln!("\nper tool point (mean) and the tool frame (its origin; orientation in degrees):");
         for (name, pose) in &poses {
             let Some(pose) = pose else { continue };
             let points: Vec<String> = pose.per_point.iter().enumerate().map(|(j, s)| format!("point {} {:.4e}", j + 1, s.mean)).collect();
@@ -98,7 +98,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
                 (Some(f), Some(o), Some(rms)) => format!("; frame {:.4e}, orientation mean {:.4e} rms {rms:.4e}", f.mean, o.mean),
                 _ => String::new(),
             };
-            println!("{name:<12} {}{frame}", points.join(", "));
+            outln!("{name:<12} {}{frame}", points.join(", "));
         }
     }
     if let Some(path) = &args.json {
@@ -119,7 +119,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             let pairs: Vec<(f64, f64)> = data.joints.chunks_exact(2).map(|q| (q[0], q[1])).collect();
             files.extend(error_heatmaps(dir, "q1 (rad)", "q2 (rad)", &pairs, &before, &after, 24, unit)?);
         }
-        println!("figures written to {} ({} files)", dir.display(), files.len());
+        outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if far > 0 {
         eprintln!(

@@ -257,7 +257,7 @@ pub fn run(args: FitArgs) -> Result<()> {
     if crate::cli::is_stdout(&args.out) {
         eprintln!("{summary}");
     } else {
-        println!("{summary}");
+        outln!("{summary}");
     }
     Ok(())
 }

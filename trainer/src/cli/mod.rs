@@ -1,5 +1,16 @@
 //! The `cbd` command line: one file per command.
 
+/// `println!` for the CLI's stdout: through [`print_line`], so that a reader that went away
+/// (`cbd eval ... | head -1`) ends the process quietly instead of a panic.
+macro_rules! outln {
+    () => {
+        $crate::cli::print_line(format_args!(""))
+    };
+    ($($t:tt)*) => {
+        $crate::cli::print_line(format_args!($($t)*))
+    };
+}
+
 pub mod bench;
 pub mod compare;
 pub mod compensate;
@@ -143,3 +154,19 @@ fn dispatch(cli: Cli) -> Result<()> {
 // in `crate::memory`; the commands reach them here.
 pub use crate::io::{check_output, is_stdout, write_atomically, STDOUT};
 pub use crate::memory;
+
+/// Writes one line to stdout (locked, flushed as `println!` does). A closed pipe (EPIPE: the reader
+/// took what it wanted, `| head -1`) is a quiet, successful exit — what the default SIGPIPE does for
+/// C tools, without Rust's `println!` panic; any other write error is an error line and exit code 1.
+pub fn print_line(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{args}").and_then(|_| out.flush()) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => {
+            eprintln!("error: writing to stdout: {e}");
+            std::process::exit(1)
+        }
+    }
+}

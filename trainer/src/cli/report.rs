@@ -22,6 +22,6 @@ pub struct ReportArgs {
 pub fn run(args: ReportArgs) -> crate::Result<()> {
     crate::io::check_paths(&[("--json", Some(&args.json))], &[("--out", Some(&args.out))])?;
     let figures = crate::report::html::write_report(&args.json, args.plots.as_deref(), &args.out, &args.unit)?;
-    println!("report written to {} ({figures} figures embedded)", args.out.display());
+    outln!("report written to {} ({figures} figures embedded)", args.out.display());
     Ok(())
 }

@@ -345,7 +345,7 @@ fn geometric_columns(model: &NominalModel, data: &Measurements, geometric: &[(us
             if d_delta.iter().all(|v| *v == 0.0) && (0..m).all(|c| a.b[c] == b.b[c]) {
                 continue;
             }
-            let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q);
+            let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q, kinematics::point_of_row(model, i));
             for c in 0..m {
                 jac[(m * i + c, col)] += (0..n).map(|d| dk[c * n + d] * d_delta[d]).sum::<f64>() + (a.b[c] - b.b[c]) / (2.0 * h);
             }
@@ -371,7 +371,7 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
     }
     for i in 0..rows {
         let q = data.joints(i);
-        let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q);
+        let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q, kinematics::point_of_row(model, i));
         for (col, e) in &effects {
             match kinematics::response(model, e, q) {
                 Response::Joint(delta) => {
@@ -412,6 +412,49 @@ mod tests {
                 let fd = (a[r] - b[r]) / (2.0 * h);
                 assert!(
                     (fd - jac[(r, col)]).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "{} row {r}: fd {fd} vs {}",
+                    param_name(&model, p),
+                    jac[(r, col)]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn columns_of_a_model_with_tool_points_match_central_differences_at_every_point() {
+        // Three tool points per pose (rows pose-major): every column — geometric, joint effects,
+        // bending — at each row's own point, the effects deflecting the chain the points ride on.
+        let mut chain = crate::simulate::six_joint::ur5_nominal();
+        chain.tool_points = heapless::Vec::from_slice(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.6, 20.0]]).unwrap();
+        let mut model = NominalModel::DhChain(chain);
+        for e in
+            [Effect::GravityCompliance { joint: 2, compliance: 4e-7 }, Effect::Transmission { joint: 1, harmonic: 2, cos: 1e-3, sin: 0.0 }]
+        {
+            model.effects_mut().list.push(e).unwrap();
+        }
+        let groups = candidate_groups(&model, &LibraryOptions { harmonics: 2 }, 3);
+        let params: Vec<Param> = groups.iter().flat_map(|g| g.params.clone()).collect();
+        let mut data = Measurements::with_points(6, 3, 3);
+        for q in [[0.3, -1.2, 0.8, 0.1, 1.5, -0.4], [-2.0, -0.4, 1.9, -1.0, 0.2, 2.2]] {
+            for _ in 0..3 {
+                data.push(&q, &[0.0; 3]);
+            }
+        }
+        let jac = jacobian(&model, &data, &params);
+        // The points differ: a rotation's column (θ offset 1, the q2 transmission) read at the tool
+        // origin for every row would not match.
+        let transmission = params.iter().position(|p| matches!(p, Param::TransmissionCos { joint: 1, harmonic: 1 })).unwrap();
+        for col in [3, transmission] {
+            assert!((0..3).any(|c| (jac[(c, col)] - jac[(3 + c, col)]).abs() > 1e-3), "rows 0 and 1 share column {col}");
+        }
+        for (col, p) in params.iter().enumerate() {
+            let h = 1e-6;
+            let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
+            let (a, b) = (positions(&plus, &data.joints, 3), positions(&minus, &data.joints, 3));
+            for r in 0..a.len() {
+                let fd = (a[r] - b[r]) / (2.0 * h);
+                assert!(
+                    (fd - jac[(r, col)]).abs() < 1e-5 * (1.0 + fd.abs()),
                     "{} row {r}: fd {fd} vs {}",
                     param_name(&model, p),
                     jac[(r, col)]

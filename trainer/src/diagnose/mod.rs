@@ -90,6 +90,8 @@ pub struct TableRow {
     pub name: String,
     pub stats: ErrorStats,
     pub errors: Vec<f64>,
+    /// With several tool points per pose: the errors per point and of the tool frame.
+    pub pose: Option<crate::evaluation::pose_errors::PoseErrors>,
 }
 
 /// Everything a diagnosis found.
@@ -355,7 +357,7 @@ pub fn diagnose(
     let jac = jacobian(model, &train, &params);
     let group_cols = usable_columns(&groups, &offsets, &jac, options.identifiability_tolerance);
     // 4. Selection, judged out of sample.
-    let problem = LinearProblem::new(&jac, &r0, m, options.selection.folds, options.selection.seed);
+    let problem = LinearProblem::new(&jac, &r0, m, train.points_per_pose, options.selection.folds, options.selection.seed);
     let selection = forward_select(&problem, &group_cols, &options.selection);
     // 5. Refinement on the nonlinear model; then every effect must be significant and earn its
     // place, or it is dropped (the weakest first) and the rest refined again.
@@ -522,7 +524,8 @@ fn held_out_table(
     let mut table = Vec::new();
     let mut push = |name: &str, predicted: Vec<f64>| {
         let errors = crate::report::stats::position_errors(&predicted, &test.positions, m);
-        table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors });
+        let pose = crate::evaluation::pose_errors::PoseErrors::of(given.tool_points(), &predicted, &test.positions, m);
+        table.push(TableRow { name: name.to_string(), stats: ErrorStats::of_errors(&errors), errors, pose });
     };
     push("nominal", positions(model, &test.joints, m));
     push("nominal + geometric", positions(geometric_only, &test.joints, m));

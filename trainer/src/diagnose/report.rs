@@ -127,6 +127,7 @@ pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
         out +=
             &format!("  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max);
     }
+    out += &pose_table(d, unit);
     if let Some(rec) = &d.recommendation {
         let cv: Vec<String> = rec.cross_validation.iter().map(|(name, rms)| format!("{name} {rms:.4e}")).collect();
         out += &format!(
@@ -138,6 +139,29 @@ pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
         if rec.effects_hurt {
             out += "  => naming the effects makes the calibrated model worse out of sample: fit CbD on the nominal model (cbd fit without the written model)\n";
         }
+    }
+    out
+}
+
+/// With several tool points per pose: each held-out row's mean error per tool point, of the tool
+/// frame's origin and of its orientation (degrees: mean and RMS); empty otherwise.
+fn pose_table(d: &Diagnosis, unit: &str) -> String {
+    let Some(points) = d.table.iter().find_map(|r| r.pose.as_ref().map(|p| p.per_point.len())) else { return String::new() };
+    let mut out =
+        format!("\nheld-out mean error per tool point and of the tool frame ({unit}; orientation in degrees):\n  {:<26}", "model");
+    for j in 1..=points {
+        out += &format!(" {:>11}", format!("point {j}"));
+    }
+    out += &format!(" {:>11} {:>11} {:>11}\n", "frame", "orient mean", "orient rms");
+    for r in &d.table {
+        let Some(p) = &r.pose else { continue };
+        out += &format!("  {:<26}", r.name);
+        for s in &p.per_point {
+            out += &format!(" {:>11.4e}", s.mean);
+        }
+        let frame = p.frame_position.map_or(f64::NAN, |s| s.mean);
+        let (mean, rms) = (p.orientation_deg.map_or(f64::NAN, |s| s.mean), p.orientation_rms_deg.unwrap_or(f64::NAN));
+        out += &format!(" {frame:>11.4e} {mean:>11.4e} {rms:>11.4e}\n");
     }
     out
 }
@@ -186,7 +210,11 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
     };
     let mut held = serde_json::Map::new();
     for r in &d.table {
-        held.insert(r.name.clone(), json!({"mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max}));
+        let mut row = json!({"mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max});
+        if let Some(pose) = &r.pose {
+            row["pose"] = pose.to_json();
+        }
+        held.insert(r.name.clone(), row);
     }
     json!({
         "unit": units.length,

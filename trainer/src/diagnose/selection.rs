@@ -84,23 +84,27 @@ impl LinearProblem {
         .sum()
     }
 
-    /// `a`: (rows·m) × P Jacobian, `r`: residual y − k (rows·m), rows assigned to `folds`
-    /// folds by a permutation drawn from `seed`.
-    pub fn new(a: &Mat<f64>, r: &[f64], task_dim: usize, folds: usize, seed: u64) -> LinearProblem {
+    /// `a`: (rows·m) × P Jacobian, `r`: residual y − k (rows·m), pose-major rows of
+    /// `points_per_pose` tool points each; whole poses assigned to `folds` folds by a permutation
+    /// drawn from `seed` (a pose's points are never split between fitting and judging).
+    pub fn new(a: &Mat<f64>, r: &[f64], task_dim: usize, points_per_pose: usize, folds: usize, seed: u64) -> LinearProblem {
         let rows = r.len() / task_dim;
+        let per_pose = points_per_pose.max(1);
+        let poses = rows.div_ceil(per_pose);
         let scale: Vec<f64> = (0..a.ncols()).map(|k| column_norm(a.as_ref(), k).max(f64::MIN_POSITIVE)).collect();
         let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, k| a[(i, k)] / scale[k]);
-        let mut order: Vec<usize> = (0..rows).collect();
+        let mut order: Vec<usize> = (0..poses).collect();
         order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
-        let folds = folds.clamp(2, rows.max(2));
-        let mut fold_of = vec![0; rows];
-        for (pos, &i) in order.iter().enumerate() {
-            fold_of[i] = pos % folds;
+        let folds = folds.clamp(2, poses.max(2));
+        let mut fold_of = vec![0; poses];
+        for (pos, &k) in order.iter().enumerate() {
+            fold_of[k] = pos % folds;
         }
+        let fold_of_obs = |o: usize| fold_of[o / task_dim / per_pose];
         let fold_problems = (0..folds)
             .map(|f| {
-                let held: Vec<usize> = (0..r.len()).filter(|&o| fold_of[o / task_dim] == f).collect();
-                let train: Vec<usize> = (0..r.len()).filter(|&o| fold_of[o / task_dim] != f).collect();
+                let held: Vec<usize> = (0..r.len()).filter(|&o| fold_of_obs(o) == f).collect();
+                let train: Vec<usize> = (0..r.len()).filter(|&o| fold_of_obs(o) != f).collect();
                 (held, compress(&scaled, r, &train))
             })
             .collect();
@@ -204,11 +208,34 @@ mod tests {
         use rand::Rng;
         let a = Mat::from_fn(rows, 4, |_, _| rng.gen_range(-1.0..1.0));
         let r: Vec<f64> = (0..rows).map(|i| 0.7 * a[(i, 2)] + 0.01 * rng.gen_range(-1.0..1.0)).collect();
-        let problem = LinearProblem::new(&a, &r, 1, 5, 1);
+        let problem = LinearProblem::new(&a, &r, 1, 1, 5, 1);
         let groups = vec![vec![0], vec![1], vec![2], vec![3]];
         let s = forward_select(&problem, &groups, &SelectionOptions::default());
         assert_eq!(s.selected, vec![2]);
         let (theta, _) = problem.fit(&[2]);
         assert!((theta[0] - 0.7).abs() < 2e-3, "{theta:?}");
+    }
+
+    #[test]
+    fn folds_hold_out_whole_poses() {
+        // 30 poses of 3 points, 3 coordinates each: every fold holds all 9 observations of a
+        // pose or none of them.
+        let (poses, points, m) = (30, 3, 3);
+        let obs = poses * points * m;
+        let a = Mat::from_fn(obs, 2, |i, k| ((i * 7 + k * 3) % 11) as f64 - 5.0);
+        let r: Vec<f64> = (0..obs).map(|i| (i % 5) as f64).collect();
+        let problem = LinearProblem::new(&a, &r, m, points, 4, 9);
+        let mut seen = vec![0usize; poses];
+        for (held, _) in &problem.folds {
+            let mut count = vec![0usize; poses];
+            for &o in held {
+                count[o / (points * m)] += 1;
+            }
+            for (k, c) in count.iter().enumerate() {
+                assert!(*c == 0 || *c == points * m, "pose {k} split: {c} of {} observations held", points * m);
+                seen[k] += c;
+            }
+        }
+        assert!(seen.iter().all(|&c| c == points * m), "every pose held out exactly once: {seen:?}");
     }
 }

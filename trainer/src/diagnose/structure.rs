@@ -51,7 +51,9 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
     let obs = rows * m;
     let null = Mat::from_fn(obs, m, |i, c| if i % m == c { 1.0 } else { 0.0 });
     let rigid = kinematics::rigid(model);
-    let jac: Vec<Vec<f64>> = (0..rows).map(|i| kinematics::deflected_rigid_jacobian(model, &rigid, data.joints(i))).collect();
+    let jac: Vec<Vec<f64>> = (0..rows)
+        .map(|i| kinematics::deflected_rigid_jacobian(model, &rigid, data.joints(i), kinematics::point_of_row(model, i)))
+        .collect();
     let tau: Vec<Vec<f64>> = (0..rows).map(|i| kinematics::gravity_torques(model, data.joints(i))).collect();
     // Regressor f(i) per coordinate (m columns) plus f(i)·J_j(q_i) (one column).
     let per_joint = |j: usize, f: &dyn Fn(usize) -> f64, cols: &mut Vec<Vec<f64>>| {
@@ -86,7 +88,8 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
         out.push(("joint shape", Some(j), nested_f_test(&null, &to_mat(&cols), r)));
     }
     // Task position, normalised: (k − mean) / rms.
-    let predicted: Vec<f64> = (0..rows).flat_map(|i| kinematics::position(model, data.joints(i), m)).collect();
+    let predicted: Vec<f64> =
+        (0..rows).flat_map(|i| kinematics::position(model, data.joints(i), m, kinematics::point_of_row(model, i))).collect();
     let norm = crate::evidence::normalisation_of(&Measurements {
         n_joints: n,
         task_dim: m,

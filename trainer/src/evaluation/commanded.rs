@@ -54,6 +54,26 @@ impl SimulatedArm {
             SimulatedArm::Six(robot) => robot.true_position(q).to_vec(),
         }
     }
+    /// The six-joint arm's true tool frame when commanded `q` (its real chain at the joints gravity
+    /// deflects `q` to, the frame whose points `cbd simulate --tool-points` measures); `None` for
+    /// the planar arm.
+    pub fn true_frame(&self, q: &[f64]) -> Option<crate::nominal::Frame> {
+        match self {
+            SimulatedArm::Rr(_) => None,
+            SimulatedArm::Six(robot) => {
+                let walk = cbd_runtime::kinematics::rigid::dh_walk(&robot.real, &robot.deflected(q));
+                Some(crate::nominal::Frame::new(walk.tool_rotation, walk.tool))
+            }
+        }
+    }
+    /// Noise-free position of tool point `point` (offset in the tool frame) when commanded `q`;
+    /// `None` is the tool origin ([`SimulatedArm::true_position`]).
+    pub fn true_point(&self, q: &[f64], point: Option<[f64; 3]>) -> Vec<f64> {
+        match (point, self.true_frame(q)) {
+            (Some(p), Some(frame)) => frame.apply(p).to_vec(),
+            _ => self.true_position(q),
+        }
+    }
     /// `count` random configurations in the simulator's range.
     pub fn random_configurations(&self, count: usize, seed: u64) -> Vec<f64> {
         match self {
@@ -154,6 +174,10 @@ pub struct CommandedRow {
     pub not_reached: usize,
     /// For CbD rows: |k1(q) − x| at the commands, the compensation's own residual.
     pub residual: Option<ErrorStats>,
+    /// Pose targets: the true tool frame's orientation error (degrees) after the command.
+    pub orientation_deg: Option<ErrorStats>,
+    /// Pose targets, CbD rows: the calibrated frame's orientation error at q* (degrees).
+    pub forward_orientation_deg: Option<ErrorStats>,
 }
 
 /// The commanded-accuracy table.
@@ -161,10 +185,13 @@ pub struct CommandedRow {
 pub struct CommandedAccuracy {
     pub targets: usize,
     pub rows: Vec<CommandedRow>,
+    /// What the targets are: `tool position`, `tool pose`, or tool point 1's position.
+    pub target: String,
 }
 
 impl CommandedAccuracy {
-    /// `{"targets": N, "methods": {name: {mean, median, p99, max, not_reached, forward_mean?}}}`.
+    /// `{"targets": N, "target": what, "methods": {name: {mean, median, p99, max, not_reached,
+    /// forward_mean?, orientation_deg?: {mean, median, p99, max}, forward_orientation_mean_deg?}}}`.
     pub fn to_json(&self) -> serde_json::Value {
         use serde_json::json;
         let mut methods = serde_json::Map::new();
@@ -179,15 +206,21 @@ impl CommandedAccuracy {
                 row["residual_p99"] = json!(r.p99);
                 row["residual_max"] = json!(r.max);
             }
+            if let Some(o) = &r.orientation_deg {
+                row["orientation_deg"] = json!({"mean": o.mean, "median": o.median, "p99": o.p99, "max": o.max});
+            }
+            if let Some(o) = &r.forward_orientation_deg {
+                row["forward_orientation_mean_deg"] = json!(o.mean);
+            }
             methods.insert(r.name.clone(), row);
         }
-        json!({"targets": self.targets, "methods": methods})
+        json!({"targets": self.targets, "target": self.target, "methods": methods})
     }
 
     pub fn table(&self, unit: &str) -> String {
         let mut out = format!(
-            "commanded accuracy: true tool error ({unit}) at {} random reachable targets\n{:10} {:>12} {:>12} {:>12} {:>12} {:>12} {:>14}\n",
-            self.targets, "method", "mean", "median", "p99", "max", "not reached", "forward mean"
+            "commanded accuracy ({} targets): true tool error ({unit}) at {} random reachable targets\n{:10} {:>12} {:>12} {:>12} {:>12} {:>12} {:>14}\n",
+            self.target, self.targets, "method", "mean", "median", "p99", "max", "not reached", "forward mean"
         );
         for r in &self.rows {
             let forward = r.forward.map(|f| format!("{:.4e}", f.mean)).unwrap_or_default();
@@ -195,6 +228,17 @@ impl CommandedAccuracy {
                 "{:10} {:>12.4e} {:>12.4e} {:>12.4e} {:>12.4e} {:>12} {:>14}\n",
                 r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.not_reached, forward
             );
+        }
+        if self.rows.iter().any(|r| r.orientation_deg.is_some()) {
+            out += &format!(
+                "orientation of the true tool frame (degrees):\n{:10} {:>12} {:>12} {:>12} {:>12} {:>14}\n",
+                "method", "mean", "median", "p99", "max", "forward mean"
+            );
+            for r in &self.rows {
+                let Some(o) = &r.orientation_deg else { continue };
+                let forward = r.forward_orientation_deg.map(|f| format!("{:.4e}", f.mean)).unwrap_or_default();
+                out += &format!("{:10} {:>12.4e} {:>12.4e} {:>12.4e} {:>12.4e} {:>14}\n", r.name, o.mean, o.median, o.p99, o.max, forward);
+            }
         }
         out
     }
@@ -205,16 +249,31 @@ fn distance(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The table for `count` targets drawn from `seed` (see the module doc).
+/// Position targets; with several tool points, tool point 1's position (the point position-only
+/// compensation commands; pose targets: `commanded_pose`, chosen by `commanded_pose::commander_for`).
 pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize, seed: u64) -> crate::Result<CommandedAccuracy> {
     let n = arm.n_joints();
     let nominal = fitted.nominal;
     if nominal.n_joints() != n {
         return Err(Error::InvalidInput(format!("the model has {} joints, the simulated arm {n}", nominal.n_joints())));
     }
+    // Several tool points without an orientation to command: tool point 1, through each model's
+    // chain moved to it (the runtime's position-only compensation commands point 1 too).
+    let point = (nominal.tool_point_count() > 1).then(|| nominal.tool_point(0)).flatten();
+    let at_point = |model: &NominalModel| match point {
+        Some(_) => cbd_runtime::kinematics::tool_point::at_tool_point(model, 0).unwrap_or_else(|| model.clone()),
+        None => model.clone(),
+    };
+    let target = match point {
+        Some(_) => "tool point 1 position (pose compensation needs at least 6 joints and 3 tool points off a line)",
+        None => "tool position",
+    };
+    let (nominal_at, dh_at, dh_krr_at) = (at_point(nominal), fitted.dh.map(at_point), fitted.dh_krr.map(|(m, _)| at_point(m)));
+    let nominal = &nominal_at;
     let configurations = arm.random_configurations(count, seed);
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xc0ffee);
     let scale = {
-        let targets: Vec<f64> = configurations.chunks_exact(n).flat_map(|q| arm.true_position(q)).collect();
+        let targets: Vec<f64> = configurations.chunks_exact(n).flat_map(|q| arm.true_point(q, point)).collect();
         let m = nominal.task_dim();
         (targets.chunks_exact(m).map(|t| t.iter().map(|v| v * v).sum::<f64>()).sum::<f64>() / count.max(1) as f64).sqrt().max(1e-12)
     };
@@ -245,10 +304,10 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         }
     };
     for q_star in configurations.chunks_exact(n) {
-        let x = arm.true_position(q_star);
+        let x = arm.true_point(q_star, point);
         let hint: Vec<f64> = q_star.iter().map(|q| q + rng.gen_range(-HINT_PERTURBATION..HINT_PERTURBATION)).collect();
         let mut record = |k: usize, q: &[f64], reached: bool| {
-            errors[k].push(distance(&arm.true_position(q), &x));
+            errors[k].push(distance(&arm.true_point(q, point), &x));
             if !reached {
                 not_reached[k] += 1;
             }
@@ -257,7 +316,7 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         let (q_nominal, ok) = nominal_ik(nominal, &x, &hint);
         record(0, &q_nominal, ok);
         // (b) DH-calibrated compensation.
-        if let Some(dh) = fitted.dh {
+        if let Some(dh) = &dh_at {
             let (q, ok) = nominal_ik(dh, &x, &hint);
             record(1, &q, ok);
         } else if let Some(p) = &fitted.planar {
@@ -285,7 +344,7 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
             let (q, ok) = pose_redefinition(krr, &|target, hint| nominal_ik(nominal, target, hint));
             record(2, &q, ok);
         }
-        if let Some((model, krr)) = fitted.dh_krr {
+        if let (Some((_, krr)), Some(model)) = (fitted.dh_krr, &dh_krr_at) {
             // The chain's own inverse: the planar arm's closed form in its frame, else the DH chain's.
             let (q, ok) = match &fitted.planar {
                 Some(p) if fitted.dh.is_none() => pose_redefinition(krr, &|target, hint| match p.inverse(target, hint) {
@@ -316,21 +375,29 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
             not_reached: nr,
             forward: (!f.is_empty()).then(|| ErrorStats::of_errors(f)),
             residual: (!r.is_empty()).then(|| ErrorStats::of_errors(r)),
+            orientation_deg: None,
+            forward_orientation_deg: None,
         })
         .collect();
-    Ok(CommandedAccuracy { targets: count, rows })
+    Ok(CommandedAccuracy { targets: count, rows, target: target.into() })
 }
+
+/// The table of fitted methods for `count` targets drawn from `seed`: [`commanded_accuracy`] or
+/// the pose table (`commanded_pose::commander_for` chooses).
+pub type Commander = fn(&SimulatedArm, &Fitted<'_>, usize, u64) -> crate::Result<CommandedAccuracy>;
 
 /// Fits every method on `train` (DH or the planar parametric fit, the kernel-ridge correction
 /// `krr_fit` on the nominal model and on the DH-calibrated chain — for the planar arm its DH
 /// form, as `cbd compare` — CbD through `cbd_fit`, which returns a blob, on the nominal model and on
-/// the DH-calibrated chain) and runs [`commanded_accuracy`].
+/// the DH-calibrated chain) and runs `command` ([`commanded_accuracy`] or the pose table).
+#[allow(clippy::too_many_arguments)]
 pub fn fit_and_command(
     arm: &SimulatedArm,
     nominal: &NominalModel,
     train: &Measurements,
     krr_fit: CorrectionFitter,
     cbd_fit: &dyn Fn(&NominalModel, &Measurements) -> crate::Result<Vec<u8>>,
+    command: Commander,
     count: usize,
     seed: u64,
 ) -> crate::Result<CommandedAccuracy> {
@@ -339,7 +406,8 @@ pub fn fit_and_command(
         NominalModel::PlanarChain { .. } => None,
     };
     let planar = PlanarCalibration::fit(nominal, train);
-    let krr_on = |model: &NominalModel| krr_fit(model, train).ok().map(|fitted| fitted.predict);
+    // One kernel-ridge correction per tool point (as `cbd compare`'s rows).
+    let krr_on = |model: &NominalModel| super::correction::fit_per_tool_point(krr_fit, model, train).ok().map(|fitted| fitted.predict);
     let krr = krr_on(nominal);
     // The chain `cbd compare`'s dh+krr row corrects: the DH fit, planar arms in their DH form.
     let dh_for_krr = match &dh {
@@ -359,19 +427,13 @@ pub fn fit_and_command(
         cbd.push(("dh+cbd", b.as_slice()));
     }
     let fitted = Fitted { nominal, dh: dh.as_ref(), planar, krr: krr.as_ref(), dh_krr: dh_krr.as_ref().map(|(m, k)| (*m, k)), cbd };
-    commanded_accuracy(arm, &fitted, count, seed)
+    command(arm, &fitted, count, seed)
 }
 
 /// The simulated arm `--commanded robot` names, checked against the model file's arm: `compare`
 /// calls it before any fit (an unknown name was refused only after all six fits).
 pub fn commanded_arm(robot: &str, nominal: &NominalModel) -> crate::Result<SimulatedArm> {
     let arm = SimulatedArm::named(robot).map_err(|e| e.context("--commanded"))?;
-    if nominal.tool_point_count() > 1 {
-        return Err(Error::InvalidInput(format!(
-            "--commanded {robot}: the table commands tool positions; this model has {} tool points (pose compensation: `cbd compensate`, trainer/tests/tool_points.rs)",
-            nominal.tool_point_count()
-        )));
-    }
     if arm.n_joints() != nominal.n_joints() {
         return Err(Error::InvalidInput(format!(
             "--commanded {robot}: that arm has {} joints, the model file's {}",

@@ -3,6 +3,7 @@
 //! enter as fitted corrections ([`correction`]) the CLI chooses; no harness names a peer.
 
 pub mod commanded;
+pub mod commanded_pose;
 pub mod compare;
 pub mod correction;
 pub mod pose_errors;
