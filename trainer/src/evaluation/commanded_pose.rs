@@ -9,7 +9,7 @@
 //! same on the DH-calibrated chain from (a)'s command; (c, c') kernel ridge by pose redefinition on
 //! the tool points, y'_j ← y'_j + y*_j − krr_j(q) (y*_j = R* p_j + t*), the frame fitted to y'
 //! commanded through (a) or (b), five rounds; (d) CbD: `Calibrator::compensate_pose` from the hint,
-//! as `cbd compensate` does it (`cli::compensate::compensate_all_poses`).
+//! as `cbd compensate` does it (`evaluation::compensation::compensate_all_poses`).
 
 use super::commanded::{commanded_accuracy, CommandedAccuracy, CommandedRow, Commander, Fitted, SimulatedArm};
 use super::correction::Predictor;
@@ -119,7 +119,7 @@ pub fn commanded_pose_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: u
     // (d) CbD: pose compensation from the hint, as `cbd compensate` commands target poses.
     for (k, (name, blob)) in fitted.cbd.iter().enumerate() {
         let tally = &mut tallies[4 + k];
-        let rows = crate::cli::compensate::compensate_all_poses(blob, &targets, Some(&hints))
+        let rows = crate::evaluation::compensation::compensate_all_poses(blob, &targets, Some(&hints))
             .map_err(|e| Error::InvalidInput(format!("{name}: pose compensation: {e}")))?;
         let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(*name))?;
         let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
