@@ -10,7 +10,9 @@
 //! ```sh
 //! cargo run --release -p cbd-trainer --example plan_curves -- [six|rr|both] [seeds, e.g. 1,2,3,4,5]
 //! ```
-//! `CBD_PLAN_WORKSPACE` / `CBD_PLAN_CANDIDATES` override the planner's workspace and candidate counts,
+//! `CBD_PLAN_WORKSPACE` / `CBD_PLAN_CANDIDATES` / `CBD_PLAN_SPACE_FILLING` override the planner's options,
+//! `CBD_PLAN_RANDOM_EVERY` makes every so-many-th pose a uniform random one, `CBD_PLAN_BATCH` caps the poses per plan (re-estimated in between), `CBD_PLAN_ORACLE=1` plans with
+//! the evidence on 400 further random poses,
 //! `CBD_PLAN_MAX_K` ends the curves early.
 
 use cbd_protocol::{IntegratorMethod, NominalModel};
@@ -122,11 +124,14 @@ struct Row {
 fn run(arm: &Arm, seed: u64) -> Vec<Row> {
     let n = arm.nominal.n_joints();
     let test = (arm.random)(1000, 1000 + seed);
-    let options = |count| PlanOptions {
+    // `salt`: 0 for the first plan of a curve point (the seeds of one batch per point), else distinct.
+    let options = |count: usize, salt: u64| PlanOptions {
         count,
         candidates: env_usize("CBD_PLAN_CANDIDATES", 10_000),
         workspace: env_usize("CBD_PLAN_WORKSPACE", PlanOptions::default().workspace),
-        seed: seed * 1000 + count as u64,
+        space_filling: env_usize("CBD_PLAN_SPACE_FILLING", 0),
+        random_every: env_usize("CBD_PLAN_RANDOM_EVERY", 0),
+        seed: seed * 1000 + count as u64 + salt * 1_000_000,
         ..PlanOptions::default()
     };
     let sample = candidates::uniform_within(&arm.limits, 500, seed);
@@ -134,37 +139,59 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
     let stated = prior::stated(&arm.nominal, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: arm.noise });
     let random = (arm.random)(*arm.sizes.last().unwrap(), 200 + seed);
     let random_data = arm.measure(&random, 300 + seed);
+    // CBD_PLAN_ORACLE=1: every plan with the evidence on 400 further random poses (the hyperparameters
+    // a user cannot know), to see what the estimates cost.
+    let oracle = (env_usize("CBD_PLAN_ORACLE", 0) > 0).then(|| {
+        let q = (arm.random)(400, 700 + seed);
+        prior::from_measurements(&arm.nominal, &arm.measure(&q, 800 + seed)).expect("evidence")
+    });
+    // CBD_PLAN_BATCH=b: at most b poses per `cbd plan` (re-estimated in between); default: one
+    // batch per curve point.
+    let batch_max = env_usize("CBD_PLAN_BATCH", usize::MAX);
     let mut measured: Option<Measurements> = None;
     let mut rows = Vec::new();
+    let mut sub = 0u64;
     for (b, &k) in arm.sizes.iter().enumerate() {
-        let have = measured.as_ref().map_or(0, |d| d.len());
-        let hyperparameters = match &measured {
-            Some(d) => prior::from_measurements(&arm.nominal, d).expect("evidence"),
-            None => stated.clone(),
-        };
-        let input = PlanInput {
-            nominal: &arm.nominal,
-            limits: &arm.limits,
-            to_model: None,
-            user_candidates: &[],
-            measured: measured.as_ref(),
-            hyperparameters,
-        };
-        let t = std::time::Instant::now();
-        let planned = plan(&input, &options(k - have)).expect("plan");
-        let seconds = t.elapsed().as_secs_f64();
-        let predicted = planned.poses.last().and_then(|p| p.predicted_rms);
-        let joints: Vec<f64> = planned.poses.iter().flat_map(|p| p.joints.clone()).collect();
-        let batch = arm.measure(&joints, 50 + 100 * seed + b as u64);
-        let all = match measured.as_ref() {
-            Some(d) => {
-                let mut d = d.clone();
-                d.joints.extend_from_slice(&batch.joints);
-                d.positions.extend_from_slice(&batch.positions);
-                d
-            }
-            None => batch,
-        };
+        let mut predicted = None;
+        let mut seconds = 0.0;
+        let mut identified = None;
+        while measured.as_ref().map_or(0, |d| d.len()) < k {
+            let have = measured.as_ref().map_or(0, |d| d.len());
+            let hyperparameters = match (&oracle, &measured) {
+                (Some(h), _) => h.clone(),
+                (None, Some(d)) => prior::from_measurements(&arm.nominal, d).expect("evidence"),
+                (None, None) => stated.clone(),
+            };
+            let input = PlanInput {
+                nominal: &arm.nominal,
+                limits: &arm.limits,
+                to_model: None,
+                user_candidates: &[],
+                measured: measured.as_ref(),
+                hyperparameters,
+            };
+            let count = (k - have).min(batch_max);
+            let t = std::time::Instant::now();
+            let first = have == arm.sizes[..b].last().copied().unwrap_or(0);
+            let planned = plan(&input, &options(count, if first { 0 } else { 1 + sub })).expect("plan");
+            seconds += t.elapsed().as_secs_f64();
+            predicted = planned.poses.last().and_then(|p| p.predicted_rms);
+            identified = planned.geometric_identified_after;
+            let joints: Vec<f64> = planned.poses.iter().flat_map(|p| p.joints.clone()).collect();
+            // The first sub-batch of each curve point keeps the seed it had with one batch per point.
+            let noise_seed = if first { 50 + 100 * seed + b as u64 } else { 10_000 + 100 * seed + sub };
+            sub += 1;
+            let batch = arm.measure(&joints, noise_seed);
+            measured = Some(match measured.take() {
+                Some(mut d) => {
+                    d.joints.extend_from_slice(&batch.joints);
+                    d.positions.extend_from_slice(&batch.positions);
+                    d
+                }
+                None => batch,
+            });
+        }
+        let all = measured.clone().expect("measured");
         // What `cbd plan --data` reports on all of them (count 0).
         let h = prior::from_measurements(&arm.nominal, &all).expect("evidence");
         let input = PlanInput {
@@ -175,7 +202,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
             measured: Some(&all),
             hyperparameters: h,
         };
-        let after = plan(&input, &PlanOptions { count: 0, candidates: 0, ..options(0) }).expect("plan").measured_predicted_rms;
+        let after = plan(&input, &PlanOptions { count: 0, candidates: 0, ..options(0, 0) }).expect("plan").measured_predicted_rms;
         let p = arm.reached(&all, &test);
         let rd = Measurements {
             n_joints: n,
@@ -190,10 +217,9 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
             arm.name,
             predicted.map_or("–".into(), |v| format!("{v:.3e}")),
             after.map_or("–".into(), |v| format!("{v:.3e}")),
-            planned.geometric_identified_after,
+            identified,
         );
         rows.push(Row { k, planned: p, random: r, predicted, after });
-        measured = Some(all);
     }
     rows
 }

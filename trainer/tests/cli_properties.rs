@@ -183,6 +183,10 @@ fn with(base: &[&str], flag: &str, value: &str) -> Vec<String> {
     args
 }
 
+/// The planar RR arm with joint limits (`cbd plan` needs them).
+const RR_MODEL_WITH_LIMITS: &str =
+    "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = [1.0, 0.5]\n[measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\njoint_limits = [[-3.1, 3.1], [0.1, 3.0]]\n";
+
 const GIVEN: [&str; 12] =
     ["--joint-b", "0.001", "--gamma", "1", "--task-width", "10", "--task-gamma", "1", "--sigma", "1e-4", "--steps", "1"];
 
@@ -193,6 +197,7 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
     rr_grid(&dir, "g4.csv", 4);
     succeeds(&cbd(&dir, &["simulate", "--sampling", "uniform", "--count", "20", "--seed", "3", "--out", "t.csv"]));
     write(&dir, "rr.toml", PLANAR_RR_MODEL);
+    write(&dir, "rr-limits.toml", RR_MODEL_WITH_LIMITS);
     write(&dir, "targets.csv", "x,y\n1.2,0.3\n0.5,0.5\n");
     let mut fit = vec!["fit", "--data", "g4.csv", "--out", "a.blob", "--quiet"];
     fit.extend(GIVEN);
@@ -220,6 +225,7 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
     let mut cmp_base = vec!["compare", "--model", "rr.toml", "--train", "g4.csv", "--test", "t.csv"];
     cmp_base.extend(GIVEN);
     let report_base = ["report", "--json", "run.json", "--out", "r.html"];
+    let plan_base = ["plan", "--model", "rr-limits.toml", "--count", "3", "--candidates", "200", "--workspace", "16", "--out", "p.csv"];
 
     for (base, flag) in [
         (&fit_base[..], "--data"),
@@ -230,6 +236,8 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
         (&diag_base[..], "--test"),
         (&cmp_base[..], "--train"),
         (&cmp_base[..], "--test"),
+        (&plan_base[..], "--data"),
+        (&plan_base[..], "--candidate-file"),
     ] {
         // The few-row files are valid data for some commands (three rows fit); the rest are bad.
         let bad: Vec<String> = csvs.iter().filter(|f| !(f.as_str() == "same.csv" && flag == "--test")).cloned().collect();
@@ -241,6 +249,7 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
         (&comp_base[..], "--model"),
         (&diag_base[..], "--model"),
         (&cmp_base[..], "--model"),
+        (&plan_base[..], "--model"),
     ] {
         csv_slot(base, flag, &models);
     }
@@ -297,6 +306,12 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
         (&sim_base, "--noise"),
         (&bench_base, "--sizes"),
         (&bench_base, "--evidence-sizes"),
+        (&plan_base, "--count"),
+        (&plan_base, "--candidates"),
+        (&plan_base, "--workspace"),
+        (&plan_base, "--noise"),
+        (&plan_base, "--prior-error"),
+        (&plan_base, "--seed"),
     ];
     for (base, flag) in numeric {
         for v in numbers {
@@ -345,7 +360,7 @@ fn no_input_makes_any_subcommand_panic_or_abort() {
     // Nearly every case is bad input: the property was checked on them, not skipped.
     assert!(judged * 10 >= cases.len() * 8, "only {judged} of {} cases failed", cases.len());
     // The valid base commands still work (the bad value, not the command, was refused).
-    for base in [&eval_base[..], &comp_base[..], &report_base[..], &sim_base[..]] {
+    for base in [&eval_base[..], &comp_base[..], &report_base[..], &sim_base[..], &plan_base[..]] {
         let r = run(&dir, base);
         assert_eq!(r.code, Some(0), "cbd {base:?}\n{}", r.stderr);
     }
@@ -387,6 +402,7 @@ fn no_output_path_destroys_an_input_or_a_non_regular_file() {
     write(&dir, "rr.toml", PLANAR_RR_MODEL);
     write(&dir, "targets.csv", "x,y\n1.2,0.3\n0.5,0.5\n");
     write(&dir, "seeds.csv", "q1,q2\n0.5,0.5\n0.6,0.4\n");
+    write(&dir, "rr-limits.toml", RR_MODEL_WITH_LIMITS);
     write(&dir, "precious.txt", "precious");
     let mut fit = vec!["fit", "--model", "rr.toml", "--data", "g4.csv", "--out", "a.blob", "--quiet"];
     fit.extend(GIVEN);
@@ -430,6 +446,29 @@ fn no_output_path_destroys_an_input_or_a_non_regular_file() {
         (diag.clone(), vec!["--json", "--plots", "--write-model"], vec!["--model", "--data", "--test"]),
         (cmp.clone(), vec!["--json", "--plots"], vec!["--model", "--train", "--test"]),
         (vec!["simulate", "--grid", "3", "--out", "s.csv"], vec!["--out"], vec![]),
+        (
+            vec![
+                "plan",
+                "--model",
+                "rr-limits.toml",
+                "--data",
+                "g4.csv",
+                "--candidate-file",
+                "seeds.csv",
+                "--count",
+                "2",
+                "--candidates",
+                "100",
+                "--workspace",
+                "8",
+                "--out",
+                "p.csv",
+                "--json",
+                "p.json",
+            ],
+            vec!["--out", "--json"],
+            vec!["--model", "--data", "--candidate-file"],
+        ),
         (demo.clone(), vec!["--out", "--json", "--plots"], vec![]),
         (vec!["bench", "--sizes", "4", "--evidence-sizes", "4", "--no-ur5", "--json", "b.json"], vec!["--json", "--markdown"], vec![]),
     ];

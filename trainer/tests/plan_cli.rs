@@ -47,6 +47,11 @@ fn bad_plan_inputs_name_the_file_and_line() {
         &cbd(&dir, &["plan", "--model", "prismatic.toml", "--count", "2", "--out", "o.csv"]),
         &["prismatic.toml", "joint 2 has no finite limits"],
     );
+    let points = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/tool-points/six-points.toml");
+    fails_with(
+        &cbd(&dir, &["plan", "--model", points.to_str().unwrap(), "--count", "2", "--out", "o.csv"]),
+        &["six-points.toml", "3 tool points", "one measured point per pose"],
+    );
 }
 
 /// With `[measurements.joint_map]` the limits apply to the controller's values, so the plan samples

@@ -69,6 +69,9 @@ pub fn run(args: PlanArgs) -> Result<()> {
     }
     let (nominal, spec) = load_nominal(&args.model)?;
     let model_name = args.model.model.as_ref().map_or("the built-in RR arm".to_string(), |p| p.display().to_string());
+    if nominal.tool_point_count() > 1 {
+        return Err(crate::plan::PlanError::ToolPoints { points: nominal.tool_point_count() }).context(&model_name);
+    }
     let limits = spec.joint_limits.clone();
     if let Some(d) = limits.iter().position(|[lo, hi]| !(lo.is_finite() && hi.is_finite())) {
         return Err(Error::InvalidInput(format!(
@@ -126,6 +129,16 @@ pub fn run(args: PlanArgs) -> Result<()> {
         workspace: args.workspace,
         ..PlanOptions::default()
     };
+    let bytes = crate::plan::memory_bytes(
+        nominal.n_joints(),
+        nominal.task_dim(),
+        &options,
+        user_candidates.len() / nominal.n_joints().max(1),
+        measured.as_ref().map_or(0, |d| d.len()),
+    );
+    crate::cli::memory::room_for(bytes)
+        .map_err(|e| crate::cli::memory::MemoryError(format!("{}; lower --candidates or --workspace", e.0)))
+        .context(format!("--candidates {} --workspace {} --count {}", args.candidates, args.workspace, args.count))?;
     let sample: Vec<f64> = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2))
         .chunks_exact(limits.len())
         .flat_map(to_model)

@@ -84,8 +84,10 @@ impl DataScales {
         (lower[n], upper[n]) = (gamma_v0 - ln(1e12), gamma_v0 + ln(1e8));
         (lower[n + 1], upper[n + 1]) = (ln(1e-2), ln(1e3));
         (lower[n + 2], upper[n + 2]) = (ln(var_r * 1e-12), ln(var_r * 1e8));
-        // σ from 1e-8 of the residual's spread (and 1e-12 of the workspace) to three times it.
-        (lower[n + 3], upper[n + 3]) = ((0.5 * ln(var_r * 1e-16)).max(ln(1e-12)), 0.5 * ln(var_r * 10.0));
+        // σ from 1e-8 of the residual's spread (and 1e-12 of the workspace) to three times it; a
+        // residual below 1e-12 / √10 of the workspace (data a model fits exactly) leaves σ at the floor.
+        let sigma_floor = (0.5 * ln(var_r * 1e-16)).max(ln(1e-12));
+        (lower[n + 3], upper[n + 3]) = (sigma_floor, (0.5 * ln(var_r * 10.0)).max(sigma_floor));
         (lower, upper)
     }
 }

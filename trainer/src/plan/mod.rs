@@ -34,11 +34,28 @@ pub struct PlanOptions {
     /// Measured poses the posterior is conditioned on (evenly spaced when there are more); the
     /// geometric group's information uses all of them.
     pub max_conditioning: usize,
+    /// The first poses chosen by the largest posterior variance at the candidate itself (a
+    /// space-filling start in the kernel's metric) instead of the workspace variance reduction.
+    pub space_filling: usize,
+    /// Every this-many-th pose (0: none) the next random candidate in sampling order, a uniform
+    /// random pose, instead of the criterion's choice: a hedge against a kernel that misses part
+    /// of the error (the uniform test distribution gets its share of poses whatever the process
+    /// believes).
+    pub random_every: usize,
 }
 
 impl Default for PlanOptions {
     fn default() -> Self {
-        PlanOptions { count: 20, candidates: 10_000, seed: 1, workspace: 96, evaluation: 500, max_conditioning: 100 }
+        PlanOptions {
+            count: 20,
+            candidates: 10_000,
+            seed: 1,
+            workspace: 96,
+            evaluation: 500,
+            max_conditioning: 100,
+            space_filling: 0,
+            random_every: 0,
+        }
     }
 }
 
@@ -111,6 +128,10 @@ pub enum PlanError {
     UnboundedJoint { joint: usize },
     #[error("{count} poses asked for, but only {available} candidates are at least 1° from a singular configuration; raise --candidates")]
     TooFewCandidates { count: usize, available: usize },
+    /// The Gaussian process tracks one position per pose; with several tool points a pose measures
+    /// each, and their fields are correlated in a way the planner does not model.
+    #[error("the model has {points} tool points ([chain] tool.points): cbd plan plans for one measured point per pose; plan with a model of one tool point (the points' centre) and measure every point at the planned poses")]
+    ToolPoints { points: usize },
     #[error("the model has {model} joints; {what} has {given}")]
     Shape { model: usize, given: usize, what: &'static str },
 }
@@ -127,11 +148,28 @@ impl From<PlanError> for crate::Error {
 /// to cancellation (prior/posterior variance ≈ 1e8–1e10, 1e-6–1e-8 of f64's 16 digits).
 const GEOMETRIC_PRIOR: f64 = 1e3;
 
+/// Bytes [`plan`] holds for a chain of `n` joints and task dimension `m`, `user` candidates of the
+/// user's and `measured` poses: per tracked point (candidates, workspace, evaluation, conditioned
+/// poses) its kinematics, features, geometric rows (at most 6n + 6 parameters) and posterior rows
+/// (m per added pose), and the candidate × workspace cross-covariances, m² each.
+pub fn memory_bytes(n: usize, m: usize, options: &PlanOptions, user: usize, measured: usize) -> f64 {
+    let added = (options.count + measured.min(options.max_conditioning)) as f64;
+    let (n, m) = (n as f64, m as f64);
+    let candidates = (options.candidates + user) as f64;
+    let points = candidates + (options.workspace + options.evaluation + measured) as f64;
+    let per_point = 3.0 + n * m + 2.0 * n + 2.0 * m * (6.0 * n + 6.0) + (added + 2.0) * m * m + 2.0 * n;
+    8.0 * (points * per_point + candidates * (options.workspace as f64 + 1.0) * m * m)
+}
+
 /// Plans `options.count` poses (see the module documentation).
 pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError> {
     let start = std::time::Instant::now();
     let nominal = input.nominal;
     let (n, m) = (nominal.n_joints(), nominal.task_dim());
+    let points = input.measured.map_or(1, |d| d.points_per_pose).max(nominal.tool_point_count());
+    if points > 1 {
+        return Err(PlanError::ToolPoints { points });
+    }
     if input.limits.len() != n {
         return Err(PlanError::Shape { model: n, given: input.limits.len(), what: "the joint limits" });
     }
@@ -160,11 +198,13 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     pool.extend(candidates::uniform_within(input.limits, options.candidates, options.seed));
     let pool_model = to_model(&pool);
     let (mut kept, mut kept_controller, mut distances, mut rejected_singular) = (Vec::new(), Vec::new(), Vec::new(), 0);
-    for (c, q) in pool.chunks_exact(n).zip(pool_model.chunks_exact(n)) {
+    let mut user_count = 0;
+    for (i, (c, q)) in pool.chunks_exact(n).zip(pool_model.chunks_exact(n)).enumerate() {
         let d = candidates::singular_distance(nominal, q, reach);
         if d >= candidates::SINGULAR_MARGIN && candidates::within_limits(c, input.limits) {
             kept.extend_from_slice(q);
             kept_controller.extend_from_slice(c);
+            user_count += usize::from(i * n < input.user_candidates.len());
             distances.push(d);
         } else {
             rejected_singular += 1;
@@ -226,7 +266,13 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     let mut geometric_identified_after = identified(&geometric).then_some(0);
     for _ in 0..options.count {
         let stage = if identified(&geometric) { Stage::Posterior } else { Stage::Geometric };
-        let best = (0..count_c).filter(|&c| !chosen[c]).map(|c| (c, gp.gain(c))).max_by(|a, b| a.1.total_cmp(&b.1));
+        let spread_first = poses.len() < options.space_filling;
+        let score = |c: usize| if spread_first { gp.variance(c) } else { gp.gain(c) };
+        let uniform = options.random_every > 0 && (poses.len() + 1) % options.random_every == 0;
+        let best = match uniform {
+            true => (user_count..count_c).chain(0..user_count).find(|&c| !chosen[c]).map(|c| (c, 0.0)),
+            false => (0..count_c).filter(|&c| !chosen[c]).map(|c| (c, score(c))).max_by(|a, b| a.1.total_cmp(&b.1)),
+        };
         let Some((c, _)) = best else { break };
         chosen[c] = true;
         if let Some(g) = geometric.as_mut() {

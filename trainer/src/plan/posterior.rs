@@ -155,6 +155,12 @@ impl Posterior {
         range.map(|i| (0..m).map(|c| self.cov[i * m * m + c * m + c]).sum::<f64>()).sum::<f64>() / count
     }
 
+    /// tr k_S(x, x) at point `i`: its expected squared error given the poses added so far.
+    pub fn variance(&self, i: usize) -> f64 {
+        let m = self.prior.m;
+        (0..m).map(|c| self.cov[i * m * m + c * m + c]).sum()
+    }
+
     /// Reduction of the workspace's mean posterior variance if candidate `c` were measured:
     /// (1/|W|) Σ_w tr(k_S(w, c) (k_S(c, c) + σ²I)⁻¹ k_S(c, w)).
     pub fn gain(&self, c: usize) -> f64 {

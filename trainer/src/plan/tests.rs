@@ -51,6 +51,41 @@ fn unbounded_joint_is_refused() {
     assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::UnboundedJoint { joint: 2 });
 }
 
+/// Poses the DH fit reproduces exactly (one pose measured 50 times) leave a residual of rounding
+/// size: the evidence's noise box must not invert (it panicked in `f64::clamp`).
+#[test]
+fn exactly_fitted_data_give_hyperparameters_not_a_panic() {
+    let rr = crate::simulate::rr::nominal();
+    let data =
+        Measurements { n_joints: 2, task_dim: 2, joints: [0.1, 0.2].repeat(50), positions: [1.3, 0.4].repeat(50), points_per_pose: 1 };
+    let h = prior::from_measurements(&rr, &data).expect("hyperparameters");
+    assert!(h.sigma.is_finite() && h.sigma >= 0.0, "{h:?}");
+}
+
+/// A model with several tool points is refused (each pose would measure every point; the process
+/// tracks one), whether the model or the measured data carry them.
+#[test]
+fn several_tool_points_are_refused() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/tool-points/six-points.toml");
+    let file = crate::data::model_file::load_model_file(path).unwrap();
+    let (_, limits) = ur5_limits();
+    let h = prior::stated(&file.nominal, &[0.0; 6], 1000.0, prior::StatedPrior { error: 0.3, noise: 0.02 });
+    let input = PlanInput {
+        nominal: &file.nominal,
+        limits: &limits,
+        to_model: None,
+        user_candidates: &[],
+        measured: None,
+        hyperparameters: h.clone(),
+    };
+    assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::ToolPoints { points: 3 });
+    let (six, _) = ur5_limits();
+    let data = Measurements { n_joints: 6, task_dim: 3, joints: vec![0.1; 12], positions: vec![0.0; 18], points_per_pose: 3 };
+    let input =
+        PlanInput { nominal: &six, limits: &limits, to_model: None, user_candidates: &[], measured: Some(&data), hyperparameters: h };
+    assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::ToolPoints { points: 3 });
+}
+
 /// The six-joint arm (geometric errors, gravity compliance, 0.02 mm noise): 30 random poses measured,
 /// 30 more planned from them; dh+cbd (Euler × 1: the posterior mean itself) fitted on all 60; its RMS
 /// error against the true positions at 400 fresh random configurations within a factor 1.5 of the
