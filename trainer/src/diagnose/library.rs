@@ -9,7 +9,7 @@
 
 use super::kinematics::{self, Response};
 use crate::data::Measurements;
-use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
+use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for, parameter_names_for};
 use crate::nominal::positions;
 use cbd_protocol::{Effect, NominalModel};
 use cbd_runtime::kinematics::effects::{effect_terms, Order};
@@ -18,7 +18,7 @@ use faer::Mat;
 /// One scalar parameter of the library.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Param {
-    /// Index into the DH parameter vector (`nominal::dh_parameters::parameter_names`) or, for a planar
+    /// Index into the DH parameter vector (`nominal::dh_parameters::parameter_names_for`) or, for a planar
     /// chain, the link index.
     Geometric(usize),
     EncoderScale {
@@ -96,7 +96,7 @@ impl Default for LibraryOptions {
 pub fn param_name(model: &NominalModel, p: &Param) -> String {
     match *p {
         Param::Geometric(k) => match model {
-            NominalModel::DhChain(c) => parameter_names(c.joints.len())[k].clone(),
+            NominalModel::DhChain(c) => parameter_names_for(c)[k].clone(),
             NominalModel::PlanarChain { .. } => format!("l{}", k + 1),
         },
         Param::EncoderScale { joint } => format!("scale q{}", joint + 1),
@@ -115,8 +115,8 @@ pub fn param_name(model: &NominalModel, p: &Param) -> String {
 pub fn is_angle(model: &NominalModel, p: &Param) -> bool {
     match (model, p) {
         (NominalModel::DhChain(c), Param::Geometric(k)) => {
-            let name = &parameter_names(c.joints.len())[*k];
-            name.starts_with("alpha") || name.starts_with("theta") || name.starts_with("base_r")
+            let name = &parameter_names_for(c)[*k];
+            name.starts_with("alpha") || name.starts_with("theta") || name.starts_with("base_r") || name.starts_with("tool_r")
         }
         (_, Param::TransmissionCos { .. } | Param::TransmissionSin { .. }) => true,
         _ => false,
@@ -125,7 +125,7 @@ pub fn is_angle(model: &NominalModel, p: &Param) -> bool {
 
 fn geometric_count(model: &NominalModel) -> usize {
     match model {
-        NominalModel::DhChain(c) => parameter_count(c.joints.len()),
+        NominalModel::DhChain(c) => parameter_count_for(c),
         NominalModel::PlanarChain { lengths, .. } => lengths.len(),
     }
 }
@@ -250,7 +250,7 @@ fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>,
 pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<NominalModel, super::DiagnoseError> {
     let mut out = match model {
         NominalModel::DhChain(chain) => {
-            let mut p = vec![0.0; parameter_count(chain.joints.len())];
+            let mut p = vec![0.0; parameter_count_for(chain)];
             for (param, v) in params.iter().zip(values) {
                 if let Param::Geometric(k) = param {
                     p[*k] += v;
