@@ -294,26 +294,7 @@ impl Calibrator<'_> {
         options: &PoseCompensateOptions,
     ) -> Result<PoseCompensation, Error> {
         let n = self.dims.n;
-        if n < MIN_POSE_JOINTS {
-            return Err(Error::TooFewJoints { found: n, needed: MIN_POSE_JOINTS });
-        }
-        if !determines_orientation(self.model.nominal.tool_points()) {
-            return Err(Error::OrientationUndetermined);
-        }
-        let target = validated_target(position, rotation)?;
-        if seed.len() != n || out.len() != n {
-            return Err(Error::QueryDimension { expected: n, found: if seed.len() != n { seed.len() } else { out.len() } });
-        }
-        if let Some(index) = seed.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFiniteQuery { index });
-        }
-        if n > NJ {
-            return Err(Error::Internal);
-        }
-        let mut revolute = [true; NJ];
-        for (d, r) in revolute.iter_mut().enumerate().take(n) {
-            *r = self.model.nominal.is_revolute(d);
-        }
+        let (target, revolute) = checked_pose_query(&self.model.nominal, position, rotation, seed, out)?;
         let (lever, scale) = (tool_lever(&self.model.nominal), self.model.normalisation.task_scale);
         let mut start = [0.0; NJ];
         let start_slice = start.get_mut(..n).ok_or(Error::Internal)?;
@@ -432,26 +413,7 @@ pub fn nominal_pose_inverse(
     scale: f64,
 ) -> Result<(f64, f64), Error> {
     let n = nominal.n_joints();
-    if n < MIN_POSE_JOINTS {
-        return Err(Error::TooFewJoints { found: n, needed: MIN_POSE_JOINTS });
-    }
-    if !determines_orientation(nominal.tool_points()) {
-        return Err(Error::OrientationUndetermined);
-    }
-    let target = validated_target(position, rotation)?;
-    if seed.len() != n || out.len() != n {
-        return Err(Error::QueryDimension { expected: n, found: if seed.len() != n { seed.len() } else { out.len() } });
-    }
-    if let Some(index) = seed.iter().position(|v| !v.is_finite()) {
-        return Err(Error::NonFiniteQuery { index });
-    }
-    if n > NJ {
-        return Err(Error::Internal);
-    }
-    let mut revolute = [true; NJ];
-    for (d, r) in revolute.iter_mut().enumerate().take(n) {
-        *r = nominal.is_revolute(d);
-    }
+    let (target, revolute) = checked_pose_query(nominal, position, rotation, seed, out)?;
     let q = nominal_pose_solve(nominal, &target, seed, n, iterations, &revolute, scale)?;
     for (dst, v) in out.iter_mut().zip(q.iter()) {
         *dst = *v;
@@ -499,6 +461,39 @@ fn validated_target(position: &[f64], rotation: &[[f64; 3]; 3]) -> Result<Target
         return Err(Error::InvalidRotation);
     }
     Ok(Target { position: [x, y, z], rotation: *rotation })
+}
+
+/// The checks every pose query makes (errors as documented on [`Calibrator::compensate_pose_with`]):
+/// the validated target and which of `nominal`'s joints are revolute.
+fn checked_pose_query(
+    nominal: &NominalModel,
+    position: &[f64],
+    rotation: &[[f64; 3]; 3],
+    seed: &[f64],
+    out: &[f64],
+) -> Result<(Target, [bool; NJ]), Error> {
+    let n = nominal.n_joints();
+    if n < MIN_POSE_JOINTS {
+        return Err(Error::TooFewJoints { found: n, needed: MIN_POSE_JOINTS });
+    }
+    if !determines_orientation(nominal.tool_points()) {
+        return Err(Error::OrientationUndetermined);
+    }
+    let target = validated_target(position, rotation)?;
+    if seed.len() != n || out.len() != n {
+        return Err(Error::QueryDimension { expected: n, found: if seed.len() != n { seed.len() } else { out.len() } });
+    }
+    if let Some(index) = seed.iter().position(|v| !v.is_finite()) {
+        return Err(Error::NonFiniteQuery { index });
+    }
+    if n > NJ {
+        return Err(Error::Internal);
+    }
+    let mut revolute = [true; NJ];
+    for (d, r) in revolute.iter_mut().enumerate().take(n) {
+        *r = nominal.is_revolute(d);
+    }
+    Ok((target, revolute))
 }
 
 #[cfg(test)]
