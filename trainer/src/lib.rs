@@ -5,6 +5,17 @@
 //! calibration → CbD's evidence → calibrate (the one pipeline) → diagnosis, planning, evaluation
 //! harnesses → the peers (kernel ridge) → the `cbd` CLI.
 
+/// `eprintln!` that never panics: a line to a closed or broken stderr (`cbd … 2>&1 | head -1`) is
+/// dropped, as `cli::print_line` ends quietly on a closed stdout. Every diagnostic of the crate and
+/// the binary goes through it.
+#[macro_export]
+macro_rules! errln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
 /// The peers CbD is compared with (kernel ridge on the residual).
 pub mod baselines;
 /// The one calibration pipeline: hyperparameters, scheme, fit, blob.

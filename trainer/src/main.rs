@@ -5,7 +5,7 @@ fn main() {
     let cli = cbd_trainer::cli::Cli::parse();
     cbd_trainer::cli::configure_allocator();
     if let Err(e) = cbd_trainer::cli::run(cli) {
-        eprintln!("error: {}", cbd_trainer::error::one_line(&e.to_string()));
+        cbd_trainer::errln!("error: {}", cbd_trainer::error::one_line(&e.to_string()));
         std::process::exit(1);
     }
 }

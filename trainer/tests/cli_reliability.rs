@@ -437,3 +437,21 @@ fn a_closed_stdout_pipe_is_a_quiet_exit() {
     let printed = String::from_utf8_lossy(&cbd(&dir, &eval).stdout).into_owned();
     assert!(printed.lines().next().is_some_and(|l| l.starts_with("model")), "{printed}");
 }
+
+/// `cbd simulate ... 2>&1 | true`: a closed pipe on stderr made `eprintln!` panic (exit 101). Stderr is
+/// here a pipe whose read end is closed before `cbd` starts: the run succeeds and writes its file; a
+/// failing run still exits 1 (its `error:` line is lost, its status is not).
+#[test]
+fn a_closed_stderr_pipe_is_not_a_panic() {
+    let dir = scratch("broken-stderr");
+    let run = |args: &[&str]| {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        std::process::Command::new(CBD).args(args).current_dir(&dir).stderr(writer).output().unwrap()
+    };
+    let out = run(&["simulate", "--robot", "six", "--sampling", "uniform", "--count", "10", "--out", "six.csv"]);
+    assert_eq!(out.status.code(), Some(0), "a run that writes to stderr");
+    assert!(dir.join("six.csv").exists());
+    let out = run(&["simulate", "--robot", "nine", "--out", "nine.csv"]);
+    assert_eq!(out.status.code(), Some(1), "a refused run");
+}

@@ -368,7 +368,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     };
     for &n in &args.sizes {
         per_axis(n)?;
-        eprintln!("fitting N = {n} …");
+        errln!("fitting N = {n} …");
         // One process per size, so each peak-memory figure is that size's own.
         let blob_path = std::env::temp_dir().join(format!("cbd-bench-{}-{n}.blob", std::process::id()));
         let out = std::process::Command::new(&exe)
@@ -381,26 +381,29 @@ pub fn run(args: BenchArgs) -> Result<()> {
         }
         let line = String::from_utf8_lossy(&out.stdout);
         let fit: FitBench = serde_json::from_str(line.trim()).map_err(Error::JsonOutput).context(format!("bench output for N = {n}"))?;
-        eprintln!(
+        errln!(
             "  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.2e}",
-            fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error
+            fit.seconds,
+            fit.iterations,
+            fit.peak_mib,
+            fit.test_mean_error
         );
         report.fit.push(fit);
         let blob = std::fs::read(&blob_path).map_err(|e| Error::io(&blob_path, e))?;
         let _ = std::fs::remove_file(&blob_path);
         let mut e = eval_one(n, &blob)?;
         e.model = "paper (kernel, euler × 2)".into();
-        eprintln!("  evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.ns, e.ratio_to_nominal, e.ratio_to_krr);
+        errln!("  evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.ns, e.ratio_to_nominal, e.ratio_to_krr);
         report.eval.push(e);
     }
     if !args.sizes.is_empty() {
-        eprintln!("the demo's model (N = 256, evidence kernels) …");
+        errln!("the demo's model (N = 256, evidence kernels) …");
         let e = eval_demo()?;
-        eprintln!("  {}: evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.model, e.ns, e.ratio_to_nominal, e.ratio_to_krr);
+        errln!("  {}: evaluation {:.0} ns ({:.1}× nominal FK, {:.2}× kernel ridge)", e.model, e.ns, e.ratio_to_nominal, e.ratio_to_krr);
         report.eval.push(e);
     }
     if !args.no_ur5 {
-        eprintln!("fitting the UR5 example ({}) …", args.ur5.display());
+        errln!("fitting the UR5 example ({}) …", args.ur5.display());
         let out = std::process::Command::new(&exe)
             .args(["bench", "--single-ur5", "--ur5"])
             .arg(&args.ur5)
@@ -411,18 +414,26 @@ pub fn run(args: BenchArgs) -> Result<()> {
         }
         let fit: FitBench =
             serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).map_err(Error::JsonOutput).context("UR5 bench output")?;
-        eprintln!(
+        errln!(
             "  {:.2} s, {} iterations, peak {:.0} MiB, test mean error {:.3e}",
-            fit.seconds, fit.iterations, fit.peak_mib, fit.test_mean_error
+            fit.seconds,
+            fit.iterations,
+            fit.peak_mib,
+            fit.test_mean_error
         );
         report.fit.push(fit);
     }
     for (&n, &threads) in args.evidence_sizes.iter().zip(&evidence_threads) {
-        eprintln!("noisy RR, N = {n}: CbD pipeline and kernel ridge, each with its own evidence …");
+        errln!("noisy RR, N = {n}: CbD pipeline and kernel ridge, each with its own evidence …");
         let e = evidence_rr(n, threads, budget)?;
-        eprintln!(
+        errln!(
             "  CbD {:.3e} (selection {:.2} s, pipeline {:.2} s, {}); kernel ridge {:.3e} (selection {:.2} s)",
-            e.cbd_test_mean, e.cbd_selection_seconds, e.cbd_seconds, e.cbd_scheme, e.krr_test_mean, e.krr_selection_seconds
+            e.cbd_test_mean,
+            e.cbd_selection_seconds,
+            e.cbd_seconds,
+            e.cbd_scheme,
+            e.krr_test_mean,
+            e.krr_selection_seconds
         );
         report.evidence.push(e);
     }

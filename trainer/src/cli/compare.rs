@@ -93,14 +93,14 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     let inputs = read_compare_files(&args.model, &args.train, &args.test)?;
     if let Some(r) = &inputs.registration {
         let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
-        eprintln!("{}: {}", args.train.display(), r.describe(unit));
+        errln!("{}: {}", args.train.display(), r.describe(unit));
     }
     let mut warnings = inputs.warnings;
     for (path, imported) in [(&args.train, &inputs.train), (&args.test, &inputs.test)] {
         warnings.extend(crate::data::nominal_check::nominal_warnings(&inputs.nominal, &imported.measurements, &imported.lines, path)?);
     }
     for w in warnings {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     if let Some(robot) = &args.commanded {
         commanded_arm(robot, &inputs.nominal)?;
@@ -119,7 +119,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     outln!("{}", comparison.table(unit));
     for w in comparison.warnings() {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     for r in &comparison.rows {
         if !r.note.is_empty() {
@@ -167,11 +167,11 @@ mod tests {
     /// the rows `cbd compare` ranks first there): commanded error within 1.2× its forward error,
     /// ahead of DH-only compensation.
     fn check(c: &CommandedAccuracy, unit: &str, best: &str) {
-        eprintln!("{}", c.table(unit));
+        errln!("{}", c.table(unit));
         let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap();
         let get = |n: &str| row(n).stats.mean;
         for r in c.rows.iter().filter(|r| r.name.contains("cbd")) {
-            eprintln!("{}: compensation residual |k1(q) - x| {:?}", r.name, r.residual.unwrap());
+            errln!("{}: compensation residual |k1(q) - x| {:?}", r.name, r.residual.unwrap());
             let forward = r.forward.unwrap().mean;
             assert!(r.stats.mean <= 1.2 * forward, "{} commanded {} vs forward {forward}", r.name, r.stats.mean);
         }
@@ -258,7 +258,7 @@ mod tests {
         let search = SearchOptions::default();
         let krr = kernel_ridge_correction(&search);
         let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
-        eprintln!("{}", c.table("mm"));
+        errln!("{}", c.table("mm"));
         assert!(c.target.contains("pose"), "{}", c.target);
         let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap_or_else(|| panic!("no row {n}"));
         for name in ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"] {

@@ -219,7 +219,7 @@ pub fn run(args: CompensateArgs) -> Result<()> {
     let residuals: Vec<f64> = rows.iter().map(|r| r.compensation.residual / length).collect();
     let stats = crate::report::stats::ErrorStats::of_errors(&residuals);
     let (reached, singular, extrapolating) = (count(&|c| c.reached), count(&|c| c.singular), count(&|c| c.extrapolating));
-    eprintln!(
+    errln!(
         "{} targets: {reached} reached, {singular} singular, {extrapolating} outside the calibrated region; residual median {:.3e} max {:.3e} {unit}",
         rows.len(),
         stats.median,
@@ -278,7 +278,7 @@ fn run_poses(args: &CompensateArgs, spec: &ColumnSpec, blob: &[u8], length: f64)
         crate::report::stats::ErrorStats::of_errors(&rows.iter().map(|r| r.compensation.position_residual / length).collect::<Vec<_>>());
     let angle =
         crate::report::stats::ErrorStats::of_errors(&rows.iter().map(|r| r.compensation.angle_residual.to_degrees()).collect::<Vec<_>>());
-    eprintln!(
+    errln!(
         "{} target poses: {reached} reached; position residual max {:.3e} {}, angle residual max {:.3e}°",
         rows.len(),
         position.max,

@@ -71,14 +71,14 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
         let imported = crate::data::csv_import::read_measurements(path, &spec)?;
         for w in imported.warnings(path) {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         let registration = match register {
             true => crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?,
             false => None,
         };
         for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         Ok((imported.measurements, registration))
     };

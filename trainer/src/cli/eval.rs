@@ -46,7 +46,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
     take_registered_base(&args, &mut nominal, &model.nominal, &data)?;
     if model.nominal != nominal {
-        eprintln!(
+        errln!(
             "note: {} carries its own nominal model (e.g. DH-calibrated); errors are reported against the model file's nominal",
             args.blob.display()
         );
@@ -122,7 +122,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     if far > 0 {
-        eprintln!(
+        errln!(
             "warning: {far} of {} configurations are far from every measured configuration (kernel support < {}): extrapolation",
             data.len(),
             args.extrapolation_threshold
@@ -161,7 +161,7 @@ fn take_registered_base(
         rms_after: crate::nominal::register::rms_from(chain, data),
         refined: true,
     };
-    eprintln!("{}: {} (as fitted, from {})", args.data.display(), r.describe(file.length_unit.name()), args.blob.display());
+    errln!("{}: {} (as fitted, from {})", args.data.display(), r.describe(file.length_unit.name()), args.blob.display());
     Ok(())
 }
 

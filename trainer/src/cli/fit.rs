@@ -151,11 +151,11 @@ impl SolverArgs {
 /// Prints what the pipeline chose (stderr) and its warnings.
 pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
     if let Some(dh) = &c.dh {
-        eprintln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.iterations, dh.rank, dh.n_parameters, dh.final_rms);
+        errln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.iterations, dh.rank, dh.n_parameters, dh.final_rms);
     }
     if !quiet {
         match &c.evidence {
-            Some(e) => eprintln!(
+            Some(e) => errln!(
                 "hyperparameters (CbD evidence {:.2} on {} rows, {} evaluations, {:.2} s): {}",
                 e.log_evidence,
                 e.rows_used,
@@ -163,11 +163,11 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
                 e.seconds,
                 c.describe_hyperparameters()
             ),
-            None => eprintln!("hyperparameters: {}", c.describe_hyperparameters()),
+            None => errln!("hyperparameters: {}", c.describe_hyperparameters()),
         }
         let cv: Vec<String> =
             c.scheme.cross_validation.iter().map(|(i, e)| format!("{} {e:.3e}", crate::calibrate::scheme::label(*i))).collect();
-        eprintln!(
+        errln!(
             "scheme: {} ({}{})",
             c.scheme.label(),
             c.scheme.chosen_by,
@@ -175,7 +175,7 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
         );
     }
     for w in &c.warnings {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
 }
 
@@ -209,11 +209,11 @@ pub fn run(args: FitArgs) -> Result<()> {
     let (mut nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     for w in imported.warnings(&args.data) {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     let registration = crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
     for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data)? {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);
     let mut settings = args.solver.settings()?;
@@ -255,7 +255,7 @@ pub fn run(args: FitArgs) -> Result<()> {
     );
     // With `--out -` standard output carries the blob; the summary must not corrupt it.
     if crate::cli::is_stdout(&args.out) {
-        eprintln!("{summary}");
+        errln!("{summary}");
     } else {
         outln!("{summary}");
     }

@@ -81,7 +81,7 @@ pub fn register_base_if_unknown(
         return Ok(None);
     }
     let r = crate::parametric::register::register_and_refine(nominal, data).context(data_path.display())?;
-    eprintln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
+    errln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
     Ok(Some(r))
 }
 
@@ -165,7 +165,7 @@ pub fn print_line(args: std::fmt::Arguments<'_>) {
         Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
         Err(e) => {
-            eprintln!("error: writing to stdout: {e}");
+            errln!("error: writing to stdout: {e}");
             std::process::exit(1)
         }
     }

@@ -177,7 +177,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
 
     let unit = spec.model_length_unit.name();
     let geometric = result.poses.iter().filter(|p| p.stage == Stage::Geometric).count();
-    eprintln!(
+    errln!(
         "planned {} poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s: {} before the geometric group ({} parameters) is identified, {} after",
         result.poses.len(),
         result.candidates,
@@ -188,18 +188,18 @@ pub fn run(args: PlanArgs) -> Result<()> {
         result.poses.len() - geometric
     );
     if let Some(e) = result.measured_predicted_rms {
-        eprintln!("predicted RMS position error after the measured poses: {e:.4e} {unit}");
+        errln!("predicted RMS position error after the measured poses: {e:.4e} {unit}");
     }
     let fmt = |v: Option<f64>| v.map_or("– (geometric group not yet identified)".to_string(), |e| format!("{e:.4e} {unit}"));
     for k in [9, 19, 29, 49, 99, 199] {
         if let Some(p) = result.poses.get(k).filter(|_| k + 1 < result.poses.len()) {
-            eprintln!("  after {:>4} planned poses: predicted RMS error {}", k + 1, fmt(p.predicted_rms));
+            errln!("  after {:>4} planned poses: predicted RMS error {}", k + 1, fmt(p.predicted_rms));
         }
     }
     if let Some(p) = result.poses.last() {
-        eprintln!("  after {:>4} planned poses: predicted RMS error {}", result.poses.len(), fmt(p.predicted_rms));
+        errln!("  after {:>4} planned poses: predicted RMS error {}", result.poses.len(), fmt(p.predicted_rms));
     }
-    eprintln!("wrote {} poses to {}", result.poses.len(), args.out.display());
+    errln!("wrote {} poses to {}", result.poses.len(), args.out.display());
     if let Some(path) = &args.json {
         let curve: Vec<serde_json::Value> = result
             .poses

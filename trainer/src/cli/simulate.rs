@@ -207,7 +207,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         text.push_str(&format!("{:?},{:?},{:?},{:?}\n", q[0], q[1], y[0], y[1]));
     }
     crate::cli::write_atomically(&args.out, text.as_bytes())?;
-    eprintln!("wrote {} measurements to {}", data.len(), args.out.display());
+    errln!("wrote {} measurements to {}", data.len(), args.out.display());
     Ok(())
 }
 
@@ -246,7 +246,7 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         text.push_str(&format!("{},{}\n", q.join(","), y.join(",")));
     }
     crate::cli::write_atomically(&args.out, text.as_bytes())?;
-    eprintln!("wrote {} measurements of the simulated six-joint arm to {}", data.len(), args.out.display());
+    errln!("wrote {} measurements of the simulated six-joint arm to {}", data.len(), args.out.display());
     Ok(())
 }
 
@@ -318,7 +318,7 @@ fn simulate_six_points(
         text.push_str(&(fields.join(",") + "\n"));
     }
     crate::cli::write_atomically(&args.out, text.as_bytes())?;
-    eprintln!("wrote {poses} poses ({p} tool points each) of the simulated six-joint arm to {}", args.out.display());
+    errln!("wrote {poses} poses ({p} tool points each) of the simulated six-joint arm to {}", args.out.display());
     Ok(())
 }
 

@@ -222,7 +222,7 @@ mod tests {
                 .flat_map(|r| (0..dim).map(move |c| (r, c)))
                 .map(|(r, c)| (k[(r, c)] - (gw * fit[(r, c)] + if r == c { sigma2 } else { 0.0 })).abs())
                 .fold(0.0f64, f64::max);
-            eprintln!(
+            errln!(
                 "b = {:?}: |K_evidence − K_fit| ≤ {:.3e} of the largest entry",
                 theta.log_widths.iter().map(|l| l.exp()).collect::<Vec<_>>(),
                 worst / largest

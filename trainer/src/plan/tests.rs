@@ -105,7 +105,7 @@ fn predicted_error_matches_the_error_reached() {
     let mut joints = first.joints.clone();
     joints.extend(plan.poses.iter().flat_map(|p| p.joints.clone()));
     let actual = reached_rms(&six, &robot, &joints, 13, &random_configurations(400, 21));
-    eprintln!("six, 30 random + 30 planned: predicted RMS {predicted:.4e} mm, actual {actual:.4e} mm, ratio {:.3}", predicted / actual);
+    errln!("six, 30 random + 30 planned: predicted RMS {predicted:.4e} mm, actual {actual:.4e} mm, ratio {:.3}", predicted / actual);
     assert!(predicted / actual < 1.5 && actual / predicted < 1.5, "predicted {predicted:.4e}, actual {actual:.4e}");
 }
 

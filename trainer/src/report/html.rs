@@ -514,6 +514,6 @@ mod tests {
         let plots = std::env::var_os("CBD_PLOTS_DIR").map(PathBuf::from);
         let out = std::env::var_os("CBD_REPORT_OUT").map(PathBuf::from).unwrap_or_else(|| std::env::temp_dir().join("cbd-report.html"));
         let n = write_report(Path::new(&json), plots.as_deref(), &out, "length units").unwrap();
-        eprintln!("wrote {} with {n} figures", out.display());
+        errln!("wrote {} with {n} figures", out.display());
     }
 }

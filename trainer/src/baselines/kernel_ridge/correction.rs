@@ -83,9 +83,15 @@ mod tests {
         assert!(get("dh+krr") <= get("dh") * 1.05, "{:?}", c.rows);
         assert_eq!(get("dh+krr"), get("dh+cbd"));
         for r in &c.rows {
-            eprintln!(
+            errln!(
                 "{:8} mean {:.4} median {:.4} p99 {:.4} max {:.4} fit {:.2}s  {}",
-                r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max, r.fit_seconds, r.note
+                r.name,
+                r.stats.mean,
+                r.stats.median,
+                r.stats.p99,
+                r.stats.max,
+                r.fit_seconds,
+                r.note
             );
         }
         let json = c.to_json();

@@ -213,5 +213,5 @@ fn rr_demo_figures() {
         workspace_per_axis: 16,
     };
     let files = demo_figures(&dir, &inputs).unwrap();
-    eprintln!("{} LM iterations; wrote {files:?}", fit.report.iterations);
+    errln!("{} LM iterations; wrote {files:?}", fit.report.iterations);
 }

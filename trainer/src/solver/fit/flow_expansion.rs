@@ -104,7 +104,7 @@ pub(super) fn fit(
         expansion_declined: None,
     };
     if opts.verbose {
-        eprintln!(
+        errln!(
             "expansion: {} weights over {} stages ({} joint, {} task functions, tolerance {:.0e}), {iterations} iterations, training RMS {:.3e}",
             e.len(),
             opts.integrator.stage_count(),
@@ -184,7 +184,7 @@ pub(super) fn fit_linear_scheme(
         expansion_declined: None,
     };
     if opts.verbose {
-        eprintln!(
+        errln!(
             "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), closed form in weight space, cancellation {:.1e}",
             linear.len(),
             linear.joint.len(),

@@ -43,7 +43,7 @@ impl Recorder {
         self.log.push(IterationLog { iteration, energy: e.energy, regulariser: e.regulariser, train_rms, damping, seconds });
         self.progress.update(iteration, e.energy, train_rms);
         if self.print_lines {
-            eprintln!("iter {iteration:2}  energy {:.6e}  train rms {train_rms:.3e}{detail}", e.energy);
+            errln!("iter {iteration:2}  energy {:.6e}  train rms {train_rms:.3e}{detail}", e.energy);
         }
     }
 

@@ -345,7 +345,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let seconds_basis = t0.elapsed().as_secs_f64();
     let (method, dim) = (space.method(), space.dim());
     if opts.verbose {
-        eprintln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
+        errln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
     }
     let problem = Problem::new(&cp, target.clone(), opts.sigma, space);
     problem.timers.solve.set(seconds_basis);
@@ -373,11 +373,16 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     };
     if opts.verbose {
         match &expansion_report {
-            Some(e) => eprintln!(
+            Some(e) => errln!(
                 "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), cancellation {:.1e} (momenta {:.1e})",
-                e.weights, e.joint_features, e.task_features, e.tolerance, cancellation, kernel_cancellation
+                e.weights,
+                e.joint_features,
+                e.task_features,
+                e.tolerance,
+                cancellation,
+                kernel_cancellation
             ),
-            None => eprintln!("expansion: none ({})", expansion_declined.as_deref().unwrap_or("")),
+            None => errln!("expansion: none ({})", expansion_declined.as_deref().unwrap_or("")),
         }
     }
     let (blob, max_runtime_trainer_diff) = encode::encode_checked(nominal, data, opts, &momenta, expansion.as_ref(), &train_predictions)?;
