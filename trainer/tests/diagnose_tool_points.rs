@@ -9,28 +9,13 @@
 //! diagnosed "+ effects" row.
 
 mod cli_support;
-use cli_support::{cbd, scratch, stderr};
+use cli_support::{examples, json, run, scratch};
 
 const TOOL_POINTS: &str = "0,0,0;100,0,0;50,86.60254037844386,0";
 const GRAVITY: &str = "gravity_compliance:joint=3,compliance=4e-7";
 /// cos 2e-4 rad, sin −1e-4 rad: about 0.17 mm at the tool.
 const TRANSMISSION: &str = "transmission:joint=2,harmonic=2,cos=2e-4,sin=-1e-4";
 const TRUE_TRANSMISSION_RAD: [f64; 2] = [2e-4, -1e-4];
-
-fn examples() -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples")
-}
-
-#[track_caller]
-fn run(dir: &std::path::Path, args: &[&str]) -> String {
-    let out = cbd(dir, args);
-    assert!(out.status.success(), "cbd {args:?}: {}", stderr(&out));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn json(path: &std::path::Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 /// The physical effects found, as (type, joint, harmonic), sorted.
 fn named(d: &serde_json::Value) -> Vec<(String, u64, u64)> {

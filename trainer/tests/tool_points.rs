@@ -13,26 +13,11 @@
 //!   simulator writes the point columns as the points of the pose it writes: the same data).
 
 mod cli_support;
-use cli_support::{cbd, scratch, stderr};
+use cli_support::{examples, json, run, scratch};
 
 const TOOL_POINTS: &str = "0,0,0;100,0,0;50,86.60254037844386,0";
 const NOISE: f64 = 0.02;
 const SIDE: f64 = 100.0;
-
-fn examples() -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples")
-}
-
-#[track_caller]
-fn run(dir: &std::path::Path, args: &[&str]) -> String {
-    let out = cbd(dir, args);
-    assert!(out.status.success(), "cbd {args:?}: {}", stderr(&out));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn json(path: &std::path::Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 #[test]
 fn three_tool_points_calibrate_position_and_orientation() {

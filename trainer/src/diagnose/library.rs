@@ -394,6 +394,27 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
 mod tests {
     use super::*;
 
+    /// Every column of `jac` (the library's `jacobian` of `params`) against central differences of
+    /// the positions of `model` changed by ±1e-6 in that parameter, relative tolerance `tolerance`.
+    #[track_caller]
+    fn assert_columns_are_central_differences(model: &NominalModel, data: &Measurements, params: &[Param], jac: &Mat<f64>, tolerance: f64) {
+        let m = data.task_dim;
+        for (col, p) in params.iter().enumerate() {
+            let h = 1e-6;
+            let (plus, minus) = (apply(model, &[*p], &[h]).unwrap(), apply(model, &[*p], &[-h]).unwrap());
+            let (a, b) = (positions(&plus, &data.joints, m), positions(&minus, &data.joints, m));
+            for r in 0..a.len() {
+                let fd = (a[r] - b[r]) / (2.0 * h);
+                assert!(
+                    (fd - jac[(r, col)]).abs() < tolerance * (1.0 + fd.abs()),
+                    "{} row {r}: fd {fd} vs {}",
+                    param_name(model, p),
+                    jac[(r, col)]
+                );
+            }
+        }
+    }
+
     #[test]
     fn geometric_and_effect_columns_match_finite_differences() {
         let model = crate::simulate::rr::nominal();
@@ -404,20 +425,7 @@ mod tests {
             data.push(&q, &[0.0, 0.0]);
         }
         let jac = jacobian(&model, &data, &params);
-        for (col, p) in params.iter().enumerate() {
-            let h = 1e-6;
-            let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (positions(&plus, &data.joints, 2), positions(&minus, &data.joints, 2));
-            for r in 0..a.len() {
-                let fd = (a[r] - b[r]) / (2.0 * h);
-                assert!(
-                    (fd - jac[(r, col)]).abs() < 1e-7 * (1.0 + fd.abs()),
-                    "{} row {r}: fd {fd} vs {}",
-                    param_name(&model, p),
-                    jac[(r, col)]
-                );
-            }
-        }
+        assert_columns_are_central_differences(&model, &data, &params, &jac, 1e-7);
     }
 
     #[test]
@@ -447,20 +455,7 @@ mod tests {
         for col in [3, transmission] {
             assert!((0..3).any(|c| (jac[(c, col)] - jac[(3 + c, col)]).abs() > 1e-3), "rows 0 and 1 share column {col}");
         }
-        for (col, p) in params.iter().enumerate() {
-            let h = 1e-6;
-            let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (positions(&plus, &data.joints, 3), positions(&minus, &data.joints, 3));
-            for r in 0..a.len() {
-                let fd = (a[r] - b[r]) / (2.0 * h);
-                assert!(
-                    (fd - jac[(r, col)]).abs() < 1e-5 * (1.0 + fd.abs()),
-                    "{} row {r}: fd {fd} vs {}",
-                    param_name(&model, p),
-                    jac[(r, col)]
-                );
-            }
-        }
+        assert_columns_are_central_differences(&model, &data, &params, &jac, 1e-5);
     }
 
     #[test]
@@ -481,19 +476,6 @@ mod tests {
             data.push(&q, &[0.0; 3]);
         }
         let jac = jacobian(&model, &data, &params);
-        for (col, p) in params.iter().enumerate() {
-            let h = 1e-6;
-            let (plus, minus) = (apply(&model, &[*p], &[h]).unwrap(), apply(&model, &[*p], &[-h]).unwrap());
-            let (a, b) = (positions(&plus, &data.joints, 3), positions(&minus, &data.joints, 3));
-            for r in 0..a.len() {
-                let fd = (a[r] - b[r]) / (2.0 * h);
-                assert!(
-                    (fd - jac[(r, col)]).abs() < 1e-5 * (1.0 + fd.abs()),
-                    "{} row {r}: fd {fd} vs {}",
-                    param_name(&model, p),
-                    jac[(r, col)]
-                );
-            }
-        }
+        assert_columns_are_central_differences(&model, &data, &params, &jac, 1e-5);
     }
 }

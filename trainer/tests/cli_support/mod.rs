@@ -108,3 +108,21 @@ pub fn fit_without_search(dir: &Path, model: &str, data: &str, out: &str) -> Out
     let scheme = ["--steps", "1", "--integrator", "euler", "--quiet"];
     cbd(dir, &[&["fit", "--model", model, "--data", data, "--out", out][..], &fixed[..], &scheme[..]].concat())
 }
+
+/// The repository's examples/ directory.
+pub fn examples() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples")
+}
+
+/// Runs `cbd` in `dir`, which must succeed; returns its stdout.
+#[track_caller]
+pub fn run(dir: &Path, args: &[&str]) -> String {
+    let out = cbd(dir, args);
+    assert!(out.status.success(), "cbd {args:?}: {}", stderr(&out));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A JSON file the CLI wrote.
+pub fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
