@@ -77,6 +77,15 @@ fn dimension(field: &'static str, expected: usize, found: usize) -> Result<(), M
     }
 }
 
+/// `count × width` f64 values must fill `found` bytes. Checked products: on a 32-bit controller
+/// `n_points × n × 8` wraps for a crafted `n_points`, and a wrapped size could match an empty array.
+fn array_bytes(field: &'static str, count: usize, width: usize, found: usize) -> Result<(), ModelError> {
+    match count.checked_mul(width).and_then(|values| values.checked_mul(8)) {
+        Some(expected) => dimension(field, expected, found),
+        None => Err(ModelError::OutOfRange { field }),
+    }
+}
+
 impl Effects {
     /// Checks the effects of a chain of `n_joints` joints: every joint/link index below
     /// `n_joints`, harmonics 1..=[`MAX_HARMONIC`], every value finite, `link_masses` empty or one
@@ -201,8 +210,8 @@ impl Model<'_> {
         if !n_points.is_multiple_of(self.nominal.tool_point_count()) {
             return Err(ModelError::OutOfRange { field: "n_points (not a multiple of the tool points)" });
         }
-        dimension("points", n_points * n * 8, self.points.byte_len())?;
-        dimension("momenta", n_points * m * 8, self.momenta.byte_len())?;
+        array_bytes("points", n_points, n, self.points.byte_len())?;
+        array_bytes("momenta", n_points, m, self.momenta.byte_len())?;
         finite("points", self.points.iter())?;
         finite("momenta", self.momenta.iter())?;
         if let Some(e) = &self.expansion {
@@ -254,5 +263,20 @@ impl FieldExpansion<'_> {
             return Err(ModelError::OutOfRangeAt { field: "expansion.task_exponents", index });
         }
         finite("expansion.weights", self.weights.iter())
+    }
+}
+
+#[cfg(test)]
+mod array_bytes_tests {
+    use super::*;
+
+    #[test]
+    fn a_size_that_wraps_the_address_space_is_refused_not_matched_with_an_empty_array() {
+        // 2^(bits − 3) values × 8 bytes = 2^bits: wrapping arithmetic gives 0, the length of an empty array.
+        let count = 1usize << (usize::BITS - 3);
+        assert_eq!(count.wrapping_mul(8), 0);
+        assert_eq!(array_bytes("points", count, 1, 0), Err(ModelError::OutOfRange { field: "points" }));
+        assert_eq!(array_bytes("points", 3, 2, 48), Ok(()));
+        assert_eq!(array_bytes("momenta", 3, 2, 40), Err(ModelError::Dimension { field: "momenta", expected: 48, found: 40 }));
     }
 }
