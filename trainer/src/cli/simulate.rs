@@ -90,7 +90,7 @@ pub fn parse_tracker_frame(text: &str) -> Result<crate::nominal::Frame> {
 }
 
 /// Every measured position (3 coordinates per row) seen from `frame` (`--tracker-frame`).
-fn into_tracker_frame(positions: &mut [f64], frame: &Option<crate::nominal::Frame>) {
+fn into_tracker_frame(positions: &mut [f64], frame: Option<&crate::nominal::Frame>) {
     if let Some(frame) = frame {
         for y in positions.chunks_exact_mut(3) {
             y.copy_from_slice(&frame.apply([y[0], y[1], y[2]]));
@@ -226,7 +226,7 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         None => random_configurations(args.count, args.seed),
     };
     if let Some(points) = &args.tool_points {
-        return simulate_six_points(args, &robot, &joints, &parse_tool_points(points)?, &tracker);
+        return simulate_six_points(args, &robot, &joints, &parse_tool_points(points)?, tracker.as_ref());
     }
     if args.pose {
         return Err(Error::InvalidInput("--pose needs --tool-points (at least 3 points)".into()));
@@ -237,7 +237,7 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         let rigid = cbd_protocol::NominalModel::DhChain(robot.real.clone());
         effect_arm(rigid, &args.effects)?.measure(&joints, robot.noise_std, args.seed.wrapping_add(0x5eed))
     };
-    into_tracker_frame(&mut data.positions, &tracker);
+    into_tracker_frame(&mut data.positions, tracker.as_ref());
     check_readable(&data)?;
     let mut text = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
     for i in 0..data.len() {
@@ -259,7 +259,7 @@ fn simulate_six_points(
     robot: &crate::simulate::six_joint::SixJointRobot,
     joints: &[f64],
     tool_points: &[[f64; 3]],
-    tracker: &Option<crate::nominal::Frame>,
+    tracker: Option<&crate::nominal::Frame>,
 ) -> Result<()> {
     use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
     let p = tool_points.len();
