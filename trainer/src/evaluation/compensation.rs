@@ -75,46 +75,43 @@ pub fn compensate_all_poses(
 /// The `count` training poses (of the blob: configurations pose-major, one per tool point) whose
 /// nominal tool points are nearest those of `target` (Σ_j |k0_j(q) − (R* p_j + t*)|²), nearest first.
 pub fn nearest_training_poses(model: &Model<'_>, target: &crate::nominal::Frame, count: usize) -> Vec<Vec<f64>> {
-    let n = model.n_joints().max(1);
     let m_p = model.nominal.tool_point_count().max(1);
-    let points: Vec<f64> = model.points.iter().collect();
     let wanted: Vec<[f64; 3]> = (0..m_p).map(|j| target.apply(model.nominal.tool_point(j).unwrap_or([0.0; 3]))).collect();
-    let mut scored: Vec<(f64, &[f64])> = points
-        .chunks_exact(n)
-        .step_by(m_p)
-        .map(|q| {
-            let d = (0..m_p)
-                .map(|j| {
-                    let k0 = cbd_runtime::kinematics::forward_kinematics_at(&model.nominal, q, j);
-                    (0..3).map(|c| (k0.position[c] - wanted[j][c]).powi(2)).sum::<f64>()
-                })
-                .sum::<f64>();
-            (d, q)
-        })
-        .collect();
-    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let hints: Vec<Vec<f64>> = scored.iter().take(count).map(|(_, q)| q.to_vec()).collect();
-    if hints.is_empty() {
-        vec![vec![0.0; n]]
-    } else {
-        hints
-    }
+    nearest_training_configurations(model, count, |q| {
+        (0..m_p)
+            .map(|j| {
+                let k0 = cbd_runtime::kinematics::forward_kinematics_at(&model.nominal, q, j);
+                (0..3).map(|c| (k0.position[c] - wanted[j][c]).powi(2)).sum::<f64>()
+            })
+            .sum()
+    })
 }
 
 /// The training configuration (of the blob) whose nominal position is nearest `target`: the
 /// default hint of the nominal inverse kinematics.
 pub fn nearest_training_configuration(model: &Model<'_>, target: &[f64]) -> Vec<f64> {
-    let n = model.n_joints();
-    let mut best = (f64::INFINITY, vec![0.0; n]);
-    let points: Vec<f64> = model.points.iter().collect();
-    for q in points.chunks_exact(n.max(1)) {
+    let mut nearest = nearest_training_configurations(model, 1, |q| {
         let k0 = cbd_runtime::kinematics::forward_kinematics(&model.nominal, q);
-        let d: f64 = k0.position.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
-        if d < best.0 {
-            best = (d, q.to_vec());
-        }
+        k0.position.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum()
+    });
+    nearest.pop().unwrap_or_else(|| vec![0.0; model.n_joints()])
+}
+
+/// The `count` training poses (one configuration per pose: the blob's points are pose-major, one
+/// per tool point) of smallest `distance`, nearest first (a stable sort: ties keep the data's
+/// order); all zeros when the blob has none.
+fn nearest_training_configurations(model: &Model<'_>, count: usize, distance: impl Fn(&[f64]) -> f64) -> Vec<Vec<f64>> {
+    let n = model.n_joints().max(1);
+    let points: Vec<f64> = model.points.iter().collect();
+    let mut scored: Vec<(f64, &[f64])> =
+        points.chunks_exact(n).step_by(model.nominal.tool_point_count().max(1)).map(|q| (distance(q), q)).collect();
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let nearest: Vec<Vec<f64>> = scored.iter().take(count).map(|(_, q)| q.to_vec()).collect();
+    if nearest.is_empty() {
+        vec![vec![0.0; n]]
+    } else {
+        nearest
     }
-    best.1
 }
 
 /// One row's result.
