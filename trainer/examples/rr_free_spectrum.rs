@@ -3,9 +3,10 @@
 //! configurations, seed 7), each with hyperparameters chosen by its OWN exact weight-space evidence on
 //! every row, against plain CbD's evidence choice and kernel ridge with its own evidence.
 //!
-//!     cargo run --release -p cbd-trainer --example rr_free_spectrum -- PER_AXIS [B_BOX [C_BOX [spectrum]]]
+//!     cargo run --release -p cbd-trainer --example rr_free_spectrum -- PER_AXIS [B_BOX|- [C_BOX|- [all|spectrum [NOISE_SEED]]]]
 //!
-//! (`spectrum`: stop after the joint spectra, before the task degrees and the residual field.)
+//! (`spectrum`: stop after the joint spectra, before the task degrees and the residual field; NOISE_SEED
+//! as `rr_bias_noise`'s, default 1 + 0x5eed.)
 //!
 //! One fixed basis: joint harmonics of exp(B_BOX (cos Δ − 1)) per axis (orders up to H), the task basis
 //! at plain CbD's width a, and for the residual field harmonics of exp(C_BOX (cos Δ − 1)) (default
@@ -14,11 +15,12 @@
 //! - free spectrum: λ(h1, h2) = γ_W γ_V s1(h1) s2(h2), s_d(0) = 1, s_d(1..H) free (the general stationary
 //!   kernel Σ_h s(h) cos hΔ per joint); "free 2-D spectrum": λ(h1, h2) = γ_W γ_V s(h1, h2), one free
 //!   s per pair of orders (not a product); "+ task degrees": task weights γ_W t(|α|), t(0) = 1, t(1..) free;
-//! - + residual: an additive output field r_c(q) ~ GP(0, γ_r Π_d exp(c_d (cos Δ_d − 1))) per coordinate c
+//! - with a residual field: an additive output field r_c(q) ~ GP(0, γ_r Π_d exp(c_d (cos Δ_d − 1))) per coordinate c
 //!   (kernel ridge's kernel family), c_d ≤ C_BOX; "everything free": its spectrum free as well,
 //!   γ_r r1(h1) r2(h2) on the same residual basis.
-//! nlml = ½ (|r|²/σ² − |L⁻¹ Λ^½ s|²/σ⁴) + ½ ln det B + N m ln σ + const, B = I + Λ^½ AᵀA Λ^½ / σ², s = Aᵀ r;
-//! searched by BFGS on ln θ with the exact gradient (checked against central differences at the start).
+//!
+//! nlml = ½ (|e|²/σ² + |w̃|²) + ½ ln det B + N m ln σ + const, B = I + Λ^½ AᵀA Λ^½ / σ² (support/rr_prior.rs),
+//! searched by BFGS on ln θ with the exact gradient (checked against central differences).
 //! Bias = the fit to the noise-free measurements at the same θ, noise part = |noisy fit − noise-free fit|
 //! (test means; "training rows": the same bias on the training grid); dof = r − tr B⁻¹ (the hat matrix's trace).
 //! The residual priors' evidence has several local optima: each is searched from several starts and
@@ -43,6 +45,10 @@
 //!           63542.03 → 0.838, 63372.67 → 0.844); free + task degrees + residual 63553.52 / 1.7923e-5
 //!           (1.066) / 1.463e-5 / 1.070e-5 / 52.9 (other optimum 63522.64 → 0.729); everything free: the
 //!           same 63553.52 / 1.066 (other optima 63533.47 → 0.702 / bias 1.85e-6, 63528.94 → 0.705).
+//! Noise seed 6134 (`-- PER_AXIS - - spectrum 6134`; kernel ridge 5.5459e-5 at N = 256, 1.5937e-5 at 4096):
+//! N = 256 plain searched on this basis 3574.97 / 0.742, free spectrum 3608.49 / 0.707, free 2-D 3617.96 /
+//! 0.700; N = 4096 plain at `cbd fit`'s θ 63359.64 / 1.3339e-5 (0.837), free spectrum 63402.53 / 0.812,
+//! free 2-D 63415.06 / 1.2901e-5 (0.810), bias 4.93e-6, dof 82.3 → 73.4.
 //! So only the free 2-D spectrum reaches 0.85 × kernel ridge at both N with its own evidence, narrowly
 //! (0.847 at 4096, on this one noise draw), and by variance alone: it shrinks pairs the data does not
 //! use ((1, 2) and (1, 3) by 16–18 decades; 81 → 70 effective degrees of freedom, noise part −6 %) while
@@ -249,13 +255,14 @@ fn beside(a: &Mat<f64>, b: &Mat<f64>) -> Mat<f64> {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let per_axis: usize = args.get(1).map_or(16, |s| s.parse().unwrap());
-    let b_box: f64 = args.get(2).map_or(0.2, |s| s.parse().unwrap());
+    let b_box: f64 = args.get(2).filter(|s| *s != "-").map_or(0.2, |s| s.parse().unwrap());
     let (m, n) = (2usize, 2usize);
     let real = rr::RealRr::default();
     let nominal = rr::nominal();
     let clean = real.measure(&configurations(Sampling::Grid { per_axis }, 2));
     let mut noisy = clean.clone();
-    add_noise(&mut noisy.positions, 1e-4, 1u64.wrapping_add(0x5eed));
+    let noise_seed: u64 = args.get(5).map_or(1u64.wrapping_add(0x5eed), |s| s.parse().unwrap());
+    add_noise(&mut noisy.positions, 1e-4, noise_seed);
     let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
     let norm = cbd_trainer::evidence::normalisation_of(&noisy);
     let peer = fit_kernel_ridge_peer(&nominal, &noisy, &Default::default()).unwrap();
@@ -269,7 +276,7 @@ fn main() {
         kh.kernel.gamma * kh.task_scale * kh.task_scale,
         kh.noise_sigma_data_units()
     );
-    let c_box: f64 = args.get(3).map_or(1.5 * krr_b.iter().cloned().fold(0.0, f64::max), |s| s.parse().unwrap());
+    let c_box: f64 = args.get(3).filter(|s| *s != "-").map_or(1.5 * krr_b.iter().cloned().fold(0.0, f64::max), |s| s.parse().unwrap());
     let e = cbd_trainer::evidence::choose_cbd_hyperparameters(&nominal, &noisy, &norm, &Default::default()).unwrap();
     let h = &e.hyperparameters;
     println!("plain cbd evidence {:.2} ({}), {:?}", e.log_evidence, e.form, h);

@@ -169,10 +169,13 @@ pub fn nelder_mead(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: f64, free: &[boo
     (best_f, embed(&best_x))
 }
 
+/// A criterion's value and gradient at θ; `None` where it is infeasible.
+pub type ValueAndGradient<'a> = dyn Fn(&[f64]) -> Option<(f64, Vec<f64>)> + 'a;
+
 /// BFGS with an Armijo backtracking line search on `f` (value, gradient; `None` = infeasible) from `x0`,
 /// steps capped at 2 per coordinate; stops when a step gains under 1e-6 nats three times running, or
 /// the gradient is below 1e-4 everywhere. Returns (value, x, iterations).
-pub fn bfgs(f: &dyn Fn(&[f64]) -> Option<(f64, Vec<f64>)>, x0: &[f64], max_iterations: usize) -> (f64, Vec<f64>, usize) {
+pub fn bfgs(f: &ValueAndGradient, x0: &[f64], max_iterations: usize) -> (f64, Vec<f64>, usize) {
     let k = x0.len();
     let mut x = x0.to_vec();
     let (mut fx, mut g) = f(&x).expect("BFGS start is infeasible");
