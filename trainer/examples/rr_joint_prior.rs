@@ -11,7 +11,7 @@
 //! in the absolute link angles u = (q1, q1 + q2) (u: the field's components stay in q; uu: they are in
 //! u too, V_q = A⁻¹ V_u with V_u's components independent, so the design takes J_q A⁻¹ = J_u).
 //! The search (Nelder–Mead on ln θ) starts from plain CbD's own evidence choice (`cbd fit`'s).
-//! nlml = ½ (|r|²/σ² − |L⁻¹ Λ^½ s|²/σ⁴) + ½ ln det B + N m ln σ + const, B = I + Λ^½ AᵀA Λ^½ / σ², s = Aᵀ r.
+//! nlml = ½ (|e|²/σ² + |w̃|²) + ½ ln det B + N m ln σ + const, B = I + Λ^½ AᵀA Λ^½ / σ² (support/rr_prior.rs).
 //!
 //! Measured (B_BOX 0.2; kernel ridge with its evidence: 6.2414e-5 at N = 256, 1.6810e-5 at 4096):
 //! N = 4096, log evidence / test mean: q one kernel (`cbd fit`'s) 63362.85 / 1.4852e-5 (0.884×), q sum
@@ -20,6 +20,12 @@
 //! 5.0666e-5, uu 3461.75 / 4.8881e-5. Link angles lower the bias (5.4e-6 → 0.8e-6 at 4096) but lose
 //! the evidence by 100–120 nats at both sizes, so an evidence choice between q and u keeps q; the sum
 //! kernel's narrow part gets no weight (in q its optimum at c = b_box loses 127 nats at N = 256, 276 at 4096).
+//! Since the evaluation moved to support/rr_prior.rs (shared with `rr_free_spectrum`; the value now as
+//! ½ (|e|²/σ² + |w̃|²) + …, no difference of two large terms) plain CbD's θ at N = 256 prints 3569.85 /
+//! 4.9467e-5 on this basis (the library's kernel form: 3570.46); the other figures were not re-run.
+
+#[path = "support/rr_prior.rs"]
+mod rr_prior;
 
 use cbd_protocol::*;
 use cbd_trainer::baselines::kernel_ridge::fit_kernel_ridge_peer;
@@ -29,25 +35,13 @@ use cbd_trainer::expansion::weights::periodic_weights;
 use cbd_trainer::expansion::{task_radius_of, tolerance_for};
 use cbd_trainer::flow::ControlPoints;
 use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
-use faer::linalg::matmul::matmul;
-use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
-use faer::{Accum, Mat, Par};
-
-fn mean_error(pred: &[f64], truth: &[f64]) -> f64 {
-    let e: f64 = pred.chunks_exact(2).zip(truth.chunks_exact(2)).map(|(p, t)| ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2)).sqrt()).sum();
-    e / (pred.len() / 2) as f64
-}
+use rr_prior::{mean_error, nelder_mead, project, LinearGaussian};
 
 /// The linear model r = A w + e on a fixed basis; θ = ln(γ_W, γ₁, b₁, b₂, γ₂, c₁, c₂, σ), normalised units.
 struct Model {
     joint_orders: Vec<[usize; 2]>,
     task_functions: usize,
-    gram: Mat<f64>,
-    s: Vec<f64>,
-    rr: f64,
-    obs: usize,
+    linear: LinearGaussian,
     b_box: f64,
 }
 
@@ -57,7 +51,7 @@ impl Model {
         let max_h = self.joint_orders.iter().flat_map(|o| o.iter().copied()).max().unwrap_or(0);
         let w = |b: f64| periodic_weights(b, max_h);
         let (b1, b2, c1, c2) = (w(e[2]), w(e[3]), w(e[5]), w(e[6]));
-        let mut v = Vec::with_capacity(self.gram.nrows());
+        let mut v = Vec::with_capacity(self.linear.gram.nrows());
         for o in &self.joint_orders {
             let lam = e[0] * (e[1] * b1[o[0]] * b2[o[1]] + e[4] * c1[o[0]] * c2[o[1]]);
             v.push(lam);
@@ -72,86 +66,9 @@ impl Model {
         if t[2..4].iter().chain(&t[5..7]).any(|lb| lb.exp() > self.b_box) || t.iter().any(|v| !v.is_finite() || v.abs() > 60.0) {
             return None;
         }
-        let r = self.gram.nrows();
-        let lam = self.variances(t);
-        let sq: Vec<f64> = lam.iter().map(|v| v.sqrt()).collect();
-        let sigma2 = (2.0 * t[7]).exp();
-        let mut b = Mat::from_fn(r, r, |i, j| sq[i] * self.gram[(i, j)] * sq[j] / sigma2 + if i == j { 1.0 } else { 0.0 });
-        let par = Par::Seq;
-        let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(r, par, Default::default()));
-        cholesky_in_place(b.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default()).ok()?;
-        let logdet: f64 = (0..r).map(|i| 2.0 * b[(i, i)].ln()).sum();
-        let s = clean_s.unwrap_or(&self.s);
-        let mut x = Mat::from_fn(r, 1, |i, _| sq[i] * s[i]);
-        solve_lower_triangular_in_place(b.as_ref(), x.as_mut(), par);
-        let quad: f64 = (0..r).map(|i| x[(i, 0)] * x[(i, 0)]).sum();
-        solve_upper_triangular_in_place(b.as_ref().transpose(), x.as_mut(), par);
-        let w: Vec<f64> = (0..r).map(|i| sq[i] * x[(i, 0)] / sigma2).collect();
-        let nlml = 0.5 * (self.rr / sigma2 - quad / (sigma2 * sigma2)) + 0.5 * logdet + self.obs as f64 * t[7];
-        Some((nlml, w))
+        let post = self.linear.posterior(&self.variances(t), t[7], clean_s, false)?;
+        Some((post.nlml, post.weights))
     }
-}
-
-/// Nelder–Mead on `f` from `x0` with initial steps `step`, restarted until no gain.
-fn nelder_mead(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: f64, free: &[bool]) -> (f64, Vec<f64>) {
-    let idx: Vec<usize> = (0..x0.len()).filter(|&k| free[k]).collect();
-    let k = idx.len();
-    let embed = |y: &[f64]| {
-        let mut x = x0.to_vec();
-        for (j, &i) in idx.iter().enumerate() {
-            x[i] = y[j];
-        }
-        x
-    };
-    let mut best_x: Vec<f64> = idx.iter().map(|&i| x0[i]).collect();
-    let mut best_f = f(&embed(&best_x));
-    for _restart in 0..3 {
-        let mut simplex: Vec<(f64, Vec<f64>)> = vec![(best_f, best_x.clone())];
-        for j in 0..k {
-            let mut y = best_x.clone();
-            y[j] += step;
-            simplex.push((f(&embed(&y)), y));
-        }
-        for _ in 0..150 * k {
-            simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
-            let centroid: Vec<f64> = (0..k).map(|j| simplex[..k].iter().map(|p| p.1[j]).sum::<f64>() / k as f64).collect();
-            let worst = simplex[k].clone();
-            let at = |a: f64| -> Vec<f64> { (0..k).map(|j| centroid[j] + a * (worst.1[j] - centroid[j])).collect() };
-            let xr = at(-1.0);
-            let fr = f(&embed(&xr));
-            if fr < simplex[0].0 {
-                let xe = at(-2.0);
-                let fe = f(&embed(&xe));
-                simplex[k] = if fe < fr { (fe, xe) } else { (fr, xr) };
-            } else if fr < simplex[k - 1].0 {
-                simplex[k] = (fr, xr);
-            } else {
-                let xc = at(0.5);
-                let fc = f(&embed(&xc));
-                if fc < worst.0 {
-                    simplex[k] = (fc, xc);
-                } else {
-                    let x0 = simplex[0].1.clone();
-                    for p in simplex.iter_mut().skip(1) {
-                        p.1 = (0..k).map(|j| x0[j] + 0.5 * (p.1[j] - x0[j])).collect();
-                        p.0 = f(&embed(&p.1));
-                    }
-                }
-            }
-            let spread = simplex.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max) - simplex[0].0;
-            if spread < 1e-6 {
-                break;
-            }
-        }
-        simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let gain = best_f - simplex[0].0;
-        best_f = simplex[0].0;
-        best_x = simplex[0].1.clone();
-        if gain < 1e-4 {
-            break;
-        }
-    }
-    (best_f, embed(&best_x))
 }
 
 fn main() {
@@ -237,22 +154,19 @@ fn main() {
     let tproblem = LinearProblem { dims: tcp.dims, points: &tcp.points, nominal: &tnom, jacobians: &tjac, residual: &zero };
     let at = design(&tproblem, &jk, &tk, &joint, &task);
     let r = a.ncols();
-    let mut gram = Mat::zeros(r, r);
-    matmul(gram.as_mut(), Accum::Replace, a.transpose(), a.as_ref(), 1.0, Par::Seq);
-    let proj = |v: &[f64]| -> Vec<f64> { (0..r).map(|j| (0..a.nrows()).map(|i| a[(i, j)] * v[i]).sum()).collect() };
-    let (s, s_clean) = (proj(&res), proj(&res_clean));
+    let s_clean = project(&a, &res_clean);
     println!(
         "basis: {} joint functions × {n} + {} task functions × {m} = {r} weights (tolerance {tolerance:.1e}, b_box {b_box})",
         joint.len(),
         task.len()
     );
-    let model = Model { joint_orders, task_functions: task.len(), gram, s, rr: res.iter().map(|v| v * v).sum(), obs: res.len(), b_box };
+    let model = Model { joint_orders, task_functions: task.len(), linear: LinearGaussian::new(&a, &res), b_box };
     let predict = |w: &[f64]| -> Vec<f64> {
         let d = apply(&at, w);
         tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.task_offset[i % m] + norm.task_scale * (k + d)).collect()
     };
     // Data units: ln p(y) = −nlml − N m ln scale − ½ N m ln 2π.
-    let to_lml = |nlml: f64| -nlml - model.obs as f64 * (norm.task_scale.ln() + 0.5 * (2.0 * std::f64::consts::PI).ln());
+    let to_lml = |nlml: f64| -nlml - model.linear.obs as f64 * (norm.task_scale.ln() + 0.5 * (2.0 * std::f64::consts::PI).ln());
     let report = |name: &str, t: &[f64], nlml: f64| {
         let (_, w) = model.evaluate(t, None).unwrap();
         let (_, wc) = model.evaluate(t, Some(&s_clean)).unwrap();
