@@ -183,11 +183,24 @@ pub fn choose_cbd_hyperparameters(
     // A subset's choice refined on every row in weight space, where the expansions are short.
     let (mut rows_used, mut weight_space, mut weight_space_declined) = (used.len(), None, None);
     if used.len() < data.len() {
-        match weight_space::refine(nominal, data, norm, &param, &lower, &upper, options, used.len(), &evaluations) {
-            Ok((v, p, report)) => {
-                (nlml, param, rows_used, weight_space) = (v, p, data.len(), Some(report));
-            }
+        let refine = |from: &[f64], options: &EvidenceOptions| {
+            weight_space::refine(nominal, data, norm, from, &lower, &upper, options, used.len(), &evaluations)
+        };
+        let mut candidates = Vec::new();
+        match refine(&param, options) {
+            Ok(found) => candidates.push(found),
             Err(why) => weight_space_declined = Some(why.to_string()),
+        }
+        // The starts too, screened on every row and the best basins refined: the subsets can miss the
+        // basin all rows prefer (dh+cbd on the noisy RR grid at N = 4096: 3 noise draws of 5 ended
+        // 420 nats below it, at 2.7 × the test error).
+        let screening = EvidenceOptions { max_iterations: options.screening_iterations, ..options.clone() };
+        let mut starts_on_every_row: Vec<(f64, Vec<f64>)> =
+            packed.iter().filter_map(|(_, p)| refine(p, &screening).ok()).map(|(v, p, _)| (v, p)).collect();
+        starts_on_every_row.sort_by(|a, b| a.0.total_cmp(&b.0));
+        candidates.extend(best_basins(starts_on_every_row).iter().filter_map(|(_, p)| refine(p, options).ok()));
+        if let Some((v, p, report)) = candidates.into_iter().min_by(|a, b| a.0.total_cmp(&b.0)) {
+            (nlml, param, rows_used, weight_space, weight_space_declined) = (v, p, data.len(), Some(report), None);
         }
     }
     let theta = Theta::unpack(&param, n);
