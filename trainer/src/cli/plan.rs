@@ -198,6 +198,9 @@ pub fn run(args: PlanArgs) -> Result<()> {
         result.geometric_parameters,
         result.poses.len() - geometric
     );
+    if options.exchange > 0 {
+        errln!("exchange passes (at most {}): {} swaps", options.exchange, result.exchange_swaps);
+    }
     if let Some(e) = result.measured_predicted_rms {
         errln!("predicted RMS position error after the measured poses: {e:.4e} {unit}");
     }
