@@ -13,7 +13,8 @@
 //! `CBD_PLAN_WORKSPACE` / `CBD_PLAN_CANDIDATES` / `CBD_PLAN_SPACE_FILLING` override the planner's options,
 //! `CBD_PLAN_RANDOM_EVERY` makes every so-many-th pose a uniform random one, `CBD_PLAN_BATCH` caps the poses per plan (re-estimated in between), `CBD_PLAN_ORACLE=1` plans with
 //! the evidence on 400 further random poses,
-//! `CBD_PLAN_MAX_K` ends the curves early.
+//! `CBD_PLAN_EXCHANGE` sets the exchange passes after each greedy batch (`CBD_PLAN_EXCHANGE_WORKSPACE`:
+//! scored on a fresh workspace sample of that size per pass), `CBD_PLAN_MAX_K` ends the curves early.
 
 use cbd_protocol::{IntegratorMethod, NominalModel};
 use cbd_trainer::calibrate::{calibrate, Settings};
@@ -131,6 +132,8 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         workspace: env_usize("CBD_PLAN_WORKSPACE", PlanOptions::default().workspace),
         space_filling: env_usize("CBD_PLAN_SPACE_FILLING", 0),
         random_every: env_usize("CBD_PLAN_RANDOM_EVERY", 0),
+        exchange: env_usize("CBD_PLAN_EXCHANGE", 0),
+        exchange_workspace: env_usize("CBD_PLAN_EXCHANGE_WORKSPACE", 0),
         seed: seed * 1000 + count as u64 + salt * 1_000_000,
         ..PlanOptions::default()
     };
@@ -155,6 +158,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         let mut predicted = None;
         let mut seconds = 0.0;
         let mut identified = None;
+        let mut swaps = 0;
         while measured.as_ref().map_or(0, |d| d.len()) < k {
             let have = measured.as_ref().map_or(0, |d| d.len());
             let hyperparameters = match (&oracle, &measured) {
@@ -177,6 +181,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
             seconds += t.elapsed().as_secs_f64();
             predicted = planned.poses.last().and_then(|p| p.predicted_rms);
             identified = planned.geometric_identified_after;
+            swaps += planned.exchange_swaps;
             let joints: Vec<f64> = planned.poses.iter().flat_map(|p| p.joints.clone()).collect();
             // The first sub-batch of each curve point keeps the seed it had with one batch per point.
             let noise_seed = if first { 50 + 100 * seed + b as u64 } else { 10_000 + 100 * seed + sub };
@@ -213,7 +218,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         };
         let r = arm.reached(&rd, &test);
         eprintln!(
-            "{} seed {seed} K {k:>3}: planned {p:.3e} random {r:.3e} predicted {} after {} (plan {seconds:.1} s, identified after {:?})",
+            "{} seed {seed} K {k:>3}: planned {p:.3e} random {r:.3e} predicted {} after {} (plan {seconds:.1} s, identified after {:?}, {swaps} exchanges)",
             arm.name,
             predicted.map_or("–".into(), |v| format!("{v:.3e}")),
             after.map_or("–".into(), |v| format!("{v:.3e}")),

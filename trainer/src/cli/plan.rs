@@ -43,6 +43,15 @@ pub struct PlanArgs {
     /// Workspace points whose mean posterior variance each step reduces.
     #[arg(long, default_value_t = 96)]
     pub workspace: usize,
+    /// Exchange passes after the greedy choice: each planned pose in turn is replaced by the
+    /// candidate that most lowers the workspace's mean posterior variance given the others (never
+    /// the --data poses); stops early when a pass swaps nothing. 0: the greedy choice as is.
+    #[arg(long, default_value_t = 0)]
+    pub exchange: usize,
+    /// Workspace points the exchange passes score on: 0, the greedy step's; else a fresh uniform
+    /// sample of this size per pass.
+    #[arg(long, default_value_t = 0)]
+    pub exchange_workspace: usize,
     /// Write the plan as JSON: every pose with its stage and the predicted RMS error after it
     /// (the learning curve), the hyperparameters, counts and timing.
     #[arg(long)]
@@ -127,6 +136,8 @@ pub fn run(args: PlanArgs) -> Result<()> {
         candidates: args.candidates,
         seed: args.seed,
         workspace: args.workspace,
+        exchange: args.exchange,
+        exchange_workspace: args.exchange_workspace,
         ..PlanOptions::default()
     };
     let bytes = crate::plan::memory_bytes(
@@ -187,6 +198,9 @@ pub fn run(args: PlanArgs) -> Result<()> {
         result.geometric_parameters,
         result.poses.len() - geometric
     );
+    if options.exchange > 0 {
+        errln!("exchange passes (at most {}): {} swaps", options.exchange, result.exchange_swaps);
+    }
     if let Some(e) = result.measured_predicted_rms {
         errln!("predicted RMS position error after the measured poses: {e:.4e} {unit}");
     }

@@ -12,9 +12,13 @@ const RANK_RATIO: f64 = 1e-10;
 
 /// The information M = Σ_s J_sᵀ J_s of the chosen poses on the identifiable parameters, each
 /// column scaled to unit RMS over the candidates.
+#[derive(Clone)]
 pub struct Identifiability {
     m: usize,
     p: usize,
+    /// The identifiable columns of the DH Jacobian and their scales.
+    columns: Vec<usize>,
+    scale: Vec<f64>,
     /// Per point: its m × p scaled Jacobian rows, row-major.
     rows: Vec<f64>,
     info: Mat<f64>,
@@ -43,7 +47,14 @@ impl Identifiability {
                 rows[i * p + a] = jac[(i, k)] / scale[a];
             }
         }
-        Identifiability { m, p, rows, info: Mat::zeros(p, p) }
+        Identifiability { m, p, columns: identifiable.to_vec(), scale, rows, info: Mat::zeros(p, p) }
+    }
+
+    /// The m × p scaled rows of point `point` of another DH Jacobian `jac` (all parameters, m rows
+    /// per point): the same columns and scales as the tracked points'.
+    pub fn scaled_rows(&self, jac: &Mat<f64>, point: usize) -> Vec<f64> {
+        let (m, p) = (self.m, self.p);
+        (0..m * p).map(|k| jac[(point * m + k / p, self.columns[k % p])] / self.scale[k % p]).collect()
     }
 
     /// Number of identifiable parameters.

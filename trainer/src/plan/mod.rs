@@ -6,9 +6,10 @@
 //!
 //! In pipeline order: `candidates` (sampling, limits, singular distance), `prior` (hyperparameters),
 //! `identifiability` (the DH Jacobian and its information), `posterior` (the Gaussian process),
-//! here the greedy loop.
+//! here the greedy loop, then `exchange` (optional passes that revise the greedy batch).
 
 pub mod candidates;
+pub mod exchange;
 pub mod identifiability;
 pub mod posterior;
 pub mod prior;
@@ -42,6 +43,11 @@ pub struct PlanOptions {
     /// of the error (the uniform test distribution gets its share of poses whatever the process
     /// believes).
     pub random_every: usize,
+    /// Exchange passes after the greedy batch (0: none; passes stop early when one swaps nothing).
+    pub exchange: usize,
+    /// Workspace points the exchange passes score on: 0, the greedy step's; else an independent
+    /// uniform sample of this size, fresh for every pass.
+    pub exchange_workspace: usize,
 }
 
 impl Default for PlanOptions {
@@ -55,6 +61,8 @@ impl Default for PlanOptions {
             max_conditioning: 100,
             space_filling: 0,
             random_every: 0,
+            exchange: 0,
+            exchange_workspace: 0,
         }
     }
 }
@@ -116,6 +124,8 @@ pub struct Plan {
     /// Identifiable geometric parameters (DH, base, tool) and the pose after which they are.
     pub geometric_parameters: usize,
     pub geometric_identified_after: Option<usize>,
+    /// Swaps the exchange passes made (0 without them).
+    pub exchange_swaps: usize,
     pub reach: f64,
     pub hyperparameters: CbdHyperparameters,
     pub seconds: f64,
@@ -151,14 +161,19 @@ const GEOMETRIC_PRIOR: f64 = 1e3;
 /// Bytes [`plan`] holds for a chain of `n` joints and task dimension `m`, `user` candidates of the
 /// user's and `measured` poses: per tracked point (candidates, workspace, evaluation, conditioned
 /// poses) its kinematics, features, geometric rows (at most 6n + 6 parameters) and posterior rows
-/// (m per added pose), and the candidate × workspace cross-covariances, m² each.
+/// (m per added pose), and the candidate × workspace cross-covariances, m² each (the larger of the
+/// greedy and the exchange workspace: one process is held at a time).
 pub fn memory_bytes(n: usize, m: usize, options: &PlanOptions, user: usize, measured: usize) -> f64 {
-    let added = (options.count + measured.min(options.max_conditioning)) as f64;
+    // An exchange pass appends at most two row groups per planned pose (a swap's downdate and
+    // update) to a process of the same size, built afresh per pass.
+    let exchange = options.exchange.min(1) * options.count;
+    let added = (options.count + measured.min(options.max_conditioning) + 2 * exchange) as f64;
     let (n, m) = (n as f64, m as f64);
     let candidates = (options.candidates + user) as f64;
-    let points = candidates + (options.workspace + options.evaluation + measured) as f64;
+    let workspace = options.workspace.max(options.exchange_workspace) as f64;
+    let points = candidates + workspace + (options.evaluation + measured) as f64;
     let per_point = 3.0 + n * m + 2.0 * n + 2.0 * m * (6.0 * n + 6.0) + (added + 2.0) * m * m + 2.0 * n;
-    8.0 * (points * per_point + candidates * (options.workspace as f64 + 1.0) * m * m)
+    8.0 * (points * per_point + candidates * (workspace + 1.0) * m * m)
 }
 
 /// Plans `options.count` poses (see the module documentation).
@@ -238,11 +253,11 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         Some(g) => (g.parameters(), g.prior_factor(GEOMETRIC_PRIOR * GEOMETRIC_PRIOR * sigma2, sigma2, &unconditioned)),
         None => (0, Vec::new()),
     };
+    // The basis reads the rows only; `geometric` gains the chosen poses' information below.
+    let rows = geometric.clone();
     let basis = |i: usize| -> Vec<f64> {
-        let Some(g) = &geometric else { return Vec::new() };
-        let j = g.block(i);
-        // G = J L (m × p).
-        (0..m * p).map(|k| (0..p).map(|t| j[(k / p) * p + t] * factor[t * p + k % p]).sum()).collect()
+        let Some(g) = &rows else { return Vec::new() };
+        times_factor(g.block(i), &factor, m, p)
     };
     let mut points: Vec<_> = (0..count_c + count_w + count_e).map(|i| prior.point(nominal, &all[i * n..(i + 1) * n], basis(i))).collect();
     points.extend(conditioned.iter().map(|&i| prior.point(nominal, &measured_joints[i * n..(i + 1) * n], basis(measured_start + i))));
@@ -262,8 +277,17 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     let measured_predicted_rms = if count_d > 0 { predict(&gp, &geometric) } else { None };
 
     let mut chosen = vec![false; count_c];
+    let mut batch = Vec::with_capacity(options.count);
     let mut poses = Vec::with_capacity(options.count);
+    let geometric_measured = geometric.clone();
     let mut geometric_identified_after = identified(&geometric).then_some(0);
+    let pose = |c: usize, stage: Stage, predicted_rms: Option<f64>| PlannedPose {
+        joints: kept[c * n..(c + 1) * n].to_vec(),
+        controller: kept_controller[c * n..(c + 1) * n].to_vec(),
+        stage,
+        singular_distance: distances[c],
+        predicted_rms,
+    };
     for _ in 0..options.count {
         let stage = if identified(&geometric) { Stage::Posterior } else { Stage::Geometric };
         let spread_first = poses.len() < options.space_filling;
@@ -275,6 +299,7 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         };
         let Some((c, _)) = best else { break };
         chosen[c] = true;
+        batch.push(c);
         if let Some(g) = geometric.as_mut() {
             g.add(c);
         }
@@ -283,13 +308,93 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         if predicted_rms.is_some() && geometric_identified_after.is_none() {
             geometric_identified_after = Some(poses.len() + 1);
         }
-        poses.push(PlannedPose {
-            joints: kept[c * n..(c + 1) * n].to_vec(),
-            controller: kept_controller[c * n..(c + 1) * n].to_vec(),
-            stage,
-            singular_distance: distances[c],
-            predicted_rms,
+        poses.push(pose(c, stage, predicted_rms));
+    }
+    let mut exchange_swaps = 0;
+    if options.exchange > 0 && !batch.is_empty() {
+        // The candidates (and measured poses) as a fresh process tracks them: [candidates |
+        // workspace | conditioned measured poses], conditioned on the measured poses and `batch`.
+        let candidate_points = |prior: &Prior| -> Vec<posterior::Point> {
+            (0..count_c).map(|i| prior.point(nominal, &all[i * n..(i + 1) * n], basis(i))).collect()
+        };
+        let measured_points = |prior: &Prior| -> Vec<posterior::Point> {
+            conditioned.iter().map(|&i| prior.point(nominal, &measured_joints[i * n..(i + 1) * n], basis(measured_start + i))).collect()
+        };
+        let conditioned_on = |mut points: Vec<posterior::Point>, workspace: usize, prior: Prior, batch: &[usize]| -> Posterior {
+            points.extend(measured_points(&prior));
+            let mut gp = Posterior::new(prior, points, count_c, workspace);
+            (0..conditioned.len()).for_each(|k| {
+                gp.add(count_c + workspace + k);
+            });
+            batch.iter().for_each(|&c| {
+                gp.add(c);
+            });
+            gp
+        };
+        // Each pass on a process built afresh (the first on the greedy step's when it shares its
+        // workspace), so the rows a pass's swaps append are dropped after it.
+        let mut current = gp;
+        for pass in 0..options.exchange {
+            if pass > 0 || options.exchange_workspace > 0 {
+                // Frees the last process before the next is built.
+                drop(std::mem::replace(&mut current, Posterior::new(Prior::new(&input.hyperparameters, m), Vec::new(), 0, 0)));
+                let prior = Prior::new(&input.hyperparameters, m);
+                let mut points = candidate_points(&prior);
+                let size = match options.exchange_workspace {
+                    0 => {
+                        points.extend((count_c..count_c + count_w).map(|i| prior.point(nominal, &all[i * n..(i + 1) * n], basis(i))));
+                        count_w
+                    }
+                    size => {
+                        let seed = options.seed.wrapping_add(3 + pass as u64);
+                        let sample = to_model(&candidates::uniform_within(input.limits, size, seed));
+                        let jac = crate::parametric::identification_jacobian(nominal, &sample).map(|(jac, _)| jac);
+                        points.extend(sample.chunks_exact(n).enumerate().map(|(w, q)| {
+                            // The basis at a new point: its DH rows through the same scaling and prior factor.
+                            let row = match (&rows, &jac) {
+                                (Some(g), Some(jac)) => g.scaled_rows(jac, w),
+                                _ => Vec::new(),
+                            };
+                            prior.point(nominal, q, times_factor(&row, &factor, m, p))
+                        }));
+                        size
+                    }
+                };
+                current = conditioned_on(points, size, prior, &batch);
+            }
+            let swaps = exchange::pass(&mut current, &mut batch, &mut chosen);
+            exchange_swaps += swaps;
+            if swaps == 0 {
+                break;
+            }
+        }
+        drop(current);
+        // The learning curve of the exchanged batch, in its order: a process on [batch | evaluation
+        // | conditioned measured poses].
+        let prior = Prior::new(&input.hyperparameters, m);
+        let mut points: Vec<_> = batch.iter().map(|&c| prior.point(nominal, &all[c * n..(c + 1) * n], basis(c))).collect();
+        points.extend(eval_range.clone().map(|i| prior.point(nominal, &all[i * n..(i + 1) * n], basis(i))));
+        points.extend(measured_points(&prior));
+        let (count_b, curve_eval) = (batch.len(), batch.len()..batch.len() + count_e);
+        let mut curve = Posterior::new(prior, points, 0, 0);
+        (0..conditioned.len()).for_each(|k| {
+            curve.add(count_b + count_e + k);
         });
+        let mut g = geometric_measured;
+        geometric_identified_after = identified(&g).then_some(0);
+        poses.clear();
+        for (k, &c) in batch.iter().enumerate() {
+            let stage = if identified(&g) { Stage::Posterior } else { Stage::Geometric };
+            if let Some(g) = g.as_mut() {
+                g.add(c);
+            }
+            curve.add(k);
+            let predicted_rms = identified(&g).then(|| curve.mean_variance(curve_eval.clone()).sqrt());
+            if predicted_rms.is_some() && geometric_identified_after.is_none() {
+                geometric_identified_after = Some(k + 1);
+            }
+            poses.push(pose(c, stage, predicted_rms));
+        }
     }
     Ok(Plan {
         poses,
@@ -299,10 +404,19 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         rejected_singular,
         geometric_parameters: p,
         geometric_identified_after,
+        exchange_swaps,
         reach,
         hyperparameters: input.hyperparameters.clone(),
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// G = J L (m × p, row-major): a point's scaled geometric rows J through the prior factor L.
+fn times_factor(j: &[f64], factor: &[f64], m: usize, p: usize) -> Vec<f64> {
+    if j.is_empty() {
+        return Vec::new();
+    }
+    (0..m * p).map(|k| (0..p).map(|t| j[(k / p) * p + t] * factor[t * p + k % p]).sum()).collect()
 }
 
 #[cfg(test)]

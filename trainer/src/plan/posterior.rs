@@ -100,8 +100,11 @@ pub struct Posterior {
     points: Vec<Point>,
     candidates: usize,
     workspace: usize,
-    /// Per point: the rows of V = L⁻¹ k(S, x) (L the Cholesky factor of K_SS + σ²I), m per added pose.
+    /// Per point: the rows of V = L⁻¹ k(S, x) (L the Cholesky factor of K_SS + σ²I), m per added
+    /// or removed pose, k_S(x, y) = k(x, y) − Σ_g sign_g V_g(x)ᵀ V_g(y).
     v: Vec<Vec<f64>>,
+    /// Per row group: 1 (a pose added) or −1 (removed).
+    signs: Vec<f64>,
     /// Per point: its posterior covariance k_S(x, x), m × m.
     cov: Vec<f64>,
     /// Per candidate c and workspace point w: k_S(c, w), m × m.
@@ -134,7 +137,7 @@ impl Posterior {
                 accumulate_outer(&mut spread[c * mm..(c + 1) * mm], &cross[at..at + mm], m);
             }
         }
-        Posterior { prior, points, candidates, workspace, v, cov, cross, spread, added: 0 }
+        Posterior { prior, points, candidates, workspace, v, signs: Vec::new(), cov, cross, spread, added: 0 }
     }
 
     pub fn len(&self) -> usize {
@@ -164,10 +167,15 @@ impl Posterior {
     /// Reduction of the workspace's mean posterior variance if candidate `c` were measured:
     /// (1/|W|) Σ_w tr(k_S(w, c) (k_S(c, c) + σ²I)⁻¹ k_S(c, w)).
     pub fn gain(&self, c: usize) -> f64 {
-        let (m, mm) = (self.prior.m, self.prior.m * self.prior.m);
-        let b = &self.spread[c * mm..(c + 1) * mm];
+        let mm = self.prior.m * self.prior.m;
+        self.gain_from(&self.cov[c * mm..(c + 1) * mm], &self.spread[c * mm..(c + 1) * mm])
+    }
+
+    /// The gain of a candidate of posterior covariance `cov` and spread `b` = Σ_w k_S(c, w) k_S(w, c).
+    fn gain_from(&self, cov: &[f64], b: &[f64]) -> f64 {
+        let m = self.prior.m;
         let mut sc = [0.0; 9];
-        sc[..mm].copy_from_slice(&self.cov[c * mm..(c + 1) * mm]);
+        sc[..m * m].copy_from_slice(&cov[..m * m]);
         for r in 0..m {
             sc[r * m + r] += self.prior.sigma2;
         }
@@ -178,41 +186,105 @@ impl Posterior {
         (0..m).map(|r| lbl[r * m + r]).sum::<f64>() / self.workspace.max(1) as f64
     }
 
-    /// Conditions on a measurement at point `s`: with t_x = k_S(s, x) = k(s, x) − V_sᵀV_x and
-    /// L_d Lᵀ_d = k_S(s, s) + σ²I, every point gains the rows u_x = L_d⁻¹ t_x, k_S(x, y) −= u_xᵀ u_y.
+    /// Conditions on a measurement at point `s`: with t_x = k_S(s, x) and L_d Lᵀ_d = k_S(s, s) + σ²I,
+    /// every point gains the rows u_x = L_d⁻¹ t_x, k_S(x, y) −= u_xᵀ u_y.
     pub fn add(&mut self, s: usize) -> bool {
+        match self.rows_for(s, 1.0) {
+            Some(u) => {
+                self.apply(u, 1.0);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Forgets the measurement at point `s` (added before): the inverse of [`Self::add`],
+    /// k_{S∖s}(x, y) = k_S(x, y) + k_S(x, s) (σ²I − k_S(s, s))⁻¹ k_S(s, y) (the update formula solved
+    /// for the prior; σ²I − k_S(s, s) = σ⁴ (k_{S∖s}(s, s) + σ²I)⁻¹ is positive definite).
+    pub fn remove(&mut self, s: usize) -> bool {
+        match self.rows_for(s, -1.0) {
+            Some(u) => {
+                self.apply(u, -1.0);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The workspace's mean posterior variance, the quantity the greedy and exchange steps reduce.
+    pub fn criterion(&self) -> f64 {
+        self.mean_variance(self.candidates..self.candidates + self.workspace)
+    }
+
+    /// Per candidate, [`Self::gain`] in the posterior without the measurement at point `s` (the
+    /// downdate's rows, not applied); `None` where that downdate is not positive definite.
+    pub fn gains_without(&self, s: usize) -> Option<Vec<f64>> {
+        let u = self.rows_for(s, -1.0)?;
+        let (m, mm, base) = (self.prior.m, self.prior.m * self.prior.m, self.candidates);
+        let gains = (0..self.candidates)
+            .map(|c| {
+                let uc = &u[c * mm..(c + 1) * mm];
+                let mut cov = [0.0; 9];
+                cov[..mm].copy_from_slice(&self.cov[c * mm..(c + 1) * mm]);
+                subtract_outer(&mut cov, uc, uc, m, -1.0);
+                let mut spread = [0.0; 9];
+                for w in 0..self.workspace {
+                    let mut q = [0.0; 9];
+                    q[..mm].copy_from_slice(&self.cross[(c * self.workspace + w) * mm..][..mm]);
+                    subtract_outer(&mut q, uc, &u[(base + w) * mm..(base + w + 1) * mm], m, -1.0);
+                    accumulate_outer(&mut spread, &q, m);
+                }
+                self.gain_from(&cov, &spread)
+            })
+            .collect();
+        Some(gains)
+    }
+
+    /// k_S(s, x) = k(s, x) − Σ_g sign_g V_g(s)ᵀ V_g(x) over the row groups added so far.
+    fn conditioned_block(&self, s: usize, x: usize, k: &mut [f64; 9]) {
+        let m = self.prior.m;
+        self.prior.block(&self.points[s], &self.points[x], &mut k[..m * m]);
+        let (vs, vx) = (&self.v[s], &self.v[x]);
+        for (row, sign) in (0..vs.len() / m).map(|row| (row, self.signs[row / m])) {
+            for r in 0..m {
+                for c in 0..m {
+                    k[r * m + c] -= sign * vs[row * m + r] * vx[row * m + c];
+                }
+            }
+        }
+    }
+
+    /// The rows u_x = L_d⁻¹ k_S(s, x) of every point (m × m each), L_d L_dᵀ = sign (k_S(s, s) +
+    /// sign σ²I): adding (sign 1) or removing (sign −1) the measurement at `s`.
+    fn rows_for(&self, s: usize, sign: f64) -> Option<Vec<f64>> {
         let (m, mm) = (self.prior.m, self.prior.m * self.prior.m);
         let mut d = [0.0; 9];
-        d[..mm].copy_from_slice(&self.cov[s * mm..(s + 1) * mm]);
+        for k in 0..mm {
+            d[k] = sign * self.cov[s * mm + k];
+        }
         for r in 0..m {
             d[r * m + r] += self.prior.sigma2;
         }
-        let Some(l) = cholesky(&d, m) else { return false };
-        let vs = self.v[s].clone();
+        let l = cholesky(&d, m)?;
         let mut u = vec![0.0; self.points.len() * mm];
         let mut k = [0.0; 9];
         for x in 0..self.points.len() {
-            self.prior.block(&self.points[s], &self.points[x], &mut k[..mm]);
-            let vx = &self.v[x];
-            for row in 0..vs.len() / m {
-                for r in 0..m {
-                    for c in 0..m {
-                        k[r * m + c] -= vs[row * m + r] * vx[row * m + c];
-                    }
-                }
-            }
-            let ux = lower_solve(&l, &k, m);
-            u[x * mm..(x + 1) * mm].copy_from_slice(&ux[..mm]);
+            self.conditioned_block(s, x, &mut k);
+            u[x * mm..(x + 1) * mm].copy_from_slice(&lower_solve(&l, &k, m)[..mm]);
         }
+        Some(u)
+    }
+
+    /// k_S(x, y) −= sign u_xᵀ u_y for the kept covariances, cross-covariances and spreads; the
+    /// rows join V with their sign.
+    fn apply(&mut self, u: Vec<f64>, sign: f64) {
+        let (m, mm) = (self.prior.m, self.prior.m * self.prior.m);
         for x in 0..self.points.len() {
             let ux = &u[x * mm..(x + 1) * mm];
             self.v[x].extend_from_slice(ux);
-            for r in 0..m {
-                for c in 0..m {
-                    self.cov[x * mm + r * m + c] -= (0..m).map(|t| ux[t * m + r] * ux[t * m + c]).sum::<f64>();
-                }
-            }
+            subtract_outer(&mut self.cov[x * mm..(x + 1) * mm], ux, ux, m, sign);
         }
+        self.signs.push(sign);
         let base = self.candidates;
         for c in 0..self.candidates {
             let uc = &u[c * mm..(c + 1) * mm];
@@ -221,16 +293,20 @@ impl Posterior {
             for w in 0..self.workspace {
                 let uw = &u[(base + w) * mm..(base + w + 1) * mm];
                 let q = &mut self.cross[(c * self.workspace + w) * mm..][..mm];
-                for r in 0..m {
-                    for cc in 0..m {
-                        q[r * m + cc] -= (0..m).map(|t| uc[t * m + r] * uw[t * m + cc]).sum::<f64>();
-                    }
-                }
+                subtract_outer(q, uc, uw, m, sign);
                 accumulate_outer(spread, q, m);
             }
         }
         self.added += 1;
-        true
+    }
+}
+
+/// out −= sign aᵀ b for m × m a, b (row-major).
+fn subtract_outer(out: &mut [f64], a: &[f64], b: &[f64], m: usize, sign: f64) {
+    for r in 0..m {
+        for c in 0..m {
+            out[r * m + c] -= sign * (0..m).map(|t| a[t * m + r] * b[t * m + c]).sum::<f64>();
+        }
     }
 }
 
@@ -335,5 +411,52 @@ mod tests {
                 assert!((dense - post.cov[8 * 4 + r * 2 + c]).abs() < 1e-12, "{dense} vs {}", post.cov[8 * 4 + r * 2 + c]);
             }
         }
+    }
+
+    /// Removing a measurement inverts adding it: the covariances, cross-covariances and gains equal
+    /// those of a process that never had it, and `gains_without` foresees the gains after removing.
+    #[test]
+    fn remove_inverts_add() {
+        let rr = crate::simulate::rr::nominal();
+        let h = CbdHyperparameters {
+            joint_axes: vec![cbd_protocol::JointKernelAxis::Periodic { b: 1.3 }; 2],
+            joint_gamma: 2e-3,
+            task_width: 0.8,
+            task_gamma: 1e-3,
+            sigma: 1e-2,
+        };
+        let q = super::super::candidates::uniform_within(&[[-3.0, 3.0], [-3.0, 3.0]], 14, 8);
+        let process = || {
+            let prior = Prior::new(&h, 2);
+            let points = q.chunks_exact(2).map(|x| prior.point(&rr, x, vec![0.3 * x[0], x[1].cos(), 0.1, x[0].sin()])).collect();
+            Posterior::new(prior, points, 8, 4)
+        };
+        let mut with = process();
+        for s in [1, 3, 0, 12] {
+            assert!(with.add(s));
+        }
+        let foreseen = with.gains_without(3).unwrap();
+        assert!(with.remove(3));
+        let mut without = process();
+        for s in [1, 0, 12] {
+            assert!(without.add(s));
+        }
+        let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-9 * scale;
+        let scale = without.cov.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+        for (a, b) in with.cov.iter().zip(&without.cov) {
+            assert!(close(*a, *b, scale), "covariance {a} vs {b}");
+        }
+        for (a, b) in with.cross.iter().zip(&without.cross) {
+            assert!(close(*a, *b, scale), "cross-covariance {a} vs {b}");
+        }
+        let top = (0..8).map(|c| without.gain(c)).fold(0.0_f64, f64::max);
+        for c in 0..8 {
+            assert!(close(with.gain(c), without.gain(c), top), "gain {c}: {} vs {}", with.gain(c), without.gain(c));
+            assert!(close(foreseen[c], without.gain(c), top), "foreseen gain {c}: {} vs {}", foreseen[c], without.gain(c));
+        }
+        // The removed pose's gain is its share of the criterion: re-adding it restores it.
+        let before = with.criterion();
+        assert!(with.add(3));
+        assert!(close(before - with.criterion(), without.gain(3), top), "re-added gain");
     }
 }

@@ -25,19 +25,45 @@ fn planned_poses_respect_limits_and_singular_margin() {
         // The user's candidates include exactly singular poses (q2 = 0 for RR; q3 = q5 = 0 for the UR5).
         let singular: Vec<f64> = if nominal.n_joints() == 2 { vec![0.4, 0.0, 1.0, 0.01] } else { vec![0.1, -1.0, 0.0, 0.2, 0.0, 0.3] };
         let input = PlanInput { nominal, limits: &limits, to_model: None, user_candidates: &singular, measured: None, hyperparameters: h };
-        let options = PlanOptions { count: 25, candidates: 1500, seed: 3, workspace: 32, evaluation: 100, ..PlanOptions::default() };
-        let plan = plan(&input, &options).unwrap();
-        assert_eq!(plan.poses.len(), 25);
-        assert!(plan.rejected_singular >= 1, "the singular user candidates were left out");
-        for pose in &plan.poses {
-            assert!(candidates::within_limits(&pose.joints, &limits), "{:?} beyond {limits:?}", pose.joints);
-            let d = candidates::singular_distance(nominal, &pose.joints, plan.reach);
-            assert!(d >= candidates::SINGULAR_MARGIN, "{:?}: {d} rad from singular", pose.joints);
+        let greedy = PlanOptions { count: 25, candidates: 1500, seed: 3, workspace: 32, evaluation: 100, ..PlanOptions::default() };
+        // The exchange passes only choose among the same candidates.
+        for options in [greedy.clone(), PlanOptions { exchange: 2, exchange_workspace: 48, ..greedy }] {
+            let plan = plan(&input, &options).unwrap();
+            assert_eq!(plan.poses.len(), 25);
+            assert!(plan.rejected_singular >= 1, "the singular user candidates were left out");
+            for pose in &plan.poses {
+                assert!(candidates::within_limits(&pose.joints, &limits), "{:?} beyond {limits:?}", pose.joints);
+                let d = candidates::singular_distance(nominal, &pose.joints, plan.reach);
+                assert!(d >= candidates::SINGULAR_MARGIN, "{:?}: {d} rad from singular", pose.joints);
+            }
+            // The RR band |q2| ≤ 0.3 is mostly near the singular q2 = 0: nothing within 1° of it is chosen.
+            if nominal.n_joints() == 2 {
+                assert!(plan.poses.iter().all(|p| p.joints[1].abs() > 0.9 * candidates::SINGULAR_MARGIN));
+            }
         }
-        // The RR band |q2| ≤ 0.3 is mostly near the singular q2 = 0: nothing within 1° of it is chosen.
-        if nominal.n_joints() == 2 {
-            assert!(plan.poses.iter().all(|p| p.joints[1].abs() > 0.9 * candidates::SINGULAR_MARGIN));
-        }
+    }
+}
+
+/// The same seed gives the same poses, with exchange passes on either workspace; the exchange
+/// changes the greedy batch here, and its learning curve is recomputed for the new poses.
+#[test]
+fn exchanged_plans_are_deterministic() {
+    let rr = crate::simulate::rr::nominal();
+    let limits = [[0.0, 2.0 * std::f64::consts::PI]; 2];
+    let sample = candidates::uniform_within(&limits, 300, 7);
+    let reach = candidates::reach(&rr, &sample);
+    let h = prior::stated(&rr, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: 1e-4 });
+    let input = PlanInput { nominal: &rr, limits: &limits, to_model: None, user_candidates: &[], measured: None, hyperparameters: h };
+    let greedy = PlanOptions { count: 16, candidates: 800, seed: 9, workspace: 48, evaluation: 200, ..PlanOptions::default() };
+    let plain = plan(&input, &greedy).unwrap();
+    for exchange_workspace in [0, 96] {
+        let options = PlanOptions { exchange: 3, exchange_workspace, ..greedy.clone() };
+        let (a, b) = (plan(&input, &options).unwrap(), plan(&input, &options).unwrap());
+        assert_eq!(a.poses, b.poses, "exchange workspace {exchange_workspace}");
+        assert!(a.exchange_swaps > 0 && a.poses != plain.poses, "exchange workspace {exchange_workspace}: no swap");
+        // The learning curve falls pose by pose once the group is identified.
+        let curve: Vec<f64> = a.poses.iter().filter_map(|p| p.predicted_rms).collect();
+        assert!(curve.len() >= 12 && curve.windows(2).all(|w| w[1] <= w[0] * (1.0 + 1e-9)), "{curve:?}");
     }
 }
 
