@@ -15,15 +15,13 @@
 //! the evidence on 400 further random poses,
 //! `CBD_PLAN_EXCHANGE` sets the exchange passes after each greedy batch (`CBD_PLAN_EXCHANGE_WORKSPACE`:
 //! scored on a fresh workspace sample of that size per pass), `CBD_PLAN_MAX_K` ends the curves early.
-//! `CBD_PLAN_MAXIMIN=1` replaces the planner by a model-free space-filling design: each pose the
-//! candidate (10 000 uniform within the limits, ≥ 1° from singular) farthest in joint angle from every
-//! pose measured so far (greedy maximin; a joint whose limits span a full turn measured around the circle).
+//! `CBD_PLAN_MAXIMIN=1` plans with `--criterion maximin` (model-free space filling in joint angle).
 
 use cbd_protocol::{IntegratorMethod, NominalModel};
 use cbd_trainer::calibrate::{calibrate, Settings};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::parametric::{calibrate_dh, DhCalibrationOptions};
-use cbd_trainer::plan::{candidates, plan, prior, PlanInput, PlanOptions};
+use cbd_trainer::plan::{candidates, plan, prior, Criterion, PlanInput, PlanOptions};
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
 use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
 use std::f64::consts::PI;
@@ -113,37 +111,6 @@ impl Arm {
     }
 }
 
-/// `CBD_PLAN_MAXIMIN`: `count` poses, each the candidate farthest (squared joint-angle distance, around
-/// the circle where the limits span a full turn) from every pose in `have` and those chosen before it.
-fn maximin(arm: &Arm, have: &[f64], count: usize, seed: u64) -> Vec<f64> {
-    let n = arm.nominal.n_joints();
-    let all = candidates::uniform_within(&arm.limits, 10_000, seed);
-    let reach = candidates::reach(&arm.nominal, &all);
-    let pool: Vec<&[f64]> =
-        all.chunks_exact(n).filter(|q| candidates::singular_distance(&arm.nominal, q, reach) >= 1f64.to_radians()).collect();
-    let full_turn: Vec<bool> = arm.limits.iter().map(|[lo, hi]| hi - lo >= 2.0 * PI - 1e-9).collect();
-    let distance = |a: &[f64], b: &[f64]| -> f64 {
-        (0..n)
-            .map(|j| {
-                let t = (a[j] - b[j]).abs();
-                let t = if full_turn[j] { t.rem_euclid(2.0 * PI).min(2.0 * PI - t.rem_euclid(2.0 * PI)) } else { t };
-                t * t
-            })
-            .sum()
-    };
-    let mut nearest: Vec<f64> = pool.iter().map(|c| have.chunks_exact(n).map(|h| distance(c, h)).fold(f64::INFINITY, f64::min)).collect();
-    let mut chosen = Vec::with_capacity(count * n);
-    for _ in 0..count {
-        // The first pose of an empty set: the first candidate (every distance is infinite).
-        let best = (0..pool.len()).fold(0, |b, i| if nearest[i] > nearest[b] { i } else { b });
-        chosen.extend_from_slice(pool[best]);
-        for (d, c) in nearest.iter_mut().zip(&pool) {
-            *d = d.min(distance(c, pool[best]));
-        }
-    }
-    chosen
-}
-
 fn env_usize(name: &str, default: usize) -> usize {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
@@ -168,6 +135,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         random_every: env_usize("CBD_PLAN_RANDOM_EVERY", 0),
         exchange: env_usize("CBD_PLAN_EXCHANGE", 0),
         exchange_workspace: env_usize("CBD_PLAN_EXCHANGE_WORKSPACE", 0),
+        criterion: if env_usize("CBD_PLAN_MAXIMIN", 0) > 0 { Criterion::Maximin } else { Criterion::Variance },
         seed: seed * 1000 + count as u64 + salt * 1_000_000,
         ..PlanOptions::default()
     };
@@ -211,17 +179,12 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
             let count = (k - have).min(batch_max);
             let t = std::time::Instant::now();
             let first = have == arm.sizes[..b].last().copied().unwrap_or(0);
-            let joints: Vec<f64> = if env_usize("CBD_PLAN_MAXIMIN", 0) > 0 {
-                let have_joints = measured.as_ref().map_or(&[][..], |d| &d.joints[..]);
-                maximin(arm, have_joints, count, seed * 1000 + k as u64)
-            } else {
-                let planned = plan(&input, &options(count, if first { 0 } else { 1 + sub })).expect("plan");
-                predicted = planned.poses.last().and_then(|p| p.predicted_rms);
-                identified = planned.geometric_identified_after;
-                swaps += planned.exchange_swaps;
-                planned.poses.iter().flat_map(|p| p.joints.clone()).collect()
-            };
+            let planned = plan(&input, &options(count, if first { 0 } else { 1 + sub })).expect("plan");
             seconds += t.elapsed().as_secs_f64();
+            predicted = planned.poses.last().and_then(|p| p.predicted_rms);
+            identified = planned.geometric_identified_after;
+            swaps += planned.exchange_swaps;
+            let joints: Vec<f64> = planned.poses.iter().flat_map(|p| p.joints.clone()).collect();
             // The first sub-batch of each curve point keeps the seed it had with one batch per point.
             let noise_seed = if first { 50 + 100 * seed + b as u64 } else { 10_000 + 100 * seed + sub };
             sub += 1;

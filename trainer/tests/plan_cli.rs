@@ -24,6 +24,34 @@ fn plan_measure_plan_again_fit() {
     all.extend(m2.lines().skip(1).map(|l| format!("{l}\n")));
     write(&dir, "all.csv", all);
     succeeds(&cbd(&dir, &["fit", "--data", "all.csv", "--out", "arm.blob", "--steps", "1"]));
+
+    // The space-filling criterion from the same data: its poses said in the JSON, after the data.
+    succeeds(&cbd(
+        &dir,
+        &[
+            "plan",
+            "--count",
+            "8",
+            "--candidates",
+            "800",
+            "--data",
+            "m1.csv",
+            "--criterion",
+            "maximin",
+            "--out",
+            "p3.csv",
+            "--json",
+            "p3.json",
+        ],
+    ));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p3.json")).unwrap()).unwrap();
+    assert_eq!(json["criterion"], "maximin");
+    let stages: Vec<&str> = json["plan"]["poses"].as_array().unwrap().iter().map(|p| p["stage"].as_str().unwrap()).collect();
+    assert_eq!(stages, ["maximin"; 8], "every pose by the criterion");
+    fails_with(
+        &cbd(&dir, &["plan", "--count", "8", "--criterion", "maximin", "--exchange", "1", "--out", "p4.csv"]),
+        &["--exchange", "--criterion maximin"],
+    );
 }
 
 #[test]

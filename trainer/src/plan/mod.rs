@@ -43,6 +43,8 @@ pub struct PlanOptions {
     /// of the error (the uniform test distribution gets its share of poses whatever the process
     /// believes).
     pub random_every: usize,
+    /// What chooses each pose after the geometric stage.
+    pub criterion: Criterion,
     /// Exchange passes after the greedy batch (0: none; passes stop early when one swaps nothing).
     pub exchange: usize,
     /// Workspace points the exchange passes score on: 0, the greedy step's; else an independent
@@ -61,6 +63,7 @@ impl Default for PlanOptions {
             max_conditioning: 100,
             space_filling: 0,
             random_every: 0,
+            criterion: Criterion::Variance,
             exchange: 0,
             exchange_workspace: 0,
         }
@@ -83,6 +86,21 @@ pub struct PlanInput<'a> {
     pub hyperparameters: CbdHyperparameters,
 }
 
+/// What chooses the poses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Criterion {
+    /// The largest reduction of the mean posterior variance over the workspace (model-based).
+    #[default]
+    Variance,
+    /// Model-free space filling: the candidate farthest in joint angle from every pose measured or
+    /// chosen (greedy maximin; around the circle for a joint whose limits span a full turn), from
+    /// the first pose on (a D-optimal geometric stage first made it worse on both simulated arms,
+    /// BENCHMARKS "Planning poses"). It hedges against a kernel that misjudges where the error
+    /// lies; the predicted error is still the posterior's.
+    Maximin,
+}
+
 /// Which criterion chose a pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -92,6 +110,8 @@ pub enum Stage {
     Geometric,
     /// Reduction of the posterior variance over the workspace, the geometric group identified.
     Posterior,
+    /// [`Criterion::Maximin`].
+    Maximin,
 }
 
 /// One planned pose.
@@ -288,10 +308,29 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         singular_distance: distances[c],
         predicted_rms,
     };
+    // Maximin: each candidate's squared joint-angle distance to the nearest pose measured or chosen.
+    let full_turn: Vec<bool> = input.limits.iter().map(|[lo, hi]| hi - lo >= std::f64::consts::TAU - 1e-9).collect();
+    let mut nearest: Vec<f64> = match options.criterion {
+        Criterion::Variance => Vec::new(),
+        Criterion::Maximin => (0..count_c)
+            .map(|c| {
+                let q = &kept[c * n..(c + 1) * n];
+                measured_joints.chunks_exact(n).map(|h| joint_distance2(q, h, &full_turn)).fold(f64::INFINITY, f64::min)
+            })
+            .collect(),
+    };
     for _ in 0..options.count {
-        let stage = if identified(&geometric) { Stage::Posterior } else { Stage::Geometric };
+        let stage = match (options.criterion, identified(&geometric)) {
+            (Criterion::Maximin, _) => Stage::Maximin,
+            (Criterion::Variance, true) => Stage::Posterior,
+            (Criterion::Variance, false) => Stage::Geometric,
+        };
         let spread_first = poses.len() < options.space_filling;
-        let score = |c: usize| if spread_first { gp.variance(c) } else { gp.gain(c) };
+        let score = |c: usize| match stage {
+            Stage::Maximin => nearest[c],
+            _ if spread_first => gp.variance(c),
+            _ => gp.gain(c),
+        };
         let uniform = options.random_every > 0 && (poses.len() + 1) % options.random_every == 0;
         let best = match uniform {
             true => (user_count..count_c).chain(0..user_count).find(|&c| !chosen[c]).map(|c| (c, 0.0)),
@@ -299,6 +338,12 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         };
         let Some((c, _)) = best else { break };
         chosen[c] = true;
+        if options.criterion == Criterion::Maximin {
+            let q = kept[c * n..(c + 1) * n].to_vec();
+            for (i, d) in nearest.iter_mut().enumerate() {
+                *d = d.min(joint_distance2(&kept[i * n..(i + 1) * n], &q, &full_turn));
+            }
+        }
         batch.push(c);
         if let Some(g) = geometric.as_mut() {
             g.add(c);
@@ -311,7 +356,8 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
         poses.push(pose(c, stage, predicted_rms));
     }
     let mut exchange_swaps = 0;
-    if options.exchange > 0 && !batch.is_empty() {
+    // Exchange passes improve the variance criterion; a maximin design is left as it is.
+    if options.exchange > 0 && options.criterion == Criterion::Variance && !batch.is_empty() {
         // The candidates (and measured poses) as a fresh process tracks them: [candidates |
         // workspace | conditioned measured poses], conditioned on the measured poses and `batch`.
         let candidate_points = |prior: &Prior| -> Vec<posterior::Point> {
@@ -421,3 +467,22 @@ fn times_factor(j: &[f64], factor: &[f64], m: usize, p: usize) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests;
+
+/// Squared distance between two configurations in joint angle (model units), each joint's
+/// difference taken around the circle where `full_turn`.
+fn joint_distance2(a: &[f64], b: &[f64], full_turn: &[bool]) -> f64 {
+    a.iter()
+        .zip(b)
+        .enumerate()
+        .map(|(j, (x, y))| {
+            let t = (x - y).abs();
+            let t = if full_turn.get(j).copied().unwrap_or(false) {
+                let t = t.rem_euclid(std::f64::consts::TAU);
+                t.min(std::f64::consts::TAU - t)
+            } else {
+                t
+            };
+            t * t
+        })
+        .sum()
+}

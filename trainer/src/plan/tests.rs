@@ -27,7 +27,8 @@ fn planned_poses_respect_limits_and_singular_margin() {
         let input = PlanInput { nominal, limits: &limits, to_model: None, user_candidates: &singular, measured: None, hyperparameters: h };
         let greedy = PlanOptions { count: 25, candidates: 1500, seed: 3, workspace: 32, evaluation: 100, ..PlanOptions::default() };
         // The exchange passes only choose among the same candidates.
-        for options in [greedy.clone(), PlanOptions { exchange: 2, exchange_workspace: 48, ..greedy }] {
+        let maximin = PlanOptions { criterion: Criterion::Maximin, ..greedy.clone() };
+        for options in [greedy.clone(), PlanOptions { exchange: 2, exchange_workspace: 48, ..greedy }, maximin] {
             let plan = plan(&input, &options).unwrap();
             assert_eq!(plan.poses.len(), 25);
             assert!(plan.rejected_singular >= 1, "the singular user candidates were left out");
@@ -157,4 +158,49 @@ fn reached_rms(six: &NominalModel, robot: &SixJointRobot, joints: &[f64], noise_
         .sum::<f64>()
         / count as f64;
     mse.sqrt()
+}
+
+/// The maximin design spreads the poses: on the RR torus its smallest distance between two poses
+/// (around both circles) is larger than the variance planner's, every pose is chosen by it, the
+/// same seed gives the same poses, and measured poses push the new ones away from them.
+#[test]
+fn maximin_spreads_the_poses_deterministically() {
+    let nominal = crate::simulate::rr::nominal();
+    let limits = [[0.0, std::f64::consts::TAU]; 2];
+    let sample = candidates::uniform_within(&limits, 300, 7);
+    let reach = candidates::reach(&nominal, &sample);
+    let h = prior::stated(&nominal, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: 1e-4 });
+    let input =
+        PlanInput { nominal: &nominal, limits: &limits, to_model: None, user_candidates: &[], measured: None, hyperparameters: h.clone() };
+    let options = PlanOptions { count: 24, candidates: 2000, seed: 5, workspace: 48, evaluation: 100, ..PlanOptions::default() };
+    let maximin_options = PlanOptions { criterion: Criterion::Maximin, ..options.clone() };
+    let full_turn = [true, true];
+    let closest = |poses: &[PlannedPose]| -> f64 {
+        let mut d = f64::INFINITY;
+        for (i, a) in poses.iter().enumerate() {
+            for b in &poses[..i] {
+                d = d.min(super::joint_distance2(&a.joints, &b.joints, &full_turn).sqrt());
+            }
+        }
+        d
+    };
+    let variance = plan(&input, &options).unwrap();
+    let maximin = plan(&input, &maximin_options).unwrap();
+    assert!(maximin.poses.iter().all(|p| p.stage == Stage::Maximin));
+    // The posterior still predicts the error once the geometric group is identified.
+    let identified_after = maximin.geometric_identified_after.expect("identified");
+    assert!(maximin.poses[identified_after - 1..].iter().all(|p| p.predicted_rms.is_some()));
+    let (dv, dm) = (closest(&variance.poses), closest(&maximin.poses));
+    assert!(dm > dv, "closest pair: maximin {dm}, variance {dv}");
+    // 24 points on the torus (area 4π²) cannot all be farther apart than a hexagonal packing's spacing.
+    assert!(dm <= (2.0 * 4.0 * std::f64::consts::PI.powi(2) / (3f64.sqrt() * 24.0)).sqrt() + 1e-12, "{dm}");
+    assert_eq!(plan(&input, &maximin_options).unwrap().poses, maximin.poses);
+
+    // Continuing from measured poses: no new pose closer to them than the design's own spacing allows.
+    let measured_joints: Vec<f64> = maximin.poses[..12].iter().flat_map(|p| p.joints.clone()).collect();
+    let data = crate::simulate::rr::RealRr::default().measure(&measured_joints);
+    let more = plan(&PlanInput { measured: Some(&data), ..input }, &PlanOptions { count: 12, ..maximin_options }).unwrap();
+    let to_measured =
+        |q: &[f64]| measured_joints.chunks_exact(2).map(|h| super::joint_distance2(q, h, &full_turn).sqrt()).fold(f64::INFINITY, f64::min);
+    assert!(more.poses.iter().all(|p| to_measured(&p.joints) >= dm * 0.999), "a new pose sits on a measured one");
 }
