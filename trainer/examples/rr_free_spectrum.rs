@@ -318,15 +318,7 @@ fn main() {
         residual.len(),
         layout.residual_h_max
     );
-    let target = |d: &cbd_trainer::data::Measurements| -> Vec<f64> {
-        d.positions
-            .chunks_exact(m)
-            .flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale))
-            .zip(&nom)
-            .map(|(y, k)| y - k)
-            .collect()
-    };
-    let (res, res_clean) = (target(&noisy), target(&clean));
+    let (res, res_clean) = (rr_prior::residual(&noisy, &norm, &nom), rr_prior::residual(&clean, &norm, &nom));
     let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nom, jacobians: &jac, residual: &res };
     let a_cbd = design(&problem, &jk, &tk, &joint, &task);
     let zero = vec![0.0; tnom.len()];

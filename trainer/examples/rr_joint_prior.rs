@@ -139,15 +139,7 @@ fn main() {
     let joint = truncate(&vec![AxisSeries::periodic(b_box); n], tolerance).expect("joint basis");
     let task = truncate(&vec![AxisSeries::gaussian(task_radius_of(&nom, m) / tk.width); m], tolerance).expect("task basis");
     let joint_orders: Vec<[usize; 2]> = joint.codes.chunks_exact(n).map(|c| [(c[0] >> 1) as usize, (c[1] >> 1) as usize]).collect();
-    let target = |d: &cbd_trainer::data::Measurements| -> Vec<f64> {
-        d.positions
-            .chunks_exact(m)
-            .flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale))
-            .zip(&nom)
-            .map(|(y, k)| y - k)
-            .collect()
-    };
-    let (res, res_clean) = (target(&noisy), target(&clean));
+    let (res, res_clean) = (rr_prior::residual(&noisy, &norm, &nom), rr_prior::residual(&clean, &norm, &nom));
     let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nom, jacobians: &jac, residual: &res };
     let a = design(&problem, &jk, &tk, &joint, &task);
     let zero = vec![0.0; tnom.len()];

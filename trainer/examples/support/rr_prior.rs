@@ -9,6 +9,18 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
 use faer::{Accum, Mat, Par};
 
+/// The measurements in normalised task units minus the nominal positions `nominal` (normalised,
+/// row-major): the residual both fields fit.
+pub fn residual(data: &cbd_trainer::data::Measurements, norm: &cbd_protocol::Normalisation, nominal: &[f64]) -> Vec<f64> {
+    let m = data.task_dim;
+    data.positions
+        .chunks_exact(m)
+        .flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale))
+        .zip(nominal)
+        .map(|(y, k)| y - k)
+        .collect()
+}
+
 /// Mean Euclidean error of planar positions (x, y pairs).
 pub fn mean_error(pred: &[f64], truth: &[f64]) -> f64 {
     let e: f64 = pred.chunks_exact(2).zip(truth.chunks_exact(2)).map(|(p, t)| ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2)).sqrt()).sum();

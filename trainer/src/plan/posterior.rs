@@ -366,17 +366,22 @@ mod tests {
     use faer::linalg::solvers::Solve;
     use faer::{Mat, Side};
 
-    /// The rank-m updates equal the posterior from one dense factorisation.
-    #[test]
-    fn updates_match_a_dense_posterior() {
-        let rr = crate::simulate::rr::nominal();
-        let h = CbdHyperparameters {
+    /// The RR arm's kernels for the small processes of these tests.
+    fn small_rr_process() -> CbdHyperparameters {
+        CbdHyperparameters {
             joint_axes: vec![cbd_protocol::JointKernelAxis::Periodic { b: 1.3 }; 2],
             joint_gamma: 2e-3,
             task_width: 0.8,
             task_gamma: 1e-3,
             sigma: 1e-2,
-        };
+        }
+    }
+
+    /// The rank-m updates equal the posterior from one dense factorisation.
+    #[test]
+    fn updates_match_a_dense_posterior() {
+        let rr = crate::simulate::rr::nominal();
+        let h = small_rr_process();
         let q = super::super::candidates::uniform_within(&[[-3.0, 3.0], [-3.0, 3.0]], 9, 5);
         let prior = Prior::new(&h, 2);
         let points: Vec<Point> = q.chunks_exact(2).map(|x| prior.point(&rr, x, vec![0.3 * x[0], x[1].cos(), 0.1, x[0].sin()])).collect();
@@ -418,13 +423,7 @@ mod tests {
     #[test]
     fn remove_inverts_add() {
         let rr = crate::simulate::rr::nominal();
-        let h = CbdHyperparameters {
-            joint_axes: vec![cbd_protocol::JointKernelAxis::Periodic { b: 1.3 }; 2],
-            joint_gamma: 2e-3,
-            task_width: 0.8,
-            task_gamma: 1e-3,
-            sigma: 1e-2,
-        };
+        let h = small_rr_process();
         let q = super::super::candidates::uniform_within(&[[-3.0, 3.0], [-3.0, 3.0]], 14, 8);
         let process = || {
             let prior = Prior::new(&h, 2);
