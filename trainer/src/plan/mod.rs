@@ -43,7 +43,7 @@ pub struct PlanOptions {
     /// of the error (the uniform test distribution gets its share of poses whatever the process
     /// believes).
     pub random_every: usize,
-    /// What chooses each pose after the geometric stage.
+    /// What chooses the poses: the variance criterion (after its geometric stage) or maximin.
     pub criterion: Criterion,
     /// Exchange passes after the greedy batch (0: none; passes stop early when one swaps nothing).
     pub exchange: usize,
