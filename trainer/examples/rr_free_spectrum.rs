@@ -72,7 +72,7 @@ use cbd_trainer::expansion::solve::{apply, design, task_exponents, LinearProblem
 use cbd_trainer::expansion::weights::{periodic_weights, periodic_weights_and_log_derivatives};
 use cbd_trainer::expansion::{task_radius_of, tolerance_for};
 use cbd_trainer::flow::ControlPoints;
-use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
+use cbd_trainer::simulate::rr;
 use faer::Mat;
 use rr_prior::{bfgs, mean_error, project, LinearGaussian};
 
@@ -257,13 +257,9 @@ fn main() {
     let per_axis: usize = args.get(1).map_or(16, |s| s.parse().unwrap());
     let b_box: f64 = args.get(2).filter(|s| *s != "-").map_or(0.2, |s| s.parse().unwrap());
     let (m, n) = (2usize, 2usize);
-    let real = rr::RealRr::default();
     let nominal = rr::nominal();
-    let clean = real.measure(&configurations(Sampling::Grid { per_axis }, 2));
-    let mut noisy = clean.clone();
     let noise_seed: u64 = args.get(5).map_or(1u64.wrapping_add(0x5eed), |s| s.parse().unwrap());
-    add_noise(&mut noisy.positions, 1e-4, noise_seed);
-    let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
+    let (clean, noisy, test) = rr_prior::benchmark(per_axis, noise_seed);
     let norm = cbd_trainer::evidence::normalisation_of(&noisy);
     let peer = fit_kernel_ridge_peer(&nominal, &noisy, &Default::default()).unwrap();
     let krr_test = mean_error(&peer.regression.predict(&nominal, &test.joints), &test.positions);
@@ -277,12 +273,8 @@ fn main() {
         kh.noise_sigma_data_units()
     );
     let c_box: f64 = args.get(3).filter(|s| *s != "-").map_or(1.5 * krr_b.iter().cloned().fold(0.0, f64::max), |s| s.parse().unwrap());
-    let e = cbd_trainer::evidence::choose_cbd_hyperparameters(&nominal, &noisy, &norm, &Default::default()).unwrap();
+    let (e, jk, tk, integ) = rr_prior::plain_cbd(&nominal, &noisy, &norm);
     let h = &e.hyperparameters;
-    println!("plain cbd evidence {:.2} ({}), {:?}", e.log_evidence, e.form, h);
-    let jk = h.blob_joint_kernel(&norm);
-    let tk = TaskKernel { width: h.blob_task_width(&norm) };
-    let integ = Integrator { method: IntegratorMethod::Euler, steps: 1 };
     let cp = ControlPoints::new(&nominal, &norm, noisy.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
     let (nom, jac) = (cp.nominal_positions(), cp.nominal_jacobians());
     let tcp = ControlPoints::new(&nominal, &norm, test.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);

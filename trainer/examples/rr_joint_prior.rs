@@ -34,7 +34,7 @@ use cbd_trainer::expansion::solve::{apply, design, LinearProblem};
 use cbd_trainer::expansion::weights::periodic_weights;
 use cbd_trainer::expansion::{task_radius_of, tolerance_for};
 use cbd_trainer::flow::ControlPoints;
-use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
+use cbd_trainer::simulate::rr;
 use rr_prior::{mean_error, nelder_mead, project, LinearGaussian};
 
 /// The linear model r = A w + e on a fixed basis; θ = ln(γ_W, γ₁, b₁, b₂, γ₂, c₁, c₂, σ), normalised units.
@@ -76,24 +76,16 @@ fn main() {
     let per_axis: usize = args.get(1).map_or(16, |s| s.parse().unwrap());
     let b_box: f64 = args.get(2).map_or(0.5, |s| s.parse().unwrap());
     let (m, n) = (2usize, 2usize);
-    let real = rr::RealRr::default();
     let nominal = rr::nominal();
-    let clean = real.measure(&configurations(Sampling::Grid { per_axis }, 2));
-    let mut noisy = clean.clone();
-    add_noise(&mut noisy.positions, 1e-4, 1u64.wrapping_add(0x5eed));
-    let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
+    let (clean, noisy, test) = rr_prior::benchmark(per_axis, 1u64.wrapping_add(0x5eed));
     if std::env::var_os("CBD_DIAG_NO_KRR").is_none() {
         let peer = fit_kernel_ridge_peer(&nominal, &noisy, &Default::default()).unwrap();
         let pn = peer.regression.predict(&nominal, &test.joints);
         println!("krr: test mean {:.4e} (lml {:.2})", mean_error(&pn, &test.positions), peer.hyperparameters.log_marginal_likelihood);
     }
     let norm = cbd_trainer::evidence::normalisation_of(&noisy);
-    let e = cbd_trainer::evidence::choose_cbd_hyperparameters(&nominal, &noisy, &norm, &Default::default()).unwrap();
+    let (e, jk, tk, integ) = rr_prior::plain_cbd(&nominal, &noisy, &norm);
     let h = &e.hyperparameters;
-    println!("plain cbd evidence {:.2} ({}), {:?}", e.log_evidence, e.form, h);
-    let jk = h.blob_joint_kernel(&norm);
-    let tk = TaskKernel { width: h.blob_task_width(&norm) };
-    let integ = Integrator { method: IntegratorMethod::Euler, steps: 1 };
     let link_angles = args.get(3).is_some_and(|s| s == "u" || s == "uu");
     let components_in_u = args.get(3).is_some_and(|s| s == "uu");
     // J_u = J_q A⁻¹: column 1 − column 2, column 2 (m × n row-major blocks).

@@ -9,6 +9,36 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
 use faer::{Accum, Mat, Par};
 
+/// The noisy RR benchmark: the per_axis × per_axis grid of `cbd simulate` noise-free and with
+/// σ = 1e-4 (`noise_seed`), and 3000 noise-free uniformly random test configurations (seed 7).
+pub fn benchmark(
+    per_axis: usize,
+    noise_seed: u64,
+) -> (cbd_trainer::data::Measurements, cbd_trainer::data::Measurements, cbd_trainer::data::Measurements) {
+    use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
+    let real = rr::RealRr::default();
+    let clean = real.measure(&configurations(Sampling::Grid { per_axis }, 2));
+    let mut noisy = clean.clone();
+    add_noise(&mut noisy.positions, 1e-4, noise_seed);
+    let test = real.measure(&configurations(Sampling::Uniform { count: 3000, seed: 7 }, 2));
+    (clean, noisy, test)
+}
+
+/// Plain CbD's choice (`cbd fit`'s evidence, printed) as the blob's kernels, with Euler × 1.
+pub fn plain_cbd(
+    nominal: &cbd_protocol::NominalModel,
+    noisy: &cbd_trainer::data::Measurements,
+    norm: &cbd_protocol::Normalisation,
+) -> (cbd_trainer::evidence::Evidence, cbd_protocol::JointKernel, cbd_protocol::TaskKernel, cbd_protocol::Integrator) {
+    let e = cbd_trainer::evidence::choose_cbd_hyperparameters(nominal, noisy, norm, &Default::default()).unwrap();
+    let h = &e.hyperparameters;
+    println!("plain cbd evidence {:.2} ({}), {:?}", e.log_evidence, e.form, h);
+    let jk = h.blob_joint_kernel(norm);
+    let tk = cbd_protocol::TaskKernel { width: h.blob_task_width(norm) };
+    let integ = cbd_protocol::Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 1 };
+    (e, jk, tk, integ)
+}
+
 /// The measurements in normalised task units minus the nominal positions `nominal` (normalised,
 /// row-major): the residual both fields fit.
 pub fn residual(data: &cbd_trainer::data::Measurements, norm: &cbd_protocol::Normalisation, nominal: &[f64]) -> Vec<f64> {
