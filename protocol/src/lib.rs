@@ -8,7 +8,8 @@
 //!
 //! The payload is a postcard encoding of [`Model`] (format 5: followed by the postcard encoding
 //! of its `Option<`[`FieldExpansion`]`>`; format 6: then the DH chain's tool points, a varint count
-//! and three f64 per point; formats 2–4 end after the model). The CRC-32 (ISO-HDLC) covers everything
+//! and three f64 per point; format 7: then the noise σ, one little-endian f64; formats 2–4 end
+//! after the model). The CRC-32 (ISO-HDLC) covers everything
 //! before it. The large arrays (measurement configurations, momenta) are stored as raw
 //! little-endian `f64` bytes that the runtime reads in place, so a blob in flash is never copied.
 #![no_std]
@@ -38,13 +39,17 @@ pub use validate::ModelError;
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
+/// Format 7 appends the noise σ the calibration assumed ([`Model::noise_sigma`]) after the format-6
+/// payload; [`encode`] writes it only for a model that carries one.
 /// Format 6 appends the DH chain's tool points ([`DhChain::tool_points`]) after the format-5
 /// payload; [`encode`] writes it only for a model that names tool points (older models keep their bytes).
 /// Format 5 appends the fields' expansions ([`FieldExpansion`]) after the format-4 payload;
 /// format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
 /// the same layout without it and load unchanged. [`encode`] writes format 4 when a model has no
 /// expansion (byte-identical to the encoders before format 5), format 5 when it has one.
-pub const FORMAT_VERSION: u16 = 6;
+pub const FORMAT_VERSION: u16 = 7;
+/// The format of a model with tool points and without a noise σ.
+pub const FORMAT_WITH_TOOL_POINTS: u16 = 6;
 /// The format of a model with an expansion and without tool points.
 pub const FORMAT_WITH_EXPANSION: u16 = 5;
 /// The format of a model without an expansion.
@@ -154,11 +159,13 @@ impl std::error::Error for DecodeError {}
 #[cfg(feature = "std")]
 impl std::error::Error for EncodeError {}
 
-/// The format [`encode`] writes for `model`: 6 when it names tool points, else 5 when it has an
-/// expansion, else 4 (so a model of an older format keeps its bytes).
+/// The format [`encode`] writes for `model`: 7 when it carries a noise σ, else 6 when it names tool
+/// points, else 5 when it has an expansion, else 4 (so a model of an older format keeps its bytes).
 pub fn format_for(model: &Model<'_>) -> u16 {
-    if !model.nominal.tool_points().is_empty() {
+    if model.noise_sigma.is_some() {
         FORMAT_VERSION
+    } else if !model.nominal.tool_points().is_empty() {
+        FORMAT_WITH_TOOL_POINTS
     } else if model.expansion.is_some() {
         FORMAT_WITH_EXPANSION
     } else {
@@ -169,7 +176,8 @@ pub fn format_for(model: &Model<'_>) -> u16 {
 /// Encodes `model` into `out`, returning the number of bytes written.
 /// The model is validated first: an invalid model is never written. Without an expansion the blob
 /// is format 4 (the payload is the model), with one format 5 (the model, then `Some(expansion)`);
-/// with tool points format 6 (the model, its `Option<expansion>`, then the tool points).
+/// with tool points format 6 (the model, its `Option<expansion>`, then the tool points); with a
+/// noise σ format 7 (then σ).
 pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     model.validate().map_err(EncodeError::Invalid)?;
     if out.len() < HEADER_LEN + TRAILER_LEN {
@@ -185,9 +193,14 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += postcard::to_slice(&model.expansion, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
         }
-        if version >= FORMAT_VERSION {
+        if version >= FORMAT_WITH_TOOL_POINTS {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += tool_points::write(model.nominal.tool_points(), tail).ok_or(EncodeError::BufferTooSmall)?;
+        }
+        if let (true, Some(sigma)) = (version >= FORMAT_VERSION, model.noise_sigma) {
+            let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
+            *tail.first_chunk_mut::<8>().ok_or(EncodeError::BufferTooSmall)? = sigma.to_le_bytes();
+            written += 8;
         }
         written
     };
@@ -257,7 +270,7 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     } else {
         rest
     };
-    let rest = if version >= FORMAT_VERSION {
+    let rest = if version >= FORMAT_WITH_TOOL_POINTS {
         // Format 6: the tool points follow (an empty list allowed, absence not).
         let (points, rest) = tool_points::read(rest)?;
         match &mut model.nominal {
@@ -267,6 +280,14 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
                 return Err(DecodeError::Invalid(ModelError::OutOfRange { field: "nominal.tool_points (on a planar chain)" }))
             }
         }
+        rest
+    } else {
+        rest
+    };
+    let rest = if version >= FORMAT_VERSION {
+        // Format 7: the noise σ follows.
+        let (sigma, rest) = rest.split_first_chunk::<8>().ok_or(DecodeError::Payload)?;
+        model.noise_sigma = Some(f64::from_le_bytes(*sigma));
         rest
     } else {
         rest

@@ -40,6 +40,12 @@ pub struct Model<'a> {
     /// (see [`crate::encode`]), so it is skipped here.
     #[serde(skip)]
     pub expansion: Option<FieldExpansion<'a>>,
+    /// The measurement noise σ per coordinate the calibration assumed — its evidence's estimate, or
+    /// the value given — in the nominal model's length unit (format 7): what a perfect model's
+    /// error on new rows is set against (the noise floor). Not used to evaluate. Encoded after the
+    /// format-6 tool points, so it is skipped here.
+    #[serde(skip)]
+    pub noise_sigma: Option<f64>,
 }
 
 impl Model<'_> {

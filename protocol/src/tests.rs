@@ -19,6 +19,7 @@ pub(crate) fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a>
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
+        noise_sigma: None,
     }
 }
 

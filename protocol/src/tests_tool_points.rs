@@ -22,6 +22,7 @@ fn ur5_model<'a>(tool_points: &[[f64; 3]], points: &'a [u8], momenta: &'a [u8]) 
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
+        noise_sigma: None,
     }
 }
 

@@ -203,6 +203,9 @@ impl Model<'_> {
             return Err(ModelError::OutOfRange { field: "integrator.steps" });
         }
         positive("sigma", self.sigma)?;
+        if let Some(sigma) = self.noise_sigma {
+            positive("noise_sigma", sigma)?;
+        }
         if self.n_points == 0 {
             return Err(ModelError::OutOfRange { field: "n_points" });
         }

@@ -23,6 +23,7 @@ pub fn reference_blob() -> Vec<u8> {
         points: F64Slice::from_le_bytes(&x),
         momenta: F64Slice::from_le_bytes(&p),
         expansion: None,
+        noise_sigma: None,
     };
     encode_to_vec(&model).expect("the reference model encodes")
 }
@@ -64,6 +65,7 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
         points: F64Slice::from_le_bytes(&pb),
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
+        noise_sigma: None,
     };
     encode_to_vec(&model).expect("the test model encodes")
 }

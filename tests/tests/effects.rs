@@ -386,6 +386,7 @@ fn blobs_with_out_of_range_effects_are_rejected() {
         points: F64Slice::from_le_bytes(&points),
         momenta: F64Slice::from_le_bytes(&momenta),
         expansion: None,
+        noise_sigma: None,
     };
     let expected = ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 };
     assert_eq!(encode_to_vec(&model), Err(EncodeError::Invalid(expected)));
@@ -443,6 +444,7 @@ fn random_effects_never_panic_in_the_calibrator() {
             points: F64Slice::from_le_bytes(&pb),
             momenta: F64Slice::from_le_bytes(&mb),
             expansion: None,
+            noise_sigma: None,
         };
         let mut storage = vec![0.0; 20_000];
         match encode_to_vec(&model) {

@@ -37,6 +37,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, method: Inte
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
+        noise_sigma: None,
     }
 }
 

@@ -47,6 +47,7 @@ fn model<'a>(nominal: NominalModel, points: &'a [u8], momenta: &'a [u8], integra
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
+        noise_sigma: None,
     }
 }
 

@@ -88,7 +88,9 @@ fn cbd_blob(name: &str, args: &[&str]) -> Vec<u8> {
 fn assert_kernel_form(blob: &[u8], len: usize, sha: &str, format_3: &str) {
     let mut model = cbd_protocol::decode(blob).unwrap();
     assert!(model.expansion.is_some());
+    // The kernel form: the model without its expansion (format 5) and its noise σ (format 7).
     model.expansion = None;
+    model.noise_sigma = None;
     let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
     assert_eq!((kernel_form.len(), sha256_hex(&kernel_form).as_str()), (len, sha));
     assert_eq!(sha256_hex(&as_format_3(&kernel_form)), format_3, "payload changed");
@@ -103,7 +105,9 @@ fn demo_blob_is_unchanged() {
     let blob = cbd_blob("demo", &["demo", "--quiet", "--test-points", "1"]);
     // Re-pinned for issue 25: the demo's model now also carries its fields in the kernels' own
     // expansion (format 5, docs/DESIGN.md §11) …
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (13184, "5e5f05dad2227246b5503b0e4d9f68beb187f72bdd5247f87f40611aadf12e56"));
+    // Re-pinned for issue 38: the blob records the noise σ its calibration assumed (format 7; 13184
+    // bytes, 5e5f05da… before); without it and the expansion it is the kernel-form pin below.
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (13193, "988817759c2208b2f220793c73286c5ad3b0c9796ea2f14b9e018441a4906a4c"));
     // … and its kernel form is byte for byte the former pin: without the expansion it encodes to the
     // format-4 blob pinned before, whose payload was the format-3 pin.
     assert_kernel_form(
@@ -121,15 +125,21 @@ fn ur5_example_blob_is_unchanged() {
     }
     let ur5 = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/ur5");
     let (model, data) = (format!("{ur5}/ur5.toml"), format!("{ur5}/train.csv"));
-    let blob = cbd_blob("ur5", &["fit", "--quiet", "--model", &model, "--data", &data]);
+    let blob = cbd_blob("ur5", &["fit", "--quiet", "--geometry", "nominal", "--model", &model, "--data", &data]);
     // Re-pinned for issue 25: the expansion added (format 5); the kernel form is the former pin.
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (142269, "187d2b53cb1dcf68aa08f4438ba629cfef371d6f75196261e96b444a42f4c9d7"));
+    // Issue 38: `--geometry nominal` is what `cbd fit` did by default before (pinned unchanged).
+    // Issue 38: plus its noise σ (format 7; 142269 bytes, 187d2b53… before).
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (142278, "c76a4cce064ab44e2821b85283287218491f642a56efd90b28741ed06b79fc21"));
     assert_kernel_form(
         &blob,
         72555,
         "f39495e9889128381c93cb5359e16d637aa660fc94db01987fd22f2ac11d057c",
         "879b3d13b2d7939b65485ab5dcd384f1b9a5cd1e159422046ddc2fc5450b4153",
     );
+    // The default since issue 38: CbD's evidence chooses the calibrated geometry on these rows (log
+    // evidence 1626.30 against 1494.84), the blob carries the DH-calibrated chain and its kernel form.
+    let default = cbd_blob("ur5-default", &["fit", "--quiet", "--model", &model, "--data", &data]);
+    assert_eq!((default.len(), sha256_hex(&default).as_str()), (72565, "ee0784aea53145299e599a3f561a9a97f430161693d79386e3d030929f2a17c2"));
 }
 
 #[test]

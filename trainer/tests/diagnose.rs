@@ -301,9 +301,11 @@ fn write_model_keeps_the_found_effect_for_fit_and_eval() {
     // The written file keeps the measurement columns: it is a model file `fit` and `eval`
     // accept, and the blob carries the effect (CbD fitted on top of it).
     assert_eq!(file.measurements.as_ref().map(|m| m.joints.len()), Some(6));
+    // Both fits deform the model file's chain as given (`--geometry nominal`): naming the effect
+    // against CbD absorbing it, the geometry alike in both.
     let eval_mean = |model: &str, blob: &std::path::Path| -> (f64, f64) {
         let fit = std::process::Command::new(cbd)
-            .args(["fit", "--quiet", "--model", model, "--data"])
+            .args(["fit", "--quiet", "--geometry", "nominal", "--model", model, "--data"])
             .arg(dir.join("train.csv"))
             .arg("--out")
             .arg(blob)

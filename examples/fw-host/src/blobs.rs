@@ -23,6 +23,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: 
         points: F64Slice::from_le_bytes(points),
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
+        noise_sigma: None,
     }
 }
 
@@ -162,6 +163,7 @@ pub fn six_tool_points_blob() -> Vec<u8> {
         points: F64Slice::from_le_bytes(&pb),
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
+        noise_sigma: None,
     };
     encode_to_vec(&model).expect("encode the tool-points blob")
 }
@@ -189,6 +191,7 @@ fn dh_chain_blob(chain: DhChain, task_offset: [f64; 3], task_scale: f64, integra
         points: F64Slice::from_le_bytes(&pb),
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
+        noise_sigma: None,
     };
     encode_to_vec(&model).expect("encode a DH-chain blob")
 }

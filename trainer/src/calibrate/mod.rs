@@ -1,23 +1,27 @@
 //! "Calibrate this data": the one pipeline `fit`, `compare`, `diagnose`, `bench` and `demo` call.
 //!
-//! 1. The starting model: the nominal one, or DH-calibrated first (`dh_first`).
-//! 2. Hyperparameters: CbD's own evidence on the training rows ([`crate::evidence`]),
-//!    or the paper's RR values; a hand-given value replaces that one hyperparameter after the search
-//!    (so `--sigma S`, S the chosen value as printed, gives the default blob back).
+//! 1. The starting model and hyperparameters together ([`geometry`]): the nominal chain, or its
+//!    geometric group calibrated first — as given, or (the default) whichever CbD's own evidence on
+//!    the training rows scores higher ([`crate::evidence`]); the paper's RR values for the demo's
+//!    reproduction. A hand-given value replaces that one hyperparameter after the search (so
+//!    `--sigma S`, S the chosen value as printed, gives the default blob back).
 //! 3. The scheme (Euler × 1 = the linearised model, Euler × 2): k-fold cross-validation on the
 //!    training rows ([`scheme`]) unless given.
 //! 4. The fit of the discrete flow, and a warning when it stalls.
 //!
 //! Every length a user gives or reads here is in the data's unit.
 
+pub mod geometry;
 pub mod scheme;
 pub mod settings;
 
+pub use geometry::{Geometry, GeometryChoice};
 pub use settings::{HyperparameterSource, Overrides, Settings};
 
 use crate::data::Measurements;
-use crate::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, Evidence};
-use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
+use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_with_geometry, CbdHyperparameters, Evidence, GeometricBasis};
+use crate::parametric::DhFitStats;
+use crate::report::noise_floor::{FloorVerdict, NoiseFloor};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions};
 use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
 
@@ -30,6 +34,8 @@ pub struct Calibration {
     pub hyperparameters: CbdHyperparameters,
     /// The evidence search, when it ran.
     pub evidence: Option<Evidence>,
+    /// Nominal or calibrated geometry, and what decided it.
+    pub geometry: GeometryChoice,
     pub scheme: scheme::SchemeChoice,
     pub options: CbdOptions,
     pub fit: CbdFit,
@@ -58,6 +64,8 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts.method = settings.solver;
     opts.verbose = settings.verbose;
     opts.memory_budget = settings.memory_budget;
+    // Recorded in the blob (format 7): what `cbd eval` sets a table's noise floor by.
+    opts.noise_sigma = Some(h.sigma);
     // The paper's reproduction keeps the paper's form, momenta, unless asked otherwise.
     opts.representation = match (settings.source, settings.representation) {
         (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
@@ -69,20 +77,24 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts
 }
 
-/// CbD's hyperparameters for `base` on `data`: the source's (its own evidence, or the paper's),
-/// then the hand-given values.
+/// CbD's hyperparameters for `base` on `data`: the source's (its own evidence — with the geometric
+/// group `geometry` marginalised when given —, or the paper's), then the hand-given values.
 pub fn choose_cbd_hyperparameters_with_overrides(
     base: &NominalModel,
     data: &Measurements,
     norm: &Normalisation,
     settings: &Settings,
+    geometry: Option<&GeometricBasis>,
 ) -> crate::Result<(CbdHyperparameters, Option<Evidence>)> {
     let (mut h, evidence) = match settings.source {
         HyperparameterSource::PaperRr => (paper_rr_hyperparameters(), None),
         // Every value is given: no search (the placeholder's fields are all replaced below).
         HyperparameterSource::Evidence if settings.overrides.is_complete(base) => (placeholder_hyperparameters(base), None),
         HyperparameterSource::Evidence => {
-            let e = choose_cbd_hyperparameters(base, data, norm, &settings.evidence)?;
+            let e = match geometry {
+                Some(g) => choose_cbd_hyperparameters_with_geometry(base, data, norm, &settings.evidence, g)?,
+                None => choose_cbd_hyperparameters(base, data, norm, &settings.evidence)?,
+            };
             (e.hyperparameters.clone(), Some(e))
         }
     };
@@ -114,14 +126,9 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     if data.len() < needed {
         return Err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }.into());
     }
-    let (base, dh) = if settings.dh_first {
-        let fitted = calibrate_dh(nominal, data, &DhCalibrationOptions::default())?;
-        (fitted.model, Some(fitted.stats))
-    } else {
-        (nominal.clone(), None)
-    };
     let norm = normalisation(data, settings);
-    let (hyperparameters, evidence) = choose_cbd_hyperparameters_with_overrides(&base, data, &norm, settings)?;
+    let (chosen, geometry) = geometry::choose_geometry(nominal, data, &norm, settings)?;
+    let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
     let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
     let fit = fit_cbd(&base, data, &options)?;
@@ -129,7 +136,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
     }
-    Ok(Calibration { base, dh, hyperparameters, evidence, scheme, options, fit, warnings })
+    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, scheme, options, fit, warnings })
 }
 
 /// The warning for a DH fit that stopped at its iteration limit.
@@ -171,6 +178,24 @@ fn stall_warnings(fit: &CbdFit, h: &CbdHyperparameters, task_dim: usize, max_ite
 }
 
 impl Calibration {
+    /// The noise floor σ implies for the data's dimension (σ of the chosen hypothesis' evidence, or
+    /// as given), and the held-out error of the chosen scheme's cross-validation against it.
+    pub fn noise_floor(&self) -> (NoiseFloor, Option<FloorVerdict>) {
+        let task_dim = self.base.task_dim();
+        // Every training row is held out once by the cross-validation.
+        let rows = self.fit.train_predictions.len() / task_dim.max(1);
+        let source = match &self.evidence {
+            Some(_) if self.hyperparameters.sigma == self.evidence.as_ref().map_or(f64::NAN, |e| e.hyperparameters.sigma) => {
+                "CbD's evidence on the training rows"
+            }
+            _ => "the σ the fit used",
+        };
+        let floor = NoiseFloor::new(self.hyperparameters.sigma, task_dim, source);
+        let held_out = self.scheme.cross_validation.iter().find(|(i, _)| *i == self.scheme.integrator).map(|&(_, rms)| rms);
+        let verdict = held_out.map(|rms| floor.verdict_rms(rms, rows));
+        (floor, verdict)
+    }
+
     /// One line of the chosen hyperparameters, in the data's unit, each printed so that passing it
     /// back by hand reproduces it exactly (shortest round-trip form).
     pub fn describe_hyperparameters(&self) -> String {
@@ -178,9 +203,12 @@ impl Calibration {
     }
 
     pub fn to_json(&self) -> serde_json::Value {
+        let (floor, held_out) = self.noise_floor();
         serde_json::json!({
+            "noise_floor": { "floor": floor, "held_out": held_out },
             "hyperparameters": self.hyperparameters,
             "evidence": self.evidence,
+            "geometry": self.geometry,
             "scheme": self.scheme.to_json(),
             "dh_first": self.dh.is_some(),
             "fit": self.fit.report,

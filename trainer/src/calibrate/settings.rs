@@ -75,8 +75,9 @@ pub struct Settings {
     /// Folds of the scheme's cross-validation.
     pub scheme_folds: usize,
     pub law: MomentumLaw,
-    /// Calibrate the DH parameters (plus base and tool) first and deform the calibrated chain.
-    pub dh_first: bool,
+    /// Deform the nominal chain, or calibrate its geometric group (DH parameters, base, tool) first
+    /// and deform that; `Auto` (the default): whichever CbD's evidence scores higher.
+    pub geometry: super::Geometry,
     pub max_iterations: usize,
     pub solver: SolverMethod,
     /// Threads for the fit; `None`: the solver's default (results never depend on it).
@@ -99,7 +100,7 @@ impl Default for Settings {
             steps: None,
             scheme_folds: 4,
             law: MomentumLaw::Hamiltonian,
-            dh_first: false,
+            geometry: super::Geometry::Auto,
             max_iterations: 30,
             solver: SolverMethod::Auto,
             threads: None,

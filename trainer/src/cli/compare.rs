@@ -37,10 +37,12 @@ pub struct CompareArgs {
 }
 
 /// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
-/// gives (nominal, DH-calibrated, with effects): the blob `cbd fit` writes for the same data and flags.
-pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> + '_ {
+/// gives (nominal, DH-calibrated, with effects), deformed as given (`--geometry nominal`): the blob
+/// `cbd fit --geometry nominal` writes for that model, data and flags.
+pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> {
+    let settings = crate::calibrate::Settings { geometry: crate::calibrate::Geometry::Nominal, ..settings.clone() };
     move |nominal: &NominalModel, data: &Measurements| -> crate::Result<FittedCorrection> {
-        let calibration = crate::calibrate::calibrate(nominal, data, settings)?;
+        let calibration = crate::calibrate::calibrate(nominal, data, &settings)?;
         crate::cli::fit::print_calibration(&calibration, !settings.verbose);
         let mut note = calibration.describe_hyperparameters();
         if let Some(e) = &calibration.evidence {
@@ -53,7 +55,22 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
         let blob = calibration.fit.blob;
         let predictor: Predictor =
             Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()]));
-        Ok(FittedCorrection::new(predictor, note))
+        Ok(FittedCorrection { noise_sigma: Some(calibration.hyperparameters.sigma), ..FittedCorrection::new(predictor, note) })
+    }
+}
+
+/// The floor of a table's rows: σ from the chosen hypothesis' evidence, else the hand-given `--sigma`.
+pub fn noise_floor(
+    choice: &crate::calibrate::GeometryChoice,
+    settings: &crate::calibrate::Settings,
+    m: usize,
+) -> Option<crate::report::noise_floor::NoiseFloor> {
+    use crate::report::noise_floor::NoiseFloor;
+    let chosen = if choice.chosen == crate::calibrate::Geometry::Calibrated { "dh+cbd" } else { "cbd" };
+    match (choice.sigma, settings.overrides.sigma) {
+        (_, Some(s)) => Some(NoiseFloor::new(s, m, "--sigma as given")),
+        (Some(s), None) => Some(NoiseFloor::new(s, m, format!("CbD's evidence on the training rows, {chosen}"))),
+        _ => None,
     }
 }
 
@@ -89,6 +106,8 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.
     settings.verbose = false;
+    // Each row deforms the model it is handed: `cbd` the nominal, `dh+cbd` the DH-calibrated chain.
+    settings.geometry = crate::calibrate::Geometry::Nominal;
     let search = SearchOptions::default();
     let inputs = read_compare_files(&args.model, &args.train, &args.test)?;
     if let Some(r) = &inputs.registration {
@@ -114,8 +133,12 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     )?;
     settings.threads = Some(threads);
     let (krr, cbd) = (kernel_ridge_correction(&search), cbd_fitter(&settings));
-    let comparison =
+    let mut comparison =
         crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, Some(&krr), Some(&cbd)));
+    // The row `cbd fit` writes by default, and the noise floor from its hypothesis' evidence.
+    let choice = crate::workers::on_workers(threads, || crate::calibrate::geometry::geometry_choice(&inputs.nominal, train, &settings))?;
+    comparison.noise_floor = noise_floor(&choice, &settings, train.task_dim);
+    comparison.default_fit = Some(choice);
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     outln!("{}", comparison.table(unit));
     for w in comparison.warnings() {

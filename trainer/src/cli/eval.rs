@@ -2,6 +2,7 @@
 
 use crate::cli::{load_nominal, ModelArgs};
 use crate::error::{Context, Error, Result};
+use crate::report::noise_floor::NoiseFloor;
 use crate::report::stats::ErrorStats;
 use std::path::PathBuf;
 
@@ -82,9 +83,25 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let nominal_pred = crate::nominal::positions(&nominal, &data.joints, m);
     let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
     let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;
-    outln!("{:<12} {:>11} {:>11} {:>11} {:>11}", "model", "mean", "median", "p99", "max");
+    // The σ the calibration assumed, which the blob records (format 7; older blobs: no floor).
+    let floor = cal.model().noise_sigma.map(|sigma| NoiseFloor::new(sigma, m, "the calibration's, recorded in the blob"));
+    let verdict = |s: &ErrorStats| floor.as_ref().map(|f| f.verdict(s.mean, data.len()));
+    outln!(
+        "{:<12} {:>11} {:>11} {:>11} {:>11}{}",
+        "model",
+        "mean",
+        "median",
+        "p99",
+        "max",
+        if floor.is_some() { "   / floor" } else { "" }
+    );
     for (name, s) in [("nominal", before), ("calibrated", after)] {
-        outln!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}", name, s.mean, s.median, s.p99, s.max);
+        let cell = verdict(&s).map_or(String::new(), |v| format!(" {:>9}", v.cell()));
+        outln!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}{cell}", name, s.mean, s.median, s.p99, s.max);
+    }
+    match (&floor, verdict(&after)) {
+        (Some(f), Some(v)) => outln!("{}; calibrated: {}", f.describe(spec.model_length_unit.name()), v.describe()),
+        _ => outln!("noise floor: unknown ({} records no noise σ: a blob of format 6 or older)", args.blob.display()),
     }
     use crate::evaluation::pose_errors::PoseErrors;
     let poses = [("nominal", &nominal_pred), ("calibrated", &predicted)]
@@ -104,6 +121,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     if let Some(path) = &args.json {
         let pose_json = |k: usize| poses[k].1.as_ref().map(PoseErrors::to_json);
         let mut v = serde_json::json!({"rows": data.len(), "extrapolating": far, "nominal": before, "calibrated": after});
+        if let Some(f) = &floor {
+            v["noise_floor"] = serde_json::json!({"floor": f, "nominal": verdict(&before), "calibrated": verdict(&after)});
+        }
         if poses[0].1.is_some() {
             v["pose"] = serde_json::json!({"nominal": pose_json(0), "calibrated": pose_json(1)});
         }

@@ -14,9 +14,14 @@ pub struct FitArgs {
     /// Output blob: a new path or a regular file (replaced atomically); `-` writes it to standard output.
     #[arg(long)]
     pub out: PathBuf,
-    /// First calibrate the DH parameters (plus base and tool) by Levenberg–Marquardt, then fit
-    /// the diffeomorphic correction on top; the blob carries the calibrated chain.
-    #[arg(long)]
+    /// Whether the chain's geometric group (DH parameters, base, tool) is calibrated before the
+    /// flows (Levenberg–Marquardt; the blob then carries the calibrated chain): auto chooses by CbD's
+    /// own evidence on the training rows (cross-validation where no evidence runs), nominal deforms
+    /// the chain as given, calibrated always calibrates it first.
+    #[arg(long, value_enum, default_value_t = crate::calibrate::Geometry::Auto)]
+    pub geometry: crate::calibrate::Geometry,
+    /// The same as `--geometry calibrated`.
+    #[arg(long, conflicts_with = "geometry")]
     pub dh_first: bool,
     /// Fit at most this many measurements, evenly spaced through the file (a fit needs memory
     /// growing as the square of the rows; the error for too many names a value that fits).
@@ -154,6 +159,7 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
         errln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.iterations, dh.rank, dh.n_parameters, dh.final_rms);
     }
     if !quiet {
+        errln!("{}", c.geometry.describe());
         match &c.evidence {
             Some(e) => errln!(
                 "hyperparameters (CbD evidence {:.2} on {} rows, {} evaluations, {:.2} s): {}",
@@ -177,6 +183,16 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
     for w in &c.warnings {
         errln!("warning: {w}");
     }
+}
+
+/// The noise floor of the chosen σ and where the cross-validated held-out error stands against it.
+fn describe_noise_floor(c: &crate::calibrate::Calibration, unit: &str) -> String {
+    let (floor, held_out) = c.noise_floor();
+    let verdict = match held_out {
+        Some(v) => format!("; held-out RMS (scheme cross-validation) {}", v.describe()),
+        None => "; no held-out error measured (no cross-validation ran)".into(),
+    };
+    format!("{}{verdict}", floor.describe(unit))
 }
 
 /// At most `max_rows` of `data`'s rows, evenly spaced (all of them without a limit).
@@ -226,7 +242,7 @@ pub fn run(args: FitArgs) -> Result<()> {
         crate::cli::memory::check_workers_of(&args.data)?
     };
     settings.memory_budget = crate::cli::memory::kernel_form_budget(threads);
-    settings.dh_first = args.dh_first;
+    settings.geometry = if args.dh_first { crate::calibrate::Geometry::Calibrated } else { args.geometry };
     settings.threads = Some(threads);
     let calibration =
         crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings)).context(args.data.display())?;
@@ -253,11 +269,15 @@ pub fn run(args: FitArgs) -> Result<()> {
         fit.blob.len(),
         args.out.display()
     );
+    let unit = spec.model_length_unit.name();
+    let floor = describe_noise_floor(&calibration, unit);
     // With `--out -` standard output carries the blob; the summary must not corrupt it.
     if crate::cli::is_stdout(&args.out) {
         errln!("{summary}");
+        errln!("{floor}");
     } else {
         outln!("{summary}");
+        outln!("{floor}");
     }
     Ok(())
 }

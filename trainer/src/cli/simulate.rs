@@ -60,6 +60,11 @@ pub struct SimulateArgs {
     /// `[chain] base = { register = true }` (README "Tracker frames").
     #[arg(long = "tracker-frame")]
     pub tracker_frame: Option<String>,
+    /// The real arm's geometry is exactly the nominal one (rr: l1 = 1, l2 = 0.5, no base offset;
+    /// six: the UR5 DH table, base and tool): only its effects — built-in or `--effect` — and the
+    /// noise set it apart. For testing what a calibration does when there is no geometric error.
+    #[arg(long)]
+    pub exact_geometry: bool,
 }
 
 /// `--tracker-frame`: `tx,ty,tz;ax,ay,az,angle_deg` → the motion y ↦ R y + t.
@@ -192,10 +197,15 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         Some(poses) => poses,
         None => configurations(sampling, 2),
     };
-    let mut data = if args.effects.is_empty() {
-        rr::RealRr::default().measure(&joints)
+    let real = if args.exact_geometry {
+        rr::RealRr { lengths: cbd_protocol::paper_rr::LENGTHS, base_offset: [0.0; 2], ..rr::RealRr::default() }
     } else {
-        let lengths = rr::RealRr::default().lengths;
+        rr::RealRr::default()
+    };
+    let mut data = if args.effects.is_empty() {
+        real.measure(&joints)
+    } else {
+        let lengths = real.lengths;
         let rigid = cbd_protocol::NominalModel::planar(&lengths).ok_or_else(|| Error::Internal("two links fit".into()))?;
         effect_arm(rigid, &args.effects)?.measure(&joints, 0.0, 0)
     };
@@ -217,6 +227,9 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform".into()));
     }
     let mut robot = SixJointRobot::ur5_like(1);
+    if args.exact_geometry {
+        robot.real = crate::simulate::six_joint::ur5_nominal();
+    }
     if let Some(noise) = args.noise {
         robot.noise_std = noise;
     }

@@ -120,6 +120,8 @@ pub struct Diagnosis {
     /// Structure still significant after the effects: CbD is what absorbs it.
     pub unexplained_structure: bool,
     pub table: Vec<TableRow>,
+    /// The held-out rows' noise floor (with CbD: σ from its evidence on nominal + effects).
+    pub noise_floor: Option<crate::report::noise_floor::NoiseFloor>,
     /// Training residual (row-major) of the starting model and of `model_after`.
     pub residual_before: Vec<f64>,
     pub residual_after: Vec<f64>,
@@ -404,7 +406,10 @@ pub fn diagnose(
     let unexplained_structure = structure_after.iter().any(|t| t.significant);
     // 7. Held-out table and the recommendation.
     let geometric_only = geometric_only_model(model, &found, &refined, &chosen_params, &start, &train, options)?;
-    let table = held_out_table(given, model, &geometric_only, &refined.model, &train, &test, cbd)?;
+    let (table, cbd_sigma) = held_out_table(given, model, &geometric_only, &refined.model, &train, &test, cbd)?;
+    // The floor of the held-out rows: σ by CbD's evidence on nominal + effects (its last row's model).
+    let noise_floor =
+        cbd_sigma.map(|s| crate::report::noise_floor::NoiseFloor::new(s, given.task_dim(), "CbD's evidence on nominal + effects"));
     let recommendation = match cbd {
         Some(fit) if !found.is_empty() && options.recommendation_folds >= 2 => {
             Some(recommend(fit, given, &refined.model, &train, options.recommendation_folds)?)
@@ -427,6 +432,7 @@ pub fn diagnose(
         model_geometric: geometric_only,
         unexplained_structure,
         table,
+        noise_floor,
         residual_before: r0,
         residual_after: r1,
         train,
@@ -509,7 +515,8 @@ fn geometric_only_model(
 }
 
 /// The held-out rows in the order the corrections build up: nominal → + geometric → + effects →
-/// + effects + CbD; and CbD alone on the nominal (the CbD rows only when `cbd` is given).
+/// + effects + CbD; and CbD alone on the nominal (the CbD rows only when `cbd` is given); and the
+/// noise σ CbD's evidence estimated on nominal + effects.
 fn held_out_table(
     given: &NominalModel,
     model: &NominalModel,
@@ -518,7 +525,7 @@ fn held_out_table(
     train: &Measurements,
     test: &Measurements,
     cbd: Option<CorrectionFitter>,
-) -> Result<Vec<TableRow>, DiagnoseError> {
+) -> Result<(Vec<TableRow>, Option<f64>), DiagnoseError> {
     // The file's task dimension: a planar arm's DH form (`model`) is read in its two coordinates.
     let m = given.task_dim();
     let mut table = Vec::new();
@@ -530,14 +537,16 @@ fn held_out_table(
     push("nominal", positions(model, &test.joints, m));
     push("nominal + geometric", positions(geometric_only, &test.joints, m));
     push("nominal + effects", positions(with_effects, &test.joints, m));
+    let mut sigma = None;
     if let Some(fit) = cbd {
         // The effects are in the model's nominal chain, which the runtime evaluates: CbD fits on top.
-        let on_effects = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?.predict;
-        push("nominal + effects + CbD", on_effects(&test.joints));
+        let on_effects = fit_on(fit, with_effects, train).map_err(DiagnoseError::on_effects)?;
+        sigma = on_effects.noise_sigma;
+        push("nominal + effects + CbD", (on_effects.predict)(&test.joints));
         let plain = fit(given, train).map_err(DiagnoseError::on_nominal)?.predict;
         push("nominal + CbD", plain(&test.joints));
     }
-    Ok(table)
+    Ok((table, sigma))
 }
 
 /// Whether CbD does better on top of the found effects or on the nominal model alone, judged by

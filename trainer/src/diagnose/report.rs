@@ -122,10 +122,17 @@ pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
         out += "  => unexplained structure: no library effect accounts for it; CbD absorbs it (table below)\n";
     }
     out += &format!("\nheld-out error ({unit}), {} rows:\n", d.test_rows);
-    out += &format!("  {:<26} {:>11} {:>11} {:>11} {:>11}\n", "model", "mean", "median", "p99", "max");
+    let floor_header = if d.noise_floor.is_some() { "   / floor" } else { "" };
+    out += &format!("  {:<26} {:>11} {:>11} {:>11} {:>11}{floor_header}\n", "model", "mean", "median", "p99", "max");
     for r in &d.table {
-        out +=
-            &format!("  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}\n", r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max);
+        let floor = d.noise_floor.as_ref().map_or(String::new(), |f| format!(" {:>9}", f.verdict(r.stats.mean, r.errors.len()).cell()));
+        out += &format!(
+            "  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}{floor}\n",
+            r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max
+        );
+    }
+    if let Some(f) = &d.noise_floor {
+        out += &format!("  {}; `=` at it (more data or effects will not help), `>` above it (structure left)\n", f.describe(unit));
     }
     out += &pose_table(d, unit);
     if let Some(rec) = &d.recommendation {
@@ -211,6 +218,11 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
     let mut held = serde_json::Map::new();
     for r in &d.table {
         let mut row = json!({"mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max});
+        if let Some(f) = &d.noise_floor {
+            let v = f.verdict(r.stats.mean, r.errors.len());
+            row["floor_ratio"] = json!(v.ratio);
+            row["at_floor"] = json!(v.at_floor);
+        }
         if let Some(pose) = &r.pose {
             row["pose"] = pose.to_json();
         }
@@ -239,6 +251,7 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
         "selection": {"candidates": d.candidates, "margin": d.margin,
                       "best_refused": d.selection.best_refused.map(|(g, cv)| json!({"group": d.group_names[g], "cv_rms": cv})), "cv_rms_before": d.selection.cv_rms_before, "cv_rms_after": d.selection.cv_rms_after()},
         "held_out": held,
+        "noise_floor": d.noise_floor,
         "recommendation": d.recommendation.as_ref().map(|r| json!({
             "best": r.best, "effects_hurt": r.effects_hurt, "folds": r.folds,
             "cross_validation": r.cross_validation.iter().map(|(n, e)| json!({"pipeline": n, "rms": e})).collect::<Vec<_>>(),

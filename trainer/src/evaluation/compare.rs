@@ -5,10 +5,12 @@
 use super::correction::{fit_on, fit_per_tool_point, CorrectionFitter, FittedCorrection, Predictor};
 use super::pose_errors::PoseErrors;
 use crate::calibrate::dh_not_converged;
+use crate::calibrate::{Geometry, GeometryChoice};
 use crate::data::import_error::ImportError;
 use crate::data::Measurements;
 use crate::error::Error;
 use crate::parametric::{calibrate_dh, DhCalibrationOptions, DhFitStats};
+use crate::report::noise_floor::NoiseFloor;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
 use std::time::Instant;
@@ -38,6 +40,11 @@ pub struct PeerResult {
 pub struct Comparison {
     pub rows: Vec<PeerResult>,
     pub dh: Option<DhFitStats>,
+    /// What `cbd fit` would choose on the training rows (its geometry), when asked: marks `cbd` or
+    /// `dh+cbd` as the row it writes.
+    pub default_fit: Option<GeometryChoice>,
+    /// The noise floor of the test rows, from the σ CbD's evidence estimated on the training rows.
+    pub noise_floor: Option<NoiseFloor>,
 }
 
 impl Comparison {
@@ -54,6 +61,14 @@ impl Comparison {
             if let Some(pose) = &r.pose {
                 method["pose"] = pose.to_json();
             }
+            if let Some(floor) = &self.noise_floor {
+                let v = floor.verdict(r.stats.mean, r.test_errors.len());
+                method["floor_ratio"] = json!(v.ratio);
+                method["at_floor"] = json!(v.at_floor);
+            }
+            if self.written_by_fit() == Some(r.name.as_str()) {
+                method["written_by_fit"] = json!(true);
+            }
             methods.insert(r.name.clone(), method);
         }
         let hyper = |name: &str| self.rows.iter().find(|r| r.name == name).and_then(|r| r.hyperparameters.clone());
@@ -65,8 +80,15 @@ impl Comparison {
                 "redundant_at_nominal": d.redundant_at_nominal, "converged": d.converged,
             })),
             "hyperparameters": { "krr": hyper("krr"), "dh+krr": hyper("dh+krr") },
+            "default_fit": self.default_fit.as_ref().map(|g| json!({"method": self.written_by_fit(), "geometry": g})),
+            "noise_floor": self.noise_floor,
             "warnings": self.warnings(),
         })
+    }
+
+    /// The row `cbd fit` writes with its default geometry (`cbd` or `dh+cbd`), when known.
+    pub fn written_by_fit(&self) -> Option<&'static str> {
+        self.default_fit.as_ref().map(|g| if g.chosen == Geometry::Calibrated { "dh+cbd" } else { "cbd" })
     }
 
     /// What the reader must not miss: a DH fit that stopped at its iteration limit.
@@ -81,16 +103,33 @@ impl Comparison {
         let errors = self.rows.iter().flat_map(|r| [r.stats.mean, r.stats.median, r.stats.p99, r.stats.max]);
         let scientific = errors.filter(|v| *v != 0.0).any(|v| v.abs() < 0.01);
         let cell = |v: f64| if scientific { format!("{v:>10.3e}") } else { format!("{v:>10.4}") };
-        let mut out = format!("{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}  ({unit})\n", "method", "mean", "median", "p99", "max", "fit [s]");
+        let floor_header = if self.noise_floor.is_some() { format!(" {:>8}", "/ floor") } else { String::new() };
+        let mut out = format!(
+            "{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}{floor_header}  ({unit})\n",
+            "method", "mean", "median", "p99", "max", "fit [s]"
+        );
+        let written = self.written_by_fit();
         for r in &self.rows {
+            let floor =
+                self.noise_floor.as_ref().map_or(String::new(), |f| format!(" {:>8}", f.verdict(r.stats.mean, r.test_errors.len()).cell()));
+            let name = if written == Some(r.name.as_str()) { format!("{}*", r.name) } else { r.name.clone() };
             out += &format!(
-                "{:<8} {} {} {} {} {:>10.2}\n",
-                r.name,
+                "{:<8} {} {} {} {} {:>10.2}{floor}\n",
+                name,
                 cell(r.stats.mean),
                 cell(r.stats.median),
                 cell(r.stats.p99),
                 cell(r.stats.max),
                 r.fit_seconds
+            );
+        }
+        if let (Some(g), Some(row)) = (&self.default_fit, written) {
+            out += &format!("* what `cbd fit` writes by default ({row}): {}\n", g.describe());
+        }
+        if let Some(f) = &self.noise_floor {
+            out += &format!(
+                "{}; `=` at it (more data or effects will not help), `>` above it (structure left: try `cbd diagnose`)\n",
+                f.describe(unit)
             );
         }
         out += &self.pose_table(unit);
@@ -189,7 +228,7 @@ pub fn compare_peers(
     let mut rows = Vec::new();
     let mut push = |name: &str, fitted: crate::Result<FittedCorrection>, seconds: f64| {
         let (stats, train_stats, note, test_errors, hyperparameters, pose) = match fitted {
-            Ok(FittedCorrection { predict: p, note, hyperparameters }) => {
+            Ok(FittedCorrection { predict: p, note, hyperparameters, .. }) => {
                 let predicted = p(&test.joints);
                 let test_errors = crate::report::plots::position_errors(&predicted, &test.positions, m);
                 let train_stats = ErrorStats::of_positions(&p(&train.joints), &train.positions, m);
@@ -263,7 +302,7 @@ pub fn compare_peers(
         }
     }
 
-    Comparison { rows, dh: dh.ok().map(|f| f.stats) }
+    Comparison { rows, dh: dh.ok().map(|f| f.stats), default_fit: None, noise_floor: None }
 }
 
 #[cfg(test)]
@@ -285,7 +324,7 @@ mod tests {
             hyperparameters: None,
             pose: None,
         };
-        let table = |rows| Comparison { rows, dh: None }.table("m");
+        let table = |rows| Comparison { rows, dh: None, default_fit: None, noise_floor: None }.table("m");
         let small = table(vec![row("nominal", 0.1083), row("cbd", 1.2916e-5)]);
         assert!(small.contains("1.292e-5") && small.contains("1.083e-1") && !small.contains("0.0000"), "{small}");
         let large = table(vec![row("nominal", 3.25), row("cbd", 0.0876)]);
@@ -300,7 +339,7 @@ mod tests {
         let options = DhCalibrationOptions { max_iterations: 1, ..DhCalibrationOptions::default() };
         let stats = calibrate_dh(&robot.nominal, &train, &options).unwrap().stats;
         assert!(!stats.converged);
-        let c = Comparison { rows: vec![], dh: Some(stats) };
+        let c = Comparison { rows: vec![], dh: Some(stats), default_fit: None, noise_floor: None };
         let w = c.warnings();
         assert!(w.len() == 1 && w[0].contains("iteration limit (1 iterations)"), "{w:?}");
         assert_eq!(c.to_json()["warnings"][0], serde_json::json!(w[0]));

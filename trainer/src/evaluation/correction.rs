@@ -16,12 +16,14 @@ pub struct FittedCorrection {
     pub note: String,
     /// The chosen hyperparameters for a JSON report, when the method has any to report there.
     pub hyperparameters: Option<serde_json::Value>,
+    /// The noise σ per coordinate the method's own evidence estimated (data unit), when it has one.
+    pub noise_sigma: Option<f64>,
 }
 
 impl FittedCorrection {
     /// A correction with its note and nothing for the JSON.
     pub fn new(predict: Predictor, note: String) -> Self {
-        FittedCorrection { predict, note, hyperparameters: None }
+        FittedCorrection { predict, note, hyperparameters: None, noise_sigma: None }
     }
 }
 
@@ -44,11 +46,11 @@ pub fn fit_on(fit: CorrectionFitter, base: &NominalModel, data: &Measurements) -
         for i in 0..data.len() {
             moved.push(&joints[i * data.n_joints..(i + 1) * data.n_joints], &frame.to_chain(data.position(i)));
         }
-        let FittedCorrection { predict, note, hyperparameters } = fit(&chain, &moved)?;
+        let FittedCorrection { predict, note, hyperparameters, noise_sigma } = fit(&chain, &moved)?;
         let back: Predictor = Box::new(move |joints: &[f64]| {
             predict(&frame.chain_joints(joints)).chunks_exact(2).flat_map(|p| frame.from_chain(p)).collect()
         });
-        return Ok(FittedCorrection { predict: back, note, hyperparameters });
+        return Ok(FittedCorrection { predict: back, note, hyperparameters, noise_sigma });
     }
     Err(Error::InvalidInput(format!("a model of {full} task coordinates for data of {m} that is not a planar arm's DH form")))
 }

@@ -16,6 +16,7 @@
 //! Only the rows given are used: pass training rows, never test rows.
 
 mod defaults;
+mod geometry;
 pub(crate) mod joint_pair_table;
 mod likelihood;
 mod search;
@@ -24,6 +25,7 @@ mod table;
 mod weight_space;
 
 pub use defaults::{default_joint_kernel, normalisation_of};
+pub use geometry::{is_length, GeometricBasis, GEOMETRY_PRIOR_STD};
 pub(crate) use table::PairTable;
 pub use weight_space::WeightSpaceReport;
 
@@ -69,6 +71,13 @@ pub struct Evidence {
     pub evaluations: usize,
     pub starts: usize,
     pub seconds: f64,
+    /// The kernel form's log evidence on its evenly spaced rows (`subset_rows` of them, data
+    /// units), before any refinement on every row: two hypotheses searched on the same data are
+    /// always comparable there.
+    pub subset_log_evidence: f64,
+    pub subset_rows: usize,
+    /// Parameters of the geometric group marginalised as explicit basis functions (0: none).
+    pub geometric_parameters: usize,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -138,13 +147,44 @@ pub fn choose_cbd_hyperparameters(
     norm: &Normalisation,
     options: &EvidenceOptions,
 ) -> Result<Evidence, EvidenceError> {
+    choose(nominal, data, norm, options, None)
+}
+
+/// The same for "CbD with the geometry calibrated": `base` the fitted chain, the geometric group
+/// linearised there marginalised with its broad prior ([`GeometricBasis`], on `data`'s rows), the
+/// evidence comparable with [`choose_cbd_hyperparameters`]'s on the nominal (the same rows).
+pub fn choose_cbd_hyperparameters_with_geometry(
+    base: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    options: &EvidenceOptions,
+    geometry: &GeometricBasis,
+) -> Result<Evidence, EvidenceError> {
+    choose(base, data, norm, options, Some(geometry))
+}
+
+fn choose(
+    nominal: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    options: &EvidenceOptions,
+    geometry: Option<&GeometricBasis>,
+) -> Result<Evidence, EvidenceError> {
     let start = std::time::Instant::now();
     if data.len() < 3 {
         return Err(EvidenceError::TooFewRows(data.len()));
     }
     let rows = evidence_rows(data, options.max_unknowns);
     let used = data.subset(&rows);
-    let table = PairTable::new(nominal, &used, norm);
+    let geometry_used = geometry.map(|g| g.subset(&rows));
+    let table_of = |rows: &Measurements, geometry: Option<&GeometricBasis>| {
+        let table = PairTable::new(nominal, rows, norm);
+        match geometry {
+            Some(g) => table.with_geometry(g),
+            None => table,
+        }
+    };
+    let table = table_of(&used, geometry_used.as_ref());
     let (n, m) = (table.n, table.m);
     let scales = DataScales::of(&table);
     let starts = scales.starts(&table);
@@ -153,7 +193,8 @@ pub fn choose_cbd_hyperparameters(
     // refined on all the evidence rows.
     let evaluations = RefCell::new(0usize);
     let coarse_rows = evidence_rows(&used, options.coarse_unknowns);
-    let coarse_table = (coarse_rows.len() < used.len()).then(|| PairTable::new(nominal, &used.subset(&coarse_rows), norm));
+    let coarse_table = (coarse_rows.len() < used.len())
+        .then(|| table_of(&used.subset(&coarse_rows), geometry_used.as_ref().map(|g| g.subset(&coarse_rows)).as_ref()));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {
         let mut found: Vec<_> = from.iter().filter_map(|(_, p)| minimise(table, &lower, &upper, p, iterations, &evaluations)).collect();
@@ -180,11 +221,15 @@ pub fn choose_cbd_hyperparameters(
     }
     let best = found.into_iter().next();
     let Some((mut nlml, mut param)) = best else { return Err(EvidenceError::NoValidSetting) };
+    let scale = norm.task_scale;
+    // Positions in data units: the density picks up 1/scale per coordinate.
+    let in_data_units = |nlml: f64, rows: usize| -nlml - ((rows * m) as f64) * scale.ln();
+    let subset_log_evidence = in_data_units(nlml, used.len());
     // A subset's choice refined on every row in weight space, where the expansions are short.
     let (mut rows_used, mut weight_space, mut weight_space_declined) = (used.len(), None, None);
     if used.len() < data.len() {
         let refine = |from: &[f64], options: &EvidenceOptions| {
-            weight_space::refine(nominal, data, norm, from, &lower, &upper, options, used.len(), &evaluations)
+            weight_space::refine(nominal, data, norm, geometry, from, &lower, &upper, options, used.len(), &evaluations)
         };
         let mut candidates = Vec::new();
         match refine(&param, options) {
@@ -204,7 +249,6 @@ pub fn choose_cbd_hyperparameters(
         }
     }
     let theta = Theta::unpack(&param, n);
-    let scale = norm.task_scale;
     let joint_axes = (0..n)
         .map(|d| {
             if table.joint.periodic[d] {
@@ -221,8 +265,7 @@ pub fn choose_cbd_hyperparameters(
         task_gamma: theta.log_gamma_w.exp() * scale * scale,
         sigma: theta.log_sigma.exp() * scale,
     };
-    // Positions in data units: the density picks up 1/scale per coordinate.
-    let log_evidence = -nlml - ((rows_used * m) as f64) * scale.ln();
+    let log_evidence = in_data_units(nlml, rows_used);
     let evaluations = evaluations.into_inner();
     Ok(Evidence {
         hyperparameters,
@@ -235,6 +278,9 @@ pub fn choose_cbd_hyperparameters(
         evaluations,
         starts: starts.len(),
         seconds: start.elapsed().as_secs_f64(),
+        subset_log_evidence,
+        subset_rows: used.len(),
+        geometric_parameters: geometry.map_or(0, |g| g.p),
     })
 }
 

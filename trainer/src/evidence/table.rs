@@ -23,8 +23,14 @@ pub(crate) struct PairTable {
     /// Per pair: J_i J_jᵀ, m × m row-major.
     pub(super) jj: Vec<f64>,
     pub(super) dist2: Vec<f64>,
-    /// N m residual (y − k0)/scale, row-major.
+    /// N m residual (y − k0)/scale, row-major (plus the geometric group's shift when it has one).
     pub(super) residual: Vec<f64>,
+    /// G Gᵀ of the geometric group's explicit basis functions ([`super::geometry`]): added to
+    /// every covariance, fixed in θ.
+    pub(super) explicit: Option<Mat<f64>>,
+    /// The residual's variance per coordinate that the fields are left to explain (without the
+    /// geometric group's shift): the data scale of the starts and bounds.
+    pub(super) fields_variance: f64,
 }
 
 impl PairTable {
@@ -50,7 +56,21 @@ impl PairTable {
                 dist2.push((0..m).map(|c| (kin[i].position[c] - kin[j].position[c]).powi(2)).sum());
             }
         }
-        PairTable { n, m, count, joint: JointPairTable::new(periodic, data), jj, dist2, residual }
+        let fields_variance = variance(&residual);
+        PairTable { n, m, count, joint: JointPairTable::new(periodic, data), jj, dist2, residual, explicit: None, fields_variance }
+    }
+
+    /// The table of "CbD with the geometry calibrated": `nominal` the fitted chain, the residual
+    /// shifted back to the nominal's (to first order) and the group's G Gᵀ in every covariance.
+    pub(crate) fn with_geometry(mut self, basis: &super::GeometricBasis) -> Self {
+        for (r, s) in self.residual.iter_mut().zip(&basis.shift) {
+            *r += s;
+        }
+        let g = basis.matrix();
+        let mut ggt = Mat::<f64>::zeros(g.nrows(), g.nrows());
+        faer::linalg::matmul::matmul(ggt.as_mut(), faer::Accum::Replace, g.as_ref(), g.transpose(), 1.0, crate::solver::FIXED_SPLIT);
+        self.explicit = Some(ggt);
+        self
     }
 
     pub(super) fn dim(&self) -> usize {
@@ -76,6 +96,9 @@ impl PairTable {
         });
         for r in 0..dim {
             k[(r, r)] += sigma2;
+        }
+        if let Some(ggt) = &self.explicit {
+            k += ggt;
         }
         (k, kv_all, kw_all)
     }
@@ -143,6 +166,11 @@ impl PairTable {
         grad[n + 3] = sigma2 * (0..dim).map(|i| q(i, i)).sum::<f64>();
         grad
     }
+}
+
+/// Mean square of `v` (floored: a residual of zeros still sets finite scales).
+fn variance(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).max(1e-30)
 }
 
 /// K = K_lin + σ² I at one θ, factored.

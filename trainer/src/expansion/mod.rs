@@ -111,20 +111,31 @@ pub fn task_radius_of(nominal: &[f64], m: usize) -> f64 {
     1.25 * nominal.chunks_exact(m).map(|k| k.iter().map(|v| v * v).sum::<f64>().sqrt()).fold(0.0f64, f64::max).max(1e-3)
 }
 
-/// The linear (Euler × 1) model on `cp`'s points in the expansion of `joint_kernel` (blob units, γ > 0)
-/// and `task_kernel`, fitted to `target` (N × m, internal units) with noise `sigma`.
-pub fn fit_linear(
-    cp: &ControlPoints,
-    joint_kernel: &JointKernel,
-    task_kernel: &TaskKernel,
-    sigma: f64,
-    target: &[f64],
-) -> Result<ExpansionFit, Declined> {
+/// The functions of the linear model's expansion on `cp`'s points: which joint and task functions
+/// the kernels need at the tolerance their noise allows (no solve yet: its length decides whether
+/// the expansion is worth solving for).
+#[derive(Debug, Clone)]
+pub struct LinearBasis {
+    pub tolerance: f64,
+    pub task_radius: f64,
+    pub joint: Basis,
+    pub task: Basis,
+}
+
+impl LinearBasis {
+    /// Weights of one stage: r_V × n joint, r_W × m task.
+    pub fn weights(&self, n: usize, m: usize) -> usize {
+        self.joint.len() * n + self.task.len() * m
+    }
+}
+
+/// The expansion's functions for `joint_kernel` (blob units, γ > 0) and `task_kernel` on `cp`'s
+/// points with noise `sigma`, or why there is none within the limits.
+pub fn linear_basis(cp: &ControlPoints, joint_kernel: &JointKernel, task_kernel: &TaskKernel, sigma: f64) -> Result<LinearBasis, Declined> {
     let (m, n) = (cp.dims.m, cp.dims.n);
     let count = cp.len();
     let nominal = cp.nominal_positions();
     let jacobians = cp.nominal_jacobians();
-    let residual: Vec<f64> = target.iter().zip(&nominal).map(|(y, k)| y - k).collect();
     let mean_j2 = jacobians.iter().map(|v| v * v).sum::<f64>() / (count * m).max(1) as f64;
     let tolerance = tolerance_for(sigma, 1.0 + joint_kernel.gamma * mean_j2);
     let ranges: Vec<f64> = (0..n).map(|d| 1.25 * cp.points.chunks_exact(n).map(|x| x[d].abs()).fold(0.0f64, f64::max).max(1e-3)).collect();
@@ -139,6 +150,38 @@ pub fn fit_linear(
     if weights_len > MAX_WEIGHTS {
         return Err(Declined::TooLong(format!("{weights_len} weights at tolerance {tolerance:.0e} (limit {MAX_WEIGHTS})")));
     }
+    Ok(LinearBasis { tolerance, task_radius, joint, task })
+}
+
+/// The linear (Euler × 1) model on `cp`'s points in the expansion of `joint_kernel` (blob units, γ > 0)
+/// and `task_kernel`, fitted to `target` (N × m, internal units) with noise `sigma`.
+pub fn fit_linear(
+    cp: &ControlPoints,
+    joint_kernel: &JointKernel,
+    task_kernel: &TaskKernel,
+    sigma: f64,
+    target: &[f64],
+) -> Result<ExpansionFit, Declined> {
+    let basis = linear_basis(cp, joint_kernel, task_kernel, sigma)?;
+    fit_linear_in(cp, basis, joint_kernel, task_kernel, sigma, target)
+}
+
+/// [`fit_linear`] in the functions `basis` ([`linear_basis`] of the same kernels and σ).
+pub fn fit_linear_in(
+    cp: &ControlPoints,
+    basis: LinearBasis,
+    joint_kernel: &JointKernel,
+    task_kernel: &TaskKernel,
+    sigma: f64,
+    target: &[f64],
+) -> Result<ExpansionFit, Declined> {
+    let (m, n) = (cp.dims.m, cp.dims.n);
+    let count = cp.len();
+    let nominal = cp.nominal_positions();
+    let jacobians = cp.nominal_jacobians();
+    let residual: Vec<f64> = target.iter().zip(&nominal).map(|(y, k)| y - k).collect();
+    let LinearBasis { tolerance, task_radius, joint, task } = basis;
+    let weights_len = joint.len() * n + task.len() * m;
     crate::memory::room_for(crate::memory::expansion_bytes(count * m, weights_len))
         .map_err(|why| Declined::Memory(format!("the expansion's {weights_len} weights {why}")))?;
     let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: &residual };

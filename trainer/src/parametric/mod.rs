@@ -19,6 +19,7 @@ mod calibrate_dh;
 pub mod identifiable;
 pub mod jacobian;
 pub mod least_squares;
+mod linearised;
 pub mod register;
 mod residuals;
 #[cfg(test)]
@@ -27,6 +28,7 @@ pub(crate) mod tests;
 pub use calibrate_dh::calibrate_dh;
 pub use identifiable::{identification_jacobian, independent_columns};
 pub use jacobian::geometric_jacobian;
+pub use linearised::{linearised_group, LinearisedGroup};
 
 use cbd_protocol::NominalModel;
 

@@ -140,7 +140,7 @@ fn predicted_error_matches_the_error_reached() {
 fn reached_rms(six: &NominalModel, robot: &SixJointRobot, joints: &[f64], noise_seed: u64, test: &[f64]) -> f64 {
     let data = robot.measure(joints, noise_seed);
     let settings = crate::calibrate::Settings {
-        dh_first: true,
+        geometry: crate::calibrate::Geometry::Calibrated,
         integrator: Some(cbd_protocol::IntegratorMethod::Euler),
         steps: Some(1),
         ..Default::default()

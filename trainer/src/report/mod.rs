@@ -1,6 +1,7 @@
 //! Error statistics and tables.
 
 pub mod html;
+pub mod noise_floor;
 pub mod plots;
 pub mod progress;
 pub mod stats;

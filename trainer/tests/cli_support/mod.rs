@@ -101,11 +101,12 @@ pub fn damaged_blob(dir: &std::path::Path, from: &str, to: &str, value: f64) -> 
     write(dir, to, cbd_protocol::encode_to_vec(&model).unwrap())
 }
 
-/// `cbd fit` with every hyperparameter given, so no search runs (a few seconds to minutes saved
-/// where any blob of the model serves): `cbd fit --model MODEL --data DATA --out OUT` plus these.
+/// `cbd fit` with every hyperparameter and the geometry given, so no search runs (a few seconds to
+/// minutes saved where any blob of the model serves): `cbd fit --model MODEL --data DATA --out OUT`
+/// plus these.
 pub fn fit_without_search(dir: &Path, model: &str, data: &str, out: &str) -> Output {
     let fixed = ["--sigma", "0.05", "--task-width", "500", "--task-gamma", "1", "--joint-b", "1", "--gamma", "1e-4"];
-    let scheme = ["--steps", "1", "--integrator", "euler", "--quiet"];
+    let scheme = ["--steps", "1", "--integrator", "euler", "--geometry", "nominal", "--quiet"];
     cbd(dir, &[&["fit", "--model", model, "--data", data, "--out", out][..], &fixed[..], &scheme[..]].concat())
 }
 

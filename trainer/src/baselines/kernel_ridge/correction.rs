@@ -13,7 +13,12 @@ pub fn kernel_ridge_correction(search: &SearchOptions) -> impl Fn(&NominalModel,
         let peer = fit_kernel_ridge_peer(model, data, search)?;
         let (note, hyperparameters) = (describe(&peer.hyperparameters), Some(to_json(&peer.hyperparameters)));
         let (krr, model) = (peer.regression, model.clone());
-        Ok(FittedCorrection { predict: Box::new(move |joints: &[f64]| krr.predict(&model, joints)), note, hyperparameters })
+        Ok(FittedCorrection {
+            predict: Box::new(move |joints: &[f64]| krr.predict(&model, joints)),
+            note,
+            hyperparameters,
+            noise_sigma: None,
+        })
     }
 }
 

@@ -9,6 +9,9 @@
 //! ```
 //!
 //! the kernel form's ½ tr((K⁻¹ − ααᵀ) ∂K) rewritten with K⁻¹A' = A'M⁻¹/σ² and α = e/σ².
+//! A geometric group's explicit columns (prior-scaled, weights N(0, I)) join A' after the kernels'
+//! weights: fixed in θ, they enter M, w̄, e, ln det M and the a and σ gradients, and have no
+//! variance gradient of their own.
 
 use super::super::search::Criterion;
 use super::super::table::Theta;
@@ -52,7 +55,10 @@ impl Criterion for WeightSpaceTable {
         let sigma2 = (2.0 * theta.log_sigma).exp();
         let (r_j, r_t) = (self.joint_functions, self.task_functions());
         let joint_width = r_j * n;
-        let r = self.weights();
+        let kernel_weights = self.weights();
+        let geo = self.explicit_columns();
+        // Every column of A': the kernels' weights, then the explicit ones.
+        let r = kernel_weights + geo;
         // Joint prior variances λ_f = γ_V Π_d ω_{h_d}(b_d) and their d ln λ_f / d ln b_d.
         let max_order = self.joint_orders.iter().copied().max().unwrap_or(0);
         let axes: Vec<(Vec<f64>, Vec<f64>)> =
@@ -60,7 +66,17 @@ impl Criterion for WeightSpaceTable {
         let orders = |f: usize| &self.joint_orders[f * n..(f + 1) * n];
         let lambda: Vec<f64> = (0..r_j).map(|f| gv * orders(f).iter().zip(&axes).map(|(&h, (w, _))| w[h]).product::<f64>()).collect();
         // Whitening per column: √λ_f for every joint column of f, √γ_W for the task columns.
-        let scale: Vec<f64> = (0..r).map(|k| if k < joint_width { lambda[k / n].sqrt() } else { gw.sqrt() }).collect();
+        let scale: Vec<f64> = (0..r)
+            .map(|k| {
+                if k < joint_width {
+                    lambda[k / n].sqrt()
+                } else if k < kernel_weights {
+                    gw.sqrt()
+                } else {
+                    1.0
+                }
+            })
+            .collect();
         // Task functions at width a, and their derivatives in ln a: ψ (|y|²/a² − |α|).
         let kernel = WeightSpaceTable::task_kernel(a);
         let (mut psi, mut psi_a) = (Mat::<f64>::zeros(count, r_t), Mat::<f64>::zeros(count, r_t));
@@ -97,13 +113,40 @@ impl Criterion for WeightSpaceTable {
                 }
             }
         }
+        // The explicit columns: fixed blocks, and their products with the task functions at width a.
+        let explicit_task: Vec<Mat<f64>> = self.explicit.iter().map(|g| transposed_product(g, &psi)).collect();
+        let explicit_task_a: Vec<Mat<f64>> = self.explicit.iter().map(|g| transposed_product(g, &psi_a)).collect();
+        for j in 0..geo {
+            let row = kernel_weights + j;
+            for l in 0..geo {
+                mm[(row, kernel_weights + l)] = self.explicit_gram[(j, l)] / sigma2;
+            }
+            for k in 0..joint_width {
+                let v = scale[k] * self.explicit_joint[(j, k)] / sigma2;
+                mm[(row, k)] = v;
+                mm[(k, row)] = v;
+            }
+            for c in 0..m {
+                for g in 0..r_t {
+                    let v = gw.sqrt() * explicit_task[c][(j, g)] / sigma2;
+                    mm[(row, task_col(g, c))] = v;
+                    mm[(task_col(g, c), row)] = v;
+                }
+            }
+        }
         for k in 0..r {
             mm[(k, k)] += 1.0;
         }
         // A'ᵀ r / σ².
         let task_residual: Vec<Mat<f64>> = self.residual.iter().map(|rc| transposed_product(&psi, rc)).collect();
         let mut w = Mat::from_fn(r, 1, |k, _| {
-            let v = if k < joint_width { self.joint_residual[k] } else { task_residual[(k - joint_width) % m][((k - joint_width) / m, 0)] };
+            let v = if k < joint_width {
+                self.joint_residual[k]
+            } else if k < kernel_weights {
+                task_residual[(k - joint_width) % m][((k - joint_width) / m, 0)]
+            } else {
+                self.explicit_residual[k - kernel_weights]
+            };
             scale[k] * v / sigma2
         });
         let mut l = mm;
@@ -114,6 +157,7 @@ impl Criterion for WeightSpaceTable {
         solve_upper_triangular_in_place(l.as_ref().transpose(), w.as_mut(), FIXED_SPLIT);
         // e = r − A' w̄, per coordinate.
         let joint_weights = Mat::from_fn(joint_width, 1, |k, _| scale[k] * w[(k, 0)]);
+        let explicit_weights = Mat::from_fn(geo, 1, |j, _| w[(kernel_weights + j, 0)]);
         let mut e2 = 0.0;
         let mut residuals = Vec::with_capacity(m);
         for c in 0..m {
@@ -121,6 +165,7 @@ impl Criterion for WeightSpaceTable {
             let mut ec = self.residual[c].clone();
             matmul(ec.as_mut(), Accum::Add, self.joint_columns[c].as_ref(), joint_weights.as_ref(), -1.0, FIXED_SPLIT);
             matmul(ec.as_mut(), Accum::Add, psi.as_ref(), task_weights.as_ref(), -1.0, FIXED_SPLIT);
+            matmul(ec.as_mut(), Accum::Add, self.explicit[c].as_ref(), explicit_weights.as_ref(), -1.0, FIXED_SPLIT);
             e2 += (0..count).map(|i| ec[(i, 0)] * ec[(i, 0)]).sum::<f64>();
             residuals.push(ec);
         }
@@ -145,7 +190,7 @@ impl Criterion for WeightSpaceTable {
             }
             grad[n] += variance_gradient[k];
         }
-        grad[n + 2] = variance_gradient[joint_width..].iter().sum();
+        grad[n + 2] = variance_gradient[joint_width..kernel_weights].iter().sum();
         // ln a: tr(M⁻¹ A'ᵀ ∂A') − eᵀ ∂A' w̄ over the task columns, ∂A' = √γ_W ψ_a on its coordinate.
         let mut trace = 0.0;
         let mut along = 0.0;
@@ -159,6 +204,9 @@ impl Criterion for WeightSpaceTable {
                 }
                 for h in 0..r_t {
                     s += inv_at(col, task_col(h, c)) * gw * task_task_a[(h, g)];
+                }
+                for j in 0..geo {
+                    s += inv_at(col, kernel_weights + j) * scale[col] * explicit_task_a[c][(j, g)];
                 }
                 trace += s;
                 along += residual_a[(g, 0)] * scale[col] * w[(col, 0)];

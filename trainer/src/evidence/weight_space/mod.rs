@@ -65,8 +65,15 @@ pub(crate) struct WeightSpaceTable {
     /// Per row k0_i (N × m) and |k0_i|², normalised units.
     pub(super) nominal: Vec<f64>,
     pub(super) radius2: Vec<f64>,
-    /// Per coordinate c: the residual r_c (N × 1).
+    /// Per coordinate c: the residual r_c (N × 1), shifted to the nominal's with a geometric group.
     pub(super) residual: Vec<Mat<f64>>,
+    /// Per coordinate c: the geometric group's explicit columns G_c (N × p; p = 0 without one),
+    /// prior-scaled: their weights are N(0, I), fixed in θ.
+    pub(super) explicit: Vec<Mat<f64>>,
+    /// Σ_c G_cᵀ G_c, Σ_c G_cᵀ A_c (p × r_J n) and Σ_c G_cᵀ r_c: the fixed blocks of the explicit columns.
+    pub(super) explicit_gram: Mat<f64>,
+    pub(super) explicit_joint: Mat<f64>,
+    pub(super) explicit_residual: Vec<f64>,
     /// Packed θ bounds of the box the basis covers (±∞ where it imposes none).
     box_lower: Vec<f64>,
     box_upper: Vec<f64>,
@@ -97,6 +104,7 @@ impl WeightSpaceTable {
         nominal: &NominalModel,
         data: &Measurements,
         norm: &Normalisation,
+        geometry: Option<&super::GeometricBasis>,
         theta: &[f64],
         max_weights: usize,
     ) -> Result<Self, Declined> {
@@ -137,14 +145,28 @@ impl WeightSpaceTable {
                 }
             }
         }
+        let shift = |i: usize, c: usize| geometry.map_or(0.0, |g| g.shift[i * m + c]);
         let residual: Vec<Mat<f64>> = (0..m)
-            .map(|c| Mat::from_fn(count, 1, |i, _| (data.position(i)[c] - norm.task_offset[c]) / norm.task_scale - kin[i].position[c]))
+            .map(|c| {
+                Mat::from_fn(count, 1, |i, _| {
+                    (data.position(i)[c] - norm.task_offset[c]) / norm.task_scale - kin[i].position[c] + shift(i, c)
+                })
+            })
             .collect();
+        let explicit: Vec<Mat<f64>> = (0..m).map(|c| geometry.map_or_else(|| Mat::zeros(count, 0), |g| g.coordinate(c))).collect();
         let mut joint_gram = Mat::zeros(r_j * n, r_j * n);
         let mut joint_residual = Mat::zeros(r_j * n, 1);
         for (a, r) in joint_columns.iter().zip(&residual) {
             matmul(joint_gram.as_mut(), Accum::Add, a.transpose(), a.as_ref(), 1.0, FIXED_SPLIT);
             matmul(joint_residual.as_mut(), Accum::Add, a.transpose(), r.as_ref(), 1.0, FIXED_SPLIT);
+        }
+        let p = explicit.first().map_or(0, |g| g.ncols());
+        let (mut explicit_gram, mut explicit_joint, mut explicit_residual) = (Mat::zeros(p, p), Mat::zeros(p, r_j * n), Mat::zeros(p, 1));
+        for c in 0..m {
+            let g = explicit[c].as_ref();
+            matmul(explicit_gram.as_mut(), Accum::Add, g.transpose(), g, 1.0, FIXED_SPLIT);
+            matmul(explicit_joint.as_mut(), Accum::Add, g.transpose(), joint_columns[c].as_ref(), 1.0, FIXED_SPLIT);
+            matmul(explicit_residual.as_mut(), Accum::Add, g.transpose(), residual[c].as_ref(), 1.0, FIXED_SPLIT);
         }
         let joint_orders = joint.codes.iter().map(|c| (c >> 1) as usize).collect();
         let task_exponents = crate::expansion::solve::task_exponents(&task);
@@ -172,6 +194,10 @@ impl WeightSpaceTable {
             nominal: nominal_positions,
             radius2,
             residual,
+            explicit,
+            explicit_gram,
+            explicit_joint,
+            explicit_residual: (0..p).map(|k| explicit_residual[(k, 0)]).collect(),
             box_lower,
             box_upper,
             tolerance,
@@ -185,6 +211,11 @@ impl WeightSpaceTable {
     /// Weights r: joint functions × n, then task functions × m (`expansion::solve::design`'s order).
     pub(super) fn weights(&self) -> usize {
         self.joint_functions * self.n + self.task_functions() * self.m
+    }
+
+    /// The geometric group's parameters (explicit columns after the weights; 0 without one).
+    pub(super) fn explicit_columns(&self) -> usize {
+        self.explicit.first().map_or(0, |g| g.ncols())
     }
 
     /// The task kernel of width a (normalised), as the runtime's basis takes it.
@@ -201,6 +232,7 @@ pub(super) fn refine(
     nominal: &NominalModel,
     data: &Measurements,
     norm: &Normalisation,
+    geometry: Option<&super::GeometricBasis>,
     start: &[f64],
     lower: &[f64],
     upper: &[f64],
@@ -212,7 +244,7 @@ pub(super) fn refine(
     let mut rounds = 0;
     loop {
         rounds += 1;
-        let table = WeightSpaceTable::new(nominal, data, norm, &param, options.max_weight_space_weights)?;
+        let table = WeightSpaceTable::new(nominal, data, norm, geometry, &param, options.max_weight_space_weights)?;
         let lo: Vec<f64> = lower.iter().zip(&table.box_lower).map(|(a, b)| a.max(*b)).collect();
         let hi: Vec<f64> = upper.iter().zip(&table.box_upper).map(|(a, b)| a.min(*b)).collect();
         let (nlml, found) = minimise(&table, &lo, &hi, &param, options.max_iterations, evaluations).ok_or(Declined::NotPositiveDefinite)?;

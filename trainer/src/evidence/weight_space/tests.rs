@@ -17,7 +17,7 @@ fn weight_space_evidence_equals_the_kernel_form() {
     let data = rr_rows(60);
     let norm = crate::evidence::normalisation_of(&data);
     let p = theta().pack();
-    let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &p, 4000).unwrap();
+    let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, None, &p, 4000).unwrap();
     let kernel = PairTable::new(&rr::nominal(), &data, &norm);
     let (a, _) = ws.nlml_and_gradient(&p).unwrap();
     let (b, _) = kernel.nlml_and_gradient(&p).unwrap();
@@ -38,7 +38,7 @@ fn weight_space_gradient_matches_finite_differences() {
     let data = rr_rows(40);
     let norm = crate::evidence::normalisation_of(&data);
     let p = theta().pack();
-    let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &p, 4000).unwrap();
+    let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, None, &p, 4000).unwrap();
     let (_, grad) = ws.nlml_and_gradient(&p).unwrap();
     for k in 0..p.len() {
         let h = 1e-5;
@@ -57,7 +57,7 @@ fn prismatic_joints_and_long_bases_are_declined() {
     // Narrow joint kernels need many functions: more than a small limit allows.
     let mut narrow = theta();
     narrow.log_widths = vec![20f64.ln(), 20f64.ln()];
-    let err = WeightSpaceTable::new(&rr::nominal(), &data, &norm, &narrow.pack(), 50).err().unwrap().to_string();
+    let err = WeightSpaceTable::new(&rr::nominal(), &data, &norm, None, &narrow.pack(), 50).err().unwrap().to_string();
     assert!(err.contains("limit 50"), "{err}");
 }
 
@@ -91,7 +91,7 @@ fn refine_from(per_axis: usize, factors: &[f64]) -> (f64, Vec<(f64, Theta, usize
             let options = crate::evidence::EvidenceOptions { max_weight_space_weights: 6000, ..Default::default() };
             let evaluations = std::cell::RefCell::new(0);
             let (nlml, p, _) =
-                super::refine(&nominal, &data, &norm, &theta.pack(), &lower, &upper, &options, rows.len(), &evaluations).unwrap();
+                super::refine(&nominal, &data, &norm, None, &theta.pack(), &lower, &upper, &options, rows.len(), &evaluations).unwrap();
             (nlml, Theta::unpack(&p, 2), evaluations.into_inner())
         })
         .collect();
@@ -127,5 +127,60 @@ fn probe_basins() {
             t.log_gamma_w.exp(),
             t.log_sigma.exp()
         );
+    }
+}
+
+/// The planar RR arm's in-plane group, linearised at its DH fit on `data`: the fitted DH form and
+/// the group's basis.
+fn rr_geometry(data: &crate::data::Measurements) -> (cbd_protocol::NominalModel, crate::evidence::GeometricBasis) {
+    use crate::parametric::{calibrate_dh, linearised_group, DhCalibrationOptions};
+    let options = DhCalibrationOptions { planar_as_dh: true, ..Default::default() };
+    let fit = calibrate_dh(&rr::nominal(), data, &options).unwrap();
+    let group = linearised_group(&rr::nominal(), &fit.stats, data).unwrap();
+    let basis = crate::evidence::GeometricBasis::new(&group, data, &crate::evidence::normalisation_of(data));
+    (fit.model, basis)
+}
+
+#[test]
+fn explicit_columns_in_weight_space_equal_the_kernel_form() {
+    let data = rr_rows(60);
+    let norm = crate::evidence::normalisation_of(&data);
+    let (model, basis) = rr_geometry(&data);
+    assert!(basis.p >= 4, "{:?}", basis.names);
+    let p = theta().pack();
+    let ws = WeightSpaceTable::new(&model, &data, &norm, Some(&basis), &p, 4000).unwrap();
+    let kernel = PairTable::new(&model, &data, &norm).with_geometry(&basis);
+    let mut q = theta();
+    q.log_widths[0] += 0.7;
+    q.log_a -= 0.3;
+    q.log_sigma += 0.5;
+    for at in [p.clone(), q.pack()] {
+        let (a, _) = ws.nlml_and_gradient(&at).unwrap();
+        let (b, _) = kernel.nlml_and_gradient(&at).unwrap();
+        assert!((a - b).abs() <= 0.01, "weight space {a} vs kernel form {b}");
+    }
+    // The group changes the evidence (it is not a no-op): the fitted chain's residual alone differs.
+    let plain = PairTable::new(&model, &data, &norm);
+    assert!((plain.nlml_and_gradient(&p).unwrap().0 - kernel.nlml_and_gradient(&p).unwrap().0).abs() > 1.0);
+}
+
+#[test]
+fn explicit_columns_gradient_matches_finite_differences() {
+    let data = rr_rows(40);
+    let norm = crate::evidence::normalisation_of(&data);
+    let (model, basis) = rr_geometry(&data);
+    let p = theta().pack();
+    let ws = WeightSpaceTable::new(&model, &data, &norm, Some(&basis), &p, 4000).unwrap();
+    let kernel = PairTable::new(&model, &data, &norm).with_geometry(&basis);
+    for table in [&ws as &dyn Criterion, &kernel] {
+        let (_, grad) = table.nlml_and_gradient(&p).unwrap();
+        for k in 0..p.len() {
+            let h = 1e-5;
+            let (mut up, mut down) = (p.clone(), p.clone());
+            up[k] += h;
+            down[k] -= h;
+            let fd = (table.nlml_and_gradient(&up).unwrap().0 - table.nlml_and_gradient(&down).unwrap().0) / (2.0 * h);
+            assert!((fd - grad[k]).abs() <= 1e-5 * fd.abs().max(1.0), "θ[{k}]: analytic {} vs finite differences {fd}", grad[k]);
+        }
     }
 }

@@ -38,6 +38,7 @@ pub(super) fn encode_checked(
             task_exponents: &task_exponents,
             weights: F64Slice::from_le_bytes(&weights),
         }),
+        noise_sigma: opts.noise_sigma,
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(FitError::Encode)?;
     // Never hand out a blob the runtime does not reproduce.

@@ -9,7 +9,7 @@ use super::encode::encode_checked;
 use super::problem::cancellation_of;
 use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
 use crate::data::Measurements;
-use crate::expansion::{fit_flow, fit_linear, Declined, ExpansionFit, Representation, CANCELLATION_LIMIT};
+use crate::expansion::{fit_flow, fit_linear, fit_linear_in, linear_basis, Declined, ExpansionFit, Representation, CANCELLATION_LIMIT};
 use crate::flow::ControlPoints;
 use crate::solver::regulariser::regulariser_matrix;
 use crate::solver::step::solve_regularised;
@@ -35,16 +35,31 @@ pub(super) fn fit(
     if opts.law.joint_field_sign() > 0.0 {
         return Ok(Err(Declined::NotHamiltonian));
     }
-    // The linear model's expansion first: the flow starts from it, and `auto` decides on its length.
-    let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
+    // The linear model's expansion first: the flow starts from it, and `auto` decides on its length
+    // — before solving for it when the dense momenta can say (the six-joint arm at N = 60: 2946
+    // weights for 180 momenta, a second of QR each fit for a model `auto` then declines).
+    let basis = match linear_basis(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma) {
+        Ok(b) => b,
+        Err(why) => return Ok(Err(why)),
+    };
+    let (weights, momenta_len) = (basis.weights(cp.dims.n, m), cp.len() * m);
+    let longer = opts.representation == Representation::Auto && weights > momenta_len;
+    let dense = if longer && momenta_len <= DENSE_MAX_UNKNOWNS { Some(dense_momenta(cp, opts, target)?) } else { None };
+    // A cancellation not measured (NaN, large N) is not known to be large.
+    if let Some((_, cancellation)) = dense.as_ref().filter(|(_, c)| !(*c > CANCELLATION_LIMIT)) {
+        return Ok(Err(Declined::LongerThanMomenta { weights, momenta: momenta_len, cancellation: *cancellation }));
+    }
+    let linear = match fit_linear_in(cp, basis, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => return Ok(Err(why)),
     };
-    let (momenta, kernel_cancellation) = linear_momenta(cp, opts, target, &linear)?;
-    // A cancellation not measured (NaN, large N) is not known to be large.
-    if opts.representation == Representation::Auto && linear.len() > cp.len() * m && !(kernel_cancellation > CANCELLATION_LIMIT) {
-        return Ok(Err(Declined::LongerThanMomenta { weights: linear.len(), momenta: cp.len() * m, cancellation: kernel_cancellation }));
+    let (momenta, kernel_cancellation) = match dense {
+        Some(d) => d,
+        None => linear_momenta(cp, opts, target, &linear)?,
+    };
+    if longer && !(kernel_cancellation > CANCELLATION_LIMIT) {
+        return Ok(Err(Declined::LongerThanMomenta { weights, momenta: momenta_len, cancellation: kernel_cancellation }));
     }
     let (e, iterations, converged) = match fit_flow(
         cp,
@@ -122,16 +137,20 @@ pub(super) fn fit(
 /// expansion's linear fit `linear`, cancellation NaN (it would need the (N m)² matrix).
 fn linear_momenta(cp: &ControlPoints, opts: &CbdOptions, target: &[f64], linear: &ExpansionFit) -> Result<(Vec<f64>, f64), FitError> {
     if cp.len() * cp.dims.m <= DENSE_MAX_UNKNOWNS {
-        let k_reg = regulariser_matrix(cp);
-        let nominal_positions = cp.nominal_positions();
-        let residual: Vec<f64> = target.iter().zip(&nominal_positions).map(|(y, k)| y - k).collect();
-        let momenta =
-            solve_regularised(&k_reg, opts.sigma, &residual, FIXED_SPLIT).ok_or(FitError::Singular { iteration: 0, damping: 0.0 })?;
-        let cancellation = cancellation_of(&k_reg, &momenta);
-        return Ok((momenta, cancellation));
+        return dense_momenta(cp, opts, target);
     }
     let sigma2 = opts.sigma * opts.sigma;
     Ok((target.iter().zip(&linear.positions).map(|(y, k)| (y - k) / sigma2).collect(), f64::NAN))
+}
+
+/// α = (K_lin + σ² I)⁻¹ r by a dense Cholesky, and its cancellation.
+fn dense_momenta(cp: &ControlPoints, opts: &CbdOptions, target: &[f64]) -> Result<(Vec<f64>, f64), FitError> {
+    let k_reg = regulariser_matrix(cp);
+    let nominal_positions = cp.nominal_positions();
+    let residual: Vec<f64> = target.iter().zip(&nominal_positions).map(|(y, k)| y - k).collect();
+    let momenta = solve_regularised(&k_reg, opts.sigma, &residual, FIXED_SPLIT).ok_or(FitError::Singular { iteration: 0, damping: 0.0 })?;
+    let cancellation = cancellation_of(&k_reg, &momenta);
+    Ok((momenta, cancellation))
 }
 
 /// The linear scheme (Euler × 1) beyond [`super::CLOSED_FORM_MAX_UNKNOWNS`]: the expansion's weights by

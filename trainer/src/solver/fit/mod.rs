@@ -52,6 +52,9 @@ pub struct CbdOptions {
     pub representation: crate::expansion::Representation,
     /// Bytes the kernel form's (N·m)² matrices may take ([`kernel_form_bytes`]); `None`: unchecked.
     pub memory_budget: Option<f64>,
+    /// The noise σ per coordinate in the data's unit the blob records (format 7; the pipeline sets
+    /// it, `calibrate::options_for`); `None`: not recorded.
+    pub noise_sigma: Option<f64>,
 }
 
 impl CbdOptions {
@@ -82,6 +85,7 @@ impl CbdOptions {
             verbose: false,
             representation: crate::expansion::Representation::Kernel,
             memory_budget: None,
+            noise_sigma: None,
         }
     }
 
@@ -424,7 +428,7 @@ fn choose_expansion(
     linear_scheme: bool,
     kernel_cancellation: f64,
 ) -> Result<(Option<crate::expansion::ExpansionFit>, Option<String>), FitError> {
-    use crate::expansion::{fit_linear, Declined, Representation, CANCELLATION_LIMIT};
+    use crate::expansion::{fit_linear_in, linear_basis, Declined, Representation, CANCELLATION_LIMIT};
     if opts.representation == Representation::Kernel {
         return Ok((None, Some("kernel form requested".into())));
     }
@@ -432,16 +436,23 @@ fn choose_expansion(
         return Ok((None, Some("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into())));
     }
     let momenta = cp.len() * cp.dims.m;
-    Ok(match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
-        Ok(e) if opts.representation == Representation::Expansion => (Some(e), None),
-        Ok(e) if e.len() <= momenta || kernel_cancellation > CANCELLATION_LIMIT => (Some(e), None),
-        Ok(e) => (
+    let basis = match linear_basis(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma) {
+        Ok(b) => b,
+        Err(why) => return Ok((None, Some(why.to_string()))),
+    };
+    // Its length decides before the solve (a QR of N m × W): a longer expansion is kept only when
+    // the momenta cancel or it was asked for.
+    let weights = basis.weights(cp.dims.n, cp.dims.m);
+    if opts.representation == Representation::Auto && weights > momenta && !(kernel_cancellation > CANCELLATION_LIMIT) {
+        return Ok((
             None,
             Some(format!(
-                "the expansion has {} weights, more than the {momenta} momenta, which do not cancel ({kernel_cancellation:.1e})",
-                e.len()
+                "the expansion has {weights} weights, more than the {momenta} momenta, which do not cancel ({kernel_cancellation:.1e})"
             )),
-        ),
+        ));
+    }
+    Ok(match fit_linear_in(cp, basis, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
+        Ok(e) => (Some(e), None),
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
         Err(why) => (None, Some(why.to_string())),
     })

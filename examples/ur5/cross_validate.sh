@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Five-fold cross-validation of every method of `cbd compare` on the real UR5 measurements
+# (train.csv and test.csv merged, 1020 rows; fold k holds out the rows whose index mod 5 is k),
+# and whether what `cbd fit` writes by default (the row `compare` marks with *) is within one
+# standard error of the best other method's mean (issue 38).
+#
+#   bash examples/ur5/cross_validate.sh [CBD] [OUT_DIR]
+#
+# CBD defaults to target/release/cbd; OUT_DIR (default target/ur5-cv) gets each fold's files and
+# compare JSON and summary.json. Exit status 0 when the default is within one standard error.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+cbd="${1:-$here/../../target/release/cbd}"
+out="${2:-$here/../../target/ur5-cv}"
+mkdir -p "$out"
+python3 - "$here/train.csv" "$here/test.csv" "$out" <<'PY'
+import sys
+train, test, out = sys.argv[1:4]
+rows, header = [], None
+for path in (train, test):
+    with open(path) as f:
+        lines = f.read().splitlines()
+    header = header or lines[0]
+    rows += [l for l in lines[1:] if l.strip()]
+for k in range(5):
+    held = [r for i, r in enumerate(rows) if i % 5 == k]
+    kept = [r for i, r in enumerate(rows) if i % 5 != k]
+    for name, part in (("train", kept), ("test", held)):
+        with open(f"{out}/fold{k}-{name}.csv", "w") as f:
+            f.write("\n".join([header] + part) + "\n")
+print(f"{len(rows)} rows in 5 folds", file=sys.stderr)
+PY
+for k in 0 1 2 3 4; do
+    echo "fold $k" >&2
+    "$cbd" compare --model "$here/ur5.toml" --train "$out/fold$k-train.csv" --test "$out/fold$k-test.csv" \
+        --json "$out/fold$k.json" > "$out/fold$k.txt"
+done
+python3 - "$out" <<'PY'
+import json, math, sys
+out = sys.argv[1]
+folds = [json.load(open(f"{out}/fold{k}.json")) for k in range(5)]
+names = list(folds[0]["methods"])
+written = [f["default_fit"]["method"] for f in folds]
+stats = {}
+for n in names:
+    v = [f["methods"][n]["mean"] for f in folds]
+    mean = sum(v) / len(v)
+    se = math.sqrt(sum((x - mean) ** 2 for x in v) / (len(v) - 1) / len(v))
+    stats[n] = (mean, se, v)
+# What `cbd fit` writes on each fold (cbd or dh+cbd, by its own choice), as one method.
+default = [f["methods"][w]["mean"] for f, w in zip(folds, written)]
+d_mean = sum(default) / 5
+d_se = math.sqrt(sum((x - d_mean) ** 2 for x in default) / 4 / 5)
+print(f"{'method':<14} {'mean (mm)':>10} {'s.e.':>8}   per fold")
+for n in names:
+    m, se, v = stats[n]
+    print(f"{n:<14} {m:>10.4f} {se:>8.4f}   " + " ".join(f"{x:.4f}" for x in v))
+print(f"{'cbd fit':<14} {d_mean:>10.4f} {d_se:>8.4f}   " + " ".join(f"{x:.4f}" for x in default) + f"   (writes: {', '.join(written)})")
+others = [n for n in names if n not in set(written)] if len(set(written)) == 1 else [n for n in names if n not in ("cbd", "dh+cbd")]
+best = min(others, key=lambda n: stats[n][0])
+bound = stats[best][0] + stats[best][1]
+ok = d_mean <= bound
+print(f"best other method: {best} {stats[best][0]:.4f} ± {stats[best][1]:.4f} mm; cbd fit's default {d_mean:.4f} mm: "
+      + ("within one standard error" if ok else "NOT within one standard error"))
+json.dump({"methods": {n: {"mean": stats[n][0], "se": stats[n][1], "folds": stats[n][2]} for n in names},
+           "default_fit": {"mean": d_mean, "se": d_se, "folds": default, "writes": written},
+           "best_other": best, "within_one_se": ok}, open(f"{out}/summary.json", "w"), indent=1)
+sys.exit(0 if ok else 1)
+PY

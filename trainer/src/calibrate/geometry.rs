@@ -1,0 +1,248 @@
+//! Whether the chain's geometric group (DH parameters, base, tool; a planar arm's in-plane group)
+//! is calibrated before the flows: two hypotheses, "CbD on the nominal" and "CbD with the geometry
+//! calibrated", scored by CbD's own evidence on the same rows — the group marginalised as explicit
+//! basis functions with a broad prior (`evidence::GeometricBasis`, docs/DESIGN.md §3) — or, where no
+//! evidence runs (the paper's hyperparameters, every value given), by k-fold cross-validation.
+
+use super::{choose_cbd_hyperparameters_with_overrides, options_for, Settings};
+use crate::data::Measurements;
+use crate::evidence::{CbdHyperparameters, Evidence, GeometricBasis};
+use crate::parametric::{calibrate_dh, linearised_group, DhCalibration, DhCalibrationOptions, DhFitStats};
+use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
+
+/// Which base model CbD deforms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Geometry {
+    /// Decided from the data: CbD's evidence, else cross-validation.
+    Auto,
+    /// The nominal chain as given.
+    Nominal,
+    /// The geometric group calibrated first (Levenberg–Marquardt), the blob carrying that chain.
+    Calibrated,
+}
+
+/// One hypothesis: the base model, its DH fit, and CbD's hyperparameters for it.
+#[derive(Debug, Clone)]
+pub struct Hypothesis {
+    pub base: NominalModel,
+    pub dh: Option<DhFitStats>,
+    pub hyperparameters: CbdHyperparameters,
+    /// The search that chose the hyperparameters.
+    pub evidence: Option<Evidence>,
+}
+
+/// The choice and what decided it (the JSON's `geometry`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GeometryChoice {
+    /// `nominal` or `calibrated`.
+    pub chosen: Geometry,
+    /// "given", "evidence", "k-fold cross-validation", or why the other hypothesis was not scored.
+    pub by: String,
+    /// Each hypothesis' score, when both were scored.
+    pub scores: Option<GeometryScores>,
+    /// The chosen hypothesis' noise σ per coordinate by its evidence (data units), when one ran.
+    pub sigma: Option<f64>,
+}
+
+/// The two hypotheses' scores on the same rows.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GeometryScores {
+    /// "log evidence" (nats, higher wins) or "held-out RMS" (data units, lower wins).
+    pub criterion: &'static str,
+    pub nominal: f64,
+    pub calibrated: f64,
+    /// Rows the scores were computed on.
+    pub rows: usize,
+    /// Geometric parameters the calibrated hypothesis marginalised (evidence) or fitted.
+    pub parameters: usize,
+}
+
+impl GeometryChoice {
+    /// One line: the choice, what decided it and both scores.
+    pub fn describe(&self) -> String {
+        let chosen = match self.chosen {
+            Geometry::Calibrated => "calibrated",
+            _ => "nominal",
+        };
+        match &self.scores {
+            Some(s) => format!(
+                "geometry: {chosen} (by {}: {} nominal {}, calibrated {} on {} rows, {} geometric parameters)",
+                self.by,
+                s.criterion,
+                short(s.nominal),
+                short(s.calibrated),
+                s.rows,
+                s.parameters
+            ),
+            None => format!("geometry: {chosen} ({})", self.by),
+        }
+    }
+}
+
+fn short(v: f64) -> String {
+    if v.abs() >= 1e-2 && v.abs() < 1e7 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.4e}")
+    }
+}
+
+/// The hypothesis "CbD on the nominal".
+pub fn nominal_hypothesis(
+    nominal: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> crate::Result<Hypothesis> {
+    let (hyperparameters, evidence) = choose_cbd_hyperparameters_with_overrides(nominal, data, norm, settings, None)?;
+    Ok(Hypothesis { base: nominal.clone(), dh: None, hyperparameters, evidence })
+}
+
+/// The geometric group fitted by Levenberg–Marquardt, when the blob can carry the result: a DH
+/// chain's (a planar blob holds link lengths only, not the base and joint offsets its group moves).
+pub fn calibrated_chain(nominal: &NominalModel, data: &Measurements) -> crate::Result<DhCalibration> {
+    if matches!(nominal, NominalModel::PlanarChain { .. }) {
+        return Err(crate::Error::InvalidInput(
+            "a planar arm's blob holds its link lengths only, not the base and joint offsets its geometric group moves: the calibrated geometry cannot be carried (`cbd compare` scores it as dh+cbd)".into(),
+        ));
+    }
+    Ok(calibrate_dh(nominal, data, &DhCalibrationOptions::default())?)
+}
+
+/// The hypothesis "CbD with the geometry calibrated" on the fitted chain `fitted`: CbD's
+/// hyperparameters by its evidence on the fitted chain's residual — the residual the fields are
+/// fitted to (with the group marginalised instead, the six-joint arm's task field came out
+/// near-affine and the test error 3.50e-2 mm against 3.33e-2).
+fn calibrated_hypothesis(
+    fitted: DhCalibration,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> crate::Result<Hypothesis> {
+    let (hyperparameters, evidence) = choose_cbd_hyperparameters_with_overrides(&fitted.model, data, norm, settings, None)?;
+    Ok(Hypothesis { base: fitted.model, dh: Some(fitted.stats), hyperparameters, evidence })
+}
+
+/// The hypothesis `settings.geometry` asks for, or for `Auto` the better of the two.
+pub fn choose_geometry(
+    nominal: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> crate::Result<(Hypothesis, GeometryChoice)> {
+    let given =
+        |chosen, h: &Hypothesis| GeometryChoice { chosen, by: "given".into(), scores: None, sigma: evidence_sigma(h.evidence.as_ref()) };
+    match settings.geometry {
+        Geometry::Nominal => {
+            let h = nominal_hypothesis(nominal, data, norm, settings)?;
+            let choice = given(Geometry::Nominal, &h);
+            Ok((h, choice))
+        }
+        Geometry::Calibrated => {
+            let h = calibrated_hypothesis(calibrated_chain(nominal, data)?, data, norm, settings)?;
+            let choice = given(Geometry::Calibrated, &h);
+            Ok((h, choice))
+        }
+        Geometry::Auto => {
+            let (plain, fitted, choice) = decide(nominal, data, norm, settings)?;
+            match fitted {
+                Some(f) if choice.chosen == Geometry::Calibrated => Ok((calibrated_hypothesis(f, data, norm, settings)?, choice)),
+                _ => Ok((plain, choice)),
+            }
+        }
+    }
+}
+
+/// What `Auto` chooses on these rows, without the calibrated hypothesis' own hyperparameters (what
+/// `cbd compare` marks as the row `cbd fit` writes by default).
+pub fn geometry_choice(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<GeometryChoice> {
+    let norm = super::normalisation(data, settings);
+    Ok(decide(nominal, data, &norm, &Settings { geometry: Geometry::Auto, ..settings.clone() })?.2)
+}
+
+/// Both hypotheses scored: the nominal one, the fitted chain (`None` when the group cannot be
+/// calibrated here, the choice then says why) and the choice.
+fn decide(
+    nominal: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> crate::Result<(Hypothesis, Option<DhCalibration>, GeometryChoice)> {
+    let plain = nominal_hypothesis(nominal, data, norm, settings)?;
+    let fitted = match calibrated_chain(nominal, data) {
+        Ok(f) => f,
+        Err(e) => {
+            let by = format!("the geometric group cannot be calibrated here: {e}");
+            let sigma = evidence_sigma(plain.evidence.as_ref());
+            return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None, sigma }));
+        }
+    };
+    // The calibrated hypothesis' evidence comparable with the nominal's: the group marginalised
+    // around the fit, on the same rows.
+    let score = match (&plain.evidence, linearised_group(nominal, &fitted.stats, data)) {
+        (Some(_), Some(group)) => {
+            let basis = GeometricBasis::new(&group, data, norm);
+            choose_cbd_hyperparameters_with_overrides(&fitted.model, data, norm, settings, Some(&basis))?.1
+        }
+        _ => None,
+    };
+    let (scores, by) = match (&plain.evidence, &score) {
+        (Some(a), Some(b)) => (evidence_scores(a, b, b.geometric_parameters), "evidence".to_string()),
+        _ => {
+            let folds = settings.scheme_folds.max(2);
+            (cross_validated_scores(nominal, data, norm, settings, &plain, folds)?, format!("{folds}-fold cross-validation"))
+        }
+    };
+    let calibrated_wins = match scores.criterion {
+        "log evidence" => scores.calibrated > scores.nominal,
+        _ => scores.calibrated < scores.nominal,
+    };
+    let chosen = if calibrated_wins { Geometry::Calibrated } else { Geometry::Nominal };
+    let sigma = evidence_sigma(if calibrated_wins { score.as_ref() } else { plain.evidence.as_ref() });
+    Ok((plain, Some(fitted), GeometryChoice { chosen, by, scores: Some(scores), sigma }))
+}
+
+fn evidence_sigma(e: Option<&Evidence>) -> Option<f64> {
+    e.map(|e| e.hyperparameters.sigma)
+}
+
+/// The two evidences where they are comparable: on every row when both were computed there, else
+/// on the kernel form's evenly spaced rows, which the two searches share.
+fn evidence_scores(nominal: &Evidence, calibrated: &Evidence, parameters: usize) -> GeometryScores {
+    let (a, b, rows) = if nominal.rows_used == calibrated.rows_used {
+        (nominal.log_evidence, calibrated.log_evidence, nominal.rows_used)
+    } else {
+        (nominal.subset_log_evidence, calibrated.subset_log_evidence, nominal.subset_rows)
+    };
+    GeometryScores { criterion: "log evidence", nominal: a, calibrated: b, rows, parameters }
+}
+
+/// Held-out RMS of both hypotheses (each fold: the DH fit on its training rows, then CbD with the
+/// given hyperparameters, Euler × 1), when no evidence was computed.
+fn cross_validated_scores(
+    nominal: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+    plain: &Hypothesis,
+    folds: usize,
+) -> crate::Result<GeometryScores> {
+    let mut quiet = settings.clone();
+    quiet.verbose = false;
+    let opts = options_for(&plain.hyperparameters, norm, Integrator { method: IntegratorMethod::Euler, steps: 1 }, &quiet);
+    let (mut sse, mut count, mut parameters) = ([0.0; 2], 0usize, 0);
+    for fold in 0..folds {
+        let (train, held) = data.fold(folds, fold);
+        let dh = calibrate_dh(nominal, &train, &DhCalibrationOptions::default())?;
+        parameters = dh.stats.rank;
+        for (k, base) in [nominal, &dh.model].into_iter().enumerate() {
+            let fit = crate::solver::fit_cbd(base, &train, &opts)?;
+            let predicted = crate::predict::evaluate_blob(&fit.blob, &held.joints)?;
+            sse[k] += predicted.iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        }
+        count += held.len();
+    }
+    let rms = |s: f64| (s / count.max(1) as f64).sqrt();
+    Ok(GeometryScores { criterion: "held-out RMS", nominal: rms(sse[0]), calibrated: rms(sse[1]), rows: data.len(), parameters })
+}
