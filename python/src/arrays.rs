@@ -43,9 +43,11 @@ pub fn matrix(name: &str, value: &Bound<'_, PyAny>, cols: usize, what: &str) -> 
         return Err(cbd_error(format!("{expected}; got shape ({}, {})", shape[0], shape[1])));
     }
     let readonly = array.try_readonly().map_err(|e| cbd_error(format!("{name}: {e}")))?;
+    // `as_slice` also lends a Fortran-ordered array's memory (column-major): only a C-ordered one's
+    // memory is its rows; any other is read in logical (row-major) order.
     let values = match readonly.as_slice() {
-        Ok(slice) => slice.to_vec(),
-        Err(_) => readonly.as_array().iter().copied().collect(), // logical (row-major) order
+        Ok(slice) if untyped.is_c_contiguous() => slice.to_vec(),
+        _ => readonly.as_array().iter().copied().collect(),
     };
     Ok(Rows { values, rows: shape[0], cols })
 }

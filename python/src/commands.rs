@@ -72,8 +72,16 @@ fn run(py: Python<'_>, args: Vec<String>, sources: &[(&str, &str)]) -> PyResult<
     .map_err(|e| e.into_py(sources))
 }
 
-/// A data argument: a CSV path, or `(q, y)` arrays written to `dir/name`.
-fn data_path(model: Option<&ModelFile>, value: &Bound<'_, PyAny>, dir: &Path, name: &str) -> PyResult<PathBuf> {
+/// A data argument: a CSV path, or `(q, y)` arrays written to `dir/name.csv` (and then named
+/// `label` in messages: pushed onto `named`).
+fn data_path(
+    model: Option<&ModelFile>,
+    value: &Bound<'_, PyAny>,
+    dir: &Path,
+    name: &str,
+    label: &'static str,
+    named: &mut Vec<(PathBuf, &'static str)>,
+) -> PyResult<PathBuf> {
     if let Ok(tuple) = value.cast::<PyTuple>() {
         if tuple.len() != 2 {
             return Err(cbd_error(format!("{name}: give a CSV path or a (q, y) tuple of arrays; got a tuple of {}", tuple.len())));
@@ -82,6 +90,7 @@ fn data_path(model: Option<&ModelFile>, value: &Bound<'_, PyAny>, dir: &Path, na
         let text = arrays_csv(&spec, &tuple.get_item(0)?, Some(&tuple.get_item(1)?))?;
         let path = dir.join(format!("{name}.csv"));
         std::fs::write(&path, text).map_err(|e| cbd_error(format!("{}: {e}", path.display())))?;
+        named.push((path.clone(), label));
         return Ok(path);
     }
     let path: PathBuf = value.extract().map_err(|_| cbd_error(format!("{name}: give a CSV path or a (q, y) tuple of arrays")))?;
@@ -116,8 +125,9 @@ pub fn compare<'py>(
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let dir = scratch()?;
-    let train = data_path(Some(&model), train, dir.path(), "train")?;
-    let test = data_path(Some(&model), test, dir.path(), "test")?;
+    let mut named = Vec::new();
+    let train = data_path(Some(&model), train, dir.path(), "train", "train (q, y)", &mut named)?;
+    let test = data_path(Some(&model), test, dir.path(), "test", "test (q, y)", &mut named)?;
     let json = dir.path().join("compare.json");
     let mut args: Vec<String> = ["compare", "--model"].map(String::from).into();
     args.push(model.path.display().to_string());
@@ -125,7 +135,7 @@ pub fn compare<'py>(
         args.extend([flag.to_string(), path.display().to_string()]);
     }
     args.extend(flags_from_options("compare", options, &["model", "train", "test", "json"])?);
-    let named = sources(&[(train.clone(), "train (q, y)"), (test.clone(), "test (q, y)")]);
+    let named = sources(&named);
     run(py, args, &named.iter().map(|(p, n)| (p.as_str(), *n)).collect::<Vec<_>>())?;
     json_dict(py, &json)
 }
@@ -143,18 +153,17 @@ pub fn diagnose<'py>(
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let dir = scratch()?;
-    let data = data_path(model.as_deref(), data, dir.path(), "data")?;
+    let mut named = Vec::new();
+    let data = data_path(model.as_deref(), data, dir.path(), "data", "data (q, y)", &mut named)?;
     let json = dir.path().join("diagnose.json");
     let mut args: Vec<String> =
         vec!["diagnose".into(), "--data".into(), data.display().to_string(), "--json".into(), json.display().to_string()];
     if let Some(m) = &model {
         args.extend(["--model".into(), m.path.display().to_string()]);
     }
-    let mut named = vec![(data.clone(), "data (q, y)")];
     if let Some(test) = test {
-        let test = data_path(model.as_deref(), test, dir.path(), "test")?;
+        let test = data_path(model.as_deref(), test, dir.path(), "test", "test (q, y)", &mut named)?;
         args.extend(["--test".into(), test.display().to_string()]);
-        named.push((test, "test (q, y)"));
     }
     args.extend(flags_from_options("diagnose", options, &["model", "data", "test", "json"])?);
     let named = sources(&named);
