@@ -4,6 +4,8 @@
 //! but the calibrated origins; a blob without calibrated geometry is refused.
 
 mod cli_support;
+#[allow(dead_code)] // the diagnose files use the rest
+mod common;
 
 use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel};
 use cbd_runtime::kinematics::rigid::dh_walk;
@@ -62,6 +64,19 @@ fn assert_same_frames(what: &str, poses: &[Vec<f64>], reach: f64, want: impl Fn(
     assert!(dp <= 1e-9 * reach && dr <= 1e-9, "{what}: position {dp:e} (reach {reach}), rotation {dr:e}");
 }
 
+/// The URDF `robot`'s chain `base` → `tip`, composed joint by joint and read by cbd's own URDF import
+/// (URDF → DH), gives `calibrated`'s tool frame on 1000 random poses.
+#[track_caller]
+fn assert_urdf_is(what: &str, robot: &urdf_rs::Robot, base: &str, tip: &str, calibrated: &DhChain, seed: u64) {
+    let kinds: Vec<JointKind> = calibrated.joints.iter().map(|j| j.kind).collect();
+    let poses = poses(&kinds, seed);
+    let r = reach(calibrated, &poses);
+    let composed = |q: &[f64]| urdf_tip_pose(robot, base, tip, q, 1000.0).unwrap();
+    assert_same_frames(&format!("{what}, composed"), &poses, r, |q| tool_frame(calibrated, q), composed);
+    let read = chain_from_urdf(robot, base, tip, 1000.0).unwrap().chain;
+    assert_same_frames(&format!("{what}, URDF → DH import"), &poses, r, |q| tool_frame(calibrated, q), |q| tool_frame(&read, q));
+}
+
 /// A realistic calibrated UR5 (mm): ±0.5 mm and ±0.1° on every DH parameter, the base and the
 /// tool, the tool turned (the simulated arm's real chain).
 fn calibrated_ur5(seed: u64) -> DhChain {
@@ -88,21 +103,8 @@ fn urdf_of_a_dh_model_reads_back_to_the_calibrated_chain() {
         let text = urdf_write::write_urdf(&frames, &Frame::from_transform(&calibrated.base), &naming(&names, &limits));
         assert!(!text.contains("calibration") && text.contains("name=\"test &quot;arm&quot; &amp; co\""), "{text}");
         let robot = parse(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
-        let kinds: Vec<JointKind> = calibrated.joints.iter().map(|j| j.kind).collect();
-        let poses = poses(&kinds, 10 + k as u64);
-        let r = reach(&calibrated, &poses);
-        // The URDF composed joint by joint …
-        assert_same_frames(
-            "URDF composed",
-            &poses,
-            r,
-            |q| tool_frame(&calibrated, q),
-            |q| urdf_tip_pose(&robot, "base_link", "tool0", q, 1000.0).unwrap(),
-        );
-        // … and read by cbd's own URDF import (URDF → DH).
-        let read = chain_from_urdf(&robot, "base_link", "tool0", 1000.0).unwrap();
-        assert_eq!(read.joint_names, names);
-        assert_same_frames("URDF → DH import", &poses, r, |q| tool_frame(&calibrated, q), |q| tool_frame(&read.chain, q));
+        assert_eq!(chain_from_urdf(&robot, "base_link", "tool0", 1000.0).unwrap().joint_names, names);
+        assert_urdf_is("URDF of a DH model", &robot, "base_link", "tool0", &calibrated, 10 + k as u64);
     }
 }
 
@@ -137,21 +139,7 @@ fn urdf_of_a_urdf_model_changes_only_the_calibrated_origins() {
     let text = ur_description();
     let robot = parse(&text).unwrap();
     let nominal = chain_from_urdf(&robot, "world", "tool0", 1000.0).unwrap().chain;
-    let errors = {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let deg = std::f64::consts::PI / 180.0;
-        let names = cbd_trainer::nominal::dh_parameters::parameter_names(6);
-        names
-            .iter()
-            .map(|s| {
-                if s.contains("alpha") || s.contains("theta") || s.contains("_r") {
-                    rng.gen_range(-0.1..0.1) * deg
-                } else {
-                    rng.gen_range(-0.5..0.5)
-                }
-            })
-            .collect::<Vec<_>>()
-    };
+    let errors = common::six_joint_geometric_errors(5);
     let calibrated = cbd_trainer::nominal::dh_parameters::apply_parameters(&nominal, &errors);
     let patched = urdf_patch::patch_urdf(&text, "world", "tool0", 1000.0, &calibrated).unwrap();
     let changed =
@@ -179,17 +167,7 @@ fn urdf_of_a_urdf_model_changes_only_the_calibrated_origins() {
     assert_eq!(patched.text.matches("<origin").count(), text.matches("<origin").count());
 
     let back = parse(&patched.text).unwrap();
-    let poses = poses(&[JointKind::Revolute; 6], 7);
-    let r = reach(&calibrated, &poses);
-    assert_same_frames(
-        "patched URDF composed",
-        &poses,
-        r,
-        |q| tool_frame(&calibrated, q),
-        |q| urdf_tip_pose(&back, "world", "tool0", q, 1000.0).unwrap(),
-    );
-    let read = chain_from_urdf(&back, "world", "tool0", 1000.0).unwrap().chain;
-    assert_same_frames("patched URDF → DH import", &poses, r, |q| tool_frame(&calibrated, q), |q| tool_frame(&read, q));
+    assert_urdf_is("patched URDF", &back, "world", "tool0", &calibrated, 7);
     // Each link stays where its meshes are: its origin moved by about the calibration's change
     // (millimetres), not along its axis by the DH parameters' redistribution.
     let (old, _) = urdf_patch::link_frames(&robot, "world", "tool0", 1000.0).unwrap();
@@ -213,15 +191,7 @@ fn urdf_patch_adds_a_missing_origin_or_attribute_and_refuses_a_chain_without_a_t
     let calibrated = cbd_trainer::nominal::dh_parameters::apply_parameters(&nominal, &p);
     let patched = urdf_patch::patch_urdf(&text, "base_link", "tool0", 1000.0, &calibrated).unwrap();
     let back = parse(&patched.text).unwrap();
-    let poses = poses(&[JointKind::Revolute; 6], 8);
-    let r = reach(&calibrated, &poses);
-    assert_same_frames(
-        "origins added",
-        &poses,
-        r,
-        |q| tool_frame(&calibrated, q),
-        |q| urdf_tip_pose(&back, "base_link", "tool0", q, 1000.0).unwrap(),
-    );
+    assert_urdf_is("origins added", &back, "base_link", "tool0", &calibrated, 8);
     let joint_text = |name: &str| {
         let at = patched.text.find(&format!("<joint name=\"{name}\"")).unwrap();
         &patched.text[at..at + patched.text[at..].find("</joint>").unwrap()]
