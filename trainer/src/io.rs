@@ -5,6 +5,39 @@ use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
+/// Which of the process's streams a message line was meant for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stream {
+    /// A command's results (`outln!`).
+    Out,
+    /// Diagnostics: warnings, progress, what the pipeline chose (`errln!`).
+    Err,
+}
+
+/// A program's own destination for the crate's message lines.
+pub type MessageSink = Box<dyn Fn(Stream, &str) + Send + Sync>;
+
+/// Set by a program that embeds the trainer (the Python package sends the lines to `logging`, never
+/// to the interpreter's stdout); `None`, the `cbd` binary's case: stdout and stderr.
+static SINK: std::sync::RwLock<Option<MessageSink>> = std::sync::RwLock::new(None);
+
+/// Sends every later message line of this process to `sink` (`None`: back to stdout and stderr).
+pub fn set_message_sink(sink: Option<MessageSink>) {
+    *SINK.write().unwrap_or_else(|e| e.into_inner()) = sink;
+}
+
+/// Gives one message line to the sink, if one is set; false when there is none (the caller writes it).
+pub fn to_sink(stream: Stream, line: std::fmt::Arguments<'_>) -> bool {
+    let sink = SINK.read().unwrap_or_else(|e| e.into_inner());
+    match sink.as_ref() {
+        Some(sink) => {
+            sink(stream, &line.to_string());
+            true
+        }
+        None => false,
+    }
+}
+
 /// The output path that means standard output.
 pub const STDOUT: &str = "-";
 
@@ -120,6 +153,12 @@ pub fn note_input(name: &str, path: &Path) {
     if !inputs.iter().any(|i| i.id == id) {
         inputs.push(Input { id, name: name.to_string() });
     }
+}
+
+/// Forgets the inputs noted so far. A program that runs several commands in one process (the
+/// Python package) starts each afresh: the inode of a deleted input may come back as a new output's.
+pub fn forget_inputs() {
+    INPUTS.lock().unwrap_or_else(|e| e.into_inner()).clear();
 }
 
 /// An output at `path` would replace a file the run reads: refused, naming the input.

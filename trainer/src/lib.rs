@@ -7,12 +7,14 @@
 
 /// `eprintln!` that never panics: a line to a closed or broken stderr (`cbd … 2>&1 | head -1`) is
 /// dropped, as `cli::print_line` ends quietly on a closed stdout. Every diagnostic of the crate and
-/// the binary goes through it.
+/// the binary goes through it (or to the program's sink: `io::set_message_sink`).
 #[macro_export]
 macro_rules! errln {
     ($($t:tt)*) => {{
         use std::io::Write as _;
-        let _ = writeln!(std::io::stderr(), $($t)*);
+        if !$crate::io::to_sink($crate::io::Stream::Err, format_args!($($t)*)) {
+            let _ = writeln!(std::io::stderr(), $($t)*);
+        }
     }};
 }
 

@@ -213,17 +213,59 @@ pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod> {
     }
 }
 
-pub fn run(args: FitArgs) -> Result<()> {
+/// The flags' values, before any work.
+fn check_flags(args: &FitArgs) -> Result<()> {
     args.solver.validate()?;
     if args.max_rows.is_some_and(|k| k < 2) {
         return Err(Error::InvalidInput("--max-rows must be at least 2".into()));
     }
+    Ok(())
+}
+
+pub fn run(args: FitArgs) -> Result<()> {
+    check_flags(&args)?;
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data))],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    let (mut nominal, spec) = load_nominal(&args.model)?;
+    let (nominal, spec) = load_nominal(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
+    let fitted = fit_measurements(&args, nominal, imported)?;
+    crate::cli::write_atomically(&args.out, &fitted.blob)?;
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&fitted.report).map_err(Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    let summary = format!("{}; blob {} bytes written to {}", fitted.summary, fitted.blob.len(), args.out.display());
+    // With `--out -` standard output carries the blob; the summary must not corrupt it.
+    if crate::cli::is_stdout(&args.out) {
+        errln!("{summary}");
+        errln!("{}", fitted.noise_floor);
+    } else {
+        outln!("{summary}");
+        outln!("{}", fitted.noise_floor);
+    }
+    Ok(())
+}
+
+/// What [`fit_measurements`] produced: the blob, the `--json` report, the summary line and the
+/// noise floor's.
+pub struct Fitted {
+    pub blob: Vec<u8>,
+    pub report: serde_json::Value,
+    pub summary: String,
+    pub noise_floor: String,
+}
+
+/// The fit `cbd fit` runs, on measurements already read with the model's column spec (`args.data`
+/// names them in messages; `args.out` and `args.json` are not written here). One function for the
+/// command and the Python package, so both give the same blob for the same data and flags.
+pub fn fit_measurements(
+    args: &FitArgs,
+    mut nominal: cbd_protocol::NominalModel,
+    imported: crate::data::csv_import::ImportedMeasurements,
+) -> Result<Fitted> {
+    check_flags(args)?;
     for w in imported.warnings(&args.data) {
         errln!("warning: {w}");
     }
@@ -247,37 +289,22 @@ pub fn run(args: FitArgs) -> Result<()> {
     let calibration =
         crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings)).context(args.data.display())?;
     print_calibration(&calibration, args.solver.quiet);
-    let fit = &calibration.fit;
-    crate::cli::write_atomically(&args.out, &fit.blob)?;
-    if let Some(path) = &args.json {
-        let mut json = calibration.to_json();
-        if let Some(r) = &registration {
-            json["registered_base"] = r.to_json();
-        }
-        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
-        crate::cli::write_atomically(path, text.as_bytes())?;
+    let mut report = calibration.to_json();
+    if let Some(r) = &registration {
+        report["registered_base"] = r.to_json();
     }
-    let r = &fit.report;
+    let r = &calibration.fit.report;
     let last = r.log.last().map(|l| l.train_rms).unwrap_or(f64::NAN);
     let summary = format!(
-        "fitted {} measurements in {:.2} s: {} iterations ({}), training RMS error {:.3e}; blob {} bytes written to {}",
+        "fitted {} measurements in {:.2} s: {} iterations ({}), training RMS error {:.3e}",
         data.len(),
         r.seconds,
         r.iterations,
         r.stop_reason,
-        last,
-        fit.blob.len(),
-        args.out.display()
+        last
     );
-    let unit = spec.model_length_unit.name();
-    let floor = describe_noise_floor(&calibration, unit);
-    // With `--out -` standard output carries the blob; the summary must not corrupt it.
-    if crate::cli::is_stdout(&args.out) {
-        errln!("{summary}");
-        errln!("{floor}");
-    } else {
-        outln!("{summary}");
-        outln!("{floor}");
-    }
-    Ok(())
+    // The model's length unit (the data are read into it): the floor's line names it.
+    let unit = load_nominal(&args.model)?.1.model_length_unit.name();
+    let noise_floor = describe_noise_floor(&calibration, unit);
+    Ok(Fitted { blob: calibration.fit.blob, report, summary, noise_floor })
 }

@@ -17,6 +17,7 @@ pub mod compensate;
 pub mod demo;
 pub mod diagnose;
 pub mod eval;
+pub mod export;
 pub mod fit;
 pub mod plan;
 pub mod report;
@@ -52,6 +53,8 @@ pub enum Command {
     Compensate(compensate::CompensateArgs),
     /// Trace the residual to physical effects (library fit, out-of-sample selection) and report before/after.
     Diagnose(diagnose::DiagnoseArgs),
+    /// The calibrated geometry for ROS: a URDF (joint origins calibrated) and the UR description's kinematics file.
+    Export(export::ExportArgs),
     /// Where to measure next: poses within the joint limits chosen for identifiability and CbD's
     /// posterior variance, with the predicted RMS error after each (learning curve).
     Plan(plan::PlanArgs),
@@ -147,6 +150,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Diagnose(args) => diagnose::run(args),
         Command::Compensate(args) => compensate::run(args),
         Command::Plan(args) => plan::run(args),
+        Command::Export(args) => export::run(args),
     }
 }
 
@@ -158,8 +162,12 @@ pub use crate::memory;
 /// Writes one line to stdout (locked, flushed as `println!` does). A closed pipe (EPIPE: the reader
 /// took what it wanted, `| head -1`) is a quiet, successful exit — what the default SIGPIPE does for
 /// C tools, without Rust's `println!` panic; any other write error is an error line and exit code 1.
+/// A program's message sink (`io::set_message_sink`) takes the line instead.
 pub fn print_line(args: std::fmt::Arguments<'_>) {
     use std::io::Write;
+    if crate::io::to_sink(crate::io::Stream::Out, args) {
+        return;
+    }
     let mut out = std::io::stdout().lock();
     match writeln!(out, "{args}").and_then(|_| out.flush()) {
         Ok(()) => {}

@@ -93,6 +93,17 @@ pub struct ModelFile {
     /// `[chain] base = { register = true }`: the base is unknown (identity in `nominal`) and is
     /// registered on the training data (`nominal::register`).
     pub register_base: bool,
+    /// `[urdf]`: the URDF the chain was read from (`cbd export` rewrites its origins).
+    pub urdf: Option<UrdfSource>,
+}
+
+/// Where a `[urdf]` model's chain comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UrdfSource {
+    /// The URDF file (relative paths resolved against the model file's folder).
+    pub path: PathBuf,
+    pub base_link: String,
+    pub tip_link: String,
 }
 
 /// `[measurements] pose`: a measured tool pose's columns — its position and a unit quaternion
@@ -264,6 +275,11 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         }
     }
     let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).or(urdf_base).is_some_and(|b| b.register == Some(true));
+    let urdf = raw.urdf.as_ref().map(|u| UrdfSource {
+        path: sections::urdf_path(u, path),
+        base_link: u.base_link.clone(),
+        tip_link: u.tip_link.clone(),
+    });
     let (mut nominal, joint_names) = if let Some(chain) = raw.chain {
         sections::dh_chain(&chain, deg, path)?
     } else if let Some(u) = raw.urdf {
@@ -307,6 +323,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         None => None,
     };
     Ok(ModelFile {
+        urdf,
         joint_map,
         planar_frame,
         register_base,

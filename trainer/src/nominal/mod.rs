@@ -4,6 +4,7 @@
 //! runtime's (`cbd_runtime::kinematics::rigid::dh_walk`): one walk for the trainer and the controller.
 
 pub mod dh_parameters;
+pub mod export;
 pub mod planar;
 mod positions;
 pub use positions::{positions, row_kinematics};

@@ -68,7 +68,7 @@ struct AxisLine {
 }
 
 /// The joints from `base_link` to `tip_link`, base first.
-fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) -> Result<Vec<&'a urdf_rs::Joint>> {
+pub(crate) fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) -> Result<Vec<&'a urdf_rs::Joint>> {
     if !robot.links.iter().any(|l| l.name == base_link) {
         return Err(Error::Urdf(format!("URDF robot '{}' has no link named '{base_link}' (base_link)", robot.name)));
     }
@@ -99,7 +99,7 @@ fn joint_path<'a>(robot: &'a urdf_rs::Robot, base_link: &str, tip_link: &str) ->
 }
 
 /// Pose of a URDF joint origin, lengths scaled.
-fn origin_pose(origin: &urdf_rs::Pose, length_scale: f64) -> Frame {
+pub(crate) fn origin_pose(origin: &urdf_rs::Pose, length_scale: f64) -> Frame {
     let [r, p, y] = origin.rpy.0;
     rpy(r, p, y).with_translation(scale(origin.xyz.0, length_scale))
 }
@@ -140,7 +140,7 @@ fn check_origin(joint: &urdf_rs::Joint, length_scale: f64) -> Result<()> {
     Ok(())
 }
 
-fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+pub(crate) fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
     let n = norm(v);
     (n > 1e-12).then(|| scale(v, 1.0 / n))
 }
@@ -199,12 +199,14 @@ fn dh_from_axis_lines(lines: &[AxisLine], tip: &Frame) -> DhChain {
         let c = cross(z, z2);
         let (x, a, d, origin) = if norm(c) > 1e-9 {
             let x = scale(c, 1.0 / norm(c));
-            // Closest points of the lines o + t1 z and p2 + t2 z2.
-            let w = sub(o, p2);
-            let (b, dz, e) = (dot(z, z2), dot(z, w), dot(z2, w));
-            let denom = 1.0 - b * b;
-            let t1 = (b * e - dz) / denom;
-            let t2 = (e - b * dz) / denom;
+            // Closest points of the lines o + t1 z and p2 + t2 z2: t1 = (w × z2)·c / |c|²,
+            // t2 = (w × z)·c / |c|² with w = p2 − o. Written with c = z × z2 itself, not 1 − (z·z2)²,
+            // which cancels for nearly parallel axes (a calibrated UR5's joints 2–4): that lost
+            // 1e-9 of the reach in the DH form of an exported URDF.
+            let w = sub(p2, o);
+            let cc = dot(c, c);
+            let t1 = dot(cross(w, z2), c) / cc;
+            let t2 = dot(cross(w, z), c) / cc;
             let c1 = add(o, scale(z, t1));
             let c2 = add(p2, scale(z2, t2));
             (x, dot(sub(c2, c1), x), t1, c2)

@@ -8,7 +8,7 @@ use crate::nominal::planar::PlanarFrame;
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::{rpy, Frame};
 use cbd_protocol::{DhChain, DhConvention, DhJoint, JointKind, NominalModel, Transform, MAX_JOINTS};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The nominal model and its joint names.
 type Section = (NominalModel, Vec<String>);
@@ -80,8 +80,17 @@ pub(super) fn dh_chain(chain: &RawChain, deg: f64, path: &Path) -> Result<Sectio
 
 /// `[urdf]`: the URDF's chain from `base_link` to `tip_link` as a DH chain in `length_unit`; a
 /// relative URDF path is relative to the model file at `path`.
+/// The `[urdf]` file's path: as given when absolute, else relative to the model file at `path`.
+pub(super) fn urdf_path(u: &RawUrdf, path: &Path) -> PathBuf {
+    if u.path.is_absolute() {
+        u.path.clone()
+    } else {
+        path.parent().unwrap_or(Path::new("")).join(&u.path)
+    }
+}
+
 pub(super) fn urdf_chain(u: &RawUrdf, length_unit: LengthUnit, path: &Path) -> Result<Section, ImportError> {
-    let urdf_path = if u.path.is_absolute() { u.path.clone() } else { path.parent().unwrap_or(Path::new("")).join(&u.path) };
+    let urdf_path = urdf_path(u, path);
     let urdf_err = |message: String| ImportError::Urdf { file: urdf_path.clone(), message };
     let bytes = crate::data::read_capped(&urdf_path, crate::data::MAX_URDF_BYTES, "URDF").map_err(|e| urdf_err(e.without_path()))?;
     let text = String::from_utf8(bytes).map_err(|e| urdf_err(format!("not UTF-8 text: {e}")))?;

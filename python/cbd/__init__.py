@@ -1,0 +1,23 @@
+"""cbd — Calibration by Diffeomorphisms for robot arms, from Python: numpy in, numpy out.
+
+The same pipeline as the ``cbd`` command (a fit from Python and ``cbd fit`` on the same data give
+the same blob bytes), and the runtime a controller runs for evaluation and compensation::
+
+    import numpy as np, cbd
+    model_file = cbd.ModelFile.load("examples/ur5/ur5.toml")
+    data = np.loadtxt("examples/ur5/train.csv", delimiter=",", skiprows=1)
+    model = cbd.fit(model_file, data[:, :6], data[:, 6:], dh_first=True)
+    q, _ = model_file.to_model(data[:, :6], data[:, 6:])      # degrees → radians, as the import does
+    positions = model.evaluate(q)                              # mm, the model's length unit
+
+Progress and warnings go to the ``logging`` logger ``"cbd"``; failures raise :class:`CbdError`
+(a ``ValueError``) with the command's message.
+"""
+
+import logging as _logging
+
+from ._cbd import CbdError, Model, ModelFile, __version__, compare, diagnose, fit, simulate
+
+_logging.getLogger("cbd").addHandler(_logging.NullHandler())
+
+__all__ = ["CbdError", "Model", "ModelFile", "__version__", "compare", "diagnose", "fit", "simulate"]

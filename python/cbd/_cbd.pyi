@@ -1,0 +1,101 @@
+"""Type stubs of cbd's native module (cbd._cbd); every name is re-exported by ``cbd``."""
+
+import os
+from typing import Any, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+Array = npt.NDArray[np.float64]
+PathLike = Union[str, "os.PathLike[str]"]
+Data = Union[PathLike, Tuple[Array, Array]]
+Option = Union[bool, int, float, str, None, Sequence[Union[int, float, str]]]
+
+class CbdError(ValueError):
+    """A cbd failure, with the message the ``cbd`` command prints (file, line, column or field
+    named; in arrays, ``(q, y) row r``)."""
+
+class ModelFile:
+    """A model file (TOML: DH table, URDF chain or planar arm; units; CSV columns), read and checked."""
+
+    @staticmethod
+    def load(path: PathLike) -> "ModelFile":
+        """Reads and checks a model file; raises CbdError naming the file and the faulty field."""
+    @property
+    def path(self) -> str: ...
+    @property
+    def name(self) -> Optional[str]: ...
+    @property
+    def joint_names(self) -> list[str]:
+        """The URDF's joint names, or q1 … qn."""
+    @property
+    def n_joints(self) -> int: ...
+    @property
+    def task_dim(self) -> int:
+        """Coordinates per point: 3, or 2 for a planar arm."""
+    @property
+    def length_unit(self) -> str:
+        """The model's length unit: every length of a fitted model is in it."""
+    @property
+    def joint_columns(self) -> list[str]:
+        """What ``q`` holds, column by column (``[measurements] joints``)."""
+    @property
+    def position_columns(self) -> list[str]:
+        """What ``y`` holds: positions (per tool point), or a pose's position then orientation."""
+    def to_model(self, q: Array, y: Optional[Array] = None) -> Tuple[Array, Array]:
+        """Rows in the columns' units → the model's (radians, the model's length unit, joint map
+        and planar frame applied, a pose read as its tool points), by the CSV import itself:
+        ``(q, y)``, one row per (pose, tool point). With ``y=None`` the joints alone."""
+
+class Model:
+    """A calibrated model: the blob ``cbd fit`` writes. Evaluated by the runtime, in the blob's
+    units: joints in radians (prismatic: the length unit) in the model's order, positions in its
+    length unit."""
+
+    @staticmethod
+    def from_bytes(data: bytes) -> "Model":
+        """A model from blob bytes, checked as ``cbd eval`` checks a blob file."""
+    @staticmethod
+    def load(path: PathLike) -> "Model":
+        """Reads a blob file (``cbd fit --out``)."""
+    def to_bytes(self) -> bytes:
+        """The blob: what the runtime, the C library and the firmware load."""
+    def save(self, path: PathLike) -> None:
+        """Writes the blob to ``path`` atomically."""
+    @property
+    def report(self) -> Optional[dict[str, Any]]:
+        """The fit's report (``cbd fit --json``); None for a model read from a blob."""
+    @property
+    def n_joints(self) -> int: ...
+    @property
+    def task_dim(self) -> int: ...
+    @property
+    def tool_point_count(self) -> int: ...
+    def evaluate(self, q: Array, jacobian: bool = False, point: int = 0) -> Union[Array, Tuple[Array, Array]]:
+        """Calibrated positions (n, task_dim) of tool point ``point`` at each row of ``q`` (n,
+        joints), bit for bit the runtime's; with ``jacobian=True`` also the exact Jacobians
+        (n, task_dim, joints)."""
+    def evaluate_pose(self, q: Array, jacobian: bool = False) -> Tuple[Array, ...]:
+        """The calibrated tool frame (3 or more tool points): ``(origins (n, 3), rotations (n, 3, 3))``,
+        with ``jacobian=True`` also (n, 6, joints)."""
+    def compensate(self, targets: Array, seeds: Optional[Array] = None, iterations: int = 8) -> Tuple[Array, list[str]]:
+        """Joint commands (n, joints) putting the calibrated tool at each target (n, task_dim), as
+        ``cbd compensate``, and a flag per row (``ok``, or ``not_reached``/``singular``/
+        ``extrapolating`` joined by ``+``)."""
+
+def fit(model: Optional[ModelFile], q: Array, y: Array, **options: Option) -> Model:
+    """Fits a calibrated model, as ``cbd fit`` on a CSV of these columns: ``q`` (n, joints) and
+    ``y`` (n, ·) in the model file's column units (``model=None``: the built-in RR arm). ``options``
+    are the command's flags by name (``dh_first=True``, ``max_rows=500``, ``sigma=1e-3``, …). The GIL
+    is released while it runs; progress goes to the ``cbd`` logger."""
+
+def compare(model: ModelFile, train: Data, test: Data, **options: Option) -> dict[str, Any]:
+    """Every method side by side (``cbd compare``); its JSON as a dict."""
+
+def diagnose(model: Optional[ModelFile], data: Data, test: Optional[Data] = None, **options: Option) -> dict[str, Any]:
+    """Traces the residual to physical effects (``cbd diagnose``); its JSON as a dict."""
+
+def simulate(**options: Option) -> Tuple[Array, Array]:
+    """Simulated measurements (``cbd simulate``'s flags by name): ``(q, y)`` in the CSV's units."""

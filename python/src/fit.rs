@@ -1,0 +1,53 @@
+//! `cbd.fit`: the fit `cbd fit` runs (`cli::fit::fit_measurements`), with the data as arrays and the
+//! command's own flags as keyword arguments — so the same data and flags give the same blob bytes.
+
+use crate::commands::{command_args, flags_from_options};
+use crate::errors::{guarded, one_at_a_time, Failure};
+use crate::model::Model;
+use crate::model_file::{arrays_csv, spec_of, ModelFile, ARRAYS};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Fits a calibrated model to measurements: `q` (n, joints) the joint columns and `y` (n, ·) the
+/// position columns of the model file's `[measurements]`, in their units — the numbers a CSV for
+/// `cbd fit --model …` would hold (`model=None`: the built-in RR arm, q1, q2 in radians, x, y).
+/// `options` are `cbd fit`'s flags by name (`dh_first=True`, `max_rows=500`, `sigma=1e-3`, …; every
+/// flag the command has, as it has it). The GIL is released while it runs; progress goes to the
+/// "cbd" logger. Raises CbdError with the command's message (a CSV line becomes `(q, y) row r`).
+#[pyfunction]
+#[pyo3(signature = (model, q, y, **options))]
+pub fn fit(
+    py: Python<'_>,
+    model: Option<PyRef<'_, ModelFile>>,
+    q: &Bound<'_, PyAny>,
+    y: &Bound<'_, PyAny>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Model> {
+    let mut args = vec!["fit".to_string(), "--data".into(), ARRAYS.into(), "--out".into(), "-".into()];
+    if let Some(m) = &model {
+        args.extend(["--model".into(), m.path.display().to_string()]);
+    }
+    args.extend(flags_from_options("fit", options, &["model", "data", "out", "json"])?);
+    let cbd_trainer::cli::Command::Fit(fit_args) = command_args(&args)? else { unreachable!("parsed as fit") };
+    let (nominal, spec) = spec_of(model.as_deref())?;
+    let text = arrays_csv(&spec, q, Some(y))?;
+    let fitted = py
+        .detach(|| {
+            guarded(|| {
+                let _one = one_at_a_time();
+                let threads = cbd_trainer::cli::memory::workers_for_memory(cbd_trainer::cli::memory::available_bytes());
+                let fitted = cbd_trainer::workers::run_in_pool(threads, || {
+                    let imported =
+                        cbd_trainer::data::csv_import::read_measurements_from(text.as_bytes(), std::path::Path::new(ARRAYS), &spec)?;
+                    cbd_trainer::cli::fit::fit_measurements(&fit_args, nominal, imported)
+                })
+                .map_err(cbd_trainer::Error::from)??;
+                Ok::<_, Failure>(fitted)
+            })
+        })
+        .map_err(|e| e.into_py(&[(ARRAYS, ARRAYS)]))?;
+    cbd_trainer::errln!("{}", fitted.summary);
+    cbd_trainer::errln!("{}", fitted.noise_floor);
+    let report = serde_json::to_string(&fitted.report).map_err(|e| crate::errors::cbd_error(e.to_string()))?;
+    py.detach(|| guarded(|| Model::new(fitted.blob, Some(report)))).map_err(|e| e.into_py(&[]))
+}

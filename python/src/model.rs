@@ -1,0 +1,217 @@
+//! `cbd.Model`: a fitted model's blob, evaluated and compensated by the runtime (the code a
+//! controller runs), in the blob's units: joints in radians (prismatic: the model's length unit) in
+//! the model's joint order, positions in its length unit.
+
+use crate::arrays::{matrix, out2, out3};
+use crate::errors::{cbd_error, guarded, Failure};
+use cbd_runtime::Calibrator;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyTuple};
+use std::path::PathBuf;
+
+/// A calibrated model: the blob `cbd fit` writes, and (after `cbd.fit`) the fit's report.
+#[pyclass(module = "cbd", frozen)]
+pub struct Model {
+    pub blob: Vec<u8>,
+    /// The fit's JSON report (what `cbd fit --json` writes), as text.
+    pub report: Option<String>,
+    n_joints: usize,
+    task_dim: usize,
+    tool_points: usize,
+}
+
+impl Model {
+    /// A checked model: the blob decodes, the runtime loads it, and it evaluates to finite values
+    /// at its own training configurations (`predict::check_calibrator`).
+    pub fn new(blob: Vec<u8>, report: Option<String>) -> Result<Model, Failure> {
+        let (n_joints, task_dim, tool_points) = with_calibrator(&blob, |cal| {
+            cbd_trainer::predict::check_calibrator(cal).map_err(|e| Failure(e.to_string()))?;
+            let m = cal.model();
+            Ok((m.n_joints(), m.task_dim(), m.nominal.tool_point_count()))
+        })?;
+        Ok(Model { blob, report, n_joints, task_dim, tool_points })
+    }
+
+    fn queries(&self, name: &str, q: &Bound<'_, PyAny>) -> PyResult<crate::arrays::Rows> {
+        matrix(name, q, self.n_joints, "joints in radians (prismatic: the model's length unit), the model's order")
+    }
+}
+
+/// Loads `blob` into a runtime calibrator (storage of its own) for `work`.
+fn with_calibrator<T>(blob: &[u8], work: impl FnOnce(&mut Calibrator<'_>) -> Result<T, Failure>) -> Result<T, Failure> {
+    let model = cbd_protocol::decode(blob).map_err(|e| Failure(e.to_string()))?;
+    let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
+    let mut cal = Calibrator::from_model(model, &mut storage).map_err(|e| Failure(e.to_string()))?;
+    work(&mut cal)
+}
+
+#[pymethods]
+impl Model {
+    /// A model from blob bytes (checked as `cbd eval` checks a blob file).
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: Vec<u8>) -> PyResult<Model> {
+        py.detach(|| guarded(|| Model::new(data, None))).map_err(|e| e.into_py(&[]))
+    }
+
+    /// Reads a blob file (`cbd fit --out`).
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
+        let blob =
+            cbd_trainer::data::read_capped(&path, cbd_trainer::data::MAX_BLOB_BYTES, "blob").map_err(|e| cbd_error(e.to_string()))?;
+        py.detach(|| guarded(|| Model::new(blob, None))).map_err(|e| cbd_error(format!("{}: {}", path.display(), e.0)))
+    }
+
+    /// The blob's bytes: what `cbd fit` writes, what the runtime and the C library load.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.blob)
+    }
+
+    /// Writes the blob to `path` (atomically: a reader never sees a part-written file).
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        cbd_trainer::io::write_atomically(&path, &self.blob).map_err(|e| cbd_error(e.to_string()))
+    }
+
+    /// The fit's report (`cbd fit --json`: hyperparameters, evidence, scheme, the fit, warnings) as
+    /// a dict; None for a model read from a blob.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        match &self.report {
+            Some(text) => Ok(Some(py.import("json")?.call_method1("loads", (text,))?)),
+            None => Ok(None),
+        }
+    }
+
+    #[getter]
+    fn n_joints(&self) -> usize {
+        self.n_joints
+    }
+
+    /// Coordinates of a position: 3, or 2 for a planar arm.
+    #[getter]
+    fn task_dim(&self) -> usize {
+        self.task_dim
+    }
+
+    /// Measured points on the tool (1 without `tool.points`).
+    #[getter]
+    fn tool_point_count(&self) -> usize {
+        self.tool_points
+    }
+
+    /// The calibrated position of tool point `point` at each row of `q` (n, joints): an (n, task_dim)
+    /// array, bit for bit what the runtime (and the C library, the firmware) computes. With
+    /// `jacobian=True`, `(positions, jacobians)`, the exact Jacobians as (n, task_dim, joints).
+    #[pyo3(signature = (q, jacobian=false, point=0))]
+    fn evaluate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool, point: usize) -> PyResult<Bound<'py, PyAny>> {
+        let q = self.queries("q", q)?;
+        if point >= self.tool_points {
+            return Err(cbd_error(format!("point {point}: the model has {} tool point(s)", self.tool_points)));
+        }
+        let (n, m, rows) = (self.n_joints, self.task_dim, q.rows);
+        let (positions, jacobians) = py
+            .detach(|| {
+                guarded(|| {
+                    with_calibrator(&self.blob, |cal| {
+                        let (mut p, mut jac) = (Vec::with_capacity(rows * m), Vec::with_capacity(if jacobian { rows * m * n } else { 0 }));
+                        for r in 0..rows {
+                            let e = cal.evaluate_point(q.row(r), point).map_err(|e| Failure(format!("q row {r}: {e}")))?;
+                            p.extend(e.position().iter());
+                            if jacobian {
+                                let j = e.jacobian();
+                                jac.extend((0..m).flat_map(|a| (0..n).map(move |d| j[(a, d)])));
+                            }
+                        }
+                        Ok((p, jac))
+                    })
+                })
+            })
+            .map_err(|e| e.into_py(&[]))?;
+        let positions = out2(py, positions, rows, m).into_any();
+        if !jacobian {
+            return Ok(positions);
+        }
+        Ok(PyTuple::new(py, [positions, out3(py, jacobians, rows, m, n).into_any()])?.into_any())
+    }
+
+    /// The calibrated tool frame at each row of `q` (models with 3 or more tool points): `(origins,
+    /// rotations)`, (n, 3) and (n, 3, 3) — the least-squares frame of the calibrated points, as the
+    /// runtime's `evaluate_pose`. With `jacobian=True` also its (n, 6, joints) Jacobians (origin
+    /// rows, then rotation rows).
+    #[pyo3(signature = (q, jacobian=false))]
+    fn evaluate_pose<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool) -> PyResult<Bound<'py, PyTuple>> {
+        let q = self.queries("q", q)?;
+        let (n, rows) = (self.n_joints, q.rows);
+        let (origins, rotations, jacobians) = py
+            .detach(|| {
+                guarded(|| {
+                    with_calibrator(&self.blob, |cal| {
+                        let (mut o, mut r, mut jac) = (Vec::new(), Vec::new(), Vec::new());
+                        for row in 0..rows {
+                            let e = cal.evaluate_pose(q.row(row)).map_err(|e| Failure(format!("q row {row}: {e}")))?;
+                            o.extend(e.origin());
+                            r.extend(e.rotation().iter().flatten());
+                            if jacobian {
+                                let j = e.jacobian();
+                                jac.extend((0..6).flat_map(|a| (0..n).map(move |d| j[(a, d)])));
+                            }
+                        }
+                        Ok((o, r, jac))
+                    })
+                })
+            })
+            .map_err(|e| e.into_py(&[]))?;
+        let mut out = vec![out2(py, origins, rows, 3).into_any(), out3(py, rotations, rows, 3, 3).into_any()];
+        if jacobian {
+            out.push(out3(py, jacobians, rows, 6, n).into_any());
+        }
+        PyTuple::new(py, out)
+    }
+
+    /// Joint commands that put the calibrated tool at each target (n, task_dim), as `cbd compensate`
+    /// computes them: from `seeds` (n, joints), or without, from the training configuration whose
+    /// nominal position is nearest the target; `iterations` Gauss–Newton steps. Returns `(commands,
+    /// flags)`: an (n, joints) array and one flag string per row (`ok`, or `not_reached`,
+    /// `singular`, `extrapolating` joined by `+`).
+    #[pyo3(signature = (targets, seeds=None, iterations=8))]
+    fn compensate<'py>(
+        &self,
+        py: Python<'py>,
+        targets: &Bound<'py, PyAny>,
+        seeds: Option<&Bound<'py, PyAny>>,
+        iterations: usize,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let t = matrix("targets", targets, self.task_dim, "positions in the model's length unit")?;
+        let s = seeds.map(|s| self.queries("seeds", s)).transpose()?;
+        if let Some(s) = &s {
+            if s.rows != t.rows {
+                return Err(cbd_error(format!("targets has {} rows and seeds {}: one seed per target", t.rows, s.rows)));
+            }
+        }
+        if iterations == 0 {
+            return Err(cbd_error("iterations must be at least 1"));
+        }
+        let (targets, seeds) = (t.to_vecs(), s.map(|s| s.to_vecs()));
+        let rows = py
+            .detach(|| {
+                guarded(|| {
+                    cbd_trainer::evaluation::compensation::compensate_all(&self.blob, &targets, seeds.as_deref(), iterations, None).map_err(
+                        |e| match e {
+                            cbd_trainer::evaluation::compensation::CompensateError::Row { row, message } => {
+                                Failure(format!("targets row {row}: {message}"))
+                            }
+                            other => Failure(other.to_string()),
+                        },
+                    )
+                })
+            })
+            .map_err(|e| e.into_py(&[]))?;
+        let n = self.n_joints;
+        let flags: Vec<String> = rows.iter().map(|r| cbd_trainer::cli::compensate::flags(&r.compensation)).collect();
+        let commands = out2(py, rows.into_iter().flat_map(|r| r.joints).collect(), targets.len(), n);
+        PyTuple::new(py, [commands.into_any(), flags.into_pyobject(py)?.into_any()])
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Model({} joints, {}-D positions, {} bytes)", self.n_joints, self.task_dim, self.blob.len())
+    }
+}

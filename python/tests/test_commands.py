@@ -1,0 +1,62 @@
+"""compare, diagnose and simulate are the commands: the same JSON keys, the same data."""
+
+import json
+import logging
+import threading
+import time
+
+import numpy as np
+
+import cbd
+from conftest import UR5, read_csv, run
+
+
+def test_simulate_returns_the_commands_rows(cbd_bin, tmp_path):
+    q, y = cbd.simulate(robot="six", sampling="uniform", count=25, seed=3, noise=0.02)
+    run(cbd_bin, "simulate", "--robot", "six", "--sampling", "uniform", "--count", "25", "--seed", "3", "--noise", "0.02", "--out", tmp_path / "s.csv")
+    data = read_csv(tmp_path / "s.csv")
+    assert np.array_equal(q, data[:, :6]) and np.array_equal(y, data[:, 6:])
+    q, y = cbd.simulate(robot="six", sampling="uniform", count=4, tool_points="0,0,0;100,0,0;50,86.6,0", pose=True)
+    assert q.shape == (4, 6) and y.shape == (4, 9 + 7)
+
+
+def test_compare_and_diagnose_give_the_commands_json(rr_dir, cbd_bin, tmp_path):
+    rr = cbd.ModelFile.load(rr_dir / "rr.toml")
+    train, test = read_csv(rr_dir / "train.csv"), read_csv(rr_dir / "test.csv")
+    got = cbd.compare(rr, (train[:, :2], train[:, 2:]), rr_dir / "test.csv")
+    run(cbd_bin, "compare", "--model", rr_dir / "rr.toml", "--train", rr_dir / "train.csv", "--test", rr_dir / "test.csv", "--json", tmp_path / "c.json")
+    want = json.loads((tmp_path / "c.json").read_text())
+    assert got.keys() == want.keys()
+    assert [m["method"] if "method" in m else m for m in got["methods"]] == [m["method"] if "method" in m else m for m in want["methods"]]
+    got = cbd.diagnose(rr, (train[:, :2], train[:, 2:]), (test[:, :2], test[:, 2:]), no_cbd=True)
+    run(cbd_bin, "diagnose", "--no-cbd", "--model", rr_dir / "rr.toml", "--data", rr_dir / "train.csv", "--test", rr_dir / "test.csv", "--json", tmp_path / "d.json")
+    want = json.loads((tmp_path / "d.json").read_text())
+    assert got.keys() == want.keys()
+
+
+def test_messages_go_to_logging_never_to_stdout(rr_dir, capfd, caplog):
+    data = read_csv(rr_dir / "train.csv")
+    with caplog.at_level(logging.INFO, logger="cbd"):
+        cbd.fit(None, data[:, :2], data[:, 2:])
+    out, _ = capfd.readouterr()
+    assert out == ""
+    messages = [r.getMessage() for r in caplog.records if r.name == "cbd"]
+    assert any(m.startswith("hyperparameters") for m in messages) and any(m.startswith("fitted 36 measurements") for m in messages), messages
+
+
+def test_the_gil_is_released_during_a_fit(ur5_file, ur5_train):
+    ticks, done = [0], threading.Event()
+
+    def fit():
+        cbd.fit(ur5_file, ur5_train[:, :6], ur5_train[:, 6:], max_rows=200, quiet=True)
+        done.set()
+
+    worker = threading.Thread(target=fit)
+    start = time.perf_counter()
+    worker.start()
+    while not done.is_set():
+        ticks[0] += 1
+        time.sleep(0.001)
+    worker.join()
+    # Held, the main thread would not run until the fit returned: a few ticks at most.
+    assert ticks[0] > 50, f"{ticks[0]} ticks in {time.perf_counter() - start:.2f} s"
