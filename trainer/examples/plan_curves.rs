@@ -18,9 +18,8 @@
 //! `CBD_PLAN_MAXIMIN=1` plans with `--criterion maximin` (model-free space filling in joint angle).
 
 use cbd_protocol::{IntegratorMethod, NominalModel};
-use cbd_trainer::calibrate::{calibrate, Settings};
+use cbd_trainer::calibrate::{calibrate, Geometry, Settings};
 use cbd_trainer::data::Measurements;
-use cbd_trainer::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_trainer::plan::{candidates, plan, prior, Criterion, PlanInput, PlanOptions};
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
 use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
@@ -79,28 +78,13 @@ impl Arm {
         Measurements { n_joints: n, task_dim: m, joints: joints.to_vec(), positions, points_per_pose: 1 }
     }
 
-    /// RMS error against the truth at `test` of dh+cbd (Euler × 1) fitted on `data`.
+    /// RMS error against the truth at `test` of what `cbd fit` writes (Euler × 1) fitted on `data`:
+    /// its geometry chosen by the evidence (a planar arm: the nominal, its blob holds lengths only).
     fn reached(&self, data: &Measurements, test: &[f64]) -> f64 {
         let (n, m) = (self.nominal.n_joints(), self.nominal.task_dim());
-        let dh = calibrate_dh(&self.nominal, data, &DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() })
-            .expect("DH fit");
-        let settings = Settings { integrator: Some(IntegratorMethod::Euler), steps: Some(1), ..Default::default() };
-        // A planar arm's DH form is calibrated by CbD as its planar chain in its frame (as `cbd compare`).
-        let (got, _) = match cbd_trainer::nominal::planar::as_planar_in_frame(&dh.model).filter(|_| m == 2) {
-            Some((chain, frame)) => {
-                let mut moved = data.clone();
-                for i in 0..moved.len() {
-                    frame.move_row(&mut moved.joints[i * n..(i + 1) * n], &mut moved.positions[i * m..(i + 1) * m]);
-                }
-                let cal = calibrate(&chain, &moved, &settings).expect("dh+cbd fit");
-                let got = cbd_trainer::predict::evaluate_blob(&cal.fit.blob, &frame.chain_joints(test)).unwrap();
-                (got.chunks_exact(2).flat_map(|p| frame.from_chain(p)).collect::<Vec<f64>>(), ())
-            }
-            None => {
-                let cal = calibrate(&dh.model, data, &settings).expect("dh+cbd fit");
-                (cbd_trainer::predict::evaluate_blob(&cal.fit.blob, test).unwrap(), ())
-            }
-        };
+        let settings = Settings { integrator: Some(IntegratorMethod::Euler), steps: Some(1), verbose: false, ..Default::default() };
+        let cal = calibrate(&self.nominal, data, &settings).expect("fit");
+        let got = cbd_trainer::predict::evaluate_blob(&cal.fit.blob, test).unwrap();
         let count = test.len() / n;
         let se: f64 = test
             .chunks_exact(n)
@@ -150,6 +134,8 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         let q = (arm.random)(400, 700 + seed);
         prior::from_measurements(&arm.nominal, &arm.measure(&q, 800 + seed)).expect("evidence")
     });
+    // The geometry planned for: the calibrated one before any pose (the stated prior), then what
+    // `cbd fit` would choose on the poses measured so far.
     // CBD_PLAN_BATCH=b: at most b poses per `cbd plan` (re-estimated in between); default: one
     // batch per curve point.
     let batch_max = env_usize("CBD_PLAN_BATCH", usize::MAX);
@@ -163,10 +149,10 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         let mut swaps = 0;
         while measured.as_ref().map_or(0, |d| d.len()) < k {
             let have = measured.as_ref().map_or(0, |d| d.len());
-            let hyperparameters = match (&oracle, &measured) {
-                (Some(h), _) => h.clone(),
-                (None, Some(d)) => prior::from_measurements(&arm.nominal, d).expect("evidence"),
-                (None, None) => stated.clone(),
+            let (hyperparameters, geometry) = match (&oracle, &measured) {
+                (Some((h, g)), _) => (h.clone(), g.chosen),
+                (None, Some(d)) => prior::from_measurements(&arm.nominal, d).map(|(h, g)| (h, g.chosen)).expect("evidence"),
+                (None, None) => (stated.clone(), Geometry::Calibrated),
             };
             let input = PlanInput {
                 nominal: &arm.nominal,
@@ -175,6 +161,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
                 user_candidates: &[],
                 measured: measured.as_ref(),
                 hyperparameters,
+                geometry,
             };
             let count = (k - have).min(batch_max);
             let t = std::time::Instant::now();
@@ -200,7 +187,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
         }
         let all = measured.clone().expect("measured");
         // What `cbd plan --data` reports on all of them (count 0).
-        let h = prior::from_measurements(&arm.nominal, &all).expect("evidence");
+        let (h, g) = prior::from_measurements(&arm.nominal, &all).expect("evidence");
         let input = PlanInput {
             nominal: &arm.nominal,
             limits: &arm.limits,
@@ -208,6 +195,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
             user_candidates: &[],
             measured: Some(&all),
             hyperparameters: h,
+            geometry: g.chosen,
         };
         let after = plan(&input, &PlanOptions { count: 0, candidates: 0, ..options(0, 0) }).expect("plan").measured_predicted_rms;
         let p = arm.reached(&all, &test);

@@ -169,15 +169,23 @@ pub fn run(args: PlanArgs) -> Result<()> {
         .flat_map(to_model)
         .collect();
     let reach = crate::plan::candidates::reach(&nominal, &sample);
-    let hyperparameters = match &measured {
+    // With measured poses the model `cbd fit` would write on them (its geometry and hyperparameters);
+    // before any, the calibrated geometry with a stated prior.
+    let (hyperparameters, geometry) = match &measured {
         Some(data) if data.len() >= 3 => {
-            prior::from_measurements(&nominal, data).context(args.data.as_ref().map_or(String::new(), |p| p.display().to_string()))?
+            let (h, choice) =
+                prior::from_measurements(&nominal, data).context(args.data.as_ref().map_or(String::new(), |p| p.display().to_string()))?;
+            errln!("{}", choice.describe());
+            (h, choice.chosen)
         }
-        _ => prior::stated(
-            &nominal,
-            &sample,
-            reach,
-            prior::StatedPrior { error: args.prior_error.unwrap_or(3e-4 * reach), noise: args.noise.unwrap_or(1e-5 * reach) },
+        _ => (
+            prior::stated(
+                &nominal,
+                &sample,
+                reach,
+                prior::StatedPrior { error: args.prior_error.unwrap_or(3e-4 * reach), noise: args.noise.unwrap_or(1e-5 * reach) },
+            ),
+            crate::calibrate::Geometry::Calibrated,
         ),
     };
     let input = PlanInput {
@@ -187,6 +195,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         user_candidates: &user_candidates,
         measured: measured.as_ref(),
         hyperparameters,
+        geometry,
     };
     let result = plan(&input, &options).context(&model_name)?;
 

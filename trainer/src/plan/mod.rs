@@ -84,6 +84,9 @@ pub struct PlanInput<'a> {
     /// Poses already measured (model joints, as imported).
     pub measured: Option<&'a Measurements>,
     pub hyperparameters: CbdHyperparameters,
+    /// The model planned for: CbD on the nominal chain, or with its geometric group calibrated
+    /// (whose identifiability the plan then tracks) — what `cbd fit` chooses on the measured poses.
+    pub geometry: crate::calibrate::Geometry,
 }
 
 /// What chooses the poses.
@@ -260,8 +263,11 @@ pub fn plan(input: &PlanInput, options: &PlanOptions) -> Result<Plan, PlanError>
     all.extend_from_slice(&workspace);
     all.extend_from_slice(&evaluation);
     all.extend_from_slice(measured_joints);
-    let mut geometric = crate::parametric::identification_jacobian(nominal, &all)
-        .map(|(jac, identifiable)| Identifiability::new(&jac, m, count_c, &identifiable));
+    let mut geometric = match input.geometry {
+        crate::calibrate::Geometry::Nominal => None,
+        _ => crate::parametric::identification_jacobian(nominal, &all)
+            .map(|(jac, identifiable)| Identifiability::new(&jac, m, count_c, &identifiable)),
+    };
 
     // The Gaussian process, conditioned on at most `max_conditioning` measured poses (evenly
     // spaced); the rest inform the geometric group's prior.

@@ -1,10 +1,11 @@
 //! The Gaussian process's hyperparameters for planning: CbD's own evidence on the poses measured so
-//! far (after the DH fit, as `cbd fit --dh-first` and `compare`'s dh+cbd choose them), or before any
-//! data a stated prior (docs/DESIGN.md §13).
+//! far — and the geometry `cbd fit` would choose on them, the model the plan is for (the pipeline's
+//! choice, `calibrate::geometry`) —, or before any data a stated prior for the calibrated geometry
+//! (docs/DESIGN.md §13).
 
+use crate::calibrate::{Geometry, GeometryChoice, Settings};
 use crate::data::Measurements;
-use crate::evidence::{choose_cbd_hyperparameters, CbdHyperparameters, EvidenceError, EvidenceOptions};
-use crate::parametric::{calibrate_dh, DhCalibrationOptions};
+use crate::evidence::CbdHyperparameters;
 use cbd_protocol::{JointKernelAxis, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 
@@ -43,23 +44,13 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
     }
 }
 
-/// CbD's evidence on what the DH fit of the geometric group leaves (the residual dh+cbd's CbD
-/// models), read as measurements of the nominal: y − (k_dh(q) − k0(q)); the data as they are when
-/// the DH fit fails.
-pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> Result<CbdHyperparameters, EvidenceError> {
-    let options = DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() };
-    let (n, m) = (data.n_joints, data.task_dim);
-    let mut residual_data = data.clone();
-    if let Ok(fit) = calibrate_dh(nominal, data, &options) {
-        let fitted = crate::nominal::positions(&fit.model, &data.joints, m);
-        for (i, q) in data.joints.chunks_exact(n).enumerate() {
-            let k0 = forward_kinematics(nominal, q);
-            for c in 0..m {
-                residual_data.positions[i * m + c] -= fitted[i * m + c] - k0.position[c];
-            }
-        }
-    }
-    let norm = crate::evidence::normalisation_of(&residual_data);
-    let evidence = choose_cbd_hyperparameters(nominal, &residual_data, &norm, &EvidenceOptions::default())?;
-    Ok(evidence.hyperparameters)
+/// The hypothesis `cbd fit` chooses on the measured poses (`calibrate::geometry::choose_geometry`:
+/// the nominal chain, or its geometric group calibrated first) and CbD's hyperparameters for it by
+/// its evidence — for the calibrated geometry on what the DH fit leaves, read as measurements of the
+/// nominal, y − (k_dh(q) − k0(q)), the residual the posterior's geometric basis starts from.
+pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> crate::Result<(CbdHyperparameters, GeometryChoice)> {
+    let settings = Settings { geometry: Geometry::Auto, verbose: false, ..Settings::default() };
+    let norm = crate::evidence::normalisation_of(data);
+    let (hypothesis, choice) = crate::calibrate::geometry::choose_geometry(nominal, data, &norm, &settings)?;
+    Ok((hypothesis.hyperparameters, choice))
 }

@@ -2,6 +2,7 @@
 //! against the error a calibration on the planned poses actually reaches.
 
 use super::*;
+use crate::calibrate::Geometry;
 use crate::simulate::six_joint::{random_configurations, SixJointRobot};
 
 fn ur5_limits() -> (NominalModel, Vec<[f64; 2]>) {
@@ -24,7 +25,15 @@ fn planned_poses_respect_limits_and_singular_margin() {
         let h = prior::stated(nominal, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise });
         // The user's candidates include exactly singular poses (q2 = 0 for RR; q3 = q5 = 0 for the UR5).
         let singular: Vec<f64> = if nominal.n_joints() == 2 { vec![0.4, 0.0, 1.0, 0.01] } else { vec![0.1, -1.0, 0.0, 0.2, 0.0, 0.3] };
-        let input = PlanInput { nominal, limits: &limits, to_model: None, user_candidates: &singular, measured: None, hyperparameters: h };
+        let input = PlanInput {
+            nominal,
+            limits: &limits,
+            to_model: None,
+            user_candidates: &singular,
+            measured: None,
+            hyperparameters: h,
+            geometry: Geometry::Calibrated,
+        };
         let greedy = PlanOptions { count: 25, candidates: 1500, seed: 3, workspace: 32, evaluation: 100, ..PlanOptions::default() };
         // The exchange passes only choose among the same candidates.
         let maximin = PlanOptions { criterion: Criterion::Maximin, ..greedy.clone() };
@@ -54,7 +63,15 @@ fn exchanged_plans_are_deterministic() {
     let sample = candidates::uniform_within(&limits, 300, 7);
     let reach = candidates::reach(&rr, &sample);
     let h = prior::stated(&rr, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: 1e-4 });
-    let input = PlanInput { nominal: &rr, limits: &limits, to_model: None, user_candidates: &[], measured: None, hyperparameters: h };
+    let input = PlanInput {
+        nominal: &rr,
+        limits: &limits,
+        to_model: None,
+        user_candidates: &[],
+        measured: None,
+        hyperparameters: h,
+        geometry: Geometry::Calibrated,
+    };
     let greedy = PlanOptions { count: 16, candidates: 800, seed: 9, workspace: 48, evaluation: 200, ..PlanOptions::default() };
     let plain = plan(&input, &greedy).unwrap();
     for exchange_workspace in [0, 96] {
@@ -74,7 +91,15 @@ fn unbounded_joint_is_refused() {
     let rr = crate::simulate::rr::nominal();
     let limits = [[-1.0, 1.0], [f64::NEG_INFINITY, f64::INFINITY]];
     let h = prior::stated(&rr, &[0.0, 0.5], 1.5, prior::StatedPrior { error: 1e-3, noise: 1e-5 });
-    let input = PlanInput { nominal: &rr, limits: &limits, to_model: None, user_candidates: &[], measured: None, hyperparameters: h };
+    let input = PlanInput {
+        nominal: &rr,
+        limits: &limits,
+        to_model: None,
+        user_candidates: &[],
+        measured: None,
+        hyperparameters: h,
+        geometry: Geometry::Calibrated,
+    };
     assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::UnboundedJoint { joint: 2 });
 }
 
@@ -85,7 +110,7 @@ fn exactly_fitted_data_give_hyperparameters_not_a_panic() {
     let rr = crate::simulate::rr::nominal();
     let data =
         Measurements { n_joints: 2, task_dim: 2, joints: [0.1, 0.2].repeat(50), positions: [1.3, 0.4].repeat(50), points_per_pose: 1 };
-    let h = prior::from_measurements(&rr, &data).expect("hyperparameters");
+    let (h, _) = prior::from_measurements(&rr, &data).expect("hyperparameters");
     assert!(h.sigma.is_finite() && h.sigma >= 0.0, "{h:?}");
 }
 
@@ -104,12 +129,20 @@ fn several_tool_points_are_refused() {
         user_candidates: &[],
         measured: None,
         hyperparameters: h.clone(),
+        geometry: Geometry::Calibrated,
     };
     assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::ToolPoints { points: 3 });
     let (six, _) = ur5_limits();
     let data = Measurements { n_joints: 6, task_dim: 3, joints: vec![0.1; 12], positions: vec![0.0; 18], points_per_pose: 3 };
-    let input =
-        PlanInput { nominal: &six, limits: &limits, to_model: None, user_candidates: &[], measured: Some(&data), hyperparameters: h };
+    let input = PlanInput {
+        nominal: &six,
+        limits: &limits,
+        to_model: None,
+        user_candidates: &[],
+        measured: Some(&data),
+        hyperparameters: h,
+        geometry: Geometry::Calibrated,
+    };
     assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::ToolPoints { points: 3 });
 }
 
@@ -123,9 +156,18 @@ fn predicted_error_matches_the_error_reached() {
     let mut robot = SixJointRobot::ur5_like(1);
     robot.noise_std = 0.02;
     let first = robot.measure(&random_configurations(30, 11), 12);
-    let h = prior::from_measurements(&six, &first).unwrap();
-    let input =
-        PlanInput { nominal: &six, limits: &limits, to_model: None, user_candidates: &[], measured: Some(&first), hyperparameters: h };
+    let (h, choice) = prior::from_measurements(&six, &first).unwrap();
+    // On 30 poses of an arm with geometric errors the evidence calibrates its geometry.
+    assert_eq!(choice.chosen, Geometry::Calibrated, "{}", choice.describe());
+    let input = PlanInput {
+        nominal: &six,
+        limits: &limits,
+        to_model: None,
+        user_candidates: &[],
+        measured: Some(&first),
+        hyperparameters: h,
+        geometry: choice.chosen,
+    };
     let options = PlanOptions { count: 30, candidates: 2000, seed: 5, ..PlanOptions::default() };
     let plan = plan(&input, &options).unwrap();
     let predicted = plan.poses.last().unwrap().predicted_rms.unwrap();
@@ -170,8 +212,15 @@ fn maximin_spreads_the_poses_deterministically() {
     let sample = candidates::uniform_within(&limits, 300, 7);
     let reach = candidates::reach(&nominal, &sample);
     let h = prior::stated(&nominal, &sample, reach, prior::StatedPrior { error: 3e-4 * reach, noise: 1e-4 });
-    let input =
-        PlanInput { nominal: &nominal, limits: &limits, to_model: None, user_candidates: &[], measured: None, hyperparameters: h.clone() };
+    let input = PlanInput {
+        nominal: &nominal,
+        limits: &limits,
+        to_model: None,
+        user_candidates: &[],
+        measured: None,
+        hyperparameters: h.clone(),
+        geometry: Geometry::Calibrated,
+    };
     let options = PlanOptions { count: 24, candidates: 2000, seed: 5, workspace: 48, evaluation: 100, ..PlanOptions::default() };
     let maximin_options = PlanOptions { criterion: Criterion::Maximin, ..options.clone() };
     let full_turn = [true, true];
