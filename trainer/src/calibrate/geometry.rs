@@ -41,8 +41,6 @@ pub struct GeometryChoice {
     pub by: String,
     /// Each hypothesis' score, when both were scored.
     pub scores: Option<GeometryScores>,
-    /// The chosen hypothesis' noise σ per coordinate by its evidence (data units), when one ran.
-    pub sigma: Option<f64>,
 }
 
 /// The two hypotheses' scores on the same rows.
@@ -131,18 +129,11 @@ pub fn choose_geometry(
     norm: &Normalisation,
     settings: &Settings,
 ) -> crate::Result<(Hypothesis, GeometryChoice)> {
-    let given =
-        |chosen, h: &Hypothesis| GeometryChoice { chosen, by: "given".into(), scores: None, sigma: evidence_sigma(h.evidence.as_ref()) };
+    let given = |chosen| GeometryChoice { chosen, by: "given".into(), scores: None };
     match settings.geometry {
-        Geometry::Nominal => {
-            let h = nominal_hypothesis(nominal, data, norm, settings)?;
-            let choice = given(Geometry::Nominal, &h);
-            Ok((h, choice))
-        }
+        Geometry::Nominal => Ok((nominal_hypothesis(nominal, data, norm, settings)?, given(Geometry::Nominal))),
         Geometry::Calibrated => {
-            let h = calibrated_hypothesis(calibrated_chain(nominal, data)?, data, norm, settings)?;
-            let choice = given(Geometry::Calibrated, &h);
-            Ok((h, choice))
+            Ok((calibrated_hypothesis(calibrated_chain(nominal, data)?, data, norm, settings)?, given(Geometry::Calibrated)))
         }
         Geometry::Auto => {
             let (plain, fitted, choice) = decide(nominal, data, norm, settings)?;
@@ -174,8 +165,7 @@ fn decide(
         Ok(f) => f,
         Err(e) => {
             let by = format!("the geometric group cannot be calibrated here: {e}");
-            let sigma = evidence_sigma(plain.evidence.as_ref());
-            return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None, sigma }));
+            return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }));
         }
     };
     // The calibrated hypothesis' evidence comparable with the nominal's: the group marginalised
@@ -199,12 +189,7 @@ fn decide(
         _ => scores.calibrated < scores.nominal,
     };
     let chosen = if calibrated_wins { Geometry::Calibrated } else { Geometry::Nominal };
-    let sigma = evidence_sigma(if calibrated_wins { score.as_ref() } else { plain.evidence.as_ref() });
-    Ok((plain, Some(fitted), GeometryChoice { chosen, by, scores: Some(scores), sigma }))
-}
-
-fn evidence_sigma(e: Option<&Evidence>) -> Option<f64> {
-    e.map(|e| e.hyperparameters.sigma)
+    Ok((plain, Some(fitted), GeometryChoice { chosen, by, scores: Some(scores) }))
 }
 
 /// The two evidences where they are comparable: on every row when both were computed there, else

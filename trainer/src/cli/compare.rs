@@ -59,17 +59,18 @@ pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalMode
     }
 }
 
-/// The floor of a table's rows: σ from the chosen hypothesis' evidence, else the hand-given `--sigma`.
-pub fn noise_floor(
-    choice: &crate::calibrate::GeometryChoice,
+/// The floor of a table's rows: σ of the `row` `cbd fit` writes (its evidence's, on the training
+/// rows), or the hand-given `--sigma`.
+fn noise_floor(
+    sigma: Option<f64>,
+    row: &str,
     settings: &crate::calibrate::Settings,
     m: usize,
 ) -> Option<crate::report::noise_floor::NoiseFloor> {
     use crate::report::noise_floor::NoiseFloor;
-    let chosen = if choice.chosen == crate::calibrate::Geometry::Calibrated { "dh+cbd" } else { "cbd" };
-    match (choice.sigma, settings.overrides.sigma) {
+    match (sigma, settings.overrides.sigma) {
         (_, Some(s)) => Some(NoiseFloor::new(s, m, "--sigma as given")),
-        (Some(s), None) => Some(NoiseFloor::new(s, m, format!("CbD's evidence on the training rows, {chosen}"))),
+        (Some(s), None) => Some(NoiseFloor::new(s, m, format!("CbD's evidence on the training rows, {row}"))),
         _ => None,
     }
 }
@@ -135,10 +136,12 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     let (krr, cbd) = (kernel_ridge_correction(&search), cbd_fitter(&settings));
     let mut comparison =
         crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, Some(&krr), Some(&cbd)));
-    // The row `cbd fit` writes by default, and the noise floor from its hypothesis' evidence.
+    // The row `cbd fit` writes by default, and the noise floor from the σ that row's fit assumed
+    // (what `cbd fit` records in the blob), else its hypothesis' evidence.
     let choice = crate::workers::on_workers(threads, || crate::calibrate::geometry::geometry_choice(&inputs.nominal, train, &settings))?;
-    comparison.noise_floor = noise_floor(&choice, &settings, train.task_dim);
     comparison.default_fit = Some(choice);
+    let written = comparison.written_by_fit().and_then(|name| comparison.rows.iter().find(|r| r.name == name));
+    comparison.noise_floor = written.and_then(|r| noise_floor(r.noise_sigma, &r.name, &settings, train.task_dim));
     let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
     outln!("{}", comparison.table(unit));
     for w in comparison.warnings() {

@@ -33,6 +33,8 @@ pub struct PeerResult {
     pub hyperparameters: Option<serde_json::Value>,
     /// With several tool points per pose: test errors per point and of the tool frame.
     pub pose: Option<PoseErrors>,
+    /// The noise σ the method's own evidence estimated (CbD's rows), data unit.
+    pub noise_sigma: Option<f64>,
 }
 
 /// Everything [`compare_peers`] found, besides the table.
@@ -227,17 +229,17 @@ pub fn compare_peers(
     let m = nominal.task_dim();
     let mut rows = Vec::new();
     let mut push = |name: &str, fitted: crate::Result<FittedCorrection>, seconds: f64| {
-        let (stats, train_stats, note, test_errors, hyperparameters, pose) = match fitted {
-            Ok(FittedCorrection { predict: p, note, hyperparameters, .. }) => {
+        let (stats, train_stats, note, test_errors, hyperparameters, pose, noise_sigma) = match fitted {
+            Ok(FittedCorrection { predict: p, note, hyperparameters, noise_sigma }) => {
                 let predicted = p(&test.joints);
                 let test_errors = crate::report::plots::position_errors(&predicted, &test.positions, m);
                 let train_stats = ErrorStats::of_positions(&p(&train.joints), &train.positions, m);
                 let pose = PoseErrors::of(nominal.tool_points(), &predicted, &test.positions, m);
-                (ErrorStats::of_errors(&test_errors), train_stats, note, test_errors, hyperparameters, pose)
+                (ErrorStats::of_errors(&test_errors), train_stats, note, test_errors, hyperparameters, pose, noise_sigma)
             }
             Err(e) => {
                 let nan = ErrorStats::of_errors(&[]);
-                (nan, nan, format!("failed: {e}"), Vec::new(), None, None)
+                (nan, nan, format!("failed: {e}"), Vec::new(), None, None, None)
             }
         };
         rows.push(PeerResult {
@@ -249,6 +251,7 @@ pub fn compare_peers(
             note,
             hyperparameters,
             pose,
+            noise_sigma,
         });
     };
     push("nominal", Ok(FittedCorrection::new(nominal_predictor(nominal.clone(), m), String::new())), 0.0);
@@ -323,6 +326,7 @@ mod tests {
             note: String::new(),
             hyperparameters: None,
             pose: None,
+            noise_sigma: None,
         };
         let table = |rows| Comparison { rows, dh: None, default_fit: None, noise_floor: None }.table("m");
         let small = table(vec![row("nominal", 0.1083), row("cbd", 1.2916e-5)]);
