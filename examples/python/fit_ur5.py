@@ -11,7 +11,7 @@ model_file = cbd.ModelFile.load(ur5 / "ur5.toml")
 train = np.loadtxt(ur5 / "train.csv", delimiter=",", skiprows=1)  # q1_deg … q6_deg, x_mm, y_mm, z_mm
 test = np.loadtxt(ur5 / "test.csv", delimiter=",", skiprows=1)
 
-model = cbd.fit(model_file, train[:, :6], train[:, 6:], dh_first=True)  # `cbd fit --dh-first`: the same blob
+model = cbd.fit(model_file, train[:, :6], train[:, 6:])  # `cbd fit`: the same blob (geometry calibrated, by the evidence)
 model.save("ur5.blob")
 
 q, y = model_file.to_model(test[:, :6], test[:, 6:])  # degrees → radians, as the CSV import converts them

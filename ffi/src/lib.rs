@@ -252,6 +252,46 @@ unsafe fn loaded<'a>(calibrator: *const CbdCalibrator) -> Result<&'a CbdCalibrat
     }
 }
 
+/// The checks every query entry point makes, in this order: the handle (`CBD_ERR_NULL_POINTER` for
+/// NULL, `CBD_ERR_BAD_HANDLE` when not loaded), the caller's required pointers (`given` false:
+/// `CBD_ERR_NULL_POINTER`), the joint count (`CBD_ERR_QUERY_DIMENSION`). The handle and the
+/// model's joints n and task dimension m.
+///
+/// # Safety
+/// `calibrator` is NULL or points to storage passed to `cbd_load`; one handle per thread.
+unsafe fn query_handle<'a>(
+    calibrator: *mut CbdCalibrator,
+    given: bool,
+    n_joints: usize,
+) -> Result<(&'a mut CbdCalibrator, usize, usize), CbdStatus> {
+    loaded(calibrator)?;
+    let handle = &mut *calibrator;
+    if !given {
+        return Err(CBD_ERR_NULL_POINTER);
+    }
+    let (n, m) = (handle.cal.model().n_joints(), handle.cal.model().task_dim());
+    if n_joints != n {
+        return Err(CBD_ERR_QUERY_DIMENSION);
+    }
+    Ok((handle, n, m))
+}
+
+/// Fills `out` row-major, `n` entries a row, with `entry(row, column)` (NaN where it has none).
+fn write_rows(out: &mut [f64], n: usize, entry: impl Fn(usize, usize) -> Option<f64>) {
+    for (a, row) in out.chunks_exact_mut(n.max(1)).enumerate() {
+        for (d, dst) in row.iter_mut().enumerate() {
+            *dst = entry(a, d).unwrap_or(f64::NAN);
+        }
+    }
+}
+
+/// The `CBD_COMPENSATE_*` bits of a compensation's outcome.
+fn compensate_flags(reached: bool, singular: bool, extrapolating: bool) -> u32 {
+    u32::from(reached) * CBD_COMPENSATE_REACHED
+        + u32::from(singular) * CBD_COMPENSATE_SINGULAR
+        + u32::from(extrapolating) * CBD_COMPENSATE_EXTRAPOLATING
+}
+
 /// Evaluates the calibrated model at joint configuration `q` (`n_joints` values, radians or the
 /// model's length unit for prismatic joints): writes the calibrated position (`task_dim` values)
 /// into `position` and its exact Jacobian (`task_dim` × `n_joints`, row-major:
@@ -315,17 +355,10 @@ pub unsafe extern "C" fn cbd_evaluate_point(
     jacobian_len: usize,
     support: *mut f64,
 ) -> CbdStatus {
-    let handle = match loaded(calibrator) {
-        Ok(_) => &mut *calibrator,
+    let (handle, n, m) = match query_handle(calibrator, !q.is_null() && !position.is_null() && !jacobian.is_null(), n_joints) {
+        Ok(h) => h,
         Err(e) => return e,
     };
-    if q.is_null() || position.is_null() || jacobian.is_null() {
-        return CBD_ERR_NULL_POINTER;
-    }
-    let (n, m) = (handle.cal.model().n_joints(), handle.cal.model().task_dim());
-    if n_joints != n {
-        return CBD_ERR_QUERY_DIMENSION;
-    }
     if position_len < m || jacobian_len < m * n {
         return CBD_ERR_BUFFER_TOO_SMALL;
     }
@@ -338,13 +371,8 @@ pub unsafe extern "C" fn cbd_evaluate_point(
     for (dst, src) in position.iter_mut().zip(e.position().iter()) {
         *dst = *src;
     }
-    let jacobian = core::slice::from_raw_parts_mut(jacobian, m * n);
     let jac = e.jacobian();
-    for (a, row) in jacobian.chunks_exact_mut(n.max(1)).enumerate() {
-        for (d, dst) in row.iter_mut().enumerate() {
-            *dst = jac.get((a, d)).copied().unwrap_or(f64::NAN);
-        }
-    }
+    write_rows(core::slice::from_raw_parts_mut(jacobian, m * n), n, |a, d| jac.get((a, d)).copied());
     if let Some(s) = support.as_mut() {
         *s = e.support();
     }
@@ -382,18 +410,12 @@ pub unsafe extern "C" fn cbd_evaluate_pose(
     points_len: usize,
     fit_residual: *mut f64,
 ) -> CbdStatus {
-    let handle = match loaded(calibrator) {
-        Ok(_) => &mut *calibrator,
+    let given = !q.is_null() && !rotation.is_null() && !origin.is_null() && !jacobian.is_null();
+    let (handle, n, _) = match query_handle(calibrator, given, n_joints) {
+        Ok(h) => h,
         Err(e) => return e,
     };
-    if q.is_null() || rotation.is_null() || origin.is_null() || jacobian.is_null() {
-        return CBD_ERR_NULL_POINTER;
-    }
-    let n = handle.cal.model().n_joints();
     let count = handle.cal.model().nominal.tool_point_count();
-    if n_joints != n {
-        return CBD_ERR_QUERY_DIMENSION;
-    }
     if jacobian_len < 6 * n || (!points.is_null() && points_len < 3 * count) {
         return CBD_ERR_BUFFER_TOO_SMALL;
     }
@@ -407,13 +429,8 @@ pub unsafe extern "C" fn cbd_evaluate_pose(
         *dst = *src;
     }
     core::slice::from_raw_parts_mut(origin, 3).copy_from_slice(&pose.origin());
-    let jacobian = core::slice::from_raw_parts_mut(jacobian, 6 * n);
     let jac = pose.jacobian();
-    for (a, row) in jacobian.chunks_exact_mut(n.max(1)).enumerate() {
-        for (d, dst) in row.iter_mut().enumerate() {
-            *dst = jac.get((a, d)).copied().unwrap_or(f64::NAN);
-        }
-    }
+    write_rows(core::slice::from_raw_parts_mut(jacobian, 6 * n), n, |a, d| jac.get((a, d)).copied());
     if !points.is_null() {
         let points = core::slice::from_raw_parts_mut(points, 3 * count);
         for (j, dst) in points.chunks_exact_mut(3).enumerate() {
@@ -459,17 +476,11 @@ pub unsafe extern "C" fn cbd_compensate_pose(
     angle_residual: *mut f64,
     flags: *mut u32,
 ) -> CbdStatus {
-    let handle = match loaded(calibrator) {
-        Ok(_) => &mut *calibrator,
+    let given = !position.is_null() && !rotation.is_null() && !seed.is_null() && !command.is_null();
+    let (handle, n, _) = match query_handle(calibrator, given, n_joints) {
+        Ok(h) => h,
         Err(e) => return e,
     };
-    if position.is_null() || rotation.is_null() || seed.is_null() || command.is_null() {
-        return CBD_ERR_NULL_POINTER;
-    }
-    let n = handle.cal.model().n_joints();
-    if n_joints != n {
-        return CBD_ERR_QUERY_DIMENSION;
-    }
     let position = core::slice::from_raw_parts(position, 3);
     let r = core::slice::from_raw_parts(rotation, 9);
     let mut rows = [[0.0; 3]; 3];
@@ -491,9 +502,7 @@ pub unsafe extern "C" fn cbd_compensate_pose(
         *r = c.angle_residual;
     }
     if let Some(f) = flags.as_mut() {
-        *f = u32::from(c.reached) * CBD_COMPENSATE_REACHED
-            + u32::from(c.singular) * CBD_COMPENSATE_SINGULAR
-            + u32::from(c.extrapolating) * CBD_COMPENSATE_EXTRAPOLATING;
+        *f = compensate_flags(c.reached, c.singular, c.extrapolating);
     }
     CBD_OK
 }
@@ -527,15 +536,11 @@ pub unsafe extern "C" fn cbd_compensate(
     residual: *mut f64,
     flags: *mut u32,
 ) -> CbdStatus {
-    let handle = match loaded(calibrator) {
-        Ok(_) => &mut *calibrator,
+    let (handle, n, m) = match query_handle(calibrator, !target.is_null() && !seed.is_null() && !command.is_null(), n_joints) {
+        Ok(h) => h,
         Err(e) => return e,
     };
-    if target.is_null() || seed.is_null() || command.is_null() {
-        return CBD_ERR_NULL_POINTER;
-    }
-    let (n, m) = (handle.cal.model().n_joints(), handle.cal.model().task_dim());
-    if n_joints != n || task_dim != m {
+    if task_dim != m {
         return CBD_ERR_QUERY_DIMENSION;
     }
     let (target, seed) = (core::slice::from_raw_parts(target, m), core::slice::from_raw_parts(seed, n));
@@ -550,9 +555,7 @@ pub unsafe extern "C" fn cbd_compensate(
         *r = c.residual;
     }
     if let Some(f) = flags.as_mut() {
-        *f = u32::from(c.reached) * CBD_COMPENSATE_REACHED
-            + u32::from(c.singular) * CBD_COMPENSATE_SINGULAR
-            + u32::from(c.extrapolating) * CBD_COMPENSATE_EXTRAPOLATING;
+        *f = compensate_flags(c.reached, c.singular, c.extrapolating);
     }
     CBD_OK
 }

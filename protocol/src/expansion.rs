@@ -51,3 +51,42 @@ pub const fn code_order(code: u8) -> u8 {
 pub const fn code_is_sin(code: u8) -> bool {
     code & 1 == 1
 }
+
+/// `model` with a synthetic expansion, encoded (std only; the test and benchmark blobs of the
+/// firmware check and the cross-crate tests): the joint `codes` and task `exponents` given, and per
+/// stage, per function in storage order, weights `scale · draw() / (1 + degree)`, degree the sum of
+/// the function's orders (higher orders damped, as a kernel's series is).
+#[cfg(feature = "std")]
+pub fn encode_with_synthetic_expansion(
+    model: &crate::Model<'_>,
+    codes: &[u8],
+    exponents: &[u8],
+    scale: f64,
+    mut draw: impl FnMut() -> f64,
+) -> Result<std::vec::Vec<u8>, crate::EncodeError> {
+    let (n, m) = (model.n_joints(), model.task_dim());
+    let (r_v, r_w) = (codes.len() / n.max(1), exponents.len() / m.max(1));
+    let mut weights = std::vec::Vec::new();
+    for _ in 0..model.integrator.stage_count() {
+        for function in codes.chunks_exact(n.max(1)) {
+            let degree: u32 = function.iter().map(|&c| code_order(c) as u32).sum();
+            weights.extend((0..n).map(|_| scale * draw() / (1.0 + degree as f64)));
+        }
+        for function in exponents.chunks_exact(m.max(1)) {
+            let degree: u32 = function.iter().map(|&a| a as u32).sum();
+            weights.extend((0..m).map(|_| scale * draw() / (1.0 + degree as f64)));
+        }
+    }
+    let bytes = crate::f64_le_bytes(&weights);
+    let mut model = model.clone();
+    model.expansion = Some(FieldExpansion {
+        tolerance: 1e-9,
+        task_radius: 2.0,
+        n_joint_features: r_v as u32,
+        joint_codes: codes,
+        n_task_features: r_w as u32,
+        task_exponents: exponents,
+        weights: F64Slice::from_le_bytes(&bytes),
+    });
+    crate::encode_to_vec(&model)
+}

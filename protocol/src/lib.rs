@@ -19,21 +19,23 @@
 #[cfg(feature = "std")]
 extern crate std;
 
-mod effects;
 mod expansion;
 mod f64_slice;
 mod limits;
 mod model;
+mod normalisation;
 pub mod paper_rr;
-mod tool_points;
+mod physical_effects;
+mod tool_point_encoding;
 pub mod ur5;
 mod validate;
 
-pub use effects::*;
 pub use expansion::*;
 pub use f64_slice::*;
 pub use limits::*;
 pub use model::*;
+pub use normalisation::*;
+pub use physical_effects::*;
 pub use validate::ModelError;
 
 /// Four bytes that open every blob.
@@ -195,7 +197,7 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
         }
         if version >= FORMAT_WITH_TOOL_POINTS {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
-            written += tool_points::write(model.nominal.tool_points(), tail).ok_or(EncodeError::BufferTooSmall)?;
+            written += tool_point_encoding::write(model.nominal.tool_points(), tail).ok_or(EncodeError::BufferTooSmall)?;
         }
         if let (true, Some(sigma)) = (version >= FORMAT_VERSION, model.noise_sigma) {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
@@ -272,7 +274,7 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     };
     let rest = if version >= FORMAT_WITH_TOOL_POINTS {
         // Format 6: the tool points follow (an empty list allowed, absence not).
-        let (points, rest) = tool_points::read(rest)?;
+        let (points, rest) = tool_point_encoding::read(rest)?;
         match &mut model.nominal {
             NominalModel::DhChain(chain) => chain.tool_points = points,
             NominalModel::PlanarChain { .. } if points.is_empty() => {}

@@ -27,3 +27,6 @@ pub const MAX_TOOL_POINTS: usize = 4;
 /// Largest magnitude of a tool point's coordinate, in the model's length unit (1000 km in mm):
 /// anything larger is not a lever on an arm, and would overflow the kinematics' squares in f32.
 pub const MAX_TOOL_POINT_COORDINATE: f64 = 1e9;
+/// Largest departure of a base or tool rotation from orthonormal (|RRᵀ − I| entry by entry) a model
+/// may have: rotations the trainer writes are orthonormal to ~1e-15.
+pub const ROTATION_TOLERANCE: f64 = 1e-9;

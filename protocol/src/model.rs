@@ -3,10 +3,11 @@
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
 
-use crate::effects::Effects;
 use crate::expansion::FieldExpansion;
 use crate::f64_slice::F64Slice;
-use crate::limits::{MAX_JOINTS, MAX_TASK_DIM, MAX_TOOL_POINTS};
+use crate::limits::{MAX_JOINTS, MAX_TOOL_POINTS};
+use crate::normalisation::Normalisation;
+use crate::physical_effects::Effects;
 
 /// A calibrated model: nominal kinematics, kernels, integrator, control points and momenta.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -207,20 +208,6 @@ pub struct DhChain {
     /// [`crate::encode`]), so it is skipped here.
     #[serde(skip)]
     pub tool_points: HVec<[f64; 3], MAX_TOOL_POINTS>,
-}
-
-/// Task-space normalisation: internal = (user − offset) / scale.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Normalisation {
-    /// The offset (model units; the first `task_dim` entries are used).
-    pub task_offset: [f64; MAX_TASK_DIM],
-    /// The scale (model units per internal unit, > 0).
-    pub task_scale: f64,
-}
-
-impl Normalisation {
-    /// Internal units are the model's units.
-    pub const IDENTITY: Normalisation = Normalisation { task_offset: [0.0; MAX_TASK_DIM], task_scale: 1.0 };
 }
 
 /// K_V(x, x') = γ · exp(Σ_d f_d(x_d − x'_d)); f_d = b_d (cos Δ − 1) (periodic) or −Δ²/(2 ℓ_d²).

@@ -149,3 +149,65 @@ fn bad_tool_points_are_named() {
         Err(DecodeError::Invalid(ModelError::OutOfRange { field: "nominal.tool_points (on a planar chain)" }))
     );
 }
+
+/// Issue 39 case 3: a blob whose tool-point count regroups its rows (2 or 4 points over data of
+/// 3 per pose, a valid checksum) evaluated every row as the wrong point. The control points of a
+/// pose share one configuration; a count that breaks that is refused by name.
+#[test]
+fn a_tool_point_count_that_regroups_the_poses_is_refused() {
+    let (p, m) = arrays(6);
+    for points in [&THREE[..2], &[THREE[0], THREE[1], THREE[2], [5.0, 5.0, 5.0]][..]] {
+        let mut model = ur5_model(points, &p, &m);
+        model.n_points = 6;
+        if points.len() == 4 {
+            // 4 does not divide 6: the count check names it first; 8 control points of 2 poses × 3 …
+            assert!(matches!(encode_vec(&model), Err(EncodeError::Invalid(ModelError::OutOfRange { .. }))));
+            continue;
+        }
+        let e = encode_vec(&model).unwrap_err();
+        assert_eq!(
+            e,
+            EncodeError::Invalid(ModelError::OutOfRangeAt { field: "points (a pose's tool points at different configurations)", index: 3 })
+        );
+    }
+    // … and 4 points over 3 poses of 4 rows read from data of 3 points per pose (12 = 4 poses × 3).
+    let q: Vec<f64> = (0..12).flat_map(|c| [(c / 3) as f64 * 0.1; 6]).collect();
+    let (p, m) = (le(&q), le(&[1e-3; 36]));
+    let four = [THREE[0], THREE[1], THREE[2], [5.0, 5.0, 5.0]];
+    let mut model = ur5_model(&four, &p, &m);
+    model.n_points = 12;
+    assert!(matches!(encode_vec(&model), Err(EncodeError::Invalid(ModelError::OutOfRangeAt { index: 3, .. }))));
+    let mut model = ur5_model(&THREE, &p, &m);
+    model.n_points = 12;
+    encode_vec(&model).unwrap();
+}
+
+/// Issue 39 case 13: crafted blobs (valid checksum) with a scaled, sheared or mirrored base or tool
+/// rotation evaluated to 1.3e24 mm. A rotation must be orthonormal within 1e-9 with det +1.
+#[test]
+fn base_and_tool_must_be_rotations() {
+    let (p, m) = arrays(2);
+    let fine = ur5_model(&[], &p, &m);
+    let NominalModel::DhChain(chain) = &fine.nominal else { unreachable!() };
+    let identity = Transform::IDENTITY.rotation;
+    let turned = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    let scaled = identity.map(|v| v * (1.0 + 1e-8));
+    let mirrored = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0];
+    let nearly = [1.0 + 2e-10, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    for (rotation, ok) in [(turned, true), (nearly, true), (scaled, false), (mirrored, false), ([0.0; 9], false)] {
+        for tool in [false, true] {
+            let mut c = chain.clone();
+            let t = if tool { &mut c.tool } else { &mut c.base };
+            t.rotation = rotation;
+            let model = Model { nominal: NominalModel::DhChain(c), ..fine.clone() };
+            let mut buf = [0u8; 4096];
+            match encode(&model, &mut buf) {
+                Ok(_) => assert!(ok, "{rotation:?} accepted"),
+                Err(EncodeError::Invalid(ModelError::OutOfRange { field })) => {
+                    assert!(!ok && field.contains(if tool { "nominal.tool.rotation" } else { "nominal.base.rotation" }), "{field}")
+                }
+                Err(e) => panic!("{e:?}"),
+            }
+        }
+    }
+}

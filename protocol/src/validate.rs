@@ -1,9 +1,9 @@
 //! Consistency checks run on every encode and decode.
 
-use crate::effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
 use crate::expansion::{code_is_sin, code_order, FieldExpansion};
-use crate::limits::{MAX_EXPANSION_FEATURES, MAX_EXPANSION_ORDER, MAX_STEPS, MAX_TOOL_POINT_COORDINATE};
+use crate::limits::{MAX_EXPANSION_FEATURES, MAX_EXPANSION_ORDER, MAX_STEPS, MAX_TOOL_POINT_COORDINATE, ROTATION_TOLERANCE};
 use crate::model::*;
+use crate::physical_effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
 
 /// What is wrong with a model, naming the field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -75,6 +75,51 @@ fn dimension(field: &'static str, expected: usize, found: usize) -> Result<(), M
     } else {
         Err(ModelError::Dimension { field, expected, found })
     }
+}
+
+/// R (row-major) must be a rotation: RRᵀ = I within [`ROTATION_TOLERANCE`] entry by entry and
+/// det R > 0. A blob with a scaled, sheared or mirrored base or tool passes every finiteness check
+/// yet evaluates to nonsense (1e24 mm) and misleads compensation.
+fn rotation(field: &'static str, r: &[f64; 9]) -> Result<(), ModelError> {
+    // Constant indices only: no bounds check, no panic path in the firmware.
+    let rows = [[r[0], r[1], r[2]], [r[3], r[4], r[5]], [r[6], r[7], r[8]]];
+    for (i, a) in rows.iter().enumerate() {
+        for (j, b) in rows.iter().enumerate() {
+            let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            let want = if i == j { 1.0 } else { 0.0 };
+            // Finite entries (checked first): `>` refuses what `<=` would not accept.
+            if (dot - want).abs() > ROTATION_TOLERANCE {
+                return Err(ModelError::OutOfRange { field });
+            }
+        }
+    }
+    let det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) + r[2] * (r[3] * r[7] - r[4] * r[6]);
+    if det > 0.0 {
+        Ok(())
+    } else {
+        Err(ModelError::OutOfRange { field })
+    }
+}
+
+/// Control points are pose-major, each pose's configuration repeated for its `per_pose` tool
+/// points (docs/DESIGN.md §12): a blob whose tool-point count regroups the rows (2 or 4 points
+/// over data of 3) breaks this and is refused; `index` is the first control point that differs.
+fn poses_repeat_their_configuration(points: crate::F64Slice<'_>, n: usize, per_pose: usize) -> Result<(), ModelError> {
+    if per_pose <= 1 || n == 0 {
+        return Ok(());
+    }
+    let count = points.len() / n;
+    for c in 0..count {
+        if c % per_pose == 0 {
+            continue;
+        }
+        for d in 0..n {
+            if points.get(c * n + d).map(f64::to_bits) != points.get((c - 1) * n + d).map(f64::to_bits) {
+                return Err(ModelError::OutOfRangeAt { field: "points (a pose's tool points at different configurations)", index: c });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `count × width` f64 values must fill `found` bytes. Checked products: on a 32-bit controller
@@ -176,6 +221,8 @@ impl Model<'_> {
                 for (name, t) in [("nominal.base", &c.base), ("nominal.tool", &c.tool)] {
                     finite(name, t.rotation.iter().chain(t.translation.iter()).copied())?;
                 }
+                rotation("nominal.base.rotation (not a rotation within ROTATION_TOLERANCE)", &c.base.rotation)?;
+                rotation("nominal.tool.rotation (not a rotation within ROTATION_TOLERANCE)", &c.tool.rotation)?;
                 finite("nominal.tool_points", c.tool_points.iter().flatten().copied())?;
                 if let Some(index) = c.tool_points.iter().flatten().position(|v| v.abs() > MAX_TOOL_POINT_COORDINATE) {
                     return Err(ModelError::OutOfRangeAt { field: "nominal.tool_points (beyond MAX_TOOL_POINT_COORDINATE)", index });
@@ -216,6 +263,7 @@ impl Model<'_> {
         array_bytes("points", n_points, n, self.points.byte_len())?;
         array_bytes("momenta", n_points, m, self.momenta.byte_len())?;
         finite("points", self.points.iter())?;
+        poses_repeat_their_configuration(self.points, n, self.nominal.tool_point_count())?;
         finite("momenta", self.momenta.iter())?;
         if let Some(e) = &self.expansion {
             e.validate(self)?;

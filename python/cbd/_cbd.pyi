@@ -82,7 +82,7 @@ class Model:
         with ``jacobian=True`` also (n, 6, joints)."""
     def compensate(self, targets: Array, seeds: Optional[Array] = None, iterations: int = 8) -> Tuple[Array, list[str]]:
         """Joint commands (n, joints) putting the calibrated tool at each target (n, task_dim), as
-        ``cbd compensate``, and a flag per row (``ok``, or ``not_reached``/``singular``/
+        ``cbd compensate``, and a flag per row (``ok``, or ``not_reached``/``outside_limits``/``singular``/
         ``extrapolating`` joined by ``+``)."""
 
 def fit(model: Optional[ModelFile], q: Array, y: Array, **options: Option) -> Model:

@@ -171,7 +171,8 @@ impl Model {
     /// computes them: from `seeds` (n, joints), or without, from the training configuration whose
     /// nominal position is nearest the target; `iterations` Gauss–Newton steps. Returns `(commands,
     /// flags)`: an (n, joints) array and one flag string per row (`ok`, or `not_reached`,
-    /// `singular`, `extrapolating` joined by `+`).
+    /// `outside_limits` (a value not finite), `singular`, `extrapolating` joined by `+`; `ok` only when the
+    /// command reaches its target at the runtime's tolerance, as `cbd compensate` checks it).
     #[pyo3(signature = (targets, seeds=None, iterations=8))]
     fn compensate<'py>(
         &self,
@@ -206,7 +207,25 @@ impl Model {
             })
             .map_err(|e| e.into_py(&[]))?;
         let n = self.n_joints;
-        let flags: Vec<String> = rows.iter().map(|r| cbd_trainer::cli::compensate::flags(&r.compensation)).collect();
+        // The contract `cbd compensate` checks, on the commands as returned (model units: a blob
+        // alone knows no joint limits, so `outside_limits` is a value that is not finite).
+        let returned: Vec<Vec<f64>> = rows.iter().map(|r| r.joints.clone()).collect();
+        let checks = cbd_trainer::evaluation::command_check::check_positions(&self.blob, &returned, &targets, None)
+            .map_err(|e| cbd_error(e.to_string()))?;
+        let flags: Vec<String> = rows
+            .iter()
+            .zip(&checks)
+            .map(|(r, check)| {
+                cbd_trainer::evaluation::command_check::RowFlags {
+                    not_reached: !check.reached,
+                    outside_limits: r.joints.iter().any(|v| !v.is_finite()),
+                    singular: r.compensation.singular,
+                    extrapolating: r.compensation.extrapolating,
+                    ..Default::default()
+                }
+                .text()
+            })
+            .collect();
         let commands = out2(py, rows.into_iter().flat_map(|r| r.joints).collect(), targets.len(), n);
         PyTuple::new(py, [commands.into_any(), flags.into_pyobject(py)?.into_any()])
     }

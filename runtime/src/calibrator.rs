@@ -1,196 +1,30 @@
-//! Loading a blob into caller-provided storage and evaluating the calibrated model (eq. 20).
+//! The controller's API: [`Calibrator`]'s methods, each a thin wrapper over the function of the
+//! module that owns the operation (pinocchio's style, `algorithm(calibrator, q)`): loading
+//! ([`crate::load`]), evaluation ([`crate::evaluate`], [`crate::pose`]), the flows as maps
+//! ([`crate::flow_maps`]) and compensation ([`crate::compensate`], [`crate::compensate_pose`]).
 
-use crate::flow::control_points::{initial_state, integrate_control_points_with_features};
-use crate::flow::{Dims, FlowParams};
-use crate::integrate::scratch_len;
-use crate::kernel::{features_len, joint_features, FEATURES_PER_JOINT};
+use crate::compensate::{self, CompensateOptions, Compensation};
+use crate::compensate_pose::{self, PoseCompensateOptions, PoseCompensation};
+use crate::error::Error;
+use crate::evaluate::{self, Evaluation};
+use crate::flow::inverse::Direction;
+use crate::flow_maps;
+use crate::load;
+pub use crate::load::{storage_len, storage_len_for, Calibrator};
+use crate::pose::{self, PoseEvaluation};
 use crate::real::Real;
-use crate::Error;
-use cbd_protocol::{decode, Integrator, Model, MAX_JOINTS, MAX_TASK_DIM};
-use nalgebra::{Dyn, MatrixView, SMatrix, U1};
-
-/// [`Real`] values of storage a model with these sizes needs: the configurations' kernel features
-/// (`N × n × 2`, see [`crate::kernel::joint_features`]), the control points' trajectory
-/// (`stages × N × (2m + n)`), and working space for loading and queries.
-pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, integrator: Integrator) -> usize {
-    let dims = Dims { n: n_joints, m: task_dim };
-    let trajectory = integrator.stage_count() * n_points * dims.sample_len();
-    let load = (1 + scratch_len(1)) * n_points * dims.state_len();
-    let query = n_points * crate::flow::query_derivatives::kernel_row_len(n_joints) + crate::flow::query_derivatives::query_work_len(dims);
-    features_len(n_points, n_joints) + trajectory + if load > query { load } else { query }
-}
-
-/// [`Real`] values of storage `model` needs: for the kernel form [`storage_len`]; for a model with an
-/// expansion (format 5, docs/DESIGN.md §11) the configurations' kernel features (`N × n × 2`, for
-/// [`Evaluation::support`]), the stage weights rounded once to [`Real`]
-/// (`stages × (r_V n + r_W m)`), the query's joint-basis rows (`r_V × (1 + n + n²)`) and the query's
-/// state with tangents and the integrator's scratch. No trajectory: nothing is integrated at load.
-pub fn storage_len_for(model: &Model<'_>) -> usize {
-    let (n_points, n, m) = (model.n_points as usize, model.n_joints(), model.task_dim());
-    match &model.expansion {
-        None => storage_len(n_points, n, m, model.integrator),
-        Some(e) => {
-            let dims = Dims { n, m };
-            let weights = model.integrator.stage_count() * e.stage_len(n, m);
-            let rows = e.n_joint_features as usize * crate::expansion::joint_row_len(n);
-            features_len(n_points, n) + weights + rows + crate::flow::query_derivatives::query_work_len(dims)
-        }
-    }
-}
-
-/// The calibrated position and Jacobian at one configuration, in the user's units.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Evaluation {
-    pub(crate) position: SMatrix<f64, MAX_TASK_DIM, 1>,
-    pub(crate) jacobian: SMatrix<f64, MAX_TASK_DIM, MAX_JOINTS>,
-    pub(crate) transported_jacobian: SMatrix<f64, MAX_TASK_DIM, MAX_JOINTS>,
-    pub(crate) task_dim: usize,
-    pub(crate) n_joints: usize,
-    pub(crate) support: f64,
-}
-
-impl Evaluation {
-    /// k1(ξ): the calibrated position (length `task_dim`).
-    pub fn position(&self) -> MatrixView<'_, f64, Dyn, U1, U1, nalgebra::Const<MAX_TASK_DIM>> {
-        // task_dim ≤ MAX_TASK_DIM always; the `min` lets the compiler drop nalgebra's bounds assert.
-        self.position.generic_view((0, 0), (Dyn(self.task_dim.min(MAX_TASK_DIM)), U1))
-    }
-    /// Dk1(ξ): the calibrated Jacobian (`task_dim × n_joints`).
-    pub fn jacobian(&self) -> MatrixView<'_, f64, Dyn, Dyn, U1, nalgebra::Const<MAX_TASK_DIM>> {
-        self.jacobian.generic_view((0, 0), (Dyn(self.task_dim.min(MAX_TASK_DIM)), Dyn(self.n_joints.min(MAX_JOINTS))))
-    }
-    /// J(1) of eq. (19)/(20), the Jacobian transported along the flow as in the paper. It omits
-    /// the D²k·v term, so it differs from [`Evaluation::jacobian`]; kept for comparison.
-    pub fn transported_jacobian(&self) -> MatrixView<'_, f64, Dyn, Dyn, U1, nalgebra::Const<MAX_TASK_DIM>> {
-        self.transported_jacobian.generic_view((0, 0), (Dyn(self.task_dim), Dyn(self.n_joints)))
-    }
-    /// Largest K_V(ξ, x_j)/γ over the measured configurations, in (0, 1]: 1 on a measured
-    /// configuration, near 0 far from every one (extrapolation).
-    pub fn support(&self) -> f64 {
-        self.support
-    }
-    /// Whether the query is far from every measured configuration (`support` below `threshold`).
-    pub fn is_extrapolating(&self, threshold: f64) -> bool {
-        self.support < threshold
-    }
-}
-
-/// A loaded model: the blob's arrays (borrowed, read in place) and the control points'
-/// trajectories, integrated once at load time.
-pub struct Calibrator<'a> {
-    pub(crate) model: Model<'a>,
-    pub(crate) dims: Dims,
-    /// The configurations' kernel features ([`crate::kernel::write_features`]), N × n × 2.
-    pub(crate) features: &'a [Real],
-    pub(crate) trajectory: &'a mut [Real],
-    /// With an expansion: its stage weights rounded once to [`Real`] (empty for the kernel form,
-    /// whose `trajectory` is then empty instead).
-    pub(crate) weights: &'a [Real],
-    pub(crate) work: &'a mut [Real],
-    /// [`crate::precision::evaluation_precision`] of the model, user units (computed at load).
-    pub(crate) precision: f64,
-    /// With an expansion: the highest order of each joint axis and of each task coordinate
-    /// ([`crate::expansion::joint_orders`], [`crate::expansion::task_orders`], computed at load;
-    /// zeros for the kernel form).
-    pub(crate) orders: ExpansionOrders,
-}
-
-/// The highest orders an expansion's basis uses, per joint axis and per task coordinate: what
-/// sizes the basis' factor tables, computed once per model instead of once per query.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct ExpansionOrders {
-    pub joint: [u8; MAX_JOINTS],
-    pub task: [u8; MAX_TASK_DIM],
-}
+use cbd_protocol::Model;
 
 impl<'a> Calibrator<'a> {
     /// Decodes and validates `blob`, then integrates the control points' trajectories into `storage`
     /// (with an expansion: copies its weights), which must hold at least [`storage_len_for`] values.
     pub fn load(blob: &'a [u8], storage: &'a mut [Real]) -> Result<Self, Error> {
-        let model = decode(blob).map_err(Error::Blob)?;
-        Self::from_model(model, storage)
+        load::load(blob, storage)
     }
 
     /// As [`Calibrator::load`], for a model already decoded.
     pub fn from_model(model: Model<'a>, storage: &'a mut [Real]) -> Result<Self, Error> {
-        model.validate().map_err(|e| Error::Blob(cbd_protocol::DecodeError::Invalid(e)))?;
-        let dims = Dims { n: model.n_joints(), m: model.task_dim() };
-        let n_points = model.n_points as usize;
-        let needed = storage_len_for(&model);
-        if storage.len() < needed {
-            return Err(Error::StorageTooSmall { needed, got: storage.len() });
-        }
-        if model.expansion.is_some() {
-            return Self::with_expansion(model, dims, storage.get_mut(..needed).ok_or(Error::Internal)?);
-        }
-        let traj_len = model.integrator.stage_count() * n_points * dims.sample_len();
-        let (features, rest) = storage
-            .get_mut(..needed)
-            .ok_or(Error::Internal)?
-            .split_at_mut_checked(features_len(n_points, dims.n))
-            .ok_or(Error::Internal)?;
-        let (trajectory, work) = rest.split_at_mut_checked(traj_len).ok_or(Error::Internal)?;
-        let features: &'a [Real] = Self::integrate_at_load(&model, dims, features, trajectory, work)?;
-        let precision = crate::precision::evaluation_precision(&model);
-        Ok(Calibrator { model, dims, features, trajectory, weights: &[], work, precision, orders: ExpansionOrders::default() })
-    }
-
-    /// A model with an expansion: the configurations' kernel features (for the support) and the
-    /// weights rounded once to [`Real`]; the rest of `storage` is the queries' working space.
-    fn with_expansion(model: Model<'a>, dims: Dims, storage: &'a mut [Real]) -> Result<Self, Error> {
-        let e = model.expansion.as_ref().ok_or(Error::Internal)?;
-        let n_points = model.n_points as usize;
-        let (features, rest) = storage.split_at_mut_checked(features_len(n_points, dims.n)).ok_or(Error::Internal)?;
-        let (weights, work) = rest.split_at_mut_checked(e.weights.len()).ok_or(Error::Internal)?;
-        Self::write_features(&model, dims, features)?;
-        for (dst, src) in weights.iter_mut().zip(e.weights.iter()) {
-            *dst = src as Real;
-        }
-        let precision = crate::precision::evaluation_precision(&model);
-        let orders = ExpansionOrders {
-            joint: crate::expansion::joint_orders(e.joint_codes, dims.n),
-            task: crate::expansion::task_orders(e.task_exponents, dims.m),
-        };
-        Ok(Calibrator { model, dims, features, trajectory: &mut [], weights, work, precision, orders })
-    }
-
-    /// K_V's features of every configuration, from the blob's f64 values (unaligned bytes).
-    fn write_features(model: &Model<'_>, dims: Dims, features: &mut [Real]) -> Result<(), Error> {
-        let n = dims.n;
-        let mut points = model.points.iter();
-        let (mut x, mut f) = ([0.0; MAX_JOINTS], [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS]);
-        for out in features.chunks_exact_mut((n * FEATURES_PER_JOINT).max(1)) {
-            for xd in x.iter_mut().take(n) {
-                *xd = points.next().ok_or(Error::Internal)?;
-            }
-            joint_features(&model.joint_kernel, x.get(..n).ok_or(Error::Internal)?, &mut f);
-            for (dst, src) in out.iter_mut().zip(f.iter().flatten()) {
-                *dst = *src;
-            }
-        }
-        Ok(())
-    }
-
-    /// Writes the kernel features of the configurations and the control points' trajectory;
-    /// `work` is scratch.
-    fn integrate_at_load<'f>(
-        model: &Model<'_>,
-        dims: Dims,
-        features: &'f mut [Real],
-        trajectory: &mut [Real],
-        work: &mut [Real],
-    ) -> Result<&'f [Real], Error> {
-        let n_points = model.n_points as usize;
-        Self::write_features(model, dims, features)?;
-        let state_len = n_points * dims.state_len();
-        let (state, rest) = work.split_at_mut_checked(state_len).ok_or(Error::Internal)?;
-        initial_state(model, state)?;
-        let flow_kernel = model.joint_kernel.for_flow(model.momentum_law);
-        let params = FlowParams { dims, joint_kernel: &flow_kernel, task_kernel: &model.task_kernel, law: model.momentum_law };
-        let scratch = rest.get_mut(..scratch_len(state_len)).ok_or(Error::Internal)?;
-        let features: &'f [Real] = features;
-        integrate_control_points_with_features(&params, model.integrator, features, state, scratch, trajectory, |_, _| {})?;
-        Ok(features)
+        load::from_model(model, storage)
     }
 
     /// The model this calibrator evaluates.
@@ -204,26 +38,80 @@ impl<'a> Calibrator<'a> {
         self.precision
     }
 
-    /// eq. (20): the calibrated position k1(ξ) and its exact Jacobian Dk1(ξ) at joint
-    /// configuration `q` (see [`crate::flow::query_derivatives`]); also the paper's transported J(1).
-    /// For a model with several tool points this is tool point 0 ([`Calibrator::evaluate_point`]).
+    /// k1(ξ) and its exact Jacobian Dk1(ξ) at `q`, tool point 0 ([`evaluate::evaluate`]).
     pub fn evaluate(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_query::<true>(q, 0)
+        evaluate::evaluate(self, q)
     }
 
-    /// eq. (20) for tool point `j` (`j` < [`cbd_protocol::NominalModel::tool_point_count`]): the
-    /// query flow started from k0_j(ξ), Dk0_j(ξ) — the same joint field v(ξ) and task field w, so
-    /// every tool point is carried by the same ψ ∘ · ∘ φ⁻¹ — with its exact Jacobian.
-    /// `evaluate_point(q, 0)` is [`Calibrator::evaluate`].
+    /// k1(ξ) and its exact Jacobian for tool point `j` ([`evaluate::evaluate_point`]).
     pub fn evaluate_point(&mut self, q: &[f64], j: usize) -> Result<Evaluation, Error> {
-        self.evaluate_query::<true>(q, j)
+        evaluate::evaluate_point(self, q, j)
     }
 
-    /// eq. (20) without tangents, cheaper: the calibrated position k1(ξ) and the paper's
-    /// transported J(1) (eq. 19), which is *not* the exact derivative of k1; both
-    /// [`Evaluation::jacobian`] and [`Evaluation::transported_jacobian`] hold J(1).
-    /// The position is bit-identical to [`Calibrator::evaluate`]'s.
+    /// k1(ξ) and the transported J(1) of eq. (19), without tangents ([`evaluate::evaluate_transported`]).
     pub fn evaluate_transported(&mut self, q: &[f64]) -> Result<Evaluation, Error> {
-        self.evaluate_query::<false>(q, 0)
+        evaluate::evaluate_transported(self, q)
+    }
+
+    /// Every tool point's calibrated position and Jacobian at `q` and the calibrated tool frame
+    /// ([`pose::evaluate_pose`]).
+    pub fn evaluate_pose(&mut self, q: &[f64]) -> Result<PoseEvaluation, Error> {
+        pose::evaluate_pose(self, q)
+    }
+
+    /// ψ(y) (forward) or ψ⁻¹(y) (backward) ([`flow_maps::task_flow`]).
+    pub fn task_flow(&self, y: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        flow_maps::task_flow(self, y, direction, out)
+    }
+
+    /// φ(x) (forward) or φ⁻¹(x) (backward) ([`flow_maps::joint_flow`]).
+    pub fn joint_flow(&mut self, x: &[f64], direction: Direction, out: &mut [f64]) -> Result<(), Error> {
+        flow_maps::joint_flow(self, x, direction, out)
+    }
+
+    /// k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹, the start of compensation ([`flow_maps::inverse_flow_start`]).
+    pub fn inverse_flow_start(&mut self, target: &[f64], seed: &[f64], out: &mut [f64], nominal_iterations: usize) -> Result<(), Error> {
+        flow_maps::inverse_flow_start(self, target, seed, out, nominal_iterations)
+    }
+
+    /// [`Calibrator::compensate_with`] with [`CompensateOptions::for_model`].
+    pub fn compensate(&mut self, target: &[f64], seed: &[f64], out: &mut [f64]) -> Result<Compensation, Error> {
+        compensate::compensate(self, target, seed, out)
+    }
+
+    /// The joint command q with k1(q) = `target`, by damped minimum-norm Gauss–Newton steps from the
+    /// inverse flows' start ([`compensate::compensate_with`]).
+    pub fn compensate_with(
+        &mut self,
+        target: &[f64],
+        seed: &[f64],
+        out: &mut [f64],
+        options: &CompensateOptions,
+    ) -> Result<Compensation, Error> {
+        compensate::compensate_with(self, target, seed, out, options)
+    }
+
+    /// [`Calibrator::compensate_pose_with`] with [`PoseCompensateOptions::for_model`].
+    pub fn compensate_pose(
+        &mut self,
+        position: &[f64],
+        rotation: &[[f64; 3]; 3],
+        seed: &[f64],
+        out: &mut [f64],
+    ) -> Result<PoseCompensation, Error> {
+        compensate_pose::compensate_pose(self, position, rotation, seed, out)
+    }
+
+    /// The joint command q whose calibrated tool frame has origin `position` and rotation
+    /// `rotation` ([`compensate_pose::compensate_pose_with`]).
+    pub fn compensate_pose_with(
+        &mut self,
+        position: &[f64],
+        rotation: &[[f64; 3]; 3],
+        seed: &[f64],
+        out: &mut [f64],
+        options: &PoseCompensateOptions,
+    ) -> Result<PoseCompensation, Error> {
+        compensate_pose::compensate_pose_with(self, position, rotation, seed, out, options)
     }
 }

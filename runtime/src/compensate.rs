@@ -3,9 +3,12 @@
 //! Jacobian Dk1 (eq. 20 and [`crate::flow::query_derivatives`]) from a seed, typically the nominal
 //! model's inverse kinematics ([`crate::inverse_kinematics`]). Fixed cost, no heap, no panic.
 
+use crate::error::Error;
+use crate::evaluate::{evaluate, evaluate_transported, Evaluation};
+use crate::flow_maps::inverse_flow_start;
 use crate::inverse_kinematics::fold::{fold_root, nominal_curvature, smallest_singular_pair};
 use crate::inverse_kinematics::{bounded_step, conditioning, damped_min_norm_direction, matrices_of, padded_target};
-use crate::{Calibrator, Error, Evaluation};
+use crate::load::Calibrator;
 use cbd_protocol::{MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 use nalgebra::{SMatrix, SVector};
 
@@ -130,183 +133,178 @@ struct Iterate {
     conditioning: f64,
 }
 
-impl<'a> Calibrator<'a> {
-    /// [`Calibrator::compensate_with`] with [`CompensateOptions::for_model`].
-    pub fn compensate(&mut self, target: &[f64], seed: &[f64], out: &mut [f64]) -> Result<Compensation, Error> {
-        let options = CompensateOptions::for_model(self);
-        self.compensate_with(target, seed, out, &options)
-    }
-
-    /// Writes to `out` the joint command q with k1(q) = `target`: from the inverse-flow start
-    /// ([`Calibrator::inverse_flow_start`], `seed` choosing the nominal branch; the seed itself
-    /// without `options.inverse_flow_start` or when the start fails), `options.iterations` damped
-    /// minimum-norm Gauss–Newton steps ([`crate::inverse_kinematics::damped_min_norm_step`],
-    /// fold-aware with `options.fold_steps`) on the exact Jacobian Dk1 and `options.chord_steps`
-    /// with the last one, q ← q + Dk1ᵀ (Dk1 Dk1ᵀ + λ² I)⁻¹ (target − k1(q)).
-    /// With more joints than task coordinates (n > m) each step is the minimum-norm one, so the command stays near the seed
-    /// (its orientation and branch). The iterate with the smallest residual is returned, with
-    /// flags instead of an error when the target is not reached, Dk1 is singular there or the
-    /// command lies outside the calibrated region.
-    ///
-    /// Errors: wrong lengths ([`Error::TargetDimension`], [`Error::QueryDimension`]), a non-finite
-    /// target or seed ([`Error::NonFiniteTarget`], [`Error::NonFiniteQuery`]), and the
-    /// evaluation's own errors.
-    pub fn compensate_with(
-        &mut self,
-        target: &[f64],
-        seed: &[f64],
-        out: &mut [f64],
-        options: &CompensateOptions,
-    ) -> Result<Compensation, Error> {
-        let (m, n) = (self.dims.m, self.dims.n);
-        if target.len() != m {
-            return Err(Error::TargetDimension { expected: m, found: target.len() });
-        }
-        if seed.len() != n {
-            return Err(Error::QueryDimension { expected: n, found: seed.len() });
-        }
-        if out.len() != n {
-            return Err(Error::QueryDimension { expected: n, found: out.len() });
-        }
-        if let Some(index) = target.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFiniteTarget { index });
-        }
-        if let Some(index) = seed.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFiniteQuery { index });
-        }
-        if n > NJ || m > MT {
-            return Err(Error::Internal);
-        }
-        let target_v = padded_target(target);
-        let scale = self.model.normalisation.task_scale;
-        // k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹: inverse-flow start (the seed when it fails: a target whose
-        // pull-back k0 cannot reach stays with Newton from the seed).
-        let mut start = [0.0; NJ];
-        let start_slice = start.get_mut(..n).ok_or(Error::Internal)?;
-        let from_flows = options.inverse_flow_start && self.inverse_flow_start(target, seed, start_slice, NOMINAL_ITERATIONS).is_ok();
-        let mut q = SVector::<f64, NJ>::zeros();
-        for (dst, s) in q.iter_mut().zip(if from_flows { start_slice.iter() } else { seed.iter() }) {
-            *dst = *s;
-        }
-        let mut best = Iterate { q, residual: f64::INFINITY, support: 0.0, conditioning: 0.0 };
-        let mut query = [0.0; NJ];
-        // The guard: the seed's own residual (position only), which the start must beat.
-        let mut seed_q = SVector::<f64, NJ>::zeros();
-        for (dst, s) in seed_q.iter_mut().zip(seed.iter()) {
-            *dst = *s;
-        }
-        let mut seed_residual = f64::INFINITY;
-        if from_flows && options.start_guard {
-            let e = self.evaluate_transported(seed)?;
-            let (position, transported) = evaluation_matrices(&e, m, n);
-            seed_residual = (target_v - position).norm();
-            if seed_residual < best.residual {
-                best = Iterate { q: seed_q, residual: seed_residual, support: e.support(), conditioning: conditioning(&transported, m) };
-            }
-        }
-        // Defect correction of the start: the inverse flows from the target moved by the miss.
-        let mut moved_target = target_v;
-        for _ in 0..if from_flows { options.start_corrections } else { 0 } {
-            for (dst, v) in query.iter_mut().zip(q.iter()) {
-                *dst = *v;
-            }
-            let e = self.evaluate_transported(query.get(..n).ok_or(Error::Internal)?)?;
-            let (position, transported) = evaluation_matrices(&e, m, n);
-            let r = target_v - position;
-            let residual = r.norm();
-            if residual < best.residual {
-                best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&transported, m) };
-            }
-            moved_target += r;
-            let moved = moved_target.as_slice().get(..m).ok_or(Error::Internal)?;
-            if self.inverse_flow_start(moved, seed, start_slice, NOMINAL_ITERATIONS).is_ok() {
-                for (dst, s) in q.iter_mut().zip(start_slice.iter()) {
-                    *dst = *s;
-                }
-            }
-        }
-        let mut jacobian = SMatrix::<f64, MT, NJ>::zeros();
-        let evaluations = options.iterations + options.chord_steps;
-        for step in 0..=evaluations {
-            let exact = step < options.iterations;
-            for (dst, v) in query.iter_mut().zip(q.iter()) {
-                *dst = *v;
-            }
-            let qs = query.get(..n).ok_or(Error::Internal)?;
-            // Chord steps and the last iterate need only the position: eq. (19)'s transported
-            // J(1) stands in for Dk1 in their conditioning (same position bits, no tangents).
-            let e = if exact { self.evaluate(qs)? } else { self.evaluate_transported(qs)? };
-            let (position, this_jacobian) = evaluation_matrices(&e, m, n);
-            if exact {
-                jacobian = this_jacobian;
-            }
-            let r = target_v - position;
-            let residual = r.norm();
-            if residual < best.residual {
-                best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&this_jacobian, m) };
-            }
-            if step == 0 && seed_residual < residual {
-                // The start lost to the seed: the remaining evaluations go to the seed.
-                q = seed_q;
-                continue;
-            }
-            if step < evaluations {
-                // The fold-aware direction on exact steps (chord steps reuse an old Jacobian, whose
-                // singular pair no longer sits at q), bounded like every Gauss–Newton step.
-                let direction = if exact && options.fold_steps {
-                    self.fold_step(&q, &jacobian, &r, m, n, scale)
-                } else {
-                    damped_min_norm_direction(&jacobian, &r, m, scale)
-                };
-                if let Some(dq) = direction.and_then(|d| bounded_step(d, |j| self.model.nominal.is_revolute(j))) {
-                    q += dq;
-                }
-            }
-        }
-        // A residual that overflows (a target near f64::MAX) is never below another: `best` is
-        // then the start with residual ∞, support and conditioning 0, flagged on every count.
-        for (dst, v) in out.iter_mut().zip(best.q.iter()) {
-            *dst = *v;
-        }
-        Ok(Compensation {
-            residual: best.residual,
-            // A residual that overflowed is never reached, whatever the tolerance (a model whose
-            // precision bound is infinite resolves nothing).
-            reached: best.residual.is_finite() && best.residual <= options.tolerance,
-            singular: !(best.conditioning >= options.singular_conditioning),
-            extrapolating: !(best.support >= options.extrapolation_threshold),
-            support: best.support,
-            conditioning: best.conditioning,
-        })
-    }
+/// [`Calibrator::compensate_with`] with [`CompensateOptions::for_model`].
+pub fn compensate(cal: &mut Calibrator<'_>, target: &[f64], seed: &[f64], out: &mut [f64]) -> Result<Compensation, Error> {
+    let options = CompensateOptions::for_model(cal);
+    compensate_with(cal, target, seed, out, &options)
 }
 
-impl Calibrator<'_> {
-    /// The damped minimum-norm step with its component along Dk1's smallest right singular
-    /// vector v replaced by the nearer root of the quadratic model along it
-    /// ([`crate::inverse_kinematics::fold`]), before the revolute bound.
-    fn fold_step(
-        &self,
-        q: &SVector<f64, NJ>,
-        jacobian: &SMatrix<f64, MT, NJ>,
-        r: &SVector<f64, MT>,
-        m: usize,
-        n: usize,
-        scale: f64,
-    ) -> Option<SVector<f64, NJ>> {
-        let mut dq = damped_min_norm_direction(jacobian, r, m, scale)?;
-        if let Some((sigma, u, v)) = smallest_singular_pair(jacobian, m) {
-            // Of tool point 0, the point `evaluate` compensates (the model itself without tool points).
-            let curvature =
-                crate::kinematics::with_tool_point(&self.model.nominal, 0, |nominal| nominal_curvature(nominal, q, &u, &v, m, n))
-                    .unwrap_or(f64::NAN);
-            let rho = u.dot(r);
-            if let (true, Some(t)) = (curvature.is_finite(), fold_root(sigma, curvature, rho)) {
-                dq += v * (t - v.dot(&dq));
+/// Writes to `out` the joint command q with k1(q) = `target`: from the inverse-flow start
+/// ([`Calibrator::inverse_flow_start`], `seed` choosing the nominal branch; the seed itself
+/// without `options.inverse_flow_start` or when the start fails), `options.iterations` damped
+/// minimum-norm Gauss–Newton steps ([`crate::inverse_kinematics::damped_min_norm_step`],
+/// fold-aware with `options.fold_steps`) on the exact Jacobian Dk1 and `options.chord_steps`
+/// with the last one, q ← q + Dk1ᵀ (Dk1 Dk1ᵀ + λ² I)⁻¹ (target − k1(q)).
+/// With more joints than task coordinates (n > m) each step is the minimum-norm one, so the command stays near the seed
+/// (its orientation and branch). The iterate with the smallest residual is returned, with
+/// flags instead of an error when the target is not reached, Dk1 is singular there or the
+/// command lies outside the calibrated region.
+///
+/// Errors: wrong lengths ([`Error::TargetDimension`], [`Error::QueryDimension`]), a non-finite
+/// target or seed ([`Error::NonFiniteTarget`], [`Error::NonFiniteQuery`]), and the
+/// evaluation's own errors.
+pub fn compensate_with(
+    cal: &mut Calibrator<'_>,
+    target: &[f64],
+    seed: &[f64],
+    out: &mut [f64],
+    options: &CompensateOptions,
+) -> Result<Compensation, Error> {
+    let (m, n) = (cal.dims.m, cal.dims.n);
+    if target.len() != m {
+        return Err(Error::TargetDimension { expected: m, found: target.len() });
+    }
+    if seed.len() != n {
+        return Err(Error::QueryDimension { expected: n, found: seed.len() });
+    }
+    if out.len() != n {
+        return Err(Error::QueryDimension { expected: n, found: out.len() });
+    }
+    if let Some(index) = target.iter().position(|v| !v.is_finite()) {
+        return Err(Error::NonFiniteTarget { index });
+    }
+    if let Some(index) = seed.iter().position(|v| !v.is_finite()) {
+        return Err(Error::NonFiniteQuery { index });
+    }
+    if n > NJ || m > MT {
+        return Err(Error::Internal);
+    }
+    let target_v = padded_target(target);
+    let scale = cal.model.normalisation.task_scale;
+    // k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹: inverse-flow start (the seed when it fails: a target whose
+    // pull-back k0 cannot reach stays with Newton from the seed).
+    let mut start = [0.0; NJ];
+    let start_slice = start.get_mut(..n).ok_or(Error::Internal)?;
+    let from_flows = options.inverse_flow_start && inverse_flow_start(cal, target, seed, start_slice, NOMINAL_ITERATIONS).is_ok();
+    let mut q = SVector::<f64, NJ>::zeros();
+    for (dst, s) in q.iter_mut().zip(if from_flows { start_slice.iter() } else { seed.iter() }) {
+        *dst = *s;
+    }
+    let mut best = Iterate { q, residual: f64::INFINITY, support: 0.0, conditioning: 0.0 };
+    let mut query = [0.0; NJ];
+    // The guard: the seed's own residual (position only), which the start must beat.
+    let mut seed_q = SVector::<f64, NJ>::zeros();
+    for (dst, s) in seed_q.iter_mut().zip(seed.iter()) {
+        *dst = *s;
+    }
+    let mut seed_residual = f64::INFINITY;
+    if from_flows && options.start_guard {
+        let e = evaluate_transported(cal, seed)?;
+        let (position, transported) = evaluation_matrices(&e, m, n);
+        seed_residual = (target_v - position).norm();
+        if seed_residual < best.residual {
+            best = Iterate { q: seed_q, residual: seed_residual, support: e.support(), conditioning: conditioning(&transported, m) };
+        }
+    }
+    // Defect correction of the start: the inverse flows from the target moved by the miss.
+    let mut moved_target = target_v;
+    for _ in 0..if from_flows { options.start_corrections } else { 0 } {
+        for (dst, v) in query.iter_mut().zip(q.iter()) {
+            *dst = *v;
+        }
+        let e = evaluate_transported(cal, query.get(..n).ok_or(Error::Internal)?)?;
+        let (position, transported) = evaluation_matrices(&e, m, n);
+        let r = target_v - position;
+        let residual = r.norm();
+        if residual < best.residual {
+            best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&transported, m) };
+        }
+        moved_target += r;
+        let moved = moved_target.as_slice().get(..m).ok_or(Error::Internal)?;
+        if inverse_flow_start(cal, moved, seed, start_slice, NOMINAL_ITERATIONS).is_ok() {
+            for (dst, s) in q.iter_mut().zip(start_slice.iter()) {
+                *dst = *s;
             }
         }
-        Some(dq)
     }
+    let mut jacobian = SMatrix::<f64, MT, NJ>::zeros();
+    let evaluations = options.iterations + options.chord_steps;
+    for step in 0..=evaluations {
+        let exact = step < options.iterations;
+        for (dst, v) in query.iter_mut().zip(q.iter()) {
+            *dst = *v;
+        }
+        let qs = query.get(..n).ok_or(Error::Internal)?;
+        // Chord steps and the last iterate need only the position: eq. (19)'s transported
+        // J(1) stands in for Dk1 in their conditioning (same position bits, no tangents).
+        let e = if exact { evaluate(cal, qs)? } else { evaluate_transported(cal, qs)? };
+        let (position, this_jacobian) = evaluation_matrices(&e, m, n);
+        if exact {
+            jacobian = this_jacobian;
+        }
+        let r = target_v - position;
+        let residual = r.norm();
+        if residual < best.residual {
+            best = Iterate { q, residual, support: e.support(), conditioning: conditioning(&this_jacobian, m) };
+        }
+        if step == 0 && seed_residual < residual {
+            // The start lost to the seed: the remaining evaluations go to the seed.
+            q = seed_q;
+            continue;
+        }
+        if step < evaluations {
+            // The fold-aware direction on exact steps (chord steps reuse an old Jacobian, whose
+            // singular pair no longer sits at q), bounded like every Gauss–Newton step.
+            let direction = if exact && options.fold_steps {
+                fold_step(cal, &q, &jacobian, &r, m, n, scale)
+            } else {
+                damped_min_norm_direction(&jacobian, &r, m, scale)
+            };
+            if let Some(dq) = direction.and_then(|d| bounded_step(d, |j| cal.model.nominal.is_revolute(j))) {
+                q += dq;
+            }
+        }
+    }
+    // A residual that overflows (a target near f64::MAX) is never below another: `best` is
+    // then the start with residual ∞, support and conditioning 0, flagged on every count.
+    for (dst, v) in out.iter_mut().zip(best.q.iter()) {
+        *dst = *v;
+    }
+    Ok(Compensation {
+        residual: best.residual,
+        // A residual that overflowed is never reached, whatever the tolerance (a model whose
+        // precision bound is infinite resolves nothing).
+        reached: best.residual.is_finite() && best.residual <= options.tolerance,
+        singular: !(best.conditioning >= options.singular_conditioning),
+        extrapolating: !(best.support >= options.extrapolation_threshold),
+        support: best.support,
+        conditioning: best.conditioning,
+    })
+}
+
+/// The damped minimum-norm step with its component along Dk1's smallest right singular
+/// vector v replaced by the nearer root of the quadratic model along it
+/// ([`crate::inverse_kinematics::fold`]), before the revolute bound.
+fn fold_step(
+    cal: &Calibrator<'_>,
+    q: &SVector<f64, NJ>,
+    jacobian: &SMatrix<f64, MT, NJ>,
+    r: &SVector<f64, MT>,
+    m: usize,
+    n: usize,
+    scale: f64,
+) -> Option<SVector<f64, NJ>> {
+    let mut dq = damped_min_norm_direction(jacobian, r, m, scale)?;
+    if let Some((sigma, u, v)) = smallest_singular_pair(jacobian, m) {
+        // Of tool point 0, the point `evaluate` compensates (the model itself without tool points).
+        let curvature = crate::kinematics::with_tool_point(&cal.model.nominal, 0, |nominal| nominal_curvature(nominal, q, &u, &v, m, n))
+            .unwrap_or(f64::NAN);
+        let rho = u.dot(r);
+        if let (true, Some(t)) = (curvature.is_finite(), fold_root(sigma, curvature, rho)) {
+            dq += v * (t - v.dot(&dq));
+        }
+    }
+    Some(dq)
 }
 
 fn evaluation_matrices(e: &Evaluation, m: usize, n: usize) -> (SVector<f64, MT>, SMatrix<f64, MT, NJ>) {

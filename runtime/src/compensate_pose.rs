@@ -18,12 +18,15 @@
 //! the revolute step bound of [`crate::inverse_kinematics::bounded_step`]. Fixed cost, no heap, no panic.
 
 use crate::compensate::reach_tolerance;
+use crate::error::Error;
 use crate::flow::inverse::Direction;
-use crate::inverse_kinematics::{bounded_step, nearest_turn, ur};
+use crate::flow_maps::{joint_flow, task_flow};
+use crate::inverse_kinematics::{bounded_step, ur};
 use crate::kinematics::spatial::{dot, sub, Frame, V3, ZERO};
 use crate::kinematics::tool_frame::{determines_orientation, fit_frame, relative_rotation, rotate, rotation_vector};
 use crate::kinematics::tool_point::nominal_tool_frame;
-use crate::{Calibrator, Error};
+use crate::load::Calibrator;
+use crate::pose::evaluate_pose;
 use cbd_protocol::{NominalModel, MAX_JOINTS as NJ, MAX_TOOL_POINTS};
 use nalgebra::{SMatrix, SVector};
 
@@ -260,109 +263,107 @@ fn nominal_pose(nominal: &NominalModel, q: &[f64]) -> Result<Pose, Error> {
     Ok(Pose { origin: fit.origin, rotation: fit.rotation, jacobian, support: 1.0 })
 }
 
-impl Calibrator<'_> {
-    /// [`Calibrator::compensate_pose_with`] with [`PoseCompensateOptions::for_model`].
-    pub fn compensate_pose(
-        &mut self,
-        position: &[f64],
-        rotation: &[[f64; 3]; 3],
-        seed: &[f64],
-        out: &mut [f64],
-    ) -> Result<PoseCompensation, Error> {
-        let options = PoseCompensateOptions::for_model(self);
-        self.compensate_pose_with(position, rotation, seed, out, &options)
-    }
+/// [`Calibrator::compensate_pose_with`] with [`PoseCompensateOptions::for_model`].
+pub fn compensate_pose(
+    cal: &mut Calibrator<'_>,
+    position: &[f64],
+    rotation: &[[f64; 3]; 3],
+    seed: &[f64],
+    out: &mut [f64],
+) -> Result<PoseCompensation, Error> {
+    let options = PoseCompensateOptions::for_model(cal);
+    compensate_pose_with(cal, position, rotation, seed, out, &options)
+}
 
-    /// Writes to `out` the joint command q whose calibrated tool frame ([`Calibrator::evaluate_pose`])
-    /// has origin `position` and rotation `rotation` (rows, task frame): from the pose form of the
-    /// inverse flows (`seed` choosing the nominal branch; the seed itself without
-    /// `options.inverse_flow_start` or when the start fails), `options.iterations` damped
-    /// Gauss–Newton steps on the 6-D pose error (module doc). The best iterate is returned, with
-    /// flags instead of an error when the target is not reached.
-    ///
-    /// Errors: fewer than [`MIN_POSE_JOINTS`] joints ([`Error::TooFewJoints`]), tool points that
-    /// do not determine an orientation ([`Error::OrientationUndetermined`]), wrong lengths, a
-    /// non-finite target (index 0–2 the position, 3–11 the rotation's entries by rows) or seed,
-    /// a rotation that is not one ([`Error::InvalidRotation`], tolerance [`ROTATION_TOLERANCE`]),
-    /// and the evaluation's own errors.
-    pub fn compensate_pose_with(
-        &mut self,
-        position: &[f64],
-        rotation: &[[f64; 3]; 3],
-        seed: &[f64],
-        out: &mut [f64],
-        options: &PoseCompensateOptions,
-    ) -> Result<PoseCompensation, Error> {
-        let n = self.dims.n;
-        let (target, revolute) = checked_pose_query(&self.model.nominal, position, rotation, seed, out)?;
-        let (lever, scale) = (tool_lever(&self.model.nominal), self.model.normalisation.task_scale);
-        let mut start = [0.0; NJ];
-        let start_slice = start.get_mut(..n).ok_or(Error::Internal)?;
-        let from_flows = options.inverse_flow_start
-            && self.pose_inverse_flow_start(&target, seed, start_slice, options.nominal_iterations, &revolute).is_ok();
-        let mut q = SVector::<f64, NJ>::zeros();
-        for (dst, s) in q.iter_mut().zip(if from_flows { start_slice.iter() } else { seed.iter() }) {
-            *dst = *s;
-        }
-        let best = pose_newton(
-            |qs| {
-                let p = self.evaluate_pose(qs)?;
-                Ok(Pose { origin: p.origin, rotation: p.rotation, jacobian: p.jacobian, support: p.support() })
-            },
-            q,
-            n,
-            &target,
-            lever,
-            scale,
-            options.iterations,
-            &revolute,
-        )?;
-        for (dst, v) in out.iter_mut().zip(best.q.iter()) {
-            *dst = *v;
-        }
-        Ok(PoseCompensation {
-            position_residual: best.position,
-            angle_residual: best.angle,
-            reached: best.position.is_finite()
-                && best.angle.is_finite()
-                && best.position <= options.position_tolerance
-                && best.angle <= options.angle_tolerance,
-            singular: !(best.conditioning >= options.singular_conditioning),
-            extrapolating: !(best.support >= options.extrapolation_threshold),
-            support: best.support,
-            conditioning: best.conditioning,
-        })
+/// Writes to `out` the joint command q whose calibrated tool frame ([`Calibrator::evaluate_pose`])
+/// has origin `position` and rotation `rotation` (rows, task frame): from the pose form of the
+/// inverse flows (`seed` choosing the nominal branch; the seed itself without
+/// `options.inverse_flow_start` or when the start fails), `options.iterations` damped
+/// Gauss–Newton steps on the 6-D pose error (module doc). The best iterate is returned, with
+/// flags instead of an error when the target is not reached.
+///
+/// Errors: fewer than [`MIN_POSE_JOINTS`] joints ([`Error::TooFewJoints`]), tool points that
+/// do not determine an orientation ([`Error::OrientationUndetermined`]), wrong lengths, a
+/// non-finite target (index 0–2 the position, 3–11 the rotation's entries by rows) or seed,
+/// a rotation that is not one ([`Error::InvalidRotation`], tolerance [`ROTATION_TOLERANCE`]),
+/// and the evaluation's own errors.
+pub fn compensate_pose_with(
+    cal: &mut Calibrator<'_>,
+    position: &[f64],
+    rotation: &[[f64; 3]; 3],
+    seed: &[f64],
+    out: &mut [f64],
+    options: &PoseCompensateOptions,
+) -> Result<PoseCompensation, Error> {
+    let n = cal.dims.n;
+    let (target, revolute) = checked_pose_query(&cal.model.nominal, position, rotation, seed, out)?;
+    let (lever, scale) = (tool_lever(&cal.model.nominal), cal.model.normalisation.task_scale);
+    let mut start = [0.0; NJ];
+    let start_slice = start.get_mut(..n).ok_or(Error::Internal)?;
+    let from_flows = options.inverse_flow_start
+        && pose_inverse_flow_start(cal, &target, seed, start_slice, options.nominal_iterations, &revolute).is_ok();
+    let mut q = SVector::<f64, NJ>::zeros();
+    for (dst, s) in q.iter_mut().zip(if from_flows { start_slice.iter() } else { seed.iter() }) {
+        *dst = *s;
     }
+    let best = pose_newton(
+        |qs| {
+            let p = evaluate_pose(cal, qs)?;
+            Ok(Pose { origin: p.origin, rotation: p.rotation, jacobian: p.jacobian, support: p.support() })
+        },
+        q,
+        n,
+        &target,
+        lever,
+        scale,
+        options.iterations,
+        &revolute,
+    )?;
+    for (dst, v) in out.iter_mut().zip(best.q.iter()) {
+        *dst = *v;
+    }
+    Ok(PoseCompensation {
+        position_residual: best.position,
+        angle_residual: best.angle,
+        reached: best.position.is_finite()
+            && best.angle.is_finite()
+            && best.position <= options.position_tolerance
+            && best.angle <= options.angle_tolerance,
+        singular: !(best.conditioning >= options.singular_conditioning),
+        extrapolating: !(best.support >= options.extrapolation_threshold),
+        support: best.support,
+        conditioning: best.conditioning,
+    })
+}
 
-    /// k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹ for a pose: ψ⁻¹ of every target tool point, the nominal frame fitted
-    /// to them, its nominal inverse kinematics from `seed` (UR closed form nearest the seed, or
-    /// `nominal_iterations` Gauss–Newton steps on k0's tool frame), then φ. Writes `out` (n values).
-    fn pose_inverse_flow_start(
-        &mut self,
-        target: &Target,
-        seed: &[f64],
-        out: &mut [f64],
-        nominal_iterations: usize,
-        revolute: &[bool; NJ],
-    ) -> Result<(), Error> {
-        let n = self.dims.n;
-        let count = self.model.nominal.tool_point_count();
-        let mut nominal = [[0.0; 3]; MAX_TOOL_POINTS];
-        let mut pulled = [[0.0; 3]; MAX_TOOL_POINTS];
-        for (j, (p, z)) in nominal.iter_mut().zip(pulled.iter_mut()).enumerate().take(count) {
-            *p = self.model.nominal.tool_point(j).ok_or(Error::Internal)?;
-            // y*_j = R* p_j + t*
-            let r = rotate(&target.rotation, *p);
-            let y = [r[0] + target.position[0], r[1] + target.position[1], r[2] + target.position[2]];
-            self.task_flow(&y, Direction::Backward, z)?;
-        }
-        let fit = fit_frame(nominal.get(..count).ok_or(Error::Internal)?, pulled.get(..count).ok_or(Error::Internal)?)
-            .ok_or(Error::OrientationUndetermined)?;
-        let nominal_target = Target { position: fit.origin, rotation: fit.rotation };
-        let scale = self.model.normalisation.task_scale;
-        let q = nominal_pose_solve(&self.model.nominal, &nominal_target, seed, n, nominal_iterations, revolute, scale)?;
-        self.joint_flow(q.as_slice().get(..n).ok_or(Error::Internal)?, Direction::Forward, out)
+/// k1⁻¹ = φ ∘ k0⁻¹ ∘ ψ⁻¹ for a pose: ψ⁻¹ of every target tool point, the nominal frame fitted
+/// to them, its nominal inverse kinematics from `seed` (UR closed form nearest the seed, or
+/// `nominal_iterations` Gauss–Newton steps on k0's tool frame), then φ. Writes `out` (n values).
+fn pose_inverse_flow_start(
+    cal: &mut Calibrator<'_>,
+    target: &Target,
+    seed: &[f64],
+    out: &mut [f64],
+    nominal_iterations: usize,
+    revolute: &[bool; NJ],
+) -> Result<(), Error> {
+    let n = cal.dims.n;
+    let count = cal.model.nominal.tool_point_count();
+    let mut nominal = [[0.0; 3]; MAX_TOOL_POINTS];
+    let mut pulled = [[0.0; 3]; MAX_TOOL_POINTS];
+    for (j, (p, z)) in nominal.iter_mut().zip(pulled.iter_mut()).enumerate().take(count) {
+        *p = cal.model.nominal.tool_point(j).ok_or(Error::Internal)?;
+        // y*_j = R* p_j + t*
+        let r = rotate(&target.rotation, *p);
+        let y = [r[0] + target.position[0], r[1] + target.position[1], r[2] + target.position[2]];
+        task_flow(cal, &y, Direction::Backward, z)?;
     }
+    let fit = fit_frame(nominal.get(..count).ok_or(Error::Internal)?, pulled.get(..count).ok_or(Error::Internal)?)
+        .ok_or(Error::OrientationUndetermined)?;
+    let nominal_target = Target { position: fit.origin, rotation: fit.rotation };
+    let scale = cal.model.normalisation.task_scale;
+    let q = nominal_pose_solve(&cal.model.nominal, &nominal_target, seed, n, nominal_iterations, revolute, scale)?;
+    joint_flow(cal, q.as_slice().get(..n).ok_or(Error::Internal)?, Direction::Forward, out)
 }
 
 /// The nominal pose inverse kinematics of `target` from `seed`: the UR closed form's solution
@@ -382,7 +383,7 @@ fn nominal_pose_solve(
     }
     let closed = match (nominal, seed.first_chunk::<6>()) {
         (NominalModel::DhChain(chain), Some(hint)) if ur::is_ur_type(chain) => {
-            nearest_solution(ur::solutions(chain, &Frame::new(target.rotation, target.position)), hint)
+            ur::nearest_solution(ur::solutions(chain, &Frame::new(target.rotation, target.position)), hint)
         }
         _ => None,
     };
@@ -421,23 +422,6 @@ pub fn nominal_pose_inverse(
     // The miss at the command, as the Gauss–Newton iterates are judged.
     let (_, _, position_miss, angle_miss) = weighted(&target, &nominal_pose(nominal, out)?, tool_lever(nominal));
     Ok((position_miss, angle_miss))
-}
-
-/// The closed-form solution nearest `hint` (squared angle differences, whole turns from the hint).
-fn nearest_solution(solutions: ur::Solutions, hint: &[f64; 6]) -> Option<[f64; 6]> {
-    let mut best: Option<(f64, [f64; 6])> = None;
-    for q in solutions.into_iter().flatten() {
-        let mut near = q;
-        let mut distance = 0.0;
-        for (v, h) in near.iter_mut().zip(hint) {
-            *v += nearest_turn(*h - *v);
-            distance += (*v - h) * (*v - h);
-        }
-        if best.map(|(d, _)| distance < d).unwrap_or(true) {
-            best = Some((distance, near));
-        }
-    }
-    best.map(|(_, q)| q)
 }
 
 /// The target checked: finite, a rotation (max |R Rᵀ − I| ≤ [`ROTATION_TOLERANCE`], det > 0).

@@ -4,9 +4,11 @@
 //! ([`crate::kinematics::tool_frame`]), with its 6 × n Jacobian (linear velocity of the origin,
 //! angular velocity).
 
+use crate::error::Error;
+use crate::evaluate::{evaluate_point, Evaluation};
 use crate::kinematics::spatial::V3;
 use crate::kinematics::tool_frame::{fit_frame, FrameVelocity};
-use crate::{Calibrator, Error, Evaluation};
+use crate::load::Calibrator;
 use cbd_protocol::{MAX_JOINTS as NJ, MAX_TOOL_POINTS};
 use nalgebra::{Dyn, MatrixView, SMatrix, U1, U6};
 
@@ -57,53 +59,51 @@ impl PoseEvaluation {
     }
 }
 
-impl Calibrator<'_> {
-    /// Every tool point's calibrated position and Jacobian at `q` and the calibrated tool frame
-    /// ([`PoseEvaluation`]). [`Error::OrientationUndetermined`] when the model's tool points do not
-    /// determine an orientation (fewer than 3, or all on one line): never a guess.
-    pub fn evaluate_pose(&mut self, q: &[f64]) -> Result<PoseEvaluation, Error> {
-        let count = self.model.nominal.tool_point_count();
-        let mut nominal = [[0.0; 3]; MAX_TOOL_POINTS];
-        for (j, p) in nominal.iter_mut().enumerate().take(count) {
-            *p = self.model.nominal.tool_point(j).ok_or(Error::Internal)?;
+/// Every tool point's calibrated position and Jacobian at `q` and the calibrated tool frame
+/// ([`PoseEvaluation`]). [`Error::OrientationUndetermined`] when the model's tool points do not
+/// determine an orientation (fewer than 3, or all on one line): never a guess.
+pub fn evaluate_pose(cal: &mut Calibrator<'_>, q: &[f64]) -> Result<PoseEvaluation, Error> {
+    let count = cal.model.nominal.tool_point_count();
+    let mut nominal = [[0.0; 3]; MAX_TOOL_POINTS];
+    for (j, p) in nominal.iter_mut().enumerate().take(count) {
+        *p = cal.model.nominal.tool_point(j).ok_or(Error::Internal)?;
+    }
+    let nominal = nominal.get(..count).ok_or(Error::OrientationUndetermined)?;
+    if !crate::kinematics::tool_frame::determines_orientation(nominal) {
+        return Err(Error::OrientationUndetermined);
+    }
+    let mut points: [Option<Evaluation>; MAX_TOOL_POINTS] = [None; MAX_TOOL_POINTS];
+    let mut measured = [[0.0; 3]; MAX_TOOL_POINTS];
+    for (j, (slot, y)) in points.iter_mut().zip(measured.iter_mut()).enumerate().take(count) {
+        let e = evaluate_point(cal, q, j)?;
+        for (dst, v) in y.iter_mut().zip(e.position.iter()) {
+            *dst = *v;
         }
-        let nominal = nominal.get(..count).ok_or(Error::OrientationUndetermined)?;
-        if !crate::kinematics::tool_frame::determines_orientation(nominal) {
-            return Err(Error::OrientationUndetermined);
+        *slot = Some(e);
+    }
+    let measured = measured.get(..count).ok_or(Error::Internal)?;
+    let fit = fit_frame(nominal, measured).ok_or(Error::OrientationUndetermined)?;
+    let velocity = FrameVelocity::new(&fit, nominal, measured).ok_or(Error::OrientationUndetermined)?;
+    let n = cal.dims.n;
+    let mut jacobian = SMatrix::<f64, 6, NJ>::zeros();
+    for d in 0..n {
+        // Column d: every point's velocity along joint d, then the frame's.
+        let mut column = [[0.0; 3]; MAX_TOOL_POINTS];
+        for (dy, e) in column.iter_mut().zip(points.iter()).take(count) {
+            let e = e.as_ref().ok_or(Error::Internal)?;
+            for (a, v) in dy.iter_mut().enumerate() {
+                *v = e.jacobian.get((a, d)).copied().ok_or(Error::Internal)?;
+            }
         }
-        let mut points: [Option<Evaluation>; MAX_TOOL_POINTS] = [None; MAX_TOOL_POINTS];
-        let mut measured = [[0.0; 3]; MAX_TOOL_POINTS];
-        for (j, (slot, y)) in points.iter_mut().zip(measured.iter_mut()).enumerate().take(count) {
-            let e = self.evaluate_point(q, j)?;
-            for (dst, v) in y.iter_mut().zip(e.position.iter()) {
+        let (dt, omega) = velocity.apply(column.get(..count).ok_or(Error::Internal)?).ok_or(Error::Internal)?;
+        for (a, v) in dt.iter().chain(omega.iter()).enumerate() {
+            if let Some(dst) = jacobian.get_mut((a, d)) {
                 *dst = *v;
             }
-            *slot = Some(e);
         }
-        let measured = measured.get(..count).ok_or(Error::Internal)?;
-        let fit = fit_frame(nominal, measured).ok_or(Error::OrientationUndetermined)?;
-        let velocity = FrameVelocity::new(&fit, nominal, measured).ok_or(Error::OrientationUndetermined)?;
-        let n = self.dims.n;
-        let mut jacobian = SMatrix::<f64, 6, NJ>::zeros();
-        for d in 0..n {
-            // Column d: every point's velocity along joint d, then the frame's.
-            let mut column = [[0.0; 3]; MAX_TOOL_POINTS];
-            for (dy, e) in column.iter_mut().zip(points.iter()).take(count) {
-                let e = e.as_ref().ok_or(Error::Internal)?;
-                for (a, v) in dy.iter_mut().enumerate() {
-                    *v = e.jacobian.get((a, d)).copied().ok_or(Error::Internal)?;
-                }
-            }
-            let (dt, omega) = velocity.apply(column.get(..count).ok_or(Error::Internal)?).ok_or(Error::Internal)?;
-            for (a, v) in dt.iter().chain(omega.iter()).enumerate() {
-                if let Some(dst) = jacobian.get_mut((a, d)) {
-                    *dst = *v;
-                }
-            }
-        }
-        if !jacobian.as_slice().iter().all(|v| v.is_finite()) {
-            return Err(Error::NonFiniteResult);
-        }
-        Ok(PoseEvaluation { points, count, rotation: fit.rotation, origin: fit.origin, residual: fit.residual, jacobian, n_joints: n })
     }
+    if !jacobian.as_slice().iter().all(|v| v.is_finite()) {
+        return Err(Error::NonFiniteResult);
+    }
+    Ok(PoseEvaluation { points, count, rotation: fit.rotation, origin: fit.origin, residual: fit.residual, jacobian, n_joints: n })
 }

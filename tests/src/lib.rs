@@ -140,32 +140,9 @@ pub fn expansion_blob(
     scale: f64,
 ) -> Vec<u8> {
     let base = model_blob(nominal, n_points, 0.01, integrator, prismatic_width);
-    let mut model = decode(&base).expect("the base model decodes");
-    let (n, m) = (model.n_joints(), model.task_dim());
+    let model = decode(&base).expect("the base model decodes");
     let codes = joint_codes(&model, joint_degree);
-    let exponents = task_exponents(m, task_degree);
-    let (r_v, r_w) = (codes.len() / n, exponents.len() / m);
+    let exponents = task_exponents(model.task_dim(), task_degree);
     let mut s = 11u64;
-    let mut weights = Vec::new();
-    for _ in 0..integrator.stage_count() {
-        for f in 0..r_v {
-            let degree: u32 = codes[f * n..(f + 1) * n].iter().map(|c| (c >> 1) as u32).sum();
-            weights.extend((0..n).map(|_| scale * lcg(&mut s) / (1.0 + degree as f64)));
-        }
-        for g in 0..r_w {
-            let degree: u32 = exponents[g * m..(g + 1) * m].iter().map(|&a| a as u32).sum();
-            weights.extend((0..m).map(|_| scale * lcg(&mut s) / (1.0 + degree as f64)));
-        }
-    }
-    let wb = f64_le_bytes(&weights);
-    model.expansion = Some(FieldExpansion {
-        tolerance: 1e-9,
-        task_radius: 2.0,
-        n_joint_features: r_v as u32,
-        joint_codes: &codes,
-        n_task_features: r_w as u32,
-        task_exponents: &exponents,
-        weights: F64Slice::from_le_bytes(&wb),
-    });
-    encode_to_vec(&model).expect("the expansion model encodes")
+    encode_with_synthetic_expansion(&model, &codes, &exponents, scale, || lcg(&mut s)).expect("the expansion model encodes")
 }

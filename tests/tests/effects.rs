@@ -206,7 +206,7 @@ fn gravity_torques_match_the_simulators_numerical_torques() {
         let n = case.rigid.n_joints();
         let (mut worst, mut largest): (f64, f64) = (0.0, 0.0);
         for q in case.configurations.chunks_exact(n) {
-            let runtime = cbd_runtime::kinematics::effects::gravity_torques(&case.rigid, q);
+            let runtime = cbd_runtime::kinematics::augmented::gravity_torques(&case.rigid, q);
             let sim = cbd_trainer::simulate::effects::gravity_torques_numerical(&case.rigid, &case.rigid.effects().gravity, q);
             for (a, b) in runtime.iter().zip(&sim) {
                 worst = worst.max((a - b).abs());

@@ -1,7 +1,8 @@
 //! The house's structure, checked from the source text (issue 29): no import cycles between the
-//! files of protocol, runtime, ffi and trainer; the trainer's modules imported only from their own
-//! layer or above, as docs/DESIGN.md §1 states the layers (at most 5 imports point upward); every
-//! "DESIGN §N" citation names a section that exists.
+//! files of protocol, runtime, ffi and trainer; the trainer's and the runtime's modules import only
+//! from their own layer or below, as docs/DESIGN.md §1 states the layers (at most 5 imports point
+//! upward in the trainer, none in the runtime); every "DESIGN §N" citation names a section that
+//! exists, and every path DESIGN cites from the repository's root exists.
 //!
 //! An import is a path that starts with `crate::`, `super::` or `self::` in product code (a
 //! module's `#[cfg(test)]` items and `tests.rs` files are left out: tests may reach anywhere). It
@@ -302,12 +303,14 @@ fn no_crate_has_an_import_cycle() {
     assert!(found.is_empty(), "import cycles between files:\n{}", found.join("\n"));
 }
 
-/// The trainer's layers as docs/DESIGN.md §1 states them: rows `| N | `module`, `module` |`.
-fn design_layers() -> BTreeMap<String, usize> {
+/// A crate's layers as docs/DESIGN.md §1 states them under `heading`: rows `| N | `module`, `module` |`
+/// up to the next heading.
+fn design_layers(heading: &str) -> BTreeMap<String, usize> {
     let design = std::fs::read_to_string(repo().join("docs/DESIGN.md")).unwrap();
     let section = &design[design.find("## 1.").unwrap()..design.find("## 2.").unwrap()];
+    let Some(at) = section.find(heading) else { return BTreeMap::new() };
     let mut layers = BTreeMap::new();
-    for line in section.lines() {
+    for line in section[at + heading.len()..].lines().skip(1).take_while(|l| !l.starts_with('#')) {
         let cells: Vec<&str> = line.split('|').map(str::trim).collect();
         if cells.len() < 4 || !cells[0].is_empty() {
             continue;
@@ -320,30 +323,78 @@ fn design_layers() -> BTreeMap<String, usize> {
     layers
 }
 
-#[test]
-fn trainer_modules_import_downward_as_design_states() {
-    let layers = design_layers();
-    assert!(!layers.is_empty(), "docs/DESIGN.md §1 has no layer table");
-    let trainer = read_crate("trainer");
+/// The imports of `dir`'s modules that point up a layer of the table under `heading`. With
+/// `face_on_top` the crate's root (lib.rs: its face, which re-exports) stands above every layer, so
+/// a module that names a path through it (`crate::Error`) imports upward; without, such paths are
+/// not counted.
+fn upward_imports(dir: &str, heading: &str, face_on_top: bool) -> Vec<String> {
+    let layers = design_layers(heading);
+    assert!(!layers.is_empty(), "docs/DESIGN.md §1 has no table under {heading:?}");
+    let krate = read_crate(dir);
+    let root = format!("{dir}/src/lib.rs");
     let top = |file: &str| -> Option<String> {
-        let (path, _) = trainer.files.iter().find(|(_, f)| f.as_str() == file)?;
+        let (path, _) = krate.files.iter().find(|(_, f)| f.as_str() == file)?;
         path.first().cloned()
     };
-    let modules: BTreeSet<String> = trainer.files.keys().filter_map(|p| p.first().cloned()).collect();
+    let modules: BTreeSet<String> = krate.files.keys().filter_map(|p| p.first().cloned()).collect();
     let unplaced: Vec<&String> = modules.iter().filter(|m| !layers.contains_key(*m)).collect();
-    assert!(unplaced.is_empty(), "trainer modules missing from the layer table in docs/DESIGN.md §1: {unplaced:?}");
+    assert!(unplaced.is_empty(), "{dir} modules missing from the layer table {heading:?} in docs/DESIGN.md §1: {unplaced:?}");
     let mut upward = Vec::new();
-    for (from, targets) in &trainer.arrows {
+    for (from, targets) in &krate.arrows {
         let Some(from_module) = top(from) else { continue };
         for to in targets {
+            if *to == root && face_on_top {
+                upward.push(format!("{from} → {to} (layer {} → the crate's face)", layers[&from_module]));
+                continue;
+            }
             let Some(to_module) = top(to) else { continue };
             if layers[&to_module] > layers[&from_module] {
                 upward.push(format!("{from} → {to} (layer {} → {})", layers[&from_module], layers[&to_module]));
             }
         }
     }
-    println!("imports pointing up a layer ({}):\n{}", upward.len(), upward.join("\n"));
+    println!("{dir}: imports pointing up a layer ({}):\n{}", upward.len(), upward.join("\n"));
+    upward
+}
+
+#[test]
+fn trainer_modules_import_downward_as_design_states() {
+    let upward = upward_imports("trainer", "### The trainer's layers", false);
     assert!(upward.len() <= 5, "{} imports point from a lower layer to a higher one (at most 5):\n{}", upward.len(), upward.join("\n"));
+}
+
+#[test]
+fn runtime_modules_import_downward_as_design_states() {
+    let upward = upward_imports("runtime", "### The runtime's layers", true);
+    assert!(upward.is_empty(), "{} imports point from a lower layer to a higher one (none allowed):\n{}", upward.len(), upward.join("\n"));
+}
+
+#[test]
+fn paths_design_cites_exist() {
+    let design = std::fs::read_to_string(repo().join("docs/DESIGN.md")).unwrap();
+    let folders = ["protocol/", "runtime/", "ffi/", "trainer/", "tests/", "examples/", "docs/", "python/", "fuzz/", ".ci/"];
+    let mut missing = Vec::new();
+    let mut checked = 0;
+    // Code spans: the odd pieces between backticks (a span may wrap a line).
+    let mut line = 1;
+    for (k, span) in design.split('`').enumerate() {
+        let at = line;
+        line += span.matches('\n').count();
+        // A path from the repository's root, one file or folder (no globs, braces or spaces).
+        let looks_like_path =
+            k % 2 == 1 && folders.iter().any(|f| span.starts_with(f)) && !span.contains(|c: char| c.is_whitespace() || "{}*<>".contains(c));
+        if !looks_like_path {
+            continue;
+        }
+        checked += 1;
+        let path = span.split(':').next().unwrap();
+        if !repo().join(path).exists() {
+            missing.push(format!("docs/DESIGN.md:{at}: {span}"));
+        }
+    }
+    println!("paths cited in docs/DESIGN.md: {checked}");
+    assert!(checked > 0, "no paths found in docs/DESIGN.md");
+    assert!(missing.is_empty(), "paths docs/DESIGN.md cites that do not exist:\n{}", missing.join("\n"));
 }
 
 #[test]

@@ -82,7 +82,7 @@ fn each_control_point_is_its_tool_point_and_a_query_there_follows_it() {
     for (c, s) in state.chunks(dims.state_len()).enumerate() {
         let e = cal.evaluate_point(&x[6 * c..6 * c + 6], c % 3).unwrap();
         for a in 0..3 {
-            let reference = model.normalisation.task_offset[a] + model.normalisation.task_scale * s[a];
+            let reference = model.normalisation.position_to_user(a, s[a]);
             worst = worst.max((e.position()[a] - reference).abs());
         }
     }

@@ -47,9 +47,7 @@ fn cbd_at(
     tol_factor: f64,
 ) -> Option<Cbd> {
     let norm = cbd_trainer::evidence::normalisation_of(noisy);
-    let jk = h.blob_joint_kernel(&norm);
-    let tk = TaskKernel { width: h.blob_task_width(&norm) };
-    let sigma = h.blob_sigma();
+    let cbd_trainer::solver::FlowHyperparameters { joint_kernel: jk, task_kernel: tk, sigma } = h.to_internal(&norm);
     let integ = Integrator { method: IntegratorMethod::Euler, steps: 1 };
     let cp = ControlPoints::new(nominal, &norm, noisy.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
     let (m, n) = (2, 2);
@@ -69,15 +67,16 @@ fn cbd_at(
     let at = design(&tproblem, &jk, &tk, &joint, &task);
     let mut largest = 0.0f64;
     let mut fit = |data: &Measurements| -> Vec<f64> {
+        let norm = &norm;
         let target: Vec<f64> =
-            data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale)).collect();
+            data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c]))).collect();
         let residual: Vec<f64> = target.iter().zip(&nom).map(|(y, k)| y - k).collect();
         let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nom, jacobians: &jac, residual: &residual };
         let a = design(&problem, &jk, &tk, &joint, &task);
         let w = posterior_weights(&a, &variances, sigma, &residual).unwrap();
         largest = largest.max(w.iter().zip(&variances).map(|(w, v)| w.abs() / v.sqrt()).fold(0.0, f64::max));
         let d = apply(&at, &w);
-        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.task_offset[i % m] + norm.task_scale * (k + d)).collect()
+        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.position_to_user(i % m, k + d)).collect()
     };
     let test_noisy = fit(noisy);
     let test_clean = fit(clean);

@@ -280,7 +280,7 @@ fn main() {
     let tcp = ControlPoints::new(&nominal, &norm, test.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
     let (tnom, tjac) = (tcp.nominal_positions(), tcp.nominal_jacobians());
     let mean_j2 = jac.iter().map(|v| v * v).sum::<f64>() / nom.len() as f64;
-    let tolerance = tolerance_for(h.blob_sigma() / 3.0, 1.0 + jk.gamma * mean_j2).max(1e-16);
+    let tolerance = tolerance_for(h.to_internal(&norm).sigma / 3.0, 1.0 + jk.gamma * mean_j2).max(1e-16);
     let joint = truncate(&vec![AxisSeries::periodic(b_box); n], tolerance).expect("joint basis");
     let task = truncate(&vec![AxisSeries::gaussian(task_radius_of(&nom, m) / tk.width); m], tolerance).expect("task basis");
     let residual = truncate(&vec![AxisSeries::periodic(c_box); n], tolerance).expect("residual basis");
@@ -337,7 +337,7 @@ fn main() {
     };
     let predict = |at: &Mat<f64>, w: &[f64]| -> Vec<f64> {
         let d = apply(at, w);
-        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.task_offset[i % m] + norm.task_scale * (k + d)).collect()
+        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.position_to_user(i % m, k + d)).collect()
     };
     // Data units: ln p(y) = −nlml − N m ln scale − ½ N m ln 2π.
     let to_lml = |nlml: f64| -nlml - res.len() as f64 * (norm.task_scale.ln() + 0.5 * (2.0 * std::f64::consts::PI).ln());
@@ -352,8 +352,8 @@ fn main() {
         let test_mean = mean_error(&pn, &test.positions);
         let noise_part: Vec<f64> = pn.iter().zip(&pc).map(|(a, b)| a - b).collect();
         // The same bias on the training rows: |A w_clean − (y_clean − k0)|, in the data's unit.
-        let train_fit: Vec<f64> = apply(&lg.a, &clean_fit.weights).iter().map(|v| v * norm.task_scale).collect();
-        let train_truth: Vec<f64> = res_clean.iter().map(|v| v * norm.task_scale).collect();
+        let train_fit: Vec<f64> = apply(&lg.a, &clean_fit.weights).iter().map(|v| norm.length_to_user(*v)).collect();
+        let train_truth: Vec<f64> = res_clean.iter().map(|v| norm.length_to_user(*v)).collect();
         println!(
             "{name}: lml {:.2} test mean {test_mean:.4e} ({:.3}× krr) bias {:.3e} (training rows {:.3e}) noise part {:.3e} dof {:.1} σ {:.3e}",
             to_lml(noisy_fit.nlml),
@@ -362,7 +362,7 @@ fn main() {
             mean_error(&train_fit, &train_truth),
             mean_error(&noise_part, &vec![0.0; noise_part.len()]),
             noisy_fit.dof,
-            sigma.exp() * norm.task_scale
+            norm.length_to_user(sigma.exp())
         );
         let spectrum: Vec<String> = t[2..2 + if p.spectrum == Spectrum::Pairs { 0 } else { layout.spectrum_len(p) }]
             .iter()
@@ -385,8 +385,8 @@ fn main() {
     };
     // Plain CbD's own evidence choice, on this basis.
     let b_of = |k: usize| if let JointKernelAxis::Periodic { b } = jk.axes[k] { b } else { 1.0 };
-    let gw = h.task_gamma / (norm.task_scale * norm.task_scale);
-    let log_sigma = (h.sigma / norm.task_scale).ln();
+    let gw = norm.variance_to_internal(h.task_gamma);
+    let log_sigma = norm.length_to_internal(h.sigma).ln();
     let plain = Prior { spectrum: Spectrum::Bessel, task_degrees: false, residual: false, residual_free: false };
     let t_plain = vec![gw.ln(), jk.gamma.ln(), b_of(0).ln(), b_of(1).ln(), log_sigma];
     report("plain CbD's θ (its own evidence) on this basis", plain, &t_plain);

@@ -125,7 +125,7 @@ fn main() {
     to_u(&mut tjac);
     map(&mut tcp);
     // Bases: joint harmonics of the box's narrowest kernel (b_box per axis), task at plain CbD's a × A_FACTOR.
-    let sigma_n = h.blob_sigma();
+    let sigma_n = h.to_internal(&norm).sigma;
     let mean_j2 = jac.iter().map(|v| v * v).sum::<f64>() / nom.len() as f64;
     let tolerance = tolerance_for(sigma_n / 3.0, 1.0 + jk.gamma * mean_j2).max(1e-16);
     let joint = truncate(&vec![AxisSeries::periodic(b_box); n], tolerance).expect("joint basis");
@@ -147,7 +147,7 @@ fn main() {
     let model = Model { joint_orders, task_functions: task.len(), linear: LinearGaussian::new(&a, &res), b_box };
     let predict = |w: &[f64]| -> Vec<f64> {
         let d = apply(&at, w);
-        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.task_offset[i % m] + norm.task_scale * (k + d)).collect()
+        tnom.iter().zip(&d).enumerate().map(|(i, (k, d))| norm.position_to_user(i % m, k + d)).collect()
     };
     // Data units: ln p(y) = −nlml − N m ln scale − ½ N m ln 2π.
     let to_lml = |nlml: f64| -nlml - model.linear.obs as f64 * (norm.task_scale.ln() + 0.5 * (2.0 * std::f64::consts::PI).ln());
@@ -168,11 +168,11 @@ fn main() {
             e[4],
             e[5],
             e[6],
-            e[7] * norm.task_scale
+            norm.length_to_user(e[7])
         );
     };
     let b_of = |k: usize| if let JointKernelAxis::Periodic { b } = jk.axes[k] { b } else { 1.0 };
-    let gw = h.task_gamma / (norm.task_scale * norm.task_scale);
+    let gw = norm.variance_to_internal(h.task_gamma);
     let t_plain = vec![
         gw.ln(),
         jk.gamma.ln(),
@@ -181,7 +181,7 @@ fn main() {
         -50.0,
         b_box.ln() - 1.0,
         b_box.ln() - 1.0,
-        (h.sigma / norm.task_scale).ln(),
+        norm.length_to_internal(h.sigma).ln(),
     ];
     let f = |t: &[f64]| model.evaluate(t, None).map_or(f64::INFINITY, |v| v.0);
     report("plain CbD's θ (its own evidence) on this basis", &t_plain, f(&t_plain));

@@ -217,3 +217,36 @@ mod tests {
         assert_eq!(r.unwrap_err().to_string(), "a.blob: the stage says no");
     }
 }
+
+/// A number as a message prints it: short — as written when that is short (`0.5`, `360`,
+/// `1e300`), else in scientific form with five significant digits (`3.6e101`, `3.3333e-1`); `{v}`
+/// of 1e300 is 301 digits. NaN and infinities by name.
+pub fn number(v: f64) -> String {
+    let plain = format!("{v}");
+    if !v.is_finite() || v == 0.0 || ((1e-4..1e7).contains(&v.abs()) && plain.len() <= 12) {
+        return plain;
+    }
+    let shortest = format!("{v:e}");
+    if shortest.len() <= 10 {
+        return shortest;
+    }
+    let rounded = format!("{v:.4e}");
+    let (mantissa, exponent) = rounded.split_once('e').unwrap_or((&rounded, "0"));
+    format!("{}e{exponent}", mantissa.trim_end_matches('0').trim_end_matches('.'))
+}
+
+#[cfg(test)]
+mod number_tests {
+    #[test]
+    fn numbers_in_messages_are_short() {
+        assert_eq!(super::number(1e300), "1e300");
+        assert_eq!(super::number(-2.5e-300), "-2.5e-300");
+        assert_eq!(super::number(0.5), "0.5");
+        assert_eq!(super::number(360.0), "360");
+        assert_eq!(super::number(f64::NAN), "NaN");
+        assert_eq!(super::number(f64::NEG_INFINITY), "-inf");
+        assert_eq!(super::number(1.0 / 3.0), "3.3333e-1");
+        assert_eq!(super::number(3.5999999999999997e101), "3.6e101");
+        assert_eq!(super::number(89.159), "89.159");
+    }
+}

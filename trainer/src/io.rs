@@ -181,6 +181,13 @@ pub fn check_paths(inputs: &[(&str, Option<&Path>)], outputs: &[(&str, Option<&P
     for (flag, path) in inputs {
         if let Some(path) = path {
             note_input(flag, path);
+            // A model file's URDF is read too, after these checks: noted now, so an output on it
+            // is refused before the work, not after it.
+            if *flag == "--model" {
+                if let Some(urdf) = urdf_of_model(path) {
+                    note_input("--model's URDF", &urdf);
+                }
+            }
         }
     }
     let outputs: Vec<(&str, &Path)> = outputs.iter().filter_map(|(flag, path)| path.map(|p| (*flag, p))).collect();
@@ -195,6 +202,17 @@ pub fn check_paths(inputs: &[(&str, Option<&Path>)], outputs: &[(&str, Option<&P
         }
     }
     Ok(())
+}
+
+/// The URDF a model file names (`[urdf] path`, relative to the file), if it reads one; `None` for
+/// any file that is not such a model file (its own errors come when it is loaded).
+fn urdf_of_model(model: &Path) -> Option<std::path::PathBuf> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open(model).ok()?.take(1 << 20).read_to_string(&mut text).ok()?;
+    let table: toml::Table = toml::from_str(&text).ok()?;
+    let path = Path::new(table.get("urdf")?.get("path")?.as_str()?);
+    Some(if path.is_absolute() { path.to_path_buf() } else { model.parent().unwrap_or(Path::new("")).join(path) })
 }
 
 /// Whether two output paths name the same destination: both standard output, the same existing

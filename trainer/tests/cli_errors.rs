@@ -287,7 +287,7 @@ fn model_file_joint_limits() {
     fails_with(&fit_with_model(&dir, &m), &["count.toml", "joint_limits has 1 pairs; the model has 6 joints"]);
     let bad = "min_rows = 10\njoint_limits = [[10, -10], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]";
     let m = ur5_model_with(&dir, "order.toml", "min_rows = 10", bad);
-    fails_with(&fit_with_model(&dir, &m), &["order.toml", "joint_limits[0] = [10, -10]: needs lo < hi"]);
+    fails_with(&fit_with_model(&dir, &m), &["order.toml", "joint_limits[1] = [10, -10]: needs lo < hi"]);
     let m = ur5_model_with(&dir, "tol.toml", "min_rows = 10", "min_rows = 10\nrepeat_tolerance = -1");
     fails_with(&fit_with_model(&dir, &m), &["tol.toml", "repeat_tolerance = -1"]);
     assert!(!dir.join("a.blob").exists());
@@ -427,7 +427,8 @@ fn eval_blob_for_a_different_model() {
     let model = ur5_dir().join("ur5.toml");
     let test = ur5_dir().join("test.csv");
     let out = cbd(&dir, &["eval", "--model", model.to_str().unwrap(), "--blob", blob.to_str().unwrap(), "--data", test.to_str().unwrap()]);
-    fails_with(&out, &["test.csv", "6 joints", "2"]);
+    // The blob is for the RR arm, the model file (which reads test.csv) a six-joint one.
+    fails_with(&out, &["rr.blob: does not fit", "ur5.toml", "6 joints", "2 joints"]);
 }
 
 /// Fix needed (trainer/src/cli/eval.rs, `run`): a blob whose joint count differs from the data's

@@ -60,3 +60,25 @@ fn bench_help_shows_sizes_as_accepted() {
     assert!(help.contains("[default: 256,4096]"), "{help}");
     assert!(!help.contains("64 256"), "{help}");
 }
+
+/// Issue 39: README's error section and EXIT_CODES.md say what each of `cbd compensate`'s flags
+/// means; every flag the build writes is named in both.
+#[test]
+fn every_compensate_flag_is_documented() {
+    use cbd_trainer::evaluation::command_check::RowFlags;
+    let none = RowFlags::default();
+    let each = [
+        RowFlags { not_reached: true, ..none },
+        RowFlags { outside_limits: true, ..none },
+        RowFlags { degenerate_target: true, ..none },
+        RowFlags { singular: true, ..none },
+        RowFlags { extrapolating: true, ..none },
+    ];
+    let (readme, codes) = (repo_file("README.md"), repo_file("docs/EXIT_CODES.md"));
+    for flag in each.iter().map(RowFlags::text).chain(std::iter::once(none.text())) {
+        assert!(readme.contains(&format!("`{flag}`")), "README does not name `{flag}`");
+        if flag != "ok" {
+            assert!(codes.contains(&format!("`{flag}`")), "docs/EXIT_CODES.md does not name `{flag}`");
+        }
+    }
+}

@@ -4,6 +4,7 @@
 
 use cbd_protocol::NominalModel;
 use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
+use cbd_trainer::cli::peers::{CBD, KRR};
 use cbd_trainer::data::model_file::{load_model_file, parse_model_file};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::evaluation::compare::{compare_peers, Comparison};
@@ -89,10 +90,10 @@ fn compare(nominal: &NominalModel, train: &Measurements, test: &Measurements) ->
         verbose: false,
         ..Default::default()
     };
-    let fitter = cbd_trainer::cli::compare::cbd_fitter(&settings);
+    let fitter = cbd_trainer::cli::args::cbd_fitter(&settings);
     let search = SearchOptions::default();
     let krr = kernel_ridge_correction(&search);
-    compare_peers(nominal, train, test, Some(&krr), Some(&fitter))
+    compare_peers(nominal, train, test, &[KRR.with(&krr), CBD.with(&fitter)])
 }
 
 #[test]

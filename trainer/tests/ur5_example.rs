@@ -69,11 +69,12 @@ fn ur5_dh_calibration_reaches_the_reference_accuracy() {
 #[ignore]
 fn ur5_compare_peers() {
     use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
+    use cbd_trainer::cli::peers::KRR;
     use cbd_trainer::evaluation::compare::compare_files;
     let d = ur5_dir();
     let search = SearchOptions::default();
     let krr = kernel_ridge_correction(&search);
-    let (c, warnings) = compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), Some(&krr), None).unwrap();
+    let (c, warnings) = compare_files(d.join("ur5.toml"), d.join("train.csv"), d.join("test.csv"), &[KRR.with(&krr)]).unwrap();
     eprintln!("warnings: {warnings:?}");
     eprintln!("{}", c.table("mm"));
     for r in &c.rows {
@@ -92,6 +93,7 @@ fn ur5_compare_peers() {
 #[ignore]
 fn cbd_hook_on_the_simulated_six_joint_arm() {
     use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
+    use cbd_trainer::cli::peers::{CBD, KRR};
     use cbd_trainer::data::Measurements;
     use cbd_trainer::evaluation::compare::compare_peers;
     use cbd_trainer::evaluation::correction::{FittedCorrection, Predictor};
@@ -105,7 +107,7 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
         opts.normalisation = cbd_trainer::evidence::normalisation_of(data);
         opts.joint_kernel = cbd_trainer::evidence::default_joint_kernel(nominal);
         opts.task_kernel.width = 1.0;
-        opts.sigma = robot.noise_std / opts.normalisation.task_scale;
+        opts.sigma = opts.normalisation.length_to_internal(robot.noise_std);
         opts.max_iterations = 15;
         let fit = fit_cbd(nominal, data, &opts)?;
         let predictor: Predictor =
@@ -114,7 +116,7 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
     };
     let search = SearchOptions::default();
     let krr = kernel_ridge_correction(&search);
-    let c = compare_peers(&robot.nominal, &train, &test, Some(&krr), Some(&hook));
+    let c = compare_peers(&robot.nominal, &train, &test, &[KRR.with(&krr), CBD.with(&hook)]);
     eprintln!("{}", c.table("mm"));
     for r in &c.rows {
         eprintln!("{}: {}", r.name, r.note);

@@ -249,33 +249,9 @@ fn odometer(digits: &mut [u8], max: u8) -> bool {
 /// pseudo-random sequence: the evaluation's cost and bits do not depend on the values.
 fn with_expansion(model: &Model<'_>, (joint_degree, task_degree): (u8, u8), scale: f64, seed: u32) -> Vec<u8> {
     let (n, m) = (model.n_joints(), model.task_dim());
-    let codes = periodic_codes(n, joint_degree);
-    let exponents = monomial_exponents(m, task_degree);
-    let (r_v, r_w) = (codes.len() / n, exponents.len() / m);
     let mut rng = Lcg(seed);
-    let mut weights = Vec::new();
-    for _ in 0..model.integrator.stage_count() {
-        for f in 0..r_v {
-            let degree: u32 = codes[f * n..(f + 1) * n].iter().map(|c| (c >> 1) as u32).sum();
-            weights.extend((0..n).map(|_| scale * rng.symmetric() / (1.0 + degree as f64)));
-        }
-        for g in 0..r_w {
-            let degree: u32 = exponents[g * m..(g + 1) * m].iter().map(|&a| a as u32).sum();
-            weights.extend((0..m).map(|_| scale * rng.symmetric() / (1.0 + degree as f64)));
-        }
-    }
-    let wb = f64_le_bytes(&weights);
-    let mut model = model.clone();
-    model.expansion = Some(FieldExpansion {
-        tolerance: 1e-9,
-        task_radius: 2.0,
-        n_joint_features: r_v as u32,
-        joint_codes: &codes,
-        n_task_features: r_w as u32,
-        task_exponents: &exponents,
-        weights: F64Slice::from_le_bytes(&wb),
-    });
-    encode_to_vec(&model).expect("encode expansion blob")
+    encode_with_synthetic_expansion(model, &periodic_codes(n, joint_degree), &monomial_exponents(m, task_degree), scale, || rng.symmetric())
+        .expect("encode expansion blob")
 }
 
 /// RR arm in the kernels' own basis: the 8 × 8 grid's kernel form (the reference) and an expansion

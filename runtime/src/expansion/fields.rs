@@ -3,7 +3,7 @@
 //! sums over the kernel rows, [`crate::flow::query_derivatives`], with c_f for u_j), and the task
 //! field w(k) = Σ_g ψ_g(k) d_g with Dw and Σ_g d_g ∂²ψ_g from the task basis at the current k.
 
-use crate::expansion::basis::for_each_task_basis_with_orders;
+use crate::expansion::basis_functions::for_each_task_basis_with_orders;
 use crate::flow::stage_fields::{joint_sums, JointHessian, StageFields};
 use crate::flow::{JointField, Shape, TaskField, TaskHessian};
 use crate::kernel::{joint_kernel_exponent_n, FEATURES_PER_JOINT};

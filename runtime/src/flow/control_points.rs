@@ -2,12 +2,12 @@
 //! fixed-step integration that stores every stage's sample. The calibrator runs it once when it
 //! loads a blob; the trainer runs the same code (same bits) in its solver.
 
+use crate::error::Error;
 use crate::flow::{control_point_rates, control_point_rates_with_features, write_samples, Dims, FlowParams};
 use crate::integrate::{integrate_checked, scratch_len};
 use crate::kernel::features_len;
 use crate::kinematics::{forward_kinematics, with_tool_point, Kinematics};
 use crate::real::Real;
-use crate::Error;
 use cbd_protocol::{Integrator, Model, NominalModel, MAX_JOINTS};
 
 /// Sets the initial control-point state: k_i = k0(x_i), J_i = Dk0(x_i), P_i = P0_i (internal units);

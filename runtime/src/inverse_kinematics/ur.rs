@@ -146,8 +146,14 @@ fn wrap(a: f64) -> f64 {
 /// `None` when the chain is not UR-type or no branch reaches.
 pub fn nearest_to_hint(chain: &DhChain, target: &[f64; 3], hint: &[f64; 6]) -> Option<[f64; 6]> {
     let pose = tool_pose(chain, hint).with_translation(*target);
+    nearest_solution(solutions(chain, &pose), hint)
+}
+
+/// Of the closed-form `solutions`, the one nearest `hint` (sum of squared angle differences, whole
+/// turns taken from the hint); `None` when no branch reaches.
+pub fn nearest_solution(solutions: Solutions, hint: &[f64; 6]) -> Option<[f64; 6]> {
     let mut best: Option<(f64, [f64; 6])> = None;
-    for q in solutions(chain, &pose).into_iter().flatten() {
+    for q in solutions.into_iter().flatten() {
         let mut near = q;
         let mut distance = 0.0;
         for (n, h) in near.iter_mut().zip(hint) {

@@ -1,6 +1,6 @@
 //! The rigid chain's geometry at one configuration (joint axes, axis points, link ends and
 //! rotations in the base frame), which the effects and the gravity torques differentiate (with the
-//! vector algebra of [`crate::kinematics::spatial`]). One owner, so `effects` and `gravity` both build on it.
+//! vector algebra of [`crate::kinematics::spatial`]). One owner, so `augmented` and `gravity` both build on it.
 //!
 //! f64 through `libm`, no fused multiply-add, no panic path.
 

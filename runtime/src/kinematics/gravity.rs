@@ -7,7 +7,7 @@
 //! o_k, R_k: origin and rotation of link k's own frame (at its distal end); m_k its mass, s_k = m_k r_k
 //! its first moment (r_k the centre of mass in that frame). w_k = R_k s_k is a vector carried by
 //! every joint up to k, so it enters the column sums exactly as the points do (∂w/∂q_a = z_a × w,
-//! 0 for a prismatic joint) and the derivative formulas of [`crate::kinematics::effects`] hold unchanged.
+//! 0 for a prismatic joint) and the derivative formulas of [`crate::kinematics::augmented`] hold unchanged.
 //! The point-mass model of `[gravity] link_masses` is s_k = 0; a [`cbd_protocol::Effect::GravityMoment`]
 //! is one link's (m, s) felt by one joint.
 //!
@@ -132,7 +132,7 @@ pub fn gravity_torques(model: &NominalModel, q: &[f64]) -> [f64; NJ] {
 mod tests {
     extern crate std;
     use super::*;
-    use crate::kinematics::effects::tests::{check_gravity_terms, close, config, fd, models};
+    use crate::kinematics::augmented::tests::{check_gravity_terms, close, config, fd, models};
     use std::format;
 
     /// A mass distribution off the link ends: m_k and s_k = m_k r_k, different per link.

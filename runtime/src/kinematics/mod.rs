@@ -1,11 +1,11 @@
 //! The nominal forward kinematics k0 and its derivatives, in the model's own units: the rigid DH
 //! chain beside its derivatives (`rigid`, `rigid_derivatives`), the physical effects on top of it
-//! beside theirs (`effects`, `effects_derivatives`, with the gravity torques of a mass model in
+//! beside theirs (`augmented`, `augmented_derivatives`, with the gravity torques of a mass model in
 //! `gravity`), and the dispatch between them here.
 
+pub mod augmented;
+pub mod augmented_derivatives;
 mod chain;
-pub mod effects;
-pub mod effects_derivatives;
 pub mod gravity;
 pub mod rigid;
 pub mod rigid_derivatives;
@@ -20,11 +20,11 @@ pub use spatial::Frame;
 pub use tool_point::{forward_kinematics_at, with_tool_point};
 
 /// k0(x) and Dk0(x). `x` has one entry per joint (radians, or length units for prismatic joints).
-/// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::kinematics::effects::kinematics`]).
+/// A model with effects gives the augmented k0_aug and Dk0_aug ([`crate::kinematics::augmented::kinematics`]).
 pub fn forward_kinematics(model: &NominalModel, x: &[f64]) -> Kinematics {
     // Effect-free models take the rigid chain's code below, unchanged (same bits, same cost).
     if !model.effects().is_empty() {
-        return crate::kinematics::effects::kinematics(model, x);
+        return crate::kinematics::augmented::kinematics(model, x);
     }
     crate::kinematics::rigid::kinematics(model, x)
 }

@@ -208,7 +208,7 @@ pub fn frame_velocity(fit: &FrameFit, nominal: &[V3], measured: &[V3], velocitie
 #[derive(Debug, Clone, Copy)]
 pub struct FrameVelocity {
     m_inverse: [V3; 3],
-    rotated: [V3; crate::protocol::MAX_TOOL_POINTS],
+    rotated: [V3; cbd_protocol::MAX_TOOL_POINTS],
     count: usize,
     lever: V3,
 }
@@ -217,11 +217,11 @@ impl FrameVelocity {
     /// M⁻¹ and the rotated centred nominal points a_j of `fit`.
     pub fn new(fit: &FrameFit, nominal: &[V3], measured: &[V3]) -> Option<FrameVelocity> {
         let count = nominal.len();
-        if count != measured.len() || count > crate::protocol::MAX_TOOL_POINTS || count == 0 {
+        if count != measured.len() || count > cbd_protocol::MAX_TOOL_POINTS || count == 0 {
             return None;
         }
         let (p_bar, y_bar) = (centroid(nominal), centroid(measured));
-        let mut rotated = [ZERO; crate::protocol::MAX_TOOL_POINTS];
+        let mut rotated = [ZERO; cbd_protocol::MAX_TOOL_POINTS];
         let mut m = [[0.0; 3]; 3];
         let mut ab = 0.0;
         for ((a_j, p), y) in rotated.iter_mut().zip(nominal).zip(measured) {

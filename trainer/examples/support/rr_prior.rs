@@ -33,8 +33,7 @@ pub fn plain_cbd(
     let e = cbd_trainer::evidence::choose_cbd_hyperparameters(nominal, noisy, norm, &Default::default()).unwrap();
     let h = &e.hyperparameters;
     println!("plain cbd evidence {:.2} ({}), {:?}", e.log_evidence, e.form, h);
-    let jk = h.blob_joint_kernel(norm);
-    let tk = cbd_protocol::TaskKernel { width: h.blob_task_width(norm) };
+    let cbd_trainer::solver::FlowHyperparameters { joint_kernel: jk, task_kernel: tk, .. } = h.to_internal(norm);
     let integ = cbd_protocol::Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 1 };
     (e, jk, tk, integ)
 }
@@ -45,7 +44,7 @@ pub fn residual(data: &cbd_trainer::data::Measurements, norm: &cbd_protocol::Nor
     let m = data.task_dim;
     data.positions
         .chunks_exact(m)
-        .flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale))
+        .flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c])))
         .zip(nominal)
         .map(|(y, k)| y - k)
         .collect()

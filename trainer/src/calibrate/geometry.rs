@@ -118,8 +118,7 @@ fn calibrated_hypothesis(
     norm: &Normalisation,
     settings: &Settings,
 ) -> crate::Result<Hypothesis> {
-    let (hyperparameters, evidence) = choose_cbd_hyperparameters_with_overrides(&fitted.model, data, norm, settings, None)?;
-    Ok(Hypothesis { base: fitted.model, dh: Some(fitted.stats), hyperparameters, evidence })
+    Ok(Hypothesis { dh: Some(fitted.stats), ..nominal_hypothesis(&fitted.model, data, norm, settings)? })
 }
 
 /// The hypothesis `settings.geometry` asks for, or for `Auto` the better of the two.
@@ -136,9 +135,9 @@ pub fn choose_geometry(
             Ok((calibrated_hypothesis(calibrated_chain(nominal, data)?, data, norm, settings)?, given(Geometry::Calibrated)))
         }
         Geometry::Auto => {
-            let (plain, fitted, choice) = decide(nominal, data, norm, settings)?;
-            match fitted {
-                Some(f) if choice.chosen == Geometry::Calibrated => Ok((calibrated_hypothesis(f, data, norm, settings)?, choice)),
+            let (plain, calibrated, choice) = decide(nominal, data, norm, settings, true)?;
+            match calibrated {
+                Some(h) if choice.chosen == Geometry::Calibrated => Ok((h, choice)),
                 _ => Ok((plain, choice)),
             }
         }
@@ -149,35 +148,70 @@ pub fn choose_geometry(
 /// `cbd compare` marks as the row `cbd fit` writes by default).
 pub fn geometry_choice(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<GeometryChoice> {
     let norm = super::normalisation(data, settings);
-    Ok(decide(nominal, data, &norm, &Settings { geometry: Geometry::Auto, ..settings.clone() })?.2)
+    Ok(decide(nominal, data, &norm, &Settings { geometry: Geometry::Auto, ..settings.clone() }, false)?.2)
 }
 
-/// Both hypotheses scored: the nominal one, the fitted chain (`None` when the group cannot be
-/// calibrated here, the choice then says why) and the choice.
+/// The calibrated side of the choice: the fitted chain's evidence with the group marginalised (the
+/// score; `None` where no search runs or the group cannot be linearised) and, when asked, the
+/// calibrated hypothesis itself.
+struct CalibratedSide {
+    score: Option<Evidence>,
+    hypothesis: Option<Hypothesis>,
+}
+
+/// The calibrated side, or why the geometric group cannot be calibrated here.
+fn calibrated_side(
+    nominal: &NominalModel,
+    data: &Measurements,
+    norm: &Normalisation,
+    settings: &Settings,
+    with_hypothesis: bool,
+) -> crate::Result<Result<CalibratedSide, String>> {
+    let fitted = match calibrated_chain(nominal, data) {
+        Ok(f) => f,
+        Err(e) => return Ok(Err(format!("the geometric group cannot be calibrated here: {e}"))),
+    };
+    // The calibrated hypothesis' evidence comparable with the nominal's: the group marginalised
+    // around the fit, on the same rows (only where the nominal's evidence is searched too).
+    let searched = settings.searches_evidence(nominal);
+    // The score and the hypothesis are independent searches: side by side too.
+    let (score, hypothesis) = rayon::join(
+        || -> crate::Result<Option<Evidence>> {
+            match linearised_group(nominal, &fitted.stats, data).filter(|_| searched) {
+                Some(group) => {
+                    let basis = GeometricBasis::new(&group, data, norm);
+                    Ok(choose_cbd_hyperparameters_with_overrides(&fitted.model, data, norm, settings, Some(&basis))?.1)
+                }
+                None => Ok(None),
+            }
+        },
+        || with_hypothesis.then(|| calibrated_hypothesis(fitted.clone(), data, norm, settings)).transpose(),
+    );
+    Ok(Ok(CalibratedSide { score: score?, hypothesis: hypothesis? }))
+}
+
+/// Both hypotheses scored: the nominal one, the calibrated one when `with_hypothesis` (`None`
+/// otherwise, or when the group cannot be calibrated here: the choice then says why) and the
+/// choice. The two sides are independent and run side by side on the command's workers (the
+/// calibrated hypothesis then before it is known to win: `cbd fit`'s time is the longer side's,
+/// not the sum); each gives the same bits on one worker or two.
 fn decide(
     nominal: &NominalModel,
     data: &Measurements,
     norm: &Normalisation,
     settings: &Settings,
-) -> crate::Result<(Hypothesis, Option<DhCalibration>, GeometryChoice)> {
-    let plain = nominal_hypothesis(nominal, data, norm, settings)?;
-    let fitted = match calibrated_chain(nominal, data) {
-        Ok(f) => f,
-        Err(e) => {
-            let by = format!("the geometric group cannot be calibrated here: {e}");
-            return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }));
-        }
+    with_hypothesis: bool,
+) -> crate::Result<(Hypothesis, Option<Hypothesis>, GeometryChoice)> {
+    let (plain, calibrated) = rayon::join(
+        || nominal_hypothesis(nominal, data, norm, settings),
+        || calibrated_side(nominal, data, norm, settings, with_hypothesis),
+    );
+    let plain = plain?;
+    let calibrated = match calibrated? {
+        Ok(side) => side,
+        Err(by) => return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None })),
     };
-    // The calibrated hypothesis' evidence comparable with the nominal's: the group marginalised
-    // around the fit, on the same rows.
-    let score = match (&plain.evidence, linearised_group(nominal, &fitted.stats, data)) {
-        (Some(_), Some(group)) => {
-            let basis = GeometricBasis::new(&group, data, norm);
-            choose_cbd_hyperparameters_with_overrides(&fitted.model, data, norm, settings, Some(&basis))?.1
-        }
-        _ => None,
-    };
-    let (scores, by) = match (&plain.evidence, &score) {
+    let (scores, by) = match (&plain.evidence, &calibrated.score) {
         (Some(a), Some(b)) => (evidence_scores(a, b, b.geometric_parameters), "evidence".to_string()),
         _ => {
             let folds = settings.scheme_folds.max(2);
@@ -189,7 +223,7 @@ fn decide(
         _ => scores.calibrated < scores.nominal,
     };
     let chosen = if calibrated_wins { Geometry::Calibrated } else { Geometry::Nominal };
-    Ok((plain, Some(fitted), GeometryChoice { chosen, by, scores: Some(scores) }))
+    Ok((plain, calibrated.hypothesis, GeometryChoice { chosen, by, scores: Some(scores) }))
 }
 
 /// The two evidences where they are comparable: on every row when both were computed there, else

@@ -23,7 +23,7 @@ use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_wit
 use crate::parametric::DhFitStats;
 use crate::report::noise_floor::{FloorVerdict, NoiseFloor};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions};
-use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
+use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation};
 
 /// A calibrated model and how it was chosen.
 #[derive(Debug, Clone)]
@@ -57,8 +57,7 @@ pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
 
 /// The fit's options for hyperparameters `h`, normalisation `norm` and scheme `integrator`.
 pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Integrator, settings: &Settings) -> CbdOptions {
-    let task_kernel = TaskKernel { width: h.blob_task_width(norm) };
-    let mut opts = CbdOptions::new(h.blob_joint_kernel(norm), task_kernel, h.blob_sigma(), integrator, norm.clone());
+    let mut opts = CbdOptions::new(h.to_internal(norm), integrator, norm.clone());
     opts.law = settings.law;
     opts.max_iterations = settings.max_iterations;
     opts.method = settings.solver;
@@ -122,7 +121,7 @@ pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation 
 /// Calibrates `nominal` on `data` (training rows only).
 pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<Calibration> {
     // The evidence needs three rows (a covariance and something to predict), the fit two.
-    let needed = if settings.source == HyperparameterSource::Evidence && !settings.overrides.is_complete(nominal) { 3 } else { 2 };
+    let needed = if settings.searches_evidence(nominal) { 3 } else { 2 };
     if data.len() < needed {
         return Err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }.into());
     }

@@ -90,6 +90,14 @@ pub struct Settings {
     pub verbose: bool,
 }
 
+impl Settings {
+    /// Whether CbD's hyperparameters for `base` come from a search of its evidence (not the
+    /// paper's values, nor every value given).
+    pub fn searches_evidence(&self, base: &NominalModel) -> bool {
+        self.source == HyperparameterSource::Evidence && !self.overrides.is_complete(base)
+    }
+}
+
 impl Default for Settings {
     fn default() -> Self {
         Settings {

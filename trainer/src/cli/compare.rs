@@ -1,11 +1,11 @@
 //! `cbd compare`: every peer on the same data in one run — nominal, parametric DH calibration,
 //! kernel ridge (GP) regression of the residual, Calibration by Diffeomorphisms, and the hybrids.
 
-use crate::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
+use crate::cli::peers::{fitters, PeerContext, PEERS};
 use crate::data::Measurements;
 use crate::evaluation::commanded::{commanded_arm, fit_and_command, CommandedAccuracy};
 use crate::evaluation::compare::{compare_peers, read_compare_files};
-use crate::evaluation::correction::{FittedCorrection, Predictor};
+use crate::evaluation::peers::Peer;
 use cbd_protocol::NominalModel;
 use std::path::PathBuf;
 
@@ -33,30 +33,7 @@ pub struct CompareArgs {
     pub commanded: Option<String>,
     /// CbD's hyperparameters and scheme, as in `cbd fit` (chosen by the pipeline when unset).
     #[command(flatten)]
-    pub solver: crate::cli::fit::SolverArgs,
-}
-
-/// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
-/// gives (nominal, DH-calibrated, with effects), deformed as given (`--geometry nominal`): the blob
-/// `cbd fit --geometry nominal` writes for that model, data and flags.
-pub fn cbd_fitter(settings: &crate::calibrate::Settings) -> impl Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> {
-    let settings = crate::calibrate::Settings { geometry: crate::calibrate::Geometry::Nominal, ..settings.clone() };
-    move |nominal: &NominalModel, data: &Measurements| -> crate::Result<FittedCorrection> {
-        let calibration = crate::calibrate::calibrate(nominal, data, &settings)?;
-        crate::cli::fit::print_calibration(&calibration, !settings.verbose);
-        let mut note = calibration.describe_hyperparameters();
-        if let Some(e) = &calibration.evidence {
-            note += &format!("; evidence {:.2} on {} rows ({:.2} s)", e.log_evidence, e.rows_used, e.seconds);
-        }
-        note += &format!("; {} ({})", calibration.scheme.label(), calibration.scheme.chosen_by);
-        for w in &calibration.warnings {
-            note += &format!("; warning: {w}");
-        }
-        let blob = calibration.fit.blob;
-        let predictor: Predictor =
-            Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()]));
-        Ok(FittedCorrection { noise_sigma: Some(calibration.hyperparameters.sigma), ..FittedCorrection::new(predictor, note) })
-    }
+    pub solver: crate::cli::args::SolverArgs,
 }
 
 /// The floor of a table's rows: σ of the `row` `cbd fit` writes (its evidence's, on the training
@@ -76,22 +53,20 @@ fn noise_floor(
 }
 
 /// `cbd compare --commanded <robot>`: the table for the arm `cbd simulate --robot <robot>`
-/// measures, kernel ridge with hyperparameters by `search`, CbD fitted with `settings`; prints it
-/// and returns it for the JSON.
+/// measures, the peers of the list fitted again for it with `context`; prints it and returns it
+/// for the JSON.
 fn commanded_table(
     robot: &str,
     nominal: &NominalModel,
     train: &Measurements,
-    search: &SearchOptions,
-    settings: &crate::calibrate::Settings,
+    context: &PeerContext,
     unit: &str,
 ) -> crate::Result<CommandedAccuracy> {
     let arm = commanded_arm(robot, nominal)?;
-    let cbd_fit = |model: &NominalModel, data: &Measurements| -> crate::Result<Vec<u8>> {
-        crate::calibrate::calibrate(model, data, settings).map(|c| c.fit.blob)
-    };
+    let fitters = fitters(PEERS, context);
+    let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
     let command = crate::evaluation::commanded_pose::commander_for(nominal);
-    let c = fit_and_command(&arm, nominal, train, &kernel_ridge_correction(search), &cbd_fit, command, 1000, 15)?;
+    let c = fit_and_command(&arm, nominal, train, &peers, command, 1000, 15)?;
     outln!("{}", c.table(unit));
     Ok(c)
 }
@@ -104,12 +79,20 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
+    if args.commanded.is_some() && crate::cli::base_is_registered(&crate::cli::ModelArgs { model: Some(args.model.clone()) }) {
+        // The commanded table sends each method's commands to the simulated arm in its own base
+        // frame; a registered frame is only an estimate of where that is (1000 of 1000 targets
+        // "missed" by about a metre). Refused before any fit.
+        return Err(crate::Error::InvalidInput(format!(
+            "--commanded: {} declares the base unknown (`[chain] base = {{ register = true }}`), but the commanded table needs the simulated arm's own frame: compare data measured in the arm's base frame with a declared base (without --tracker-frame)",
+            args.model.display()
+        )));
+    }
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.
     settings.verbose = false;
     // Each row deforms the model it is handed: `cbd` the nominal, `dh+cbd` the DH-calibrated chain.
     settings.geometry = crate::calibrate::Geometry::Nominal;
-    let search = SearchOptions::default();
     let inputs = read_compare_files(&args.model, &args.train, &args.test)?;
     if let Some(r) = &inputs.registration {
         let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
@@ -117,7 +100,13 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     }
     let mut warnings = inputs.warnings;
     for (path, imported) in [(&args.train, &inputs.train), (&args.test, &inputs.test)] {
-        warnings.extend(crate::data::nominal_check::nominal_warnings(&inputs.nominal, &imported.measurements, &imported.lines, path)?);
+        warnings.extend(crate::data::nominal_check::nominal_warnings(
+            &inputs.nominal,
+            &imported.measurements,
+            &imported.lines,
+            path,
+            inputs.registration.is_some(),
+        )?);
     }
     for w in warnings {
         errln!("warning: {w}");
@@ -133,9 +122,12 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
     )?;
     settings.threads = Some(threads);
-    let (krr, cbd) = (kernel_ridge_correction(&search), cbd_fitter(&settings));
-    let mut comparison =
-        crate::workers::on_workers(threads, || compare_peers(&inputs.nominal, train, &inputs.test.measurements, Some(&krr), Some(&cbd)));
+    let context = PeerContext { settings: settings.clone(), search: Default::default() };
+    let mut comparison = crate::workers::on_workers(threads, || {
+        let fitters = fitters(PEERS, &context);
+        let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
+        compare_peers(&inputs.nominal, train, &inputs.test.measurements, &peers)
+    });
     // The row `cbd fit` writes by default, and the noise floor from the σ that row's fit assumed
     // (what `cbd fit` records in the blob), else its hypothesis' evidence.
     let choice = crate::workers::on_workers(threads, || crate::calibrate::geometry::geometry_choice(&inputs.nominal, train, &settings))?;
@@ -159,9 +151,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
     let commanded = match &args.commanded {
-        Some(robot) => {
-            Some(crate::workers::on_workers(threads, || commanded_table(robot, &inputs.nominal, train, &search, &settings, unit))?)
-        }
+        Some(robot) => Some(crate::workers::on_workers(threads, || commanded_table(robot, &inputs.nominal, train, &context, unit))?),
         None => None,
     };
     if let Some(path) = &args.json {
@@ -184,9 +174,19 @@ mod tests {
     use super::*;
     use crate::evaluation::commanded::{commanded_accuracy, SimulatedArm};
 
-    fn cbd_fit(nominal: &NominalModel, data: &Measurements) -> crate::Result<Vec<u8>> {
-        let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
-        crate::calibrate::calibrate(nominal, data, &settings).map(|c| c.fit.blob)
+    /// Every peer of the list fitted on `train` and commanded (CbD with the default settings, quiet).
+    fn command_peers(
+        arm: &SimulatedArm,
+        nominal: &NominalModel,
+        train: &Measurements,
+        command: crate::evaluation::commanded::Commander,
+        count: usize,
+    ) -> CommandedAccuracy {
+        let context =
+            PeerContext { settings: crate::calibrate::Settings { verbose: false, ..Default::default() }, search: Default::default() };
+        let fitters = fitters(PEERS, &context);
+        let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
+        fit_and_command(arm, nominal, train, &peers, command, count, 7).unwrap()
     }
 
     /// Issue 15's criteria for CbD's row `best` (cbd on the RR arm, dh+cbd on the six-joint arm,
@@ -216,9 +216,7 @@ mod tests {
         let SimulatedArm::Rr(real) = &arm else { unreachable!() };
         let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 16 }, 2));
         let nominal = crate::simulate::rr::nominal();
-        let search = SearchOptions::default();
-        let krr = kernel_ridge_correction(&search);
-        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, commanded_accuracy, 1000, 7).unwrap();
+        let c = command_peers(&arm, &nominal, &train, commanded_accuracy, 1000);
         check(&c, "m", "cbd");
     }
 
@@ -227,9 +225,7 @@ mod tests {
         let arm = SimulatedArm::named("six").unwrap();
         let SimulatedArm::Six(robot) = &arm else { unreachable!() };
         let train = robot.measure(&crate::simulate::six_joint::random_configurations(250, 22), 23);
-        let search = SearchOptions::default();
-        let krr = kernel_ridge_correction(&search);
-        let c = fit_and_command(&arm, &robot.nominal, &train, &krr, &cbd_fit, commanded_accuracy, 1000, 7).unwrap();
+        let c = command_peers(&arm, &robot.nominal, &train, commanded_accuracy, 1000);
         check(&c, "mm", "dh+cbd");
     }
 
@@ -266,9 +262,7 @@ mod tests {
     fn commanded_point_one_with_two_tool_points() {
         let (arm, nominal, train) = six_arm_at_points(&[[20.0, 0.0, 10.0], [100.0, 0.0, 0.0]]);
         let command = crate::evaluation::commanded_pose::commander_for(&nominal);
-        let search = SearchOptions::default();
-        let krr = kernel_ridge_correction(&search);
-        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
+        let c = command_peers(&arm, &nominal, &train, command, 300);
         assert!(c.target.contains("tool point 1"), "{}", c.target);
         assert!(c.rows.iter().all(|r| r.orientation_deg.is_none()));
         check(&c, "mm", "dh+cbd");
@@ -281,9 +275,7 @@ mod tests {
     fn commanded_poses_on_the_simulated_six_joint_arm_with_three_tool_points() {
         let (arm, nominal, train) = six_arm_at_points(&[[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [50.0, 86.60254037844386, 0.0]]);
         let command = crate::evaluation::commanded_pose::commander_for(&nominal);
-        let search = SearchOptions::default();
-        let krr = kernel_ridge_correction(&search);
-        let c = fit_and_command(&arm, &nominal, &train, &krr, &cbd_fit, command, 300, 7).unwrap();
+        let c = command_peers(&arm, &nominal, &train, command, 300);
         errln!("{}", c.table("mm"));
         assert!(c.target.contains("pose"), "{}", c.target);
         let row = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap_or_else(|| panic!("no row {n}"));

@@ -43,7 +43,7 @@ pub struct DiagnoseArgs {
     pub no_cbd: bool,
     /// CbD's hyperparameters and scheme for the CbD rows, as in `cbd fit`.
     #[command(flatten)]
-    pub solver: crate::cli::fit::SolverArgs,
+    pub solver: crate::cli::args::SolverArgs,
 }
 
 pub fn run(args: DiagnoseArgs) -> Result<()> {
@@ -77,7 +77,13 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             true => crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?,
             false => None,
         };
-        for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path)? {
+        for w in crate::data::nominal_check::nominal_warnings(
+            &nominal,
+            &imported.measurements,
+            &imported.lines,
+            path,
+            crate::cli::base_is_registered(&args.model),
+        )? {
             errln!("warning: {w}");
         }
         Ok((imported.measurements, registration))
@@ -98,7 +104,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     settings.verbose = false;
     settings.threads = Some(threads);
     let d = crate::workers::on_workers(threads, || {
-        let fitter = crate::cli::compare::cbd_fitter(&settings);
+        let fitter = crate::cli::args::cbd_fitter(&settings);
         let cbd: Option<crate::evaluation::correction::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
         diagnose(&nominal, &data, test.as_ref(), cbd, &options)
     })?;

@@ -1,5 +1,6 @@
 //! `cbd eval`: evaluate a blob on measured data and report the position error.
 
+use crate::cli::args::blob_misfit;
 use crate::cli::{load_nominal, ModelArgs};
 use crate::error::{Context, Error, Result};
 use crate::report::noise_floor::NoiseFloor;
@@ -31,7 +32,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     // Kernel support max K_V(q, x_j)/γ lies in [0, 1]; NaN would silently disable the warning.
     let t = args.extrapolation_threshold;
     if !(0.0..=1.0).contains(&t) {
-        return Err(Error::InvalidInput(format!("--extrapolation-threshold must be a number in [0, 1], got {t}")));
+        return Err(Error::InvalidInput(format!("--extrapolation-threshold must be a number in [0, 1], got {}", crate::error::number(t))));
     }
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
@@ -45,6 +46,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
+    crate::evaluation::blob_match::check_blob_fits(&model, &nominal).map_err(|why| blob_misfit(&args.blob, &args.model, why))?;
     take_registered_base(&args, &mut nominal, &model.nominal, &data)?;
     if model.nominal != nominal {
         errln!(
@@ -180,6 +182,7 @@ fn take_registered_base(
         rms_before,
         rms_after: crate::nominal::register::rms_from(chain, data),
         refined: true,
+        stopped_at_limit: None,
     };
     errln!("{}: {} (as fitted, from {})", args.data.display(), r.describe(file.length_unit.name()), args.blob.display());
     Ok(())

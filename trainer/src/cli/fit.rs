@@ -1,5 +1,6 @@
 //! `cbd fit`: train a model blob from measured data.
 
+use crate::cli::args::{print_calibration, SolverArgs};
 use crate::cli::{load_nominal, ModelArgs};
 use crate::error::{Context, Error, Result};
 use std::path::PathBuf;
@@ -35,156 +36,6 @@ pub struct FitArgs {
     pub solver: SolverArgs,
 }
 
-/// Hyperparameters and scheme; anything left unset is chosen by the pipeline (`crate::calibrate`):
-/// CbD's own evidence on the training rows, then the scheme by cross-validation. Every length is in
-/// the data's unit and means the same in `fit`, `compare`, `diagnose` and `demo`; a value given
-/// replaces that one hyperparameter of the search's result.
-#[derive(Debug, Clone, clap::Args)]
-pub struct SolverArgs {
-    /// Measurement noise σ per coordinate, in the data's length unit.
-    #[arg(long)]
-    pub sigma: Option<f64>,
-    /// Task-space kernel width a, in the data's length unit.
-    #[arg(long)]
-    pub task_width: Option<f64>,
-    /// Task-space field variance γ_W, in the data's length unit squared.
-    #[arg(long)]
-    pub task_gamma: Option<f64>,
-    /// Joint kernel b of every revolute joint (periodic kernel exp(b (cos Δ − 1))).
-    #[arg(long)]
-    pub joint_b: Option<f64>,
-    /// Joint-space field variance γ_V (rad² for revolute joints).
-    #[arg(long)]
-    pub gamma: Option<f64>,
-    /// euler, heun or rk4 (default euler).
-    #[arg(long)]
-    pub integrator: Option<String>,
-    /// Integration steps; training optimises exactly this discrete flow (default: 1 or 2, chosen
-    /// by cross-validation on the training rows).
-    #[arg(long)]
-    pub steps: Option<u16>,
-    #[arg(long, default_value_t = 30)]
-    pub max_iterations: usize,
-    /// Drop the −(div v) P term from the momentum law.
-    #[arg(long)]
-    pub no_divergence: bool,
-    /// auto, dense or eigenspace: search all N·m momenta (O(N³) per iteration), or K_lin's dominant
-    /// eigenspace (O(N² r), r independent of N for smooth kernels); auto picks by problem size and spectrum.
-    #[arg(long)]
-    pub solver: Option<String>,
-    /// How the runtime evaluates the fields: auto (the kernels' own expansion when it is shorter
-    /// than the momenta or the momenta cancel), kernel (points and momenta only) or expansion.
-    #[arg(long, value_enum, default_value_t = crate::expansion::Representation::default())]
-    pub representation: crate::expansion::Representation,
-    #[arg(long)]
-    pub quiet: bool,
-}
-
-/// `--solver` values.
-pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod> {
-    use crate::solver::SolverMethod;
-    match name {
-        "auto" => Ok(SolverMethod::Auto),
-        "dense" => Ok(SolverMethod::Dense),
-        "eigenspace" => Ok(SolverMethod::Eigenspace),
-        other => Err(Error::InvalidInput(format!("--solver must be auto, dense or eigenspace, got {other:?}"))),
-    }
-}
-
-impl SolverArgs {
-    /// Rejects out-of-range values before any work, naming the flag.
-    pub fn validate(&self) -> Result<()> {
-        for (flag, value) in [
-            ("--sigma", self.sigma),
-            ("--task-width", self.task_width),
-            ("--task-gamma", self.task_gamma),
-            ("--joint-b", self.joint_b),
-            ("--gamma", self.gamma),
-        ] {
-            if let Some(v) = value {
-                // Squares and products of two such values must stay finite (σ², γ |Dk0|², a²).
-                if !(v > 0.0 && v <= 1e100) {
-                    return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {v}")));
-                }
-            }
-        }
-        if let Some(steps) = self.steps {
-            if steps == 0 || steps > cbd_protocol::MAX_STEPS {
-                return Err(Error::InvalidInput(format!("--steps must be between 1 and {}, got {steps}", cbd_protocol::MAX_STEPS)));
-            }
-        }
-        if let Some(method) = &self.integrator {
-            parse_integrator(method)?;
-        }
-        if let Some(solver) = &self.solver {
-            parse_solver(solver)?;
-        }
-        if self.max_iterations == 0 {
-            return Err(Error::InvalidInput("--max-iterations must be at least 1".into()));
-        }
-        Ok(())
-    }
-
-    /// The pipeline's settings for these flags.
-    pub fn settings(&self) -> Result<crate::calibrate::Settings> {
-        self.validate()?;
-        let mut s = crate::calibrate::Settings::default();
-        s.overrides = crate::calibrate::Overrides {
-            sigma: self.sigma,
-            task_width: self.task_width,
-            task_gamma: self.task_gamma,
-            joint_b: self.joint_b,
-            joint_gamma: self.gamma,
-        };
-        if let Some(method) = &self.integrator {
-            s.integrator = Some(parse_integrator(method)?);
-        }
-        s.steps = self.steps;
-        s.max_iterations = self.max_iterations;
-        if let Some(solver) = &self.solver {
-            s.solver = parse_solver(solver)?;
-        }
-        s.verbose = !self.quiet;
-        s.representation = self.representation;
-        if self.no_divergence {
-            s.law = cbd_protocol::MomentumLaw::HamiltonianWithoutDivergence;
-        }
-        Ok(s)
-    }
-}
-
-/// Prints what the pipeline chose (stderr) and its warnings.
-pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
-    if let Some(dh) = &c.dh {
-        errln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.iterations, dh.rank, dh.n_parameters, dh.final_rms);
-    }
-    if !quiet {
-        errln!("{}", c.geometry.describe());
-        match &c.evidence {
-            Some(e) => errln!(
-                "hyperparameters (CbD evidence {:.2} on {} rows, {} evaluations, {:.2} s): {}",
-                e.log_evidence,
-                e.rows_used,
-                e.evaluations,
-                e.seconds,
-                c.describe_hyperparameters()
-            ),
-            None => errln!("hyperparameters: {}", c.describe_hyperparameters()),
-        }
-        let cv: Vec<String> =
-            c.scheme.cross_validation.iter().map(|(i, e)| format!("{} {e:.3e}", crate::calibrate::scheme::label(*i))).collect();
-        errln!(
-            "scheme: {} ({}{})",
-            c.scheme.label(),
-            c.scheme.chosen_by,
-            if cv.is_empty() { String::new() } else { format!(": held-out RMS {}", cv.join(", ")) }
-        );
-    }
-    for w in &c.warnings {
-        errln!("warning: {w}");
-    }
-}
-
 /// The noise floor of the chosen σ and where the cross-validated held-out error stands against it.
 fn describe_noise_floor(c: &crate::calibrate::Calibration, unit: &str) -> String {
     let (floor, held_out) = c.noise_floor();
@@ -200,16 +51,6 @@ fn evenly_spaced_rows(data: crate::data::Measurements, max_rows: Option<usize>) 
     match max_rows {
         Some(k) if k < data.len() => data.subset(&data.evenly_spaced_pose_rows(k)),
         _ => data,
-    }
-}
-
-/// The integrator a command-line name stands for.
-pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod> {
-    match name.to_ascii_lowercase().as_str() {
-        "euler" => Ok(cbd_protocol::IntegratorMethod::Euler),
-        "heun" => Ok(cbd_protocol::IntegratorMethod::Heun),
-        "rk4" => Ok(cbd_protocol::IntegratorMethod::Rk4),
-        other => Err(Error::InvalidInput(format!("unknown integrator `{other}` (expected euler, heun or rk4)"))),
     }
 }
 
@@ -270,7 +111,9 @@ pub fn fit_measurements(
         errln!("warning: {w}");
     }
     let registration = crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
-    for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data)? {
+    for w in
+        crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data, registration.is_some())?
+    {
         errln!("warning: {w}");
     }
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);

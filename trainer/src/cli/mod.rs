@@ -11,6 +11,7 @@ macro_rules! outln {
     };
 }
 
+pub mod args;
 pub mod bench;
 pub mod compare;
 pub mod compensate;
@@ -19,9 +20,12 @@ pub mod diagnose;
 pub mod eval;
 pub mod export;
 pub mod fit;
+pub mod peers;
 pub mod plan;
 pub mod report;
 pub mod simulate;
+
+pub use args::ModelArgs;
 
 use crate::error::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -60,15 +64,6 @@ pub enum Command {
     Plan(plan::PlanArgs),
 }
 
-/// The nominal model: a model file, or the built-in planar RR arm.
-#[derive(Debug, Clone, clap::Args)]
-pub struct ModelArgs {
-    /// Model file (TOML: DH table or URDF, units, CSV columns). Without it: the paper's RR arm,
-    /// CSV columns q1, q2 (radians), x, y.
-    #[arg(long)]
-    pub model: Option<std::path::PathBuf>,
-}
-
 /// Registers the nominal's base on the training `data` when the model file at `args` declares
 /// it unknown (`[chain] base = { register = true }`), and says so on stderr: from here on
 /// "nominal" is the nominal in the registered frame.
@@ -86,6 +81,12 @@ pub fn register_base_if_unknown(
     let r = crate::parametric::register::register_and_refine(nominal, data).context(data_path.display())?;
     errln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
     Ok(Some(r))
+}
+
+/// Whether the model file at `args` declares its base unknown (`base = { register = true }`):
+/// the nominal is then in the frame registered on the training data.
+pub fn base_is_registered(args: &ModelArgs) -> bool {
+    args.model.as_ref().and_then(|p| crate::data::model_file::load_model_file(p).ok()).is_some_and(|f| f.register_base)
 }
 
 /// The nominal model and how to read its measurement CSV files.
@@ -113,6 +114,8 @@ pub fn load_nominal(args: &ModelArgs) -> Result<(cbd_protocol::NominalModel, cra
                 planar_frame: None,
                 tool_points: Vec::new(),
                 orientation_columns: None,
+                range_hint:
+                    "the built-in arm's joints are read within one turn each way; a model file (--model) may declare `joint_limits`",
             },
         )),
     }

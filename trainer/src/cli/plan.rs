@@ -6,7 +6,6 @@ use crate::cli::{load_nominal, ModelArgs};
 use crate::data::csv_import::{read_measurements, ColumnSpec};
 use crate::error::{Context, Error, Result};
 use crate::plan::{plan, prior, Criterion, PlanInput, PlanOptions};
-use cbd_protocol::JointKind;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -79,7 +78,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     for (flag, v) in [("--noise", args.noise), ("--prior-error", args.prior_error)] {
         if let Some(v) = v {
             if !(v > 0.0 && v <= 1e100) {
-                return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {v}")));
+                return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {}", crate::error::number(v))));
             }
         }
     }
@@ -101,26 +100,9 @@ pub fn run(args: PlanArgs) -> Result<()> {
     };
     // The controller's values (the columns, in model units: where the limits apply) → the model's
     // joints, as the import maps them: the joint map, then a planar frame's offsets.
-    let joint_factor: Vec<f64> = spec
-        .joint_kinds
-        .iter()
-        .map(|k| match k {
-            JointKind::Revolute => spec.angle_unit.radians(),
-            JointKind::Prismatic => spec.length_unit.factor_to(spec.model_length_unit),
-        })
-        .collect();
-    let to_model = |c: &[f64]| -> Vec<f64> {
-        let mut q = c.to_vec();
-        if let Some(map) = &spec.joint_map {
-            let columns: Vec<f64> = c.iter().zip(&joint_factor).map(|(v, f)| v / f).collect();
-            map.to_model(&columns, &mut q);
-            q.iter_mut().zip(&joint_factor).for_each(|(v, f)| *v *= f);
-        }
-        if let Some(frame) = &spec.planar_frame {
-            q.iter_mut().zip(&frame.offsets).for_each(|(v, o)| *v += o);
-        }
-        q
-    };
+    let columns = crate::data::joint_columns::JointColumns::new(&spec);
+    let joint_factor = columns.factors().to_vec();
+    let to_model = |c: &[f64]| -> Vec<f64> { columns.to_model_from_model_units(c) };
     let mapped = spec.joint_map.is_some() || spec.planar_frame.as_ref().is_some_and(|f| f.offsets.iter().any(|o| *o != 0.0));
     let user_candidates = match &args.candidate_file {
         Some(path) => {
@@ -154,6 +136,15 @@ pub fn run(args: PlanArgs) -> Result<()> {
     if options.criterion == Criterion::Maximin && options.exchange > 0 {
         return Err(Error::InvalidInput("--exchange improves the variance criterion: it does not combine with --criterion maximin".into()));
     }
+    // More poses than candidates can never be planned: said before the memory estimate, which
+    // would blame --candidates for what --count asks.
+    let candidate_count = args.candidates + user_candidates.len() / nominal.n_joints().max(1);
+    if args.count > candidate_count {
+        return Err(Error::InvalidInput(format!(
+            "--count {} is more than the {candidate_count} candidate poses (--candidates {} and --candidate-file): lower --count or raise --candidates",
+            args.count, args.candidates
+        )));
+    }
     let bytes = crate::plan::memory_bytes(
         nominal.n_joints(),
         nominal.task_dim(),
@@ -162,19 +153,36 @@ pub fn run(args: PlanArgs) -> Result<()> {
         measured.as_ref().map_or(0, |d| d.len()),
     );
     crate::cli::memory::room_for(bytes)
-        .map_err(|e| crate::cli::memory::MemoryError(format!("{}; lower --candidates or --workspace", e.0)))
+        .map_err(|e| crate::cli::memory::MemoryError(format!("{}; lower --count, --candidates or --workspace", e.0)))
         .context(format!("--candidates {} --workspace {} --count {}", args.candidates, args.workspace, args.count))?;
     let sample: Vec<f64> = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2))
         .chunks_exact(limits.len())
         .flat_map(to_model)
         .collect();
     let reach = crate::plan::candidates::reach(&nominal, &sample);
-    // With measured poses the model `cbd fit` would write on them (its geometry and hyperparameters);
-    // before any, the calibrated geometry with a stated prior.
+    // CbD's evidence on --data only when those poses identify the geometric group with coordinates
+    // to spare; otherwise the DH fit interpolates them, σ comes out near zero and so would the
+    // predictions. Say so, and what is needed. With evidence, the model `cbd fit` would write on
+    // them (its geometry and hyperparameters); without, the calibrated geometry with a stated prior.
+    let data_name = args.data.as_ref().map_or(String::new(), |p| p.display().to_string());
+    let evidence_from_data = match &measured {
+        Some(data) => match crate::plan::identifiability::measured_identify_group(&nominal, &sample, &data.joints) {
+            Ok(()) => true,
+            Err(why) => {
+                errln!(
+                    "{data_name}: {} poses do not identify the geometric group ({} parameters; at least {} poses in general position, twice the parameters in coordinates): the predictions rest on the stated prior (--noise, --prior-error), not on CbD's evidence on these poses",
+                    why.poses,
+                    why.parameters,
+                    why.needed
+                );
+                false
+            }
+        },
+        None => false,
+    };
     let (hyperparameters, geometry) = match &measured {
-        Some(data) if data.len() >= 3 => {
-            let (h, choice) =
-                prior::from_measurements(&nominal, data).context(args.data.as_ref().map_or(String::new(), |p| p.display().to_string()))?;
+        Some(data) if evidence_from_data => {
+            let (h, choice) = prior::from_measurements(&nominal, data).context(&data_name)?;
             errln!("{}", choice.describe());
             (h, choice.chosen)
         }
@@ -198,6 +206,15 @@ pub fn run(args: PlanArgs) -> Result<()> {
         geometry,
     };
     let result = plan(&input, &options).context(&model_name)?;
+    // A prediction is a finite length or none (group not identified): never "NaN mm".
+    let predictions = result.measured_predicted_rms.iter().chain(result.poses.iter().filter_map(|p| p.predicted_rms.as_ref()));
+    if let Some(bad) = predictions.copied().find(|v| !(v.is_finite() && *v <= crate::data::csv_import::MAX_MAGNITUDE)) {
+        return Err(Error::InvalidInput(format!(
+            "{model_name}: the predicted RMS error is {}: the model's lengths (reach {}) or the stated prior are beyond what the posterior can represent; check the DH table, the joint limits and --noise / --prior-error",
+            crate::error::number(bad),
+            crate::error::number(reach)
+        )));
+    }
 
     // The poses as the controller's values, in the file's units.
     let mut text = spec.joint_columns.join(",");
@@ -250,7 +267,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
             "learning_curve": curve,
             "plan": result,
             "criterion": options.criterion,
-            "prior": if measured.as_ref().is_some_and(|d| d.len() >= 3) { "evidence on --data" } else { "stated" },
+            "prior": if evidence_from_data { "evidence on --data" } else { "stated" },
         });
         let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;

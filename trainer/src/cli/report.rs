@@ -21,7 +21,8 @@ pub struct ReportArgs {
 
 pub fn run(args: ReportArgs) -> crate::Result<()> {
     crate::io::check_paths(&[("--json", Some(&args.json))], &[("--out", Some(&args.out))])?;
-    let figures = crate::report::html::write_report(&args.json, args.plots.as_deref(), &args.out, &args.unit)?;
+    let labels = crate::cli::peers::labels(crate::cli::peers::PEERS);
+    let figures = crate::report::html::write_report(&args.json, args.plots.as_deref(), &args.out, &args.unit, &labels)?;
     outln!("report written to {} ({figures} figures embedded)", args.out.display());
     Ok(())
 }

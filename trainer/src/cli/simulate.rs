@@ -113,14 +113,11 @@ pub fn parse_tool_points(text: &str) -> Result<Vec<[f64; 3]>> {
             .map(|x| x.trim().parse::<f64>())
             .collect::<std::result::Result<_, _>>()
             .map_err(|e| bad(format!("point {}: {e}", j + 1)))?;
-        if v.len() != 3 || v.iter().any(|x| !(x.is_finite() && x.abs() <= MAX_MAGNITUDE)) {
-            return Err(bad(format!("point {} needs 3 finite coordinates", j + 1)));
-        }
-        points.push([v[0], v[1], v[2]]);
+        let [x, y, z] = v[..] else { return Err(bad(format!("point {} has {} coordinates; it needs exactly 3", j + 1, v.len()))) };
+        points.push([x, y, z]);
     }
-    if points.len() > crate::data::MAX_TOOL_POINTS {
-        return Err(bad(format!("{} points; at most {}", points.len(), crate::data::MAX_TOOL_POINTS)));
-    }
+    // The rules of a model file's `[chain.tool] points`: what is simulated can be read back.
+    crate::nominal::tool_points::check_tool_points(&points).map_err(bad)?;
     Ok(points)
 }
 
@@ -148,6 +145,7 @@ fn poses_spec(robot: &str) -> crate::data::csv_import::ColumnSpec {
         planar_frame: None,
         tool_points: Vec::new(),
         orientation_columns: None,
+        range_hint: "the simulated robot's joints are read within one turn each way",
     }
 }
 
@@ -276,8 +274,11 @@ fn simulate_six_points(
 ) -> Result<()> {
     use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
     let p = tool_points.len();
-    if args.pose && p < 3 {
-        return Err(Error::InvalidInput(format!("--pose needs at least 3 tool points (a frame from {p} is not determined)")));
+    if args.pose && !cbd_runtime::kinematics::tool_frame::determines_orientation(tool_points) {
+        return Err(Error::InvalidInput(format!(
+            "--pose needs at least 3 tool points off one line (--tool-points has {p}{}): the tool frame's orientation is not determined",
+            if p >= 3 { " on a line" } else { "" }
+        )));
     }
     let mut per_point = Vec::with_capacity(p);
     for point in tool_points {

@@ -1,82 +1,16 @@
 //! Measurement import from CSV: named joint and position columns, unit conversion, and errors
 //! that name the file, the line and the column.
 
+pub use super::column_spec::{default_joint_limits, ColumnSpec, OrientationColumns, RANGE_FROM_MODEL_FILE};
 use super::import_error::ImportError;
-use super::joint_map::JointMap;
-use super::units::{AngleUnit, LengthUnit};
 use super::Measurements;
-use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
 use std::path::Path;
 
-/// Which columns hold what, and in which units.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ColumnSpec {
-    /// One column per joint, in chain order.
-    pub joint_columns: Vec<String>,
-    /// One column per task coordinate.
-    pub position_columns: Vec<String>,
-    /// Kind of each joint: revolute columns are in `angle_unit`, prismatic ones in `length_unit`.
-    pub joint_kinds: Vec<JointKind>,
-    /// Unit of the revolute joint columns in the file (converted to radians).
-    pub angle_unit: AngleUnit,
-    /// Unit of the position (and prismatic joint) columns in the file.
-    pub length_unit: LengthUnit,
-    /// The model's length unit, which lengths are converted to.
-    pub model_length_unit: LengthUnit,
-    /// Fewer data rows is an error.
-    pub min_rows: usize,
-    /// Allowed range of each joint, model units (radians or the model's length unit); a value
-    /// outside is an error. [`default_joint_limits`] when the model file declares none.
-    pub joint_limits: Vec<[f64; 2]>,
-    /// Largest distance, model length unit, between the positions of two rows with the same joint
-    /// configuration before they count as contradictory (an error). `None`: 1e-3 of the diagonal
-    /// of the positions' bounding box.
-    pub repeat_tolerance: Option<f64>,
-    /// Controller joint values (the columns, in their units) → model joints, applied before the
-    /// unit conversion (`[measurements.joint_map]`); `None`: the columns are the model's joints.
-    pub joint_map: Option<JointMap>,
-    /// A `[planar]` arm's base, yaw and joint offsets: rows are read into its chain's frame
-    /// (joints + offsets, positions R(−yaw)(y − base)) after the units and the joint map.
-    pub planar_frame: Option<PlanarFrame>,
-    /// The model's tool points (offsets in the tool frame, model length unit): each file row is a
-    /// pose and becomes one data row per point (pose-major, `Measurements::points_per_pose`).
-    /// Empty: one point, today's rows. Without `orientation_columns`, `position_columns` holds
-    /// each point's coordinates in turn (x1, y1, z1, x2, …).
-    pub tool_points: Vec<[f64; 3]>,
-    /// A measured pose's orientation: `position_columns` is then the tool origin and the rows are
-    /// the points y_j = p + R p_j.
-    pub orientation_columns: Option<OrientationColumns>,
-}
-
-/// The orientation columns of a measured pose.
-#[derive(Debug, Clone, PartialEq)]
-pub enum OrientationColumns {
-    /// A unit quaternion (w, x, y, z).
-    Quaternion(Vec<String>),
-    /// A rotation matrix, row-major.
-    Rotation(Vec<String>),
-}
-
-impl OrientationColumns {
-    fn names(&self) -> &[String] {
-        match self {
-            OrientationColumns::Quaternion(v) | OrientationColumns::Rotation(v) => v,
-        }
-    }
-}
-
 /// Largest departure of a measured quaternion's norm from 1, or of a rotation matrix's rows from
 /// orthonormal, before it is refused as not a rotation (a few printed digits stay well inside).
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
-
-/// One full turn each way for revolute joints (beyond that no arm we know of turns, and a larger
-/// value is a unit or column mistake); no limit for prismatic joints.
-pub fn default_joint_limits(kinds: &[JointKind]) -> Vec<[f64; 2]> {
-    let turn = 2.0 * std::f64::consts::PI;
-    kinds.iter().map(|k| if *k == JointKind::Revolute { [-turn, turn] } else { [f64::NEG_INFINITY, f64::INFINITY] }).collect()
-}
 
 /// A row whose joint configuration repeats an earlier row's exactly, with positions that agree
 /// within the repeat tolerance (kept in the data: a repeated measurement).
@@ -294,6 +228,8 @@ struct RowReader<'a> {
     /// File unit → model unit, per joint and for lengths.
     joint_factor: Vec<f64>,
     length_factor: f64,
+    /// The controller's values → model joints (the joint map, the units).
+    columns: super::joint_columns::JointColumns<'a>,
 }
 
 impl<'a> RowReader<'a> {
@@ -310,10 +246,10 @@ impl<'a> RowReader<'a> {
         let joint_idx = spec.joint_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         let pos_idx = spec.position_columns.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         let orientation_idx = spec.orientation_columns.iter().flat_map(|o| o.names()).map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
-        let rad = spec.angle_unit.radians();
         let length_factor = spec.length_unit.factor_to(spec.model_length_unit);
-        let joint_factor = spec.joint_kinds.iter().map(|k| if *k == JointKind::Revolute { rad } else { length_factor }).collect();
-        Ok(RowReader { spec, err, joint_idx, pos_idx, orientation_idx, joint_factor, length_factor })
+        let columns = super::joint_columns::JointColumns::new(spec);
+        let joint_factor = columns.factors().to_vec();
+        Ok(RowReader { spec, err, joint_idx, pos_idx, orientation_idx, joint_factor, length_factor, columns })
     }
 
     /// The measured pose's rotation at file `line`: from a quaternion (w, x, y, z) of norm 1 within
@@ -376,21 +312,16 @@ impl<'a> RowReader<'a> {
                     Some(line),
                     Some(name),
                     format!(
-                        "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? declare `joint_limits` in [measurements] to change the range)",
+                        "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? {})",
                         crate::error::excerpt(&record[idx]),
                         short(lo / f),
-                        short(hi / f)
+                        short(hi / f),
+                        spec.range_hint
                     ),
                 ));
             }
-            q[d] = v;
         }
-        if let Some(map) = &spec.joint_map {
-            map.to_model(c, q);
-            for (q, f) in q.iter_mut().zip(&self.joint_factor) {
-                *q *= f;
-            }
-        }
+        self.columns.mapped(c, q);
         for d in 0..q.len() {
             let units = match spec.joint_kinds[d] {
                 JointKind::Revolute => (spec.angle_unit.name(), "rad"),
@@ -554,6 +485,7 @@ pub(crate) fn bounding_box_diagonal(data: &Measurements) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::units::{AngleUnit, LengthUnit};
 
     fn spec() -> ColumnSpec {
         ColumnSpec {
@@ -570,6 +502,7 @@ mod tests {
             planar_frame: None,
             tool_points: Vec::new(),
             orientation_columns: None,
+            range_hint: RANGE_FROM_MODEL_FILE,
         }
     }
 

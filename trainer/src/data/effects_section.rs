@@ -219,7 +219,10 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
                 return Err(FieldError::new("[gravity] link_masses", format!("{} entries; the model has {n} links", masses.len())));
             }
             if let Some((k, m)) = masses.iter().enumerate().find(|(_, m)| !(m.is_finite() && **m >= 0.0)) {
-                return Err(FieldError::new(format!("[gravity] link_masses[{}]", k + 1), format!("{m} is not a finite mass ≥ 0")));
+                return Err(FieldError::new(
+                    format!("[gravity] link_masses[{}]", k + 1),
+                    format!("{} is not a finite mass ≥ 0", crate::error::number(*m)),
+                ));
             }
             target.gravity.link_masses =
                 heapless::Vec::from_slice(masses).map_err(|_| FieldError::new("[gravity] link_masses", "too many"))?;

@@ -19,6 +19,7 @@
 //! its commands back with the inverse. Zero coefficients and zero offsets are skipped, so a
 //! mapping reproduces bit for bit a column converted by hand in floating point.
 
+use crate::error::number;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
@@ -75,10 +76,10 @@ impl JointMap {
                 if !ok {
                     let need = match key {
                         "sign" => "+1 or -1",
-                        "scale" => "a finite, non-zero factor",
-                        _ => "a finite value",
+                        "scale" => "a finite, non-zero factor within ±1e100",
+                        _ => "a finite value within ±1e100",
                     };
-                    return Err((field, format!("{name} = {v}: needs {need}")));
+                    return Err((field, format!("{name} = {}: needs {need}", number(v))));
                 }
                 out[i] = v;
             }
@@ -92,6 +93,80 @@ impl JointMap {
             Some(rows) => Some(coupling_and_inverse(rows, n)?),
         };
         Ok(JointMap { factor: sign.iter().zip(&scale).map(|(s, k)| s * k).collect(), offset, coupling })
+    }
+
+    /// Checks the whole map, sign · scale · coupling, on the controller's joint `limits` (the
+    /// columns' units; ±∞ where a joint has none): its condition number at most [`MAX_CONDITION`],
+    /// the model joints it gives within ±1e100, and its inverse — how `cbd compensate` writes a
+    /// command back — taking the limits' range to within ±1e100 and at most [`MAX_CONDITION`] times
+    /// the limits (a scale of 1e-300 is not singular by the coupling's test, yet maps a 30° command
+    /// back to 3e301°). `columns` names the controller's joints in messages.
+    pub fn check_range(&self, limits: &[[f64; 2]], columns: &[String]) -> Result<(), FieldError> {
+        let n = self.factor.len();
+        let field = || SECTION.to_string();
+        let coupling = |i: usize, j: usize| match &self.coupling {
+            Some((rows, _)) => rows[i][j],
+            None => f64::from(u8::from(i == j)),
+        };
+        let inverse = |j: usize, i: usize| match &self.coupling {
+            Some((_, inv)) => inv[j][i] / self.factor[i],
+            None => f64::from(u8::from(i == j)) / self.factor[i],
+        };
+        let whole = faer::Mat::<f64>::from_fn(n, n, |i, j| self.factor[i] * coupling(i, j));
+        let s = whole.singular_values().map_err(|e| (field(), format!("singular values failed: {e:?}")))?;
+        let (largest, smallest) = (s[0], s[n - 1]);
+        if !(smallest > 0.0 && largest / smallest <= MAX_CONDITION) {
+            return Err((
+                field(),
+                format!(
+                    "sign · scale · coupling has condition number {} (singular values {} … {}), beyond {MAX_CONDITION:e}: commands cannot be mapped back to the controller's values",
+                    number(largest / smallest),
+                    number(largest),
+                    number(smallest)
+                ),
+            ));
+        }
+        let half = |[lo, hi]: [f64; 2]| lo.abs().max(hi.abs());
+        // |coefficient| × (limit + |offset|); a zero coefficient adds nothing, even to a joint without limits.
+        let term = |coefficient: f64, limit: Option<f64>, offset: f64| {
+            if coefficient == 0.0 {
+                Some(0.0)
+            } else {
+                limit.map(|l| coefficient.abs() * (l + offset.abs()))
+            }
+        };
+        let finite: Vec<Option<f64>> = limits.iter().map(|l| Some(half(*l)).filter(|h| h.is_finite())).collect();
+        for i in 0..n {
+            // The model joint's reach over the limit box: Σ_j |M_ij| L_j + |offset_i|.
+            let reach: Option<f64> = (0..n).map(|j| term(self.factor[i] * coupling(i, j), finite[j], 0.0)).sum();
+            if let Some(r) = reach.map(|r| r + self.offset[i].abs()) {
+                if !(r <= super::limits::MAX_MAGNITUDE) {
+                    return Err((
+                        field(),
+                        format!("maps the joint limits to model joint {} values of ±{}, beyond ±1e100", i + 1, number(r)),
+                    ));
+                }
+            }
+        }
+        for j in 0..n {
+            // The controller's value of a command anywhere in the limit box: Σ_i |M⁻¹_ji| (L_i + |offset_i|).
+            let Some(own) = finite[j] else { continue };
+            let Some(back) = (0..n).map(|i| term(inverse(j, i), finite[i], self.offset[i])).sum::<Option<f64>>() else {
+                continue;
+            };
+            if !(back <= super::limits::MAX_MAGNITUDE && back <= MAX_CONDITION * own.max(f64::MIN_POSITIVE)) {
+                return Err((
+                    field(),
+                    format!(
+                        "its inverse (sign · scale · coupling, then offset) takes commands within the joint limits to {} values of ±{} (limits ±{}): the map is too close to singular, or its offset too large, for commands to be written back",
+                        crate::error::excerpt(columns.get(j).map_or("?", String::as_str)),
+                        number(back),
+                        number(own)
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Controller values `c` → model joints `q` (the columns' units).
@@ -147,7 +222,7 @@ fn coupling_and_inverse(rows: &[Vec<f64>], n: usize) -> Result<(Vec<Vec<f64>>, V
         ));
     }
     if let Some((i, j)) = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).find(|&(i, j)| !rows[i][j].is_finite()) {
-        return Err((field, format!("row {} entry {}: {} is not finite", i + 1, j + 1, rows[i][j])));
+        return Err((field, format!("row {} entry {}: {} is not finite", i + 1, j + 1, number(rows[i][j]))));
     }
     let c = faer::Mat::<f64>::from_fn(n, n, |i, j| rows[i][j]);
     let s = c.singular_values().map_err(|e| (field.clone(), format!("singular values failed: {e:?}")))?;
@@ -155,7 +230,7 @@ fn coupling_and_inverse(rows: &[Vec<f64>], n: usize) -> Result<(Vec<Vec<f64>>, V
     if !(smallest > 0.0 && largest / smallest <= MAX_CONDITION) {
         return Err((
             field,
-            format!("the matrix is singular (singular values {largest:e} … {smallest:e}): the model joints do not determine the controller's, so commands cannot be mapped back"),
+            format!("the matrix is singular (singular values {} … {}): the model joints do not determine the controller's, so commands cannot be mapped back", number(largest), number(smallest)),
         ));
     }
     let inverse = c.full_piv_lu().inverse();
@@ -218,5 +293,30 @@ mod tests {
             assert_eq!(f, field, "{text}");
             assert!(message.contains(needle), "{text}: {message}");
         }
+    }
+
+    /// Issue 39 case 1: `scale = { q1 = 1e-320 }` passed (only the coupling's condition was tested)
+    /// and `cbd compensate` wrote −inf. The whole map is checked now, and its inverse on the limits.
+    #[test]
+    fn the_whole_map_and_its_inverse_on_the_limits_are_checked() {
+        let degrees = vec![[-360.0, 360.0]; 3];
+        let columns: Vec<String> = ["J1", "J2", "J3"].map(String::from).to_vec();
+        let check = |text: &str, limits: &[[f64; 2]]| JointMap::new(&raw(text), &names(3)).unwrap().check_range(limits, &columns);
+        for (text, needle) in [
+            ("scale = { q1 = 1e-320 }", "condition number inf"),
+            ("scale = { q1 = 1e-13 }", "condition number 1e13"),
+            ("scale = { q1 = 1e-90, q2 = 1e-90, q3 = 1e-90 }", "takes commands within the joint limits to J1 values of ±3.6e92"),
+            ("scale = { q1 = 1e99, q2 = 1e99, q3 = 1e99 }", "maps the joint limits to model joint 1 values of ±3.6e101"),
+            ("scale = { q1 = 1e-7, q2 = 1e7 }\ncoupling = [[1, 0, 0], [0, 1, 0], [1, 0, 1]]", "condition number 1.4142e14"),
+        ] {
+            let (field, message) = check(text, &degrees).unwrap_err();
+            assert_eq!(field, "[measurements.joint_map]", "{text}");
+            assert!(message.contains(needle), "{text}: {message}");
+        }
+        // Real maps pass: FANUC's coupling, a gear ratio, a prismatic joint without limits.
+        JointMap::new(&raw(FANUC), &names(6)).unwrap().check_range(&[[-180.0, 180.0]; 6], &names(6)).unwrap();
+        check("scale = { q2 = 0.01 }\noffset = { q2 = -90 }", &degrees).unwrap();
+        check("coupling = [[1, 0, 0], [0, 1, 0], [0, 1, 1]]", &[[-360.0, 360.0], [-360.0, 360.0], [f64::NEG_INFINITY, f64::INFINITY]])
+            .unwrap();
     }
 }

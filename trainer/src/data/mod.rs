@@ -87,9 +87,6 @@ impl Measurements {
     }
 }
 
-/// Most tool points a pose may have (the protocol's `MAX_TOOL_POINTS`).
-pub const MAX_TOOL_POINTS: usize = 4;
-
 /// Largest blob read: a blob of the largest model the trainer fits (N = 4096 points, 6 joints,
 /// 3-D task) is under 1 MiB; 64 MiB leaves room and stops `--blob /dev/zero` at once.
 pub const MAX_BLOB_BYTES: u64 = 64 << 20;
@@ -116,11 +113,13 @@ pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Resul
     Ok(bytes)
 }
 
+pub mod column_spec;
 pub mod csv_import;
 pub mod effects_section;
 mod evenly_spaced;
 pub use evenly_spaced::evenly_spaced_rows;
 pub mod import_error;
+pub mod joint_columns;
 pub mod joint_map;
 pub mod limits;
 pub mod model_file;

@@ -53,17 +53,21 @@
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
-use super::csv_import::{default_joint_limits, ColumnSpec, OrientationColumns};
+use super::csv_import::{default_joint_limits, ColumnSpec, OrientationColumns, MAX_MAGNITUDE};
 use super::effects_section;
 use super::joint_map::{JointMap, RawJointMap};
+use crate::error::number;
 use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::{JointKind, NominalModel};
 use raw::RawModelFile;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
+mod exact;
+mod numbers;
 mod raw;
 mod sections;
+mod toml_error;
 mod writer;
 
 pub use super::import_error::ImportError;
@@ -130,6 +134,7 @@ pub struct MeasurementSection {
     pub length_unit: Option<LengthUnit>,
     pub min_rows: Option<usize>,
     /// `[lo, hi]` per joint, in the columns' units (angle_unit / length_unit of this section).
+    #[serde(default, deserialize_with = "exact::optional_list")]
     pub joint_limits: Option<Vec<[f64; 2]>>,
     /// Largest distance (length_unit of this section) between positions of repeated joint configurations.
     pub repeat_tolerance: Option<f64>,
@@ -177,18 +182,27 @@ impl ModelFile {
                 }
                 let mut out = Vec::with_capacity(limits.len());
                 for (d, ([lo, hi], kind)) in limits.iter().zip(&spec.joint_kinds).enumerate() {
+                    let pair = format!("[measurements] joint_limits[{}] = [{}, {}]", d + 1, number(*lo), number(*hi));
                     if lo.is_nan() || hi.is_nan() || lo >= hi {
-                        return Err(model_err(format!("[measurements] joint_limits[{d}] = [{lo}, {hi}]: needs lo < hi")));
+                        return Err(model_err(format!("{pair}: needs lo < hi")));
                     }
                     let f = if *kind == JointKind::Revolute { angle_unit.radians() } else { length_factor };
-                    out.push([lo * f, hi * f]);
+                    let (lo, hi) = (lo * f, hi * f);
+                    // Within ±1e100 in the model's unit, as every value read (the ±1e100 rule).
+                    if !(lo.abs() <= MAX_MAGNITUDE && hi.abs() <= MAX_MAGNITUDE) {
+                        return Err(model_err(format!("{pair}: beyond ±{MAX_MAGNITUDE:e} in the model's unit")));
+                    }
+                    out.push([lo, hi]);
                 }
                 out
             }
         };
         let repeat_tolerance = match section.repeat_tolerance {
-            Some(t) if !(t.is_finite() && t >= 0.0) => {
-                return Err(model_err(format!("[measurements] repeat_tolerance = {t}: needs a finite value ≥ 0")));
+            Some(t) if !(t >= 0.0 && t * length_factor <= MAX_MAGNITUDE) => {
+                return Err(model_err(format!(
+                    "[measurements] repeat_tolerance = {}: needs a finite value in [0, {MAX_MAGNITUDE:e}]",
+                    number(t)
+                )));
             }
             t => t.map(|t| t * length_factor),
         };
@@ -224,6 +238,7 @@ impl ModelFile {
             planar_frame: self.planar_frame.clone(),
             tool_points: Vec::new(),
             orientation_columns: None,
+            range_hint: super::csv_import::RANGE_FROM_MODEL_FILE,
         }
     }
 }
@@ -237,25 +252,11 @@ pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError>
     parse_model_file(&text, path)
 }
 
-/// The TOML parser's error on one line: where (line and column of its span) and what, the
-/// message's quotes of the file cut to excerpts (a 1 MiB line is not echoed).
-fn toml_message(e: &toml::de::Error, text: &str) -> String {
-    let what = e.message().trim_end().split('\n').map(|line| crate::error::excerpt_of(line, 200)).collect::<Vec<_>>().join("; ");
-    match e.span() {
-        Some(span) => {
-            let before = &text.as_bytes()[..span.start.min(text.len())];
-            let line = 1 + before.iter().filter(|&&b| b == b'\n').count();
-            let column = 1 + before.iter().rev().take_while(|&&b| b != b'\n').count();
-            format!("TOML parse error at line {line}, column {column}: {what}")
-        }
-        None => format!("TOML parse error: {what}"),
-    }
-}
-
 /// Parses model-file text; `path` names it in errors and anchors a relative URDF path.
 pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportError> {
     let file = path.to_path_buf();
-    let raw: RawModelFile = toml::from_str(text).map_err(|e| ImportError::Toml { file: file.clone(), message: toml_message(&e, text) })?;
+    let raw: RawModelFile =
+        toml::from_str(text).map_err(|e| ImportError::Toml { file: file.clone(), message: toml_error::toml_message(&e, text) })?;
     let model_err = |message: String| ImportError::Model { file: file.clone(), message };
     let _ = &raw.description;
     let deg = raw.angle_unit.radians();
@@ -274,6 +275,12 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             });
         }
     }
+    // Where the joint count comes from, for the messages of what must agree with it.
+    let joint_source = match (&raw.chain, &raw.urdf) {
+        (Some(_), _) => "[chain] joints",
+        (_, Some(_)) => "[urdf] chain",
+        _ => "[planar] lengths",
+    };
     let register_base = raw.chain.as_ref().and_then(|c| c.base.as_ref()).or(urdf_base).is_some_and(|b| b.register == Some(true));
     let urdf = raw.urdf.as_ref().map(|u| UrdfSource {
         path: sections::urdf_path(u, path),
@@ -297,7 +304,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
     if let Some(m) = &raw.measurements {
         if m.joints.len() != nominal.n_joints() {
             return Err(model_err(format!(
-                "[measurements] names {} joint columns; the model has {} joints",
+                "[measurements] joints: names {} joint columns; the model has {} joints ({joint_source})",
                 m.joints.len(),
                 nominal.n_joints()
             )));
@@ -308,7 +315,7 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             None if m.positions.len() != nominal.task_dim() * points => {
                 let per_point = if points > 1 { format!(" × {points} tool points") } else { String::new() };
                 return Err(model_err(format!(
-                    "[measurements] names {} position columns; the task space has {} coordinates{per_point}",
+                    "[measurements] positions: names {} position columns; the task space has {} coordinates{per_point}",
                     m.positions.len(),
                     nominal.task_dim()
                 )));
@@ -316,9 +323,19 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
             None => {}
         }
     }
+    if let Some(m) = &raw.measurements {
+        check_columns_distinct(m, &file)?;
+    }
+    if let Some((field, message)) = numbers::out_of_range(text) {
+        return Err(ImportError::Field { file: file.clone(), field, message });
+    }
     let joint_map = match raw.measurements.as_ref().and_then(|m| m.joint_map.as_ref()) {
         Some(map) => {
-            Some(JointMap::new(map, &joint_names).map_err(|(field, message)| ImportError::Field { file: file.clone(), field, message })?)
+            let field_err = |(field, message)| ImportError::Field { file: file.clone(), field, message };
+            let map = JointMap::new(map, &joint_names).map_err(field_err)?;
+            let m = raw.measurements.as_ref().expect("the map is in [measurements]");
+            map.check_range(&column_limits(m, &nominal, raw.angle_unit), &m.joints).map_err(field_err)?;
+            Some(map)
         }
         None => None,
     };
@@ -335,6 +352,44 @@ pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportErro
         joint_names,
         measurements: raw.measurements,
     })
+}
+
+/// The joint limits in the columns' own units (the controller's values): declared, or the
+/// default of one turn each way for revolute joints and none for prismatic ones.
+fn column_limits(m: &MeasurementSection, nominal: &NominalModel, file_angle_unit: AngleUnit) -> Vec<[f64; 2]> {
+    if let Some(limits) = &m.joint_limits {
+        return limits.clone();
+    }
+    let turn = 2.0 * std::f64::consts::PI / m.angle_unit.unwrap_or(file_angle_unit).radians();
+    (0..nominal.n_joints()).map(|d| if nominal.is_revolute(d) { [-turn, turn] } else { [f64::NEG_INFINITY, f64::INFINITY] }).collect()
+}
+
+/// No CSV column named twice in `[measurements]` (a joint twice, a position reusing a joint's
+/// column, two points on one column set): each name reads one value per row.
+fn check_columns_distinct(m: &MeasurementSection, file: &Path) -> Result<(), ImportError> {
+    let empty = Vec::new();
+    let pose = m.pose.as_ref();
+    let lists: [(&str, &Vec<String>); 5] = [
+        ("joints", &m.joints),
+        ("positions", &m.positions),
+        ("pose.position", pose.map_or(&empty, |p| &p.position)),
+        ("pose.quaternion", pose.and_then(|p| p.quaternion.as_ref()).unwrap_or(&empty)),
+        ("pose.rotation", pose.and_then(|p| p.rotation.as_ref()).unwrap_or(&empty)),
+    ];
+    let named: Vec<(String, &str)> = lists
+        .iter()
+        .flat_map(|(field, names)| names.iter().enumerate().map(move |(k, name)| (format!("{field}[{}]", k + 1), name.as_str())))
+        .collect();
+    for (k, (field, name)) in named.iter().enumerate() {
+        if let Some((first, _)) = named[..k].iter().find(|(_, other)| other == name) {
+            return Err(ImportError::Field {
+                file: file.to_path_buf(),
+                field: format!("[measurements] {field}"),
+                message: format!("column '{}' is already {first}: each column holds one value", crate::error::excerpt(name)),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// `[measurements] pose`: no `positions` beside it, 3 position columns, a quaternion (4) or a
@@ -660,6 +715,79 @@ compliance = 0.5
         assert!(e.contains("names 8 position columns; the task space has 3 coordinates × 3 tool points"), "{e}");
     }
 
+    /// Issue 39 cases 5, 9, 10: arrays one entry too long (NaN or not), limits beyond ±1e100 and a
+    /// column named twice were read; each is an error naming the field.
+    #[test]
+    fn arrays_are_read_exactly_values_bounded_and_columns_distinct() {
+        let cases = [
+            (
+                "translation = [0, 0, 0.05]",
+                "translation = [0, 0, 0.05, 99]",
+                "([chain] tool.translation): invalid length 4, expected an array of exactly 3",
+            ),
+            ("translation = [0, 0, 0.05]", "translation = [0, 0, 0.05, nan]", "invalid length 4"),
+            ("rpy = [0.1, 0.2, 0.3]", "rpy = [0.1, 0.2, 0.3, 4]", "([chain] tool.rpy): invalid length 4"),
+            ("[0, 0, 1]] }", "[0, 0, 1], [0, 0, 0]] }", "([chain] base.rotation): invalid length 4"),
+            ("[1, 0, 0], [0, 0, 1]] }", "[1, 0, 0, 0], [0, 0, 1]] }", "([chain] base.rotation): invalid length 4"),
+            (
+                "length_unit = \"mm\"",
+                "length_unit = \"mm\"\njoint_limits = [[-1, 1], [-1, 1, 3]]",
+                "([measurements] joint_limits): invalid length 3",
+            ),
+            (
+                "length_unit = \"mm\"",
+                "length_unit = \"mm\"\njoint_limits = [[-1e300, 1e300], [-1, 1]]",
+                "[measurements] joint_limits[1][1]: -1e300 is beyond ±1e100",
+            ),
+            (
+                "positions = [\"x\", \"y\", \"z\"]",
+                "positions = [\"x\", \"q2\", \"z\"]",
+                "[measurements] positions[2]: column 'q2' is already joints[2]",
+            ),
+            ("joints = [\"q1\", \"q2\"]", "joints = [\"q1\", \"q1\"]", "[measurements] joints[2]: column 'q1' is already joints[1]"),
+            (
+                "length_unit = \"mm\"",
+                "length_unit = \"mm\"\nrepeat_tolerance = 1e300",
+                "[measurements] repeat_tolerance: 1e300 is beyond ±1e100",
+            ),
+        ];
+        for (from, to, needle) in cases {
+            assert!(SMALL.contains(from), "{from}");
+            let e = parse_model_file(&SMALL.replacen(from, to, 1), Path::new("x.toml")).unwrap_err().to_string();
+            assert!(e.starts_with("x.toml: ") && e.contains(needle), "{to}: {e}");
+        }
+        let planar = "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = [1.0, 0.5]\nbase = [0.1, 0.2, nan]\n";
+        let e = parse_model_file(planar, Path::new("p.toml")).unwrap_err().to_string();
+        assert!(e.contains("([planar] base): invalid length 3"), "{e}");
+        // Limits within ±1e100 in the file's unit that convert beyond it (m columns, µm model).
+        let um = SMALL
+            .replace("length_unit = \"m\"", "length_unit = \"um\"")
+            .replace("length_unit = \"mm\"", "length_unit = \"m\"\njoint_limits = [[-1, 1], [-1e99, 1e99]]");
+        let e = parse_model_file(&um, Path::new("u.toml")).unwrap().column_spec().unwrap_err().to_string();
+        assert!(e.contains("joint_limits[2] = [-1e99, 1e99]: beyond ±1e100 in the model's unit"), "{e}");
+    }
+
+    /// A rotation typed with seven digits (orthonormal within the file's 1e-6) becomes the nearest
+    /// rotation, which the runtime's loader accepts (1e-9); an exact one keeps its bits.
+    #[test]
+    fn rotations_of_printed_digits_are_made_orthonormal() {
+        let h = "0.7071068";
+        let text = SMALL.replace("[[0, -1, 0], [1, 0, 0], [0, 0, 1]]", &format!("[[{h}, -{h}, 0], [{h}, {h}, 0], [0, 0, 1]]"));
+        let m = parse_model_file(&text, Path::new("r.toml")).unwrap();
+        let NominalModel::DhChain(c) = &m.nominal else { panic!() };
+        let r = c.base.rotation;
+        for i in 0..3 {
+            for j in 0..3 {
+                let dot: f64 = (0..3).map(|k| r[3 * i + k] * r[3 * j + k]).sum();
+                assert!((dot - f64::from(u8::from(i == j))).abs() < 1e-15, "{r:?}");
+            }
+        }
+        assert!((r[0] - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
+        let exact = parse_model_file(SMALL, Path::new("r.toml")).unwrap();
+        let NominalModel::DhChain(c) = &exact.nominal else { panic!() };
+        assert_eq!(c.base.rotation, [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    }
+
     #[test]
     fn urdf_model_file_loads_relative_to_itself() {
         let dir = std::env::temp_dir().join(format!("cbd-model-file-{}", std::process::id()));
@@ -690,6 +818,22 @@ compliance = 0.5
             let e = load_model_file(dir.join("bad.toml")).unwrap_err().to_string();
             assert!(e.contains("bad.toml") && e.contains("[urdf.base]") && e.contains("only `base = { register = true }`"), "{e}");
         }
+        // Issue 39 case 8: a joint map keyed by the URDF's joint names, written as the DH table
+        // (joints q1 … q6), read back naming the same joints.
+        let mapped = format!(
+            "{urdf}[measurements]\njoints = [\"a\", \"b\", \"c\", \"d\", \"e\", \"f\"]\npositions = [\"x\", \"y\", \"z\"]\n\
+             [measurements.joint_map]\nsign = {{ j2 = -1 }}\nscale = {{ slide = 2.0 }}\noffset = {{ j6 = 5.0 }}\n"
+        );
+        std::fs::write(dir.join("mapped.toml"), mapped).unwrap();
+        let m = load_model_file(dir.join("mapped.toml")).unwrap();
+        let written = write_model_file(&m, "h");
+        assert!(
+            written.contains("sign = { \"q2\" = -1.0 }") && written.contains("\"q4\" = 2.0") && written.contains("\"q6\" = 5.0"),
+            "{written}"
+        );
+        std::fs::write(dir.join("written.toml"), &written).unwrap();
+        let back = load_model_file(dir.join("written.toml")).unwrap();
+        assert_eq!(back.joint_map, m.joint_map);
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -23,7 +23,15 @@ const STILL_FRACTION: f64 = 1e-6;
 
 /// Warnings about `nominal` on `data` (rows at file `lines` of `file`), or an error when the
 /// nominal positions are not finite or beyond [`MAX_MAGNITUDE`].
-pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u64], file: &Path) -> crate::Result<Vec<String>> {
+/// `registered`: the base was registered on the data (`base = { register = true }`), so a far
+/// nominal is not a frame the registration could fix, and the warning does not suggest it.
+pub fn nominal_warnings(
+    nominal: &NominalModel,
+    data: &Measurements,
+    lines: &[u64],
+    file: &Path,
+    registered: bool,
+) -> crate::Result<Vec<String>> {
     let m = data.task_dim;
     let mut predicted = Measurements::new(data.n_joints, m);
     let mut squared = 0.0;
@@ -56,9 +64,14 @@ pub fn nominal_warnings(nominal: &NominalModel, data: &Measurements, lines: &[u6
             file.display()
         ));
     } else if rms > FAR_FROM_EXTENT * measured_extent {
+        // Suggest only what exists for this model: a planar file has no `register`.
+        let remedy = match (registered, nominal) {
+            (true, _) => "the base is registered already, so not a frame: wrong DH table, joint columns or joint map?",
+            (false, NominalModel::PlanarChain { .. }) => "measurements in another frame? declare `base` and `yaw` in [planar]",
+            (false, _) => "measurements in a tracker's frame? declare the base, or `base = { register = true }` in [chain] to register it",
+        };
         warnings.push(format!(
-            "{}: the nominal model is {rms:.3e} from the measurements (RMS), {:.0} % of their extent {measured_extent:.3e}: more than a calibration error — \
-             measurements in a tracker's frame? declare the base, or `base = {{ register = true }}` in [chain] to register it",
+            "{}: the nominal model is {rms:.3e} from the measurements (RMS), {:.0} % of their extent {measured_extent:.3e}: more than a calibration error — {remedy}",
             file.display(),
             100.0 * rms / measured_extent
         ));
@@ -87,15 +100,27 @@ mod tests {
         let (data, lines) = rr_data();
         let file = Path::new("t.csv");
         let sound = NominalModel::planar(&[1.05, 0.48]).unwrap();
-        assert!(nominal_warnings(&sound, &data, &lines, file).unwrap().is_empty());
+        assert!(nominal_warnings(&sound, &data, &lines, file, false).unwrap().is_empty());
         let still = NominalModel::planar(&[0.0, 0.0]).unwrap();
-        let w = nominal_warnings(&still, &data, &lines, file).unwrap();
+        let w = nominal_warnings(&still, &data, &lines, file, false).unwrap();
         assert!(w.iter().any(|w| w.contains("barely moves")), "{w:?}");
         let huge = NominalModel::planar(&[-1e30, 0.5]).unwrap();
-        let w = nominal_warnings(&huge, &data, &lines, file).unwrap();
+        let w = nominal_warnings(&huge, &data, &lines, file, false).unwrap();
         assert!(w.iter().any(|w| w.starts_with("t.csv: the nominal model is 1.") && w.contains("wrong unit")), "{w:?}");
         let beyond = NominalModel::planar(&[1e150, 0.5]).unwrap();
-        let e = nominal_warnings(&beyond, &data, &lines, file).unwrap_err().to_string();
+        let e = nominal_warnings(&beyond, &data, &lines, file, false).unwrap_err().to_string();
         assert!(e.starts_with("t.csv:2: the nominal model's position"), "{e}");
+    }
+
+    /// Issue 39 case 7: the warning suggested `register = true` where it was set, and to planar
+    /// files, which refuse it.
+    #[test]
+    fn the_far_warning_suggests_only_what_applies() {
+        let (data, lines) = rr_data();
+        let far = NominalModel::planar(&[1.3, 0.9]).unwrap();
+        let w = nominal_warnings(&far, &data, &lines, Path::new("t.csv"), false).unwrap().join("\n");
+        assert!(w.contains("declare `base` and `yaw` in [planar]") && !w.contains("register"), "{w}");
+        let w = nominal_warnings(&far, &data, &lines, Path::new("t.csv"), true).unwrap().join("\n");
+        assert!(w.contains("the base is registered already") && !w.contains("register = true"), "{w}");
     }
 }

@@ -12,7 +12,7 @@ use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for, parameter_names_for};
 use crate::nominal::positions;
 use cbd_protocol::{Effect, NominalModel};
-use cbd_runtime::kinematics::effects::{effect_terms, Order};
+use cbd_runtime::kinematics::augmented::{effect_terms, Order};
 use faer::Mat;
 
 /// One scalar parameter of the library.

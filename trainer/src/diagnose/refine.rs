@@ -1,11 +1,13 @@
 //! Gauss–Newton refinement of the selected parameters on the full nonlinear augmented model,
-//! min_θ Σ_i |y_i − k(θ; q_i)|², with step halving, and their uncertainties from the
+//! min_θ Σ_i |y_i − k(θ; q_i)|², with step halving (the one least-squares driver,
+//! `solver::levenberg_marquardt`), and their uncertainties from the
 //! Gauss–Newton covariance σ̂² (JᵀJ)⁻¹, σ̂² = SSE / (observations − parameters).
 
 use super::library::{apply, jacobian, Param};
 use crate::data::Measurements;
 use crate::nominal::positions;
 use crate::solver::least_squares::TruncatedSvd;
+use crate::solver::levenberg_marquardt as lm;
 use cbd_protocol::NominalModel;
 use faer::{Mat, Side};
 
@@ -39,6 +41,40 @@ fn gauss_newton_solve(jac: &Mat<f64>, r: &[f64]) -> (Vec<f64>, Vec<f64>) {
     }
 }
 
+/// The refinement as the least-squares driver sees it: |y − k(θ)|² over the values.
+struct Refinement<'a> {
+    base: &'a NominalModel,
+    data: &'a Measurements,
+    params: &'a [Param],
+}
+
+impl crate::solver::levenberg_marquardt::Problem for Refinement<'_> {
+    /// The model, its residual y − k and the sum of squares.
+    type Eval = (NominalModel, Vec<f64>, f64);
+    type Error = super::DiagnoseError;
+
+    fn cost(&self, at: &Self::Eval) -> f64 {
+        at.2
+    }
+
+    fn propose(&mut self, _x: &[f64], at: &Self::Eval, _damping: f64, _iteration: usize) -> Result<Option<lm::Step>, Self::Error> {
+        let jac = jacobian(&at.0, self.data, self.params);
+        let (delta, _) = gauss_newton_solve(&jac, &at.1);
+        Ok(Some(lm::Step { delta, predicted: None }))
+    }
+
+    fn evaluate(&mut self, trial: &[f64], _delta: &[f64]) -> Result<Option<Self::Eval>, Self::Error> {
+        let model = apply(self.base, self.params, trial)?;
+        let r = residual(&model, self.data);
+        let sse = r.iter().map(|v| v * v).sum();
+        Ok(Some((model, r, sse)))
+    }
+
+    fn accepted(&mut self, step: lm::Accepted<'_, Self::Eval>) -> Option<String> {
+        (step.decrease <= 1e-12 * step.from.2).then(|| "sum of squares decreased by at most 1e-12 of it".into())
+    }
+}
+
 /// Refines `start` values of `params` on `base` (parameters are changes to `base`).
 pub fn refine(
     base: &NominalModel,
@@ -47,33 +83,22 @@ pub fn refine(
     start: &[f64],
     max_iterations: usize,
 ) -> Result<Refined, super::DiagnoseError> {
-    let mut values = start.to_vec();
-    let mut model = apply(base, params, &values)?;
-    let mut r = residual(&model, data);
-    let mut sse: f64 = r.iter().map(|v| v * v).sum();
-    let mut iterations = 0;
-    while iterations < max_iterations && !params.is_empty() {
-        iterations += 1;
-        let jac = jacobian(&model, data, params);
-        let (step, _) = gauss_newton_solve(&jac, &r);
-        let mut t = 1.0;
-        let mut improved = false;
-        while t > 1e-4 {
-            let trial: Vec<f64> = values.iter().zip(&step).map(|(v, s)| v + t * s).collect();
-            let trial_model = apply(base, params, &trial)?;
-            let tr = residual(&trial_model, data);
-            let trial_sse: f64 = tr.iter().map(|v| v * v).sum();
-            if trial_sse.is_finite() && trial_sse <= sse {
-                let decrease = sse - trial_sse;
-                (values, model, r, sse, improved) = (trial, trial_model, tr, trial_sse, decrease > 1e-12 * sse);
-                break;
-            }
-            t *= 0.5;
-        }
-        if !improved {
-            break;
-        }
-    }
+    let model = apply(base, params, start)?;
+    let r = residual(&model, data);
+    let sse: f64 = r.iter().map(|v| v * v).sum();
+    // Gauss–Newton with step halving (t = 1, ½, … while above 1e-4), a step taken when it does not
+    // raise the sum of squares, until one lowers it by at most 1e-12 of it or none lowers it.
+    let options = lm::Options {
+        damping: lm::Damping::Backtracking { shrink: 0.5, shortest: 1e-4 },
+        acceptance: lm::Acceptance::NoIncrease,
+        counting: lm::Counting::Steps,
+        first_iteration: 1,
+        max_iterations: if params.is_empty() { 0 } else { max_iterations },
+    };
+    let mut problem = Refinement { base, data, params };
+    let found = lm::minimise(&mut problem, start.to_vec(), (model, r, sse), &options)?;
+    let (values, iterations) = (found.x, found.iterations);
+    let (model, r, sse) = found.at;
     let jac = jacobian(&model, data, params);
     let (_, var) = gauss_newton_solve(&jac, &r);
     let p = params.len();

@@ -97,7 +97,7 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
         joints: data.joints.clone(),
         positions: predicted.clone(),
     });
-    let x = |i: usize, d: usize| (predicted[m * i + d] - norm.task_offset[d]) / norm.task_scale;
+    let x = |i: usize, d: usize| norm.position_to_internal(d, predicted[m * i + d]);
     let mut monomials: Vec<Box<dyn Fn(usize) -> f64>> = Vec::new();
     for d in 0..m {
         monomials.push(Box::new(move |i| x(i, d)));

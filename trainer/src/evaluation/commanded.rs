@@ -3,14 +3,15 @@
 //! reachable targets x = real(q*) (q* random configurations of the simulator's range), for
 //! (a) the nominal model's inverse kinematics, (b) DH-calibrated compensation (the inverse
 //! kinematics of the calibrated chain; for the planar arm the DH calibration of its planar form:
-//! link lengths, joint offsets, base position and yaw), (c) kernel-ridge compensation by pose redefinition
-//! (command the nominal IK of x', x' ← x' + x − krr(q), five times), (c') the same on the
-//! DH-calibrated chain with kernel ridge on its residual (`dh+krr`; for the planar arm its
-//! DH form), (d) CbD compensation (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
-//! target: q* moved by up to 0.05 rad per joint (a controller's previous command). The caller
-//! passes the kernel-ridge correction and CbD's fit in ([`fit_and_command`]).
+//! link lengths, joint offsets, base position and yaw), then each peer of the caller's list
+//! ([`fit_and_command`], [`Command`]): a correction of the positions (kernel ridge) by pose redefinition
+//! (command the nominal IK of x', x' ← x' + x − krr(q), five times), its `dh+` row the same on the
+//! DH-calibrated chain with the correction fitted on its residual (for the planar arm its
+//! DH form); a blob (CbD) by its own compensation (`Calibrator::compensate` from the nominal IK). Every method starts from the same hint per
+//! target: q* moved by up to 0.05 rad per joint (a controller's previous command).
 
-use super::correction::{CorrectionFitter, Predictor};
+use super::correction::Predictor;
+use super::peers::{Command, Peer};
 use crate::data::Measurements;
 use crate::error::Error;
 use crate::nominal::planar::as_planar_in_frame;
@@ -153,18 +154,30 @@ pub struct Fitted<'a> {
     pub dh: Option<&'a NominalModel>,
     /// Planar parametric calibration (RR) — or `None`.
     pub planar: Option<PlanarCalibration>,
-    /// Kernel ridge fitted on the nominal model's residual: its corrected positions.
-    pub krr: Option<&'a Predictor>,
-    /// Kernel ridge fitted on the residual of a DH-calibrated chain, with that chain.
-    pub dh_krr: Option<(&'a NominalModel, &'a Predictor)>,
-    /// CbD's blobs by row name: `cbd` (fitted on the nominal model), `dh+cbd` (on the DH-calibrated chain).
-    pub cbd: Vec<(&'a str, &'a [u8])>,
+    /// The peers' rows after `nominal` and `dh`, in the list's order.
+    pub peers: Vec<FittedPeer>,
+}
+
+/// One peer's row of the commanded table, fitted.
+pub struct FittedPeer {
+    /// `krr`, `dh+krr`, `cbd`, `dh+cbd`, …
+    pub name: String,
+    pub command: FittedCommand,
+}
+
+/// A fitted peer as the table commands it ([`Command`]).
+pub enum FittedCommand {
+    /// Pose redefinition through `predict` (corrected positions) on `chain`: `None` the nominal
+    /// model, else a calibrated chain (for the planar arm its DH form, commanded in closed form).
+    Redefine { chain: Option<Box<NominalModel>>, predict: Predictor },
+    /// The blob's own compensation.
+    Compensate { blob: Vec<u8> },
 }
 
 /// One method's true tool errors after commanding.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CommandedRow {
-    /// `nominal`, `dh`, `krr`, `dh+krr`, `cbd`, `dh+cbd`.
+    /// `nominal`, `dh`, then the peers' rows (`krr`, `dh+krr`, `cbd`, `dh+cbd`).
     pub name: String,
     pub stats: ErrorStats,
     /// For CbD rows: |k1(q*) − real(q*)| over the targets' configurations, its forward error there.
@@ -268,7 +281,16 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
         Some(_) => "tool point 1 position (pose compensation needs at least 6 joints and 3 tool points off a line)",
         None => "tool position",
     };
-    let (nominal_at, dh_at, dh_krr_at) = (at_point(nominal), fitted.dh.map(at_point), fitted.dh_krr.map(|(m, _)| at_point(m)));
+    let (nominal_at, dh_at) = (at_point(nominal), fitted.dh.map(at_point));
+    // The calibrated chains the corrections' `dh+` rows command, moved to the point.
+    let chains_at: Vec<Option<NominalModel>> = fitted
+        .peers
+        .iter()
+        .map(|p| match &p.command {
+            FittedCommand::Redefine { chain: Some(chain), .. } => Some(at_point(chain)),
+            _ => None,
+        })
+        .collect();
     let nominal = &nominal_at;
     let configurations = arm.random_configurations(count, seed);
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xc0ffee);
@@ -279,19 +301,20 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
     };
     let mut storages: Vec<Vec<f64>> = Vec::new();
     let mut models = Vec::new();
-    for (name, blob) in &fitted.cbd {
-        let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(*name))?;
+    for p in &fitted.peers {
+        let FittedCommand::Compensate { blob } = &p.command else { continue };
+        let name = p.name.as_str();
+        let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(name))?;
         storages.push(vec![0.0; cbd_runtime::storage_len_for(&model)]);
-        models.push((*name, model));
+        models.push((name, model));
     }
     let mut calibrators = Vec::new();
     for ((name, model), storage) in models.into_iter().zip(storages.iter_mut()) {
         calibrators
             .push((name, cbd_runtime::Calibrator::from_model(model, storage).map_err(|e| Error::from(e).context(name.to_string()))?));
     }
-    let mut names = vec!["nominal", "dh", "krr", "dh+krr"];
-    let first_cbd = names.len();
-    names.extend(calibrators.iter().map(|(name, _)| *name));
+    let mut names = vec!["nominal", "dh"];
+    names.extend(fitted.peers.iter().map(|p| p.name.as_str()));
     let mut errors: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut not_reached = vec![0usize; names.len()];
     let mut forward: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
@@ -325,8 +348,8 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
                 None => record(1, &q_nominal, false),
             }
         }
-        // (c) kernel ridge by pose redefinition: x' ← x' + (x − krr(q)), on the nominal model and
-        // (c') on the DH-calibrated chain.
+        // (c) a correction (kernel ridge) by pose redefinition: x' ← x' + (x − krr(q)), on the
+        // nominal model or (its `dh+` row) on the DH-calibrated chain.
         let pose_redefinition = |krr: &Predictor, ik: &dyn Fn(&[f64], &[f64]) -> (Vec<f64>, bool)| {
             let mut shifted = x.clone();
             let mut q = q_nominal.clone();
@@ -340,29 +363,40 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
             }
             (q, ok)
         };
-        if let Some(krr) = fitted.krr {
-            let (q, ok) = pose_redefinition(krr, &|target, hint| nominal_ik(nominal, target, hint));
-            record(2, &q, ok);
-        }
-        if let (Some((_, krr)), Some(model)) = (fitted.dh_krr, &dh_krr_at) {
-            // The chain's own inverse: the planar arm's closed form in its frame, else the DH chain's.
-            let (q, ok) = match &fitted.planar {
-                Some(p) if fitted.dh.is_none() => pose_redefinition(krr, &|target, hint| match p.inverse(target, hint) {
-                    Some(q) => (q.to_vec(), true),
-                    None => (hint.to_vec(), false),
-                }),
-                _ => pose_redefinition(krr, &|target, hint| nominal_ik(model, target, hint)),
-            };
-            record(3, &q, ok);
-        }
-        // (d) CbD compensation from the nominal IK.
-        for (k, (name, cal)) in calibrators.iter_mut().enumerate() {
-            let mut q = vec![0.0; n];
-            let c = cal.compensate(&x, &q_nominal, &mut q).map_err(|e| Error::from(e).context(format!("{name}: compensate")))?;
-            record(first_cbd + k, &q, c.reached);
-            residuals[first_cbd + k].push(c.residual);
-            let e = cal.evaluate(q_star).map_err(|e| Error::from(e).context(format!("{name}: evaluate")))?;
-            forward[first_cbd + k].push(distance(&e.position().iter().copied().collect::<Vec<_>>(), &x));
+        // (c, d) the peers: pose redefinition through a correction, or a blob's compensation.
+        let mut calibrator = calibrators.iter_mut();
+        for (i, p) in fitted.peers.iter().enumerate() {
+            let k = 2 + i;
+            match &p.command {
+                FittedCommand::Redefine { chain: None, predict } => {
+                    let (q, ok) = pose_redefinition(predict, &|target, hint| nominal_ik(nominal, target, hint));
+                    record(k, &q, ok);
+                }
+                FittedCommand::Redefine { chain: Some(_), predict } => {
+                    let model = chains_at[i].as_ref().ok_or_else(|| Error::Internal(format!("{}: no chain", p.name)))?;
+                    // The chain's own inverse: the planar arm's closed form in its frame, else the DH chain's.
+                    let (q, ok) = match &fitted.planar {
+                        Some(planar) if fitted.dh.is_none() => {
+                            pose_redefinition(predict, &|target, hint| match planar.inverse(target, hint) {
+                                Some(q) => (q.to_vec(), true),
+                                None => (hint.to_vec(), false),
+                            })
+                        }
+                        _ => pose_redefinition(predict, &|target, hint| nominal_ik(model, target, hint)),
+                    };
+                    record(k, &q, ok);
+                }
+                FittedCommand::Compensate { .. } => {
+                    // From the nominal IK.
+                    let (name, cal) = calibrator.next().ok_or_else(|| Error::Internal(format!("{}: no calibrator", p.name)))?;
+                    let mut q = vec![0.0; n];
+                    let c = cal.compensate(&x, &q_nominal, &mut q).map_err(|e| Error::from(e).context(format!("{name}: compensate")))?;
+                    record(k, &q, c.reached);
+                    residuals[k].push(c.residual);
+                    let e = cal.evaluate(q_star).map_err(|e| Error::from(e).context(format!("{name}: evaluate")))?;
+                    forward[k].push(distance(&e.position().iter().copied().collect::<Vec<_>>(), &x));
+                }
+            }
         }
     }
     let rows = names
@@ -386,17 +420,16 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
 /// the pose table (`commanded_pose::commander_for` chooses).
 pub type Commander = fn(&SimulatedArm, &Fitted<'_>, usize, u64) -> crate::Result<CommandedAccuracy>;
 
-/// Fits every method on `train` (DH or the planar parametric fit, the kernel-ridge correction
-/// `krr_fit` on the nominal model and on the DH-calibrated chain — for the planar arm its DH
-/// form, as `cbd compare` — CbD through `cbd_fit`, which returns a blob, on the nominal model and on
-/// the DH-calibrated chain) and runs `command` ([`commanded_accuracy`] or the pose table).
-#[allow(clippy::too_many_arguments)]
+/// Fits every method on `train` — DH or the planar parametric fit, then each of `peers` with a
+/// [`Command`] on the nominal model and, when [`Peer::on_dh`], on the DH-calibrated chain (as `cbd
+/// compare`: a correction's on the DH fit, for the planar arm its DH form; a blob's on a DH chain
+/// only) — and runs `command` ([`commanded_accuracy`] or the pose table). A correction that fails
+/// has no row; a blob that fails is the error.
 pub fn fit_and_command(
     arm: &SimulatedArm,
     nominal: &NominalModel,
     train: &Measurements,
-    krr_fit: CorrectionFitter,
-    cbd_fit: &dyn Fn(&NominalModel, &Measurements) -> crate::Result<Vec<u8>>,
+    peers: &[Peer<'_>],
     command: Commander,
     count: usize,
     seed: u64,
@@ -406,27 +439,40 @@ pub fn fit_and_command(
         NominalModel::PlanarChain { .. } => None,
     };
     let planar = PlanarCalibration::fit(nominal, train);
-    // One kernel-ridge correction per tool point (as `cbd compare`'s rows).
-    let krr_on = |model: &NominalModel| super::correction::fit_per_tool_point(krr_fit, model, train).ok().map(|fitted| fitted.predict);
-    let krr = krr_on(nominal);
     // The chain `cbd compare`'s dh+krr row corrects: the DH fit, planar arms in their DH form.
-    let dh_for_krr = match &dh {
+    let dh_for_corrections = match &dh {
         Some(model) => Some(model.clone()),
         None => calibrate_dh(nominal, train, &DhCalibrationOptions { planar_as_dh: true, ..DhCalibrationOptions::default() })
             .ok()
             .map(|f| f.model),
     };
-    let dh_krr = dh_for_krr.as_ref().and_then(|model| krr_on(model).map(|k| (model, k)));
-    let blob = cbd_fit(nominal, train)?;
-    let dh_blob = match &dh {
-        Some(model) => Some(cbd_fit(model, train)?),
-        None => None,
-    };
-    let mut cbd = vec![("cbd", blob.as_slice())];
-    if let Some(b) = &dh_blob {
-        cbd.push(("dh+cbd", b.as_slice()));
+    let mut rows = Vec::new();
+    for peer in peers {
+        let row = |name: String, command: FittedCommand| FittedPeer { name, command };
+        match peer.command {
+            None => {}
+            Some(Command::PoseRedefinition) => {
+                if let Ok(f) = peer.fit_on_nominal(nominal, train) {
+                    rows.push(row(peer.name.to_string(), FittedCommand::Redefine { chain: None, predict: f.predict }));
+                }
+                if let (true, Some(chain)) = (peer.on_dh, &dh_for_corrections) {
+                    if let Ok(f) = peer.fit_on_chain(chain, train) {
+                        rows.push(row(
+                            peer.dh_name(),
+                            FittedCommand::Redefine { chain: Some(Box::new(chain.clone())), predict: f.predict },
+                        ));
+                    }
+                }
+            }
+            Some(Command::Compensate(fit)) => {
+                rows.push(row(peer.name.to_string(), FittedCommand::Compensate { blob: fit(nominal, train)? }));
+                if let (true, Some(chain)) = (peer.on_dh, &dh) {
+                    rows.push(row(peer.dh_name(), FittedCommand::Compensate { blob: fit(chain, train)? }));
+                }
+            }
+        }
     }
-    let fitted = Fitted { nominal, dh: dh.as_ref(), planar, krr: krr.as_ref(), dh_krr: dh_krr.as_ref().map(|(m, k)| (*m, k)), cbd };
+    let fitted = Fitted { nominal, dh: dh.as_ref(), planar, peers: rows };
     command(arm, &fitted, count, seed)
 }
 

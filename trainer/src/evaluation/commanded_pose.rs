@@ -11,7 +11,7 @@
 //! commanded through (a) or (b), five rounds; (d) CbD: `Calibrator::compensate_pose` from the hint,
 //! as `cbd compensate` does it (`evaluation::compensation::compensate_all_poses`).
 
-use super::commanded::{commanded_accuracy, CommandedAccuracy, CommandedRow, Commander, Fitted, SimulatedArm};
+use super::commanded::{commanded_accuracy, CommandedAccuracy, CommandedRow, Commander, Fitted, FittedCommand, SimulatedArm};
 use super::correction::Predictor;
 use crate::error::Error;
 use crate::nominal::tool_points::{rotation_angle, tool_frame};
@@ -88,8 +88,8 @@ pub fn commanded_pose_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: u
             Err(_) => (seed.to_vec(), false),
         }
     };
-    let mut names: Vec<String> = ["nominal", "dh", "krr", "dh+krr"].map(String::from).to_vec();
-    names.extend(fitted.cbd.iter().map(|(name, _)| name.to_string()));
+    let mut names: Vec<String> = ["nominal", "dh"].map(String::from).to_vec();
+    names.extend(fitted.peers.iter().map(|p| p.name.clone()));
     let mut tallies: Vec<Tally> = names.iter().map(|_| Tally::default()).collect();
     let record = |tally: &mut Tally, target: &Frame, q: &[f64], reached: bool| -> crate::Result<()> {
         let at = truth(q)?;
@@ -107,21 +107,23 @@ pub fn commanded_pose_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: u
             let (q, ok) = ik(dh, target, &q_nominal);
             record(&mut tallies[1], target, &q, ok)?;
         }
-        // (c) kernel ridge by pose redefinition on the nominal model, (c') on the DH-calibrated chain.
-        for (k, corrected) in [(2, fitted.krr.map(|krr| (nominal, krr))), (3, fitted.dh_krr)] {
-            if let Some((model, krr)) = corrected {
-                let (q, ok) = pose_redefinition(model, krr, &points, target, &q_nominal, &ik);
-                record(&mut tallies[k], target, &q, ok)?;
+        // (c) corrections by pose redefinition on the nominal model or on a calibrated chain.
+        for (i, p) in fitted.peers.iter().enumerate() {
+            if let FittedCommand::Redefine { chain, predict } = &p.command {
+                let model = chain.as_deref().unwrap_or(nominal);
+                let (q, ok) = pose_redefinition(model, predict, &points, target, &q_nominal, &ik);
+                record(&mut tallies[2 + i], target, &q, ok)?;
             }
         }
         nominal_commands.push(q_nominal);
     }
-    // (d) CbD: pose compensation from the hint, as `cbd compensate` commands target poses.
-    for (k, (name, blob)) in fitted.cbd.iter().enumerate() {
-        let tally = &mut tallies[4 + k];
+    // (d) blobs (CbD): pose compensation from the hint, as `cbd compensate` commands target poses.
+    for (i, p) in fitted.peers.iter().enumerate() {
+        let FittedCommand::Compensate { blob } = &p.command else { continue };
+        let (name, tally) = (&p.name, &mut tallies[2 + i]);
         let rows = crate::evaluation::compensation::compensate_all_poses(blob, &targets, Some(&hints))
             .map_err(|e| Error::InvalidInput(format!("{name}: pose compensation: {e}")))?;
-        let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(*name))?;
+        let model = cbd_protocol::decode(blob).map_err(|e| Error::from(e).context(name.as_str()))?;
         let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
         let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).map_err(|e| Error::from(e).context(name.to_string()))?;
         for ((row, target), q_star) in rows.iter().zip(&targets).zip(configurations.chunks_exact(n)) {

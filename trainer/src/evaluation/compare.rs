@@ -1,8 +1,9 @@
-//! Every method on the same data: nominal, parametric DH calibration, and — through hooks the
-//! caller fills — the kernel-ridge peer of the residual, Calibration by Diffeomorphisms, and the
-//! hybrids DH + KRR and DH + CbD.
+//! Every method on the same data: nominal, parametric DH calibration, and — from the list of
+//! [`Peer`]s the caller gives (`cli::peers`: the kernel-ridge peer of the residual, Calibration by
+//! Diffeomorphisms) — each peer on the nominal model and on the DH-calibrated chain (`dh+<name>`).
 
-use super::correction::{fit_on, fit_per_tool_point, CorrectionFitter, FittedCorrection, Predictor};
+use super::correction::{FittedCorrection, Predictor};
+use super::peers::Peer;
 use super::pose_errors::PoseErrors;
 use crate::calibrate::dh_not_converged;
 use crate::calibrate::{Geometry, GeometryChoice};
@@ -38,7 +39,7 @@ pub struct PeerResult {
 }
 
 /// Everything [`compare_peers`] found, besides the table.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Comparison {
     pub rows: Vec<PeerResult>,
     pub dh: Option<DhFitStats>,
@@ -47,6 +48,9 @@ pub struct Comparison {
     pub default_fit: Option<GeometryChoice>,
     /// The noise floor of the test rows, from the σ CbD's evidence estimated on the training rows.
     pub noise_floor: Option<NoiseFloor>,
+    /// The rows whose hyperparameters the JSON lists (null when a row failed or is missing): the
+    /// rows of the peers with [`Peer::hyperparameters_in_json`].
+    pub hyperparameter_rows: Vec<String>,
 }
 
 impl Comparison {
@@ -74,6 +78,8 @@ impl Comparison {
             methods.insert(r.name.clone(), method);
         }
         let hyper = |name: &str| self.rows.iter().find(|r| r.name == name).and_then(|r| r.hyperparameters.clone());
+        let hyperparameters: serde_json::Map<String, serde_json::Value> =
+            self.hyperparameter_rows.iter().map(|name| (name.clone(), json!(hyper(name)))).collect();
         json!({
             "methods": methods,
             "dh": self.dh.as_ref().map(|d| json!({
@@ -81,7 +87,7 @@ impl Comparison {
                 "n_parameters": d.n_parameters, "rank": d.rank, "unidentifiable": d.unidentifiable,
                 "redundant_at_nominal": d.redundant_at_nominal, "converged": d.converged,
             })),
-            "hyperparameters": { "krr": hyper("krr"), "dh+krr": hyper("dh+krr") },
+            "hyperparameters": hyperparameters,
             "default_fit": self.default_fit.as_ref().map(|g| json!({"method": self.written_by_fit(), "geometry": g})),
             "noise_floor": self.noise_floor,
             "warnings": self.warnings(),
@@ -167,11 +173,10 @@ pub fn compare_files(
     model_file: impl AsRef<std::path::Path>,
     train_csv: impl AsRef<std::path::Path>,
     test_csv: impl AsRef<std::path::Path>,
-    krr: Option<CorrectionFitter>,
-    cbd: Option<CorrectionFitter>,
+    peers: &[Peer<'_>],
 ) -> Result<(Comparison, Vec<String>), ImportError> {
     let inputs = read_compare_files(model_file, train_csv, test_csv)?;
-    Ok((compare_peers(&inputs.nominal, &inputs.train.measurements, &inputs.test.measurements, krr, cbd), inputs.warnings))
+    Ok((compare_peers(&inputs.nominal, &inputs.train.measurements, &inputs.test.measurements, peers), inputs.warnings))
 }
 
 /// What `compare_files` reads: the model file's nominal model, both measurement files (with their
@@ -215,17 +220,10 @@ fn nominal_predictor(model: NominalModel, m: usize) -> Predictor {
     Box::new(move |joints: &[f64]| crate::nominal::positions(&model, joints, m))
 }
 
-/// Runs every method: fits on `train` only, reports errors on `test`. `krr` is the hook for the
-/// kernel-ridge peer, fitted on the nominal model (`krr`) and on the DH-calibrated chain as it is
-/// (`dh+krr`); `cbd` the hook for Calibration by Diffeomorphisms, fitted on the nominal model
-/// (`cbd`) and on the DH-calibrated chain by [`fit_on`] (`dh+cbd`). A hook that is `None` has no rows.
-pub fn compare_peers(
-    nominal: &NominalModel,
-    train: &Measurements,
-    test: &Measurements,
-    krr: Option<CorrectionFitter>,
-    cbd: Option<CorrectionFitter>,
-) -> Comparison {
+/// Runs every method: fits on `train` only, reports errors on `test`. The rows: `nominal`, `dh`,
+/// then each of `peers` in order, fitted on the nominal model (its name) and, when it is
+/// [`Peer::on_dh`], on the DH-calibrated chain (`dh+<name>`; [`Peer::fit_on_chain`]).
+pub fn compare_peers(nominal: &NominalModel, train: &Measurements, test: &Measurements, peers: &[Peer<'_>]) -> Comparison {
     let m = nominal.task_dim();
     let mut rows = Vec::new();
     let mut push = |name: &str, fitted: crate::Result<FittedCorrection>, seconds: f64| {
@@ -281,31 +279,23 @@ pub fn compare_peers(
         dh_seconds,
     );
 
-    // The kernel-ridge peer (filled by the caller: `cli::compare` passes the peer's correction).
-    if let Some(fit) = krr {
+    for peer in peers {
         let t = Instant::now();
-        let fitted = fit_per_tool_point(fit, nominal, train);
-        push("krr", fitted, t.elapsed().as_secs_f64());
-        if let Some(dh_model) = &dh_model {
+        let fitted = peer.fit_on_nominal(nominal, train);
+        push(peer.name, fitted, t.elapsed().as_secs_f64());
+        if let (true, Some(dh_model)) = (peer.on_dh, &dh_model) {
             let t = Instant::now();
-            let fitted = fit_per_tool_point(fit, dh_model, train);
-            push("dh+krr", fitted, dh_seconds + t.elapsed().as_secs_f64());
+            let fitted = peer.fit_on_chain(dh_model, train);
+            push(&peer.dh_name(), fitted, dh_seconds + t.elapsed().as_secs_f64());
         }
     }
+    let hyperparameter_rows = peers
+        .iter()
+        .filter(|p| p.hyperparameters_in_json)
+        .flat_map(|p| std::iter::once(p.name.to_string()).chain(p.on_dh.then(|| p.dh_name())))
+        .collect();
 
-    // Calibration by Diffeomorphisms (filled by the caller: `cli::compare::cbd_fitter`).
-    if let Some(fit) = cbd {
-        let t = Instant::now();
-        let fitted = fit(nominal, train);
-        push("cbd", fitted, t.elapsed().as_secs_f64());
-        if let Some(dh_model) = &dh_model {
-            let t = Instant::now();
-            let fitted = fit_on(fit, dh_model, train);
-            push("dh+cbd", fitted, dh_seconds + t.elapsed().as_secs_f64());
-        }
-    }
-
-    Comparison { rows, dh: dh.ok().map(|f| f.stats), default_fit: None, noise_floor: None }
+    Comparison { rows, dh: dh.ok().map(|f| f.stats), default_fit: None, noise_floor: None, hyperparameter_rows }
 }
 
 #[cfg(test)]
@@ -328,7 +318,7 @@ mod tests {
             pose: None,
             noise_sigma: None,
         };
-        let table = |rows| Comparison { rows, dh: None, default_fit: None, noise_floor: None }.table("m");
+        let table = |rows| Comparison { rows, ..Comparison::default() }.table("m");
         let small = table(vec![row("nominal", 0.1083), row("cbd", 1.2916e-5)]);
         assert!(small.contains("1.292e-5") && small.contains("1.083e-1") && !small.contains("0.0000"), "{small}");
         let large = table(vec![row("nominal", 3.25), row("cbd", 0.0876)]);
@@ -343,7 +333,7 @@ mod tests {
         let options = DhCalibrationOptions { max_iterations: 1, ..DhCalibrationOptions::default() };
         let stats = calibrate_dh(&robot.nominal, &train, &options).unwrap().stats;
         assert!(!stats.converged);
-        let c = Comparison { rows: vec![], dh: Some(stats), default_fit: None, noise_floor: None };
+        let c = Comparison { dh: Some(stats), ..Comparison::default() };
         let w = c.warnings();
         assert!(w.len() == 1 && w[0].contains("iteration limit (1 iterations)"), "{w:?}");
         assert_eq!(c.to_json()["warnings"][0], serde_json::json!(w[0]));

@@ -39,12 +39,16 @@ impl GeometricBasis {
     /// The basis of `group` (linearised on `data`'s rows) for the normalisation `norm`.
     pub fn new(group: &LinearisedGroup, data: &Measurements, norm: &Normalisation) -> Self {
         let (rows, p) = (group.jacobian.nrows(), group.jacobian.ncols());
-        let scale = norm.task_scale;
+        // The prior of a length is GEOMETRY_PRIOR_STD internal units; of an angle, that many radians.
         let std: Vec<f64> =
-            group.names.iter().map(|n| if is_length(n) { GEOMETRY_PRIOR_STD * scale } else { GEOMETRY_PRIOR_STD }).collect();
-        let columns = (0..rows).flat_map(|i| (0..p).map(move |k| (i, k))).map(|(i, k)| group.jacobian[(i, k)] * std[k] / scale).collect();
+            group.names.iter().map(|n| if is_length(n) { norm.length_to_user(GEOMETRY_PRIOR_STD) } else { GEOMETRY_PRIOR_STD }).collect();
+        let columns = (0..rows)
+            .flat_map(|i| (0..p).map(move |k| (i, k)))
+            .map(|(i, k)| norm.length_to_internal(group.jacobian[(i, k)] * std[k]))
+            .collect();
         debug_assert_eq!(rows, data.len() * data.task_dim);
-        GeometricBasis { p, m: data.task_dim, columns, shift: group.shift.iter().map(|v| v / scale).collect(), names: group.names.clone() }
+        let shift = group.shift.iter().map(|v| norm.length_to_internal(*v)).collect();
+        GeometricBasis { p, m: data.task_dim, columns, shift, names: group.names.clone() }
     }
 
     /// The rows at `indices` (as `Measurements::subset`).

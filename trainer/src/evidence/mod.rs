@@ -17,40 +17,26 @@
 
 mod defaults;
 mod geometry;
+mod hyperparameters;
 pub(crate) mod joint_pair_table;
 mod likelihood;
-mod search;
+pub(crate) mod search;
 mod starts;
 mod table;
-mod weight_space;
+pub(crate) mod weight_space;
 
 pub use defaults::{default_joint_kernel, normalisation_of};
 pub use geometry::{is_length, GeometricBasis, GEOMETRY_PRIOR_STD};
+pub use hyperparameters::CbdHyperparameters;
 pub(crate) use table::PairTable;
 pub use weight_space::WeightSpaceReport;
 
 use crate::data::Measurements;
-use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
+use cbd_protocol::{NominalModel, Normalisation};
 use search::minimise;
 use starts::DataScales;
 use std::cell::RefCell;
 use table::Theta;
-
-/// CbD's hyperparameters in the data's units (what `--sigma`, `--task-width`, … mean everywhere).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct CbdHyperparameters {
-    /// One axis per joint: periodic b (revolute; 1/rad², larger is narrower) or Gaussian width ℓ
-    /// (prismatic; the joint's unit).
-    pub joint_axes: Vec<JointKernelAxis>,
-    /// γ_V: variance of the joint-space displacement field (rad² for revolute joints).
-    pub joint_gamma: f64,
-    /// a: task-space kernel width, data length unit.
-    pub task_width: f64,
-    /// γ_W: variance of the task-space displacement field, data length unit squared.
-    pub task_gamma: f64,
-    /// σ: measurement noise per coordinate, data length unit.
-    pub sigma: f64,
-}
 
 /// What the evidence search found.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -221,9 +207,8 @@ fn choose(
     }
     let best = found.into_iter().next();
     let Some((mut nlml, mut param)) = best else { return Err(EvidenceError::NoValidSetting) };
-    let scale = norm.task_scale;
     // Positions in data units: the density picks up 1/scale per coordinate.
-    let in_data_units = |nlml: f64, rows: usize| -nlml - ((rows * m) as f64) * scale.ln();
+    let in_data_units = |nlml: f64, rows: usize| -nlml - ((rows * m) as f64) * norm.task_scale.ln();
     let subset_log_evidence = in_data_units(nlml, used.len());
     // A subset's choice refined on every row in weight space, where the expansions are short.
     let (mut rows_used, mut weight_space, mut weight_space_declined) = (used.len(), None, None);
@@ -248,23 +233,7 @@ fn choose(
             (nlml, param, rows_used, weight_space, weight_space_declined) = (v, p, data.len(), Some(report), None);
         }
     }
-    let theta = Theta::unpack(&param, n);
-    let joint_axes = (0..n)
-        .map(|d| {
-            if table.joint.periodic[d] {
-                JointKernelAxis::Periodic { b: theta.log_widths[d].exp() }
-            } else {
-                JointKernelAxis::Gaussian { width: theta.log_widths[d].exp() }
-            }
-        })
-        .collect();
-    let hyperparameters = CbdHyperparameters {
-        joint_axes,
-        joint_gamma: theta.log_gamma_v.exp(),
-        task_width: theta.log_a.exp() * scale,
-        task_gamma: theta.log_gamma_w.exp() * scale * scale,
-        sigma: theta.log_sigma.exp() * scale,
-    };
+    let hyperparameters = Theta::unpack(&param, n).to_user(&table.joint.periodic, norm);
     let log_evidence = in_data_units(nlml, rows_used);
     let evaluations = evaluations.into_inner();
     Ok(Evidence {
@@ -284,26 +253,6 @@ fn choose(
     })
 }
 
-impl CbdHyperparameters {
-    /// The joint kernel of the blob: γ = γ_V / γ_W (normalised), since the blob's task kernel has
-    /// unit amplitude (scaling both kernels and σ² together leaves the fit unchanged).
-    pub fn blob_joint_kernel(&self, norm: &Normalisation) -> JointKernel {
-        let gamma_w = self.task_gamma / (norm.task_scale * norm.task_scale);
-        JointKernel {
-            gamma: self.joint_gamma / gamma_w,
-            axes: heapless::Vec::from_slice(&self.joint_axes).expect("at most MAX_JOINTS axes"),
-        }
-    }
-    /// The task kernel width in normalised units.
-    pub fn blob_task_width(&self, norm: &Normalisation) -> f64 {
-        self.task_width / norm.task_scale
-    }
-    /// σ of energy (16) for the blob's kernels: σ / √γ_W (the normalisation cancels).
-    pub fn blob_sigma(&self) -> f64 {
-        self.sigma / self.task_gamma.sqrt()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -315,16 +264,6 @@ mod tests {
         let norm = crate::evidence::normalisation_of(&data);
         let table = PairTable::new(&rr::nominal(), &data, &norm);
         let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
-        let p = theta.pack();
-        use search::Criterion;
-        let (_, grad) = table.nlml_and_gradient(&p).unwrap();
-        for k in 0..p.len() {
-            let h = 1e-5;
-            let (mut a, mut b) = (p.clone(), p.clone());
-            a[k] += h;
-            b[k] -= h;
-            let fd = (table.nlml_and_gradient(&a).unwrap().0 - table.nlml_and_gradient(&b).unwrap().0) / (2.0 * h);
-            assert!((fd - grad[k]).abs() <= 1e-6 * fd.abs().max(1.0), "θ[{k}]: analytic {} vs finite differences {fd}", grad[k]);
-        }
+        search::assert_gradient_matches_central_differences(&table, &theta.pack(), 1e-6);
     }
 }

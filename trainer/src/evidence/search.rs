@@ -7,7 +7,7 @@ use std::cell::RefCell;
 
 /// A negative log evidence over θ's packed form: the kernel form's ([`super::PairTable`]) or the
 /// weight space's ([`super::weight_space::WeightSpaceTable`]).
-pub(super) trait Criterion {
+pub(crate) trait Criterion {
     /// Observations (N m): the per-unknown scale of values, gradients and tolerances.
     fn observations(&self) -> usize;
     /// Value and gradient; `None` where the covariance is not positive definite.
@@ -89,7 +89,7 @@ impl Gradient for &Objective<'_> {
 }
 
 /// L-BFGS from `init` (clamped into the box): the best (nlml, θ) found, None if `init` is infeasible.
-pub(super) fn minimise(
+pub(crate) fn minimise(
     table: &dyn Criterion,
     lower: &[f64],
     upper: &[f64],
@@ -132,4 +132,19 @@ pub(super) fn minimise(
     // The last point L-BFGS evaluated is usually the best one: the cache answers.
     let value = objective.both(&param).0;
     (value < INFEASIBLE).then_some((value * table.observations() as f64, param))
+}
+
+/// Test helper: `criterion`'s analytic gradient at `p` against central differences (step 1e-5 in each
+/// log parameter), within `relative` of max(|difference quotient|, 1).
+#[cfg(test)]
+pub(crate) fn assert_gradient_matches_central_differences(criterion: &dyn Criterion, p: &[f64], relative: f64) {
+    let (_, grad) = criterion.nlml_and_gradient(p).unwrap();
+    for k in 0..p.len() {
+        let h = 1e-5;
+        let (mut up, mut down) = (p.to_vec(), p.to_vec());
+        up[k] += h;
+        down[k] -= h;
+        let fd = (criterion.nlml_and_gradient(&up).unwrap().0 - criterion.nlml_and_gradient(&down).unwrap().0) / (2.0 * h);
+        assert!((fd - grad[k]).abs() <= relative * fd.abs().max(1.0), "θ[{k}]: analytic {} vs finite differences {fd}", grad[k]);
+    }
 }

@@ -41,7 +41,7 @@ impl PairTable {
         let residual: Vec<f64> = (0..count)
             .flat_map(|i| {
                 let (y, k) = (data.position(i), &kin[i]);
-                (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale - k.position[c])
+                (0..m).map(move |c| norm.position_to_internal(c, y[c]) - k.position[c])
             })
             .collect();
         let pairs = count * (count + 1) / 2;

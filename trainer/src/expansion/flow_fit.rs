@@ -15,6 +15,7 @@
 use super::basis::Basis;
 use super::solve::{prior_variances, task_exponents};
 use crate::solver::least_squares::QrLeastSquares;
+use crate::solver::levenberg_marquardt as lm;
 use crate::solver::FIXED_SPLIT;
 use cbd_protocol::{Integrator, IntegratorMethod, JointKernel, TaskKernel, MAX_TASK_DIM as MT};
 use cbd_runtime::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
@@ -287,26 +288,27 @@ fn energy_of(problem: &StageProblem<'_>, k: &[f64], z: &[f64]) -> f64 {
     0.5 * (data + z.iter().map(|v| v * v).sum::<f64>())
 }
 
-/// Levenberg–Marquardt on ½ |k1(z) − y|²/σ² + ½ |z|² from `z`, converged when an accepted step
-/// lowers the energy by at most `relative_tolerance` of it or moves no training prediction by more
-/// than `prediction_tolerance` (internal units) or 5 % of the RMS training residual: returns the whitened weights, the
-/// final positions (internal units), the iterations and whether it converged.
-pub fn minimise(
-    problem: &StageProblem<'_>,
-    mut z: Vec<f64>,
-    max_iterations: usize,
+/// The fit as the least-squares driver sees it: a point is k1 (N × m), ∂k1/∂z and the energy.
+struct WeightSteps<'p, 'a> {
+    problem: &'p StageProblem<'a>,
     relative_tolerance: f64,
     prediction_tolerance: f64,
-) -> Option<(Vec<f64>, Vec<f64>, usize, bool)> {
-    let sigma = problem.sigma;
-    let energy = |k: &[f64], z: &[f64]| energy_of(problem, k, z);
-    let (mut k, mut jac) = problem.evaluate(&z, true)?;
-    let mut e = energy(&k, &z);
-    let mut damping = 0.0f64;
-    let (rows, params) = (k.len(), z.len());
-    for iteration in 1..=max_iterations {
-        let j = jac.as_ref()?;
-        // [J/σ; I; √μ I] δ = −[(k − y)/σ; z; 0].
+}
+
+impl lm::Problem for WeightSteps<'_, '_> {
+    type Eval = (Vec<f64>, Option<Mat<f64>>, f64);
+    /// No Jacobian at the current point.
+    type Error = ();
+
+    fn cost(&self, at: &Self::Eval) -> f64 {
+        at.2
+    }
+
+    /// [J/σ; I; √μ I] δ = −[(k − y)/σ; z; 0].
+    fn propose(&mut self, z: &[f64], at: &Self::Eval, damping: f64, _iteration: usize) -> Result<Option<lm::Step>, ()> {
+        let (k, sigma) = (&at.0, self.problem.sigma);
+        let j = at.1.as_ref().ok_or(())?;
+        let (rows, params) = (k.len(), z.len());
         let extra = if damping > 0.0 { params } else { 0 };
         let a = Mat::from_fn(rows + params + extra, params, |r, c| {
             if r < rows {
@@ -319,34 +321,63 @@ pub fn minimise(
                 0.0
             }
         });
-        let mut rhs: Vec<f64> = k.iter().zip(problem.target).map(|(a, b)| -(a - b) / sigma).collect();
+        let mut rhs: Vec<f64> = k.iter().zip(self.problem.target).map(|(a, b)| -(a - b) / sigma).collect();
         rhs.extend(z.iter().map(|v| -v));
         rhs.resize(rows + params + extra, 0.0);
-        let step = QrLeastSquares::factor(a, FIXED_SPLIT).solve(&rhs);
-        let trial: Vec<f64> = z.iter().zip(&step).map(|(a, b)| a + b).collect();
-        match problem.evaluate(&trial, true) {
-            Some((kt, jt)) if energy(&kt, &trial) < e => {
-                let et = energy(&kt, &trial);
-                let moved = kt.iter().zip(&k).fold(0.0f64, |s, (a, b)| s.max((a - b).abs()));
-                // Or when the predictions move by less than 5 % of the training residual they leave:
-                // the path's energy still falls, but the data no longer see it.
-                let rms = (kt.iter().zip(problem.target).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / kt.len().max(1) as f64).sqrt();
-                let converged = e - et <= relative_tolerance * e || moved <= prediction_tolerance.max(0.05 * rms);
-                (z, k, jac, e) = (trial, kt, jt, et);
-                damping *= 0.1;
-                if converged {
-                    return Some((z, k, iteration, true));
-                }
-            }
-            _ => {
-                damping = if damping == 0.0 { 1e-6 } else { damping * 100.0 };
-                if damping > 1e12 {
-                    return Some((z, k, iteration, true));
-                }
-            }
+        let delta = QrLeastSquares::factor(a, FIXED_SPLIT).solve(&rhs);
+        Ok(Some(lm::Step { delta, predicted: None }))
+    }
+
+    fn evaluate(&mut self, trial: &[f64], _delta: &[f64]) -> Result<Option<Self::Eval>, ()> {
+        Ok(self.problem.evaluate(trial, true).map(|(k, jac)| {
+            let e = energy_of(self.problem, &k, trial);
+            (k, jac, e)
+        }))
+    }
+
+    fn accepted(&mut self, step: lm::Accepted<'_, Self::Eval>) -> Option<String> {
+        let (k, kt, e) = (&step.from.0, &step.to.0, step.from.2);
+        let moved = kt.iter().zip(k).fold(0.0f64, |s, (a, b)| s.max((a - b).abs()));
+        // Or when the predictions move by less than 5 % of the training residual they leave:
+        // the path's energy still falls, but the data no longer see it.
+        let rms = (kt.iter().zip(self.problem.target).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / kt.len().max(1) as f64).sqrt();
+        if step.decrease <= self.relative_tolerance * e {
+            Some(format!("relative energy decrease below {:.0e}", self.relative_tolerance))
+        } else if moved <= self.prediction_tolerance.max(0.05 * rms) {
+            Some("no training prediction moved by the tolerance or 5 % of the RMS residual".into())
+        } else {
+            None
         }
     }
-    Some((z, k, max_iterations, false))
+}
+
+/// Levenberg–Marquardt (the one least-squares driver, `solver::levenberg_marquardt`) on
+/// ½ |k1(z) − y|²/σ² + ½ |z|² from `z`: pure Gauss–Newton until a step fails, then damping 1e-6,
+/// ×100 per failure, ×0.1 per success; converged when an accepted step
+/// lowers the energy by at most `relative_tolerance` of it or moves no training prediction by more
+/// than `prediction_tolerance` (internal units) or 5 % of the RMS training residual, or when no step
+/// lowers it at damping up to 1e12: returns the whitened weights, the
+/// final positions (internal units), the iterations (every trial counts) and whether it converged.
+pub fn minimise(
+    problem: &StageProblem<'_>,
+    z: Vec<f64>,
+    max_iterations: usize,
+    relative_tolerance: f64,
+    prediction_tolerance: f64,
+) -> Option<(Vec<f64>, Vec<f64>, usize, bool)> {
+    let (k, jac) = problem.evaluate(&z, true)?;
+    let e = energy_of(problem, &k, &z);
+    let options = lm::Options {
+        damping: lm::Damping::Marquardt { first: 1e-6, growth: 100.0, limit: 1e12, relax: lm::Relax::Scale(0.1) },
+        acceptance: lm::Acceptance::Decrease,
+        counting: lm::Counting::Trials,
+        first_iteration: 1,
+        max_iterations,
+    };
+    let mut steps = WeightSteps { problem, relative_tolerance, prediction_tolerance };
+    let found = lm::minimise(&mut steps, z, (k, jac, e), &options).ok()?;
+    let converged = found.stop != lm::Stop::IterationLimit;
+    Some((found.x, found.at.0, found.iterations, converged))
 }
 
 #[cfg(test)]

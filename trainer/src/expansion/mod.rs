@@ -35,6 +35,18 @@ pub const CANCELLATION_LIMIT: f64 = 1e4;
 /// Weights above which the expansion is never used (the fit's QR is O(W² (N m + W))).
 pub const MAX_WEIGHTS: usize = 8192;
 
+/// Most weights (over all stages) a multi-step flow fit takes for `values` data values (N m):
+/// twice the data, at least [`MIN_FLOW_WEIGHTS`]. Each Levenberg–Marquardt iteration factors a
+/// (N m + 2W) × W matrix, O(W³) once W outgrows the data: 8192 weights for 180 values (nearly
+/// singular kernels on 60 far-off rows) took minutes per iteration and the fit seemed to hang.
+/// Beyond, the kernel form (N m momenta) fits the scheme, and the report says why.
+pub fn flow_weight_limit(values: usize) -> usize {
+    (2 * values).max(MIN_FLOW_WEIGHTS)
+}
+
+/// The flow fit's weight limit for small data sets: one iteration's QR stays near 5e9 flops.
+pub const MIN_FLOW_WEIGHTS: usize = 1024;
+
 /// The fitted linear model in the expansion.
 #[derive(Debug, Clone)]
 pub struct ExpansionFit {
@@ -219,6 +231,15 @@ pub fn fit_flow(
     let params = linear.len() * integrator.stage_count();
     if params > MAX_WEIGHTS {
         return Err(Declined::TooLong(format!("{params} weights over {} stages (limit {MAX_WEIGHTS})", integrator.stage_count())));
+    }
+    let limit = flow_weight_limit(cp.len() * m);
+    if params > limit {
+        return Err(Declined::TooLong(format!(
+            "{params} weights over {} stages for {} data values: each iteration's least squares would cost {:.1e} flops (limit {limit} weights: twice the data, at least {MIN_FLOW_WEIGHTS})",
+            integrator.stage_count(),
+            cp.len() * m,
+            2.0 * (cp.len() * m + 2 * params) as f64 * (params as f64).powi(2)
+        )));
     }
     crate::memory::room_for(crate::memory::flow_expansion_bytes(cp.len() * m, params))
         .map_err(|why| Declined::Memory(format!("the {params} weights over {} stages {why}", integrator.stage_count())))?;

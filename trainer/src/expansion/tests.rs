@@ -71,8 +71,7 @@ fn the_posterior_mean_is_the_kernel_forms_without_the_cancellation() {
     let norm = &opts.normalisation;
     let cp =
         ControlPoints::new(&nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
-    let target: Vec<f64> =
-        data.positions.chunks_exact(2).flat_map(|y| (0..2).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale)).collect();
+    let target: Vec<f64> = data.positions.chunks_exact(2).flat_map(|y| (0..2).map(move |c| norm.position_to_internal(c, y[c]))).collect();
     let e = fit_linear(&cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, &target).unwrap();
     assert!(e.len() < 512, "{} weights for 512 momenta", e.len());
     assert!(e.cancellation < 1e3, "the expansion's terms cancel 1 : {:e}", e.cancellation);
@@ -81,7 +80,7 @@ fn the_posterior_mean_is_the_kernel_forms_without_the_cancellation() {
         .positions
         .chunks_exact(2)
         .zip(kernel_form.fit.train_predictions.chunks_exact(2))
-        .map(|(k, y)| (0..2).map(|c| (norm.task_offset[c] + norm.task_scale * k[c] - y[c]).abs()).fold(0.0, f64::max))
+        .map(|(k, y)| (0..2).map(|c| (norm.position_to_user(c, k[c]) - y[c]).abs()).fold(0.0, f64::max))
         .fold(0.0f64, f64::max);
     // Noise 1e-4: the two posterior means agree to a few % of it. The gap is the kernel form's own
     // rounding, ~1e-16 × its 1e11 cancellation × the scale (measured: 2.2e-6); which of the two is

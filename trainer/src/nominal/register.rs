@@ -20,6 +20,9 @@ pub struct Registration {
     pub rms_after: f64,
     /// Whether the rigid fit was refined by the geometric group (`parametric::register`).
     pub refined: bool,
+    /// The refinement stopped at its iteration limit (this many iterations) without converging:
+    /// every loop after registration is bounded, and a bound hit is said.
+    pub stopped_at_limit: Option<usize>,
 }
 
 impl Registration {
@@ -39,7 +42,10 @@ impl Registration {
             axis[2],
             self.rms_before,
             self.rms_after
-        )
+        ) + &match self.stopped_at_limit {
+            Some(n) => format!(" (the refinement stopped at its limit of {n} iterations without converging)"),
+            None => String::new(),
+        }
     }
 }
 
@@ -49,7 +55,8 @@ impl Registration {
     pub fn to_json(&self) -> serde_json::Value {
         let (axis, angle) = axis_angle(&self.base);
         serde_json::json!({"translation": self.base.translation(), "rotation": self.base.rotation(), "axis": axis, "angle_deg": angle.to_degrees(),
-                           "rms_before": self.rms_before, "rms_after": self.rms_after, "refined": self.refined})
+                           "rms_before": self.rms_before, "rms_after": self.rms_after, "refined": self.refined,
+                           "stopped_at_limit": self.stopped_at_limit})
     }
 }
 
@@ -113,12 +120,53 @@ pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<
     let model = NominalModel::DhChain(chain.clone());
     let p: Vec<[f64; 3]> = (0..data.len()).map(|i| super::row_kinematics(&model, data.joints(i), i).position).collect();
     let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
+    check_geometry(&p, &y)?;
     let base = rigid_fit(&p, &y).ok_or(RegisterError::Degenerate { rows: data.len() })?;
     let declared = Frame::from_transform(&chain.base);
     let rms_before = rms_from(chain, data);
     chain.base = base.compose(&declared).to_transform();
-    Ok(Registration { rms_before, rms_after: rms_from(chain, data), base: base.compose(&declared), refined: false })
+    Ok(Registration { rms_before, rms_after: rms_from(chain, data), base: base.compose(&declared), refined: false, stopped_at_limit: None })
 }
+
+/// Refuses what determines no rigid motion, before any fit: measured (or nominal) positions that
+/// are one point or on one line (the rotation about the line is free), and measurements that are
+/// a mirror image of the nominal positions (no rotation carries one onto the other; a fit over
+/// such a frame ran for minutes and meant nothing).
+fn check_geometry(p: &[[f64; 3]], y: &[[f64; 3]]) -> Result<(), RegisterError> {
+    use cbd_runtime::kinematics::tool_frame::determines_orientation;
+    for (what, points) in [("measured", y), ("nominal", p)] {
+        // Far from the origin f64 keeps fewer of the spread's digits (1e50 mm away: none).
+        let magnitude = points.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        let (lo, hi) = points.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), v| {
+            (std::array::from_fn(|c| lo[c].min(v[c])), std::array::from_fn(|c| hi[c].max(v[c])))
+        });
+        let extent = (0..3).map(|c| hi[c] - lo[c]).fold(0.0, f64::max);
+        let one_point = points.iter().all(|q| *q == points[0]);
+        if points.len() >= 3 && !one_point && extent < RESOLVED_DIGITS * f64::EPSILON * magnitude {
+            return Err(RegisterError::Unresolved { what, magnitude, extent });
+        }
+        if points.len() >= 3 && !determines_orientation(points) {
+            return Err(if one_point { RegisterError::OnePoint { what, magnitude } } else { RegisterError::OnALine { what } });
+        }
+    }
+    let rms = |fit: Option<Frame>, y: &[[f64; 3]]| {
+        fit.map_or(f64::INFINITY, |f| {
+            (p.iter().zip(y).map(|(a, b)| super::norm(super::sub(f.apply(*a), *b)).powi(2)).sum::<f64>() / p.len().max(1) as f64).sqrt()
+        })
+    };
+    let mirrored: Vec<[f64; 3]> = y.iter().map(|v| [-v[0], v[1], v[2]]).collect();
+    let (rotation, reflection) = (rms(rigid_fit(p, y), y), rms(rigid_fit(p, &mirrored), &mirrored));
+    let mean: [f64; 3] = std::array::from_fn(|c| y.iter().map(|v| v[c]).sum::<f64>() / y.len().max(1) as f64);
+    let spread = (y.iter().map(|v| super::norm(super::sub(*v, mean)).powi(2)).sum::<f64>() / y.len().max(1) as f64).sqrt();
+    if rotation > 2.0 * reflection && rotation > 1e-3 * spread {
+        return Err(RegisterError::Mirrored { rotation, reflection });
+    }
+    Ok(())
+}
+
+/// The positions' extent must be at least this many times their resolution in f64 (ε × their
+/// magnitude): six digits of the arm's shape kept (1000 km from the origin a 1 m arm keeps 0.2 µm).
+const RESOLVED_DIGITS: f64 = 1e6;
 
 /// Why [`register_base`] could not register the base.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -128,6 +176,18 @@ pub enum RegisterError {
     /// No rigid motion is determined by the data's positions.
     #[error("cannot register the base on {rows} rows (at least 3 in general position needed)")]
     Degenerate { rows: usize },
+    /// The positions are so far from the origin that f64 no longer resolves their extent.
+    #[error("cannot register the base: the {what} positions are up to {} from the origin, where f64 resolves only {}: their extent {} is lost to rounding (move the tracker's origin nearer the arm)", crate::error::number(*magnitude), crate::error::number(*magnitude * f64::EPSILON), crate::error::number(*extent))]
+    Unresolved { what: &'static str, magnitude: f64, extent: f64 },
+    /// Every position is the same point (to f64's precision at their magnitude).
+    #[error("cannot register the base: the {what} positions are all one point (largest coordinate {}): no rotation is determined", crate::error::number(*magnitude))]
+    OnePoint { what: &'static str, magnitude: f64 },
+    /// The positions lie on one line: the rotation about it is free.
+    #[error("cannot register the base: the {what} positions lie on one line, so the rotation about it is undetermined (measure poses that spread in two directions at least)")]
+    OnALine { what: &'static str },
+    /// The measurements are a mirror image of the nominal positions.
+    #[error("cannot register the base: the measurements are a mirror image of the nominal model's positions — the best rotation leaves {} RMS, a reflection {} (a left-handed tracker frame, or a coordinate's sign flipped?)", crate::error::number(*rotation), crate::error::number(*reflection))]
+    Mirrored { rotation: f64, reflection: f64 },
 }
 
 impl From<RegisterError> for crate::Error {
@@ -161,5 +221,27 @@ mod tests {
             + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
         assert!((det - 1.0).abs() < 1e-12);
         assert!(rigid_fit(&p[..2], &y[..2]).is_none());
+    }
+
+    /// Issue 39 case 7: mirrored or collinear tracker data were registered anyway and the fits over
+    /// the meaningless frame ran for minutes. Each is refused up front with its reason.
+    #[test]
+    fn degenerate_geometry_is_refused_with_its_reason() {
+        let motion = crate::nominal::rotation_about([0.6, 0.0, 0.8], 0.4).with_translation([4000.0, -1200.0, 300.0]);
+        let p: Vec<[f64; 3]> = (0..20).map(|k| [(k as f64 * 0.7).sin() * 500.0, (k as f64 * 1.3).cos() * 400.0, k as f64 * 20.0]).collect();
+        let y: Vec<[f64; 3]> = p.iter().map(|x| motion.apply(*x)).collect();
+        check_geometry(&p, &y).unwrap();
+        let mirrored: Vec<[f64; 3]> = y.iter().map(|v| [v[0], -v[1], v[2]]).collect();
+        assert!(matches!(check_geometry(&p, &mirrored), Err(RegisterError::Mirrored { .. })));
+        let line: Vec<[f64; 3]> = (0..20).map(|k| [k as f64, 2.0 * k as f64, 3.0]).collect();
+        let e = check_geometry(&p, &line).unwrap_err().to_string();
+        assert!(e.contains("measured positions lie on one line"), "{e}");
+        let far: Vec<[f64; 3]> = y.iter().map(|v| [v[0] + 1e50, v[1], v[2]]).collect();
+        let e = check_geometry(&p, &far).unwrap_err().to_string();
+        assert!(e.contains("measured positions are up to 1e50 from the origin, where f64 resolves only 2.2204e34"), "{e}");
+        let resolved: Vec<[f64; 3]> = y.iter().map(|v| [v[0] + 1e9, v[1], v[2]]).collect();
+        check_geometry(&p, &resolved).unwrap();
+        let e = check_geometry(&vec![[1.0, 2.0, 3.0]; 20], &y).unwrap_err().to_string();
+        assert!(e.contains("nominal positions are all one point (largest coordinate 3)"), "{e}");
     }
 }

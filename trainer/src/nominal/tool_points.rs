@@ -16,6 +16,30 @@ pub fn point_chain(chain: &DhChain, p: [f64; 3]) -> DhChain {
     }
 }
 
+/// The rules every list of tool points obeys, wherever it comes from (a model file's
+/// `[chain.tool] points`, `cbd simulate --tool-points`): 1 to `MAX_TOOL_POINTS`, each coordinate
+/// finite and within the blob's [`cbd_protocol::MAX_TOOL_POINT_COORDINATE`], no two the same.
+/// The message says which point and why (the caller names the field or flag).
+pub fn check_tool_points(points: &[[f64; 3]]) -> Result<(), String> {
+    use cbd_protocol::{MAX_TOOL_POINTS, MAX_TOOL_POINT_COORDINATE};
+    if points.is_empty() || points.len() > MAX_TOOL_POINTS {
+        return Err(format!("{} points; 1 to {MAX_TOOL_POINTS} are supported", points.len()));
+    }
+    for (j, p) in points.iter().enumerate() {
+        if let Some(v) = p.iter().find(|v| !(v.abs() <= MAX_TOOL_POINT_COORDINATE)) {
+            return Err(format!(
+                "point {}: {} is not a finite offset within ±{MAX_TOOL_POINT_COORDINATE:e} (a lever on the tool, in the length unit)",
+                j + 1,
+                crate::error::number(*v)
+            ));
+        }
+        if let Some(k) = points[..j].iter().position(|o| o == p) {
+            return Err(format!("points {} and {} are the same point", k + 1, j + 1));
+        }
+    }
+    Ok(())
+}
+
 /// The unit quaternion (w, x, y, z), w ≥ 0, of a rotation matrix (Shepperd's method: the largest
 /// of 1 + tr, 1 + 2 r_ii − tr taken as the pivot).
 pub fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {

@@ -9,6 +9,7 @@ use super::{DhCalibrationError, DhCalibrationOptions};
 use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for};
 use crate::solver::least_squares::TruncatedSvd;
+use crate::solver::levenberg_marquardt as lm;
 use cbd_protocol::DhChain;
 use faer::Mat;
 
@@ -36,117 +37,158 @@ pub(super) struct Minimum {
     pub redundant_at_nominal: Vec<usize>,
 }
 
-/// Levenberg–Marquardt on the scaled Jacobian's SVD from the nominal `chain0` (residuals `r`
-/// there), the `out_of_plane` parameters fixed.
+/// DH calibration as the least-squares driver sees it: the parameters' changes from the nominal, a
+/// point's residuals and ½|r|²; the Jacobian's scaled SVD formed after every accepted step.
+struct DhSteps<'a> {
+    chain0: &'a DhChain,
+    data: &'a Measurements,
+    out_of_plane: &'a [usize],
+    options: &'a DhCalibrationOptions,
+    rp: Vec<f64>,
+    rm: Vec<f64>,
+    jac: Mat<f64>,
+    colnorm: Vec<f64>,
+    svd: Option<TruncatedSvd>,
+    recompute: bool,
+    /// The parameters held fixed: None before the first Jacobian.
+    frozen: Option<Vec<usize>>,
+    rank: usize,
+    null_dirs: Vec<Vec<f64>>,
+    redundant_at_nominal: Vec<usize>,
+}
+
+impl lm::Problem for DhSteps<'_> {
+    type Eval = (Vec<f64>, f64);
+    type Error = DhCalibrationError;
+
+    fn cost(&self, at: &Self::Eval) -> f64 {
+        at.1
+    }
+
+    fn prepare(&mut self, p: &[f64], _at: &Self::Eval) -> Result<(), DhCalibrationError> {
+        if !self.recompute {
+            return Ok(());
+        }
+        let (options, out_of_plane) = (self.options, self.out_of_plane);
+        jacobian_at(self.chain0, p, self.data, &mut self.jac, (&mut self.rp, &mut self.rm));
+        zero_columns(&mut self.jac, out_of_plane);
+        column_scales(&self.jac, &mut self.colnorm);
+        if self.frozen.is_none() {
+            self.redundant_at_nominal = redundant_in_plane(&self.jac, &self.colnorm, options.redundancy_tolerance, out_of_plane);
+            self.frozen = Some(self.redundant_at_nominal.clone());
+        }
+        let still = self.frozen.as_deref().unwrap_or(&[]);
+        zero_columns(&mut self.jac, still);
+        for &k in still {
+            self.colnorm[k] = 1.0;
+        }
+        // The scaled Jacobian J D⁻¹ = U Σ Vᵀ: λ_k = σ_k² are the eigenvalues of D⁻¹ JᵀJ D⁻¹.
+        let factored = TruncatedSvd::with_scales(self.jac.as_ref(), self.colnorm.clone())?;
+        self.rank = (0..p.len()).filter(|&k| factored.keeps(k, options.rank_tolerance)).count();
+        self.null_dirs = reported_null_directions(&factored, options.rank_tolerance, out_of_plane);
+        self.svd = Some(factored);
+        self.recompute = false;
+        Ok(())
+    }
+
+    /// The largest eigenvalue of D⁻¹ JᵀJ D⁻¹.
+    fn damping_scale(&self) -> f64 {
+        self.svd.as_ref().and_then(|f| f.eigenvalues().first().copied()).unwrap_or(0.0)
+    }
+
+    /// The step in scaled parameters over the identifiable directions, and the decrease the linear
+    /// model predicts; none once it is negligible or predicts no decrease.
+    fn propose(&mut self, p: &[f64], at: &Self::Eval, mu: f64, _iteration: usize) -> Result<Option<lm::Step>, DhCalibrationError> {
+        let factored = self.svd.as_ref().expect("computed");
+        let (mut step_s, predicted) = factored.damped_step(&at.0, mu, self.options.rank_tolerance);
+        // Rounding in the singular vectors must not move what stays out of the plane.
+        for &k in self.out_of_plane {
+            step_s[k] = 0.0;
+        }
+        let step_norm = step_s.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let p_norm = p.iter().zip(&self.colnorm).map(|(v, c)| (v * c).powi(2)).sum::<f64>().sqrt();
+        if step_norm <= 1e-14 * (p_norm + 1e-9) || predicted <= 0.0 {
+            return Ok(None);
+        }
+        let delta = step_s.iter().zip(&self.colnorm).map(|(s, c)| s / c).collect();
+        Ok(Some(lm::Step { delta, predicted: Some(predicted) }))
+    }
+
+    fn evaluate(&mut self, trial: &[f64], _delta: &[f64]) -> Result<Option<Self::Eval>, DhCalibrationError> {
+        let mut rt = vec![0.0; self.rp.len()];
+        residuals(&apply_parameters(self.chain0, trial), self.data, &mut rt);
+        let cost = 0.5 * rt.iter().map(|v| v * v).sum::<f64>();
+        Ok(Some((rt, cost)))
+    }
+
+    fn accepted(&mut self, step: lm::Accepted<'_, Self::Eval>) -> Option<String> {
+        self.recompute = true;
+        let cost = step.to.1;
+        (step.decrease <= self.options.cost_tolerance * cost.max(f64::MIN_POSITIVE) || cost == 0.0)
+            .then(|| "cost decrease below the tolerance".into())
+    }
+
+    /// Stage 2 ("polish"): where stage 1 would stop, the parameters held fixed are freed (away from
+    /// the nominal some become identifiable) — not at a zero cost.
+    fn restart(&mut self, stop: &lm::Stop, at: &Self::Eval) -> bool {
+        if matches!(stop, lm::Stop::Converged(_)) && at.1 <= 0.0 {
+            return false;
+        }
+        match &mut self.frozen {
+            Some(f) if !f.is_empty() => {
+                f.clear();
+                self.recompute = true;
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Levenberg–Marquardt (the one least-squares driver, `solver::levenberg_marquardt`, with Nielsen's
+/// damping) on the scaled Jacobian's SVD from the nominal `chain0` (residuals `r` there), the
+/// `out_of_plane` parameters fixed. Stage 1 keeps the parameters redundant at the nominal fixed
+/// (well conditioned, fast); stage 2 frees them all.
 pub(super) fn minimise(
     chain0: &DhChain,
     data: &Measurements,
     out_of_plane: &[usize],
     options: &DhCalibrationOptions,
-    mut r: Vec<f64>,
+    r: Vec<f64>,
 ) -> Result<Minimum, DhCalibrationError> {
     let (rows, np) = (r.len(), parameter_count_for(chain0));
-    let mut p = vec![0.0; np];
-    let mut cost = 0.5 * r.iter().map(|v| v * v).sum::<f64>();
-    let mut mu = -1.0;
-    let mut nu = 2.0;
-    let mut converged = false;
-    let mut iterations = 0;
-    let (mut rp, mut rm) = (vec![0.0; rows], vec![0.0; rows]);
-    let mut rank = np;
-    let mut null_dirs: Vec<Vec<f64>> = Vec::new();
-    let mut jac = Mat::<f64>::zeros(rows, np);
-    let mut recompute = true;
-    let mut frozen: Option<Vec<usize>> = None;
-    // Stage 1 keeps the parameters redundant at the nominal fixed (well conditioned, fast);
-    // stage 2 ("polish") frees them all, since away from the nominal some become identifiable.
-    let mut redundant_at_nominal: Vec<usize> = Vec::new();
-    let polish = |frozen: &mut Option<Vec<usize>>, recompute: &mut bool, mu: &mut f64| -> bool {
-        match frozen {
-            Some(f) if !f.is_empty() => {
-                f.clear();
-                *recompute = true;
-                *mu = -1.0;
-                true
-            }
-            _ => false,
-        }
+    let cost = 0.5 * r.iter().map(|v| v * v).sum::<f64>();
+    let mut steps = DhSteps {
+        chain0,
+        data,
+        out_of_plane,
+        options,
+        rp: vec![0.0; rows],
+        rm: vec![0.0; rows],
+        jac: Mat::<f64>::zeros(rows, np),
+        colnorm: vec![1.0; np],
+        svd: None,
+        recompute: true,
+        frozen: None,
+        rank: np,
+        null_dirs: Vec::new(),
+        redundant_at_nominal: Vec::new(),
     };
-    let mut colnorm = vec![1.0; np];
-    let mut svd: Option<TruncatedSvd> = None;
-    while iterations < options.max_iterations {
-        if recompute {
-            jacobian_at(chain0, &p, data, &mut jac, (&mut rp, &mut rm));
-            zero_columns(&mut jac, out_of_plane);
-            column_scales(&jac, &mut colnorm);
-            if frozen.is_none() {
-                redundant_at_nominal = redundant_in_plane(&jac, &colnorm, options.redundancy_tolerance, out_of_plane);
-                frozen = Some(redundant_at_nominal.clone());
-            }
-            let still = frozen.as_deref().unwrap_or(&[]);
-            zero_columns(&mut jac, still);
-            for &k in still {
-                colnorm[k] = 1.0;
-            }
-            // The scaled Jacobian J D⁻¹ = U Σ Vᵀ: λ_k = σ_k² are the eigenvalues of D⁻¹ JᵀJ D⁻¹.
-            let factored = TruncatedSvd::with_scales(jac.as_ref(), colnorm.clone())?;
-            rank = (0..np).filter(|&k| factored.keeps(k, options.rank_tolerance)).count();
-            null_dirs = reported_null_directions(&factored, options.rank_tolerance, out_of_plane);
-            if mu < 0.0 {
-                mu = 1e-3 * factored.eigenvalues().first().copied().unwrap_or(0.0);
-            }
-            svd = Some(factored);
-            recompute = false;
-        }
-        let factored = svd.as_ref().expect("computed");
-        let lmax = factored.eigenvalues().first().copied().unwrap_or(0.0);
-        // Step in scaled parameters over the identifiable directions, and the decrease the linear model predicts.
-        let (mut step_s, predicted) = factored.damped_step(&r, mu, options.rank_tolerance);
-        // Rounding in the singular vectors must not move what stays out of the plane.
-        for &k in out_of_plane {
-            step_s[k] = 0.0;
-        }
-        iterations += 1;
-        let step_norm = step_s.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let p_norm = p.iter().zip(&colnorm).map(|(v, c)| (v * c).powi(2)).sum::<f64>().sqrt();
-        if step_norm <= 1e-14 * (p_norm + 1e-9) || predicted <= 0.0 {
-            if polish(&mut frozen, &mut recompute, &mut mu) {
-                continue;
-            }
-            converged = true;
-            break;
-        }
-        let trial: Vec<f64> = p.iter().zip(&step_s).zip(&colnorm).map(|((v, s), c)| v + s / c).collect();
-        let mut rt = vec![0.0; rows];
-        residuals(&apply_parameters(chain0, &trial), data, &mut rt);
-        let new_cost = 0.5 * rt.iter().map(|v| v * v).sum::<f64>();
-        let rho = (cost - new_cost) / predicted;
-        if new_cost.is_finite() && rho > 0.0 {
-            let decrease = cost - new_cost;
-            p = trial;
-            r = rt;
-            cost = new_cost;
-            mu *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
-            nu = 2.0;
-            recompute = true;
-            if decrease <= options.cost_tolerance * cost.max(f64::MIN_POSITIVE) || cost == 0.0 {
-                if cost > 0.0 && polish(&mut frozen, &mut recompute, &mut mu) {
-                    continue;
-                }
-                converged = true;
-                break;
-            }
-        } else {
-            mu *= nu;
-            nu *= 2.0;
-            if mu > 1e20 * lmax.max(1e-300) {
-                if polish(&mut frozen, &mut recompute, &mut mu) {
-                    continue;
-                }
-                converged = true;
-                break;
-            }
-        }
-    }
-    Ok(Minimum { p, r, iterations, converged, rank, null_dirs, redundant_at_nominal })
+    let driver = lm::Options {
+        damping: lm::Damping::Nielsen { initial: 1e-3, limit: 1e20 },
+        acceptance: lm::Acceptance::Decrease,
+        counting: lm::Counting::Trials,
+        first_iteration: 1,
+        max_iterations: options.max_iterations,
+    };
+    let found = lm::minimise(&mut steps, vec![0.0; np], (r, cost), &driver)?;
+    Ok(Minimum {
+        p: found.x,
+        r: found.at.0,
+        iterations: found.iterations,
+        converged: found.stop != lm::Stop::IterationLimit,
+        rank: steps.rank,
+        null_dirs: steps.null_dirs,
+        redundant_at_nominal: steps.redundant_at_nominal,
+    })
 }

@@ -52,8 +52,14 @@ pub fn register_and_refine(nominal: &mut NominalModel, data: &Measurements) -> R
     }
     let mut refined = chain.clone();
     refined.base = base.to_transform();
-    let registration =
-        Registration { base, rms_before: rigid.rms_before, rms_after: crate::nominal::register::rms_from(&refined, data), refined: true };
+    let stats = &calibration.stats;
+    let registration = Registration {
+        base,
+        rms_before: rigid.rms_before,
+        rms_after: crate::nominal::register::rms_from(&refined, data),
+        refined: true,
+        stopped_at_limit: (!stats.converged).then_some(stats.iterations),
+    };
     *nominal = NominalModel::DhChain(refined);
     Ok(registration)
 }

@@ -102,6 +102,42 @@ impl Identifiability {
     }
 }
 
+/// Whether measured poses (`measured`, model joints, row-major) identify the geometric group with
+/// coordinates to spare: the group's identifiable parameters as a generic set of poses (`generic`,
+/// e.g. uniform within the limits) shows them, the measured poses' information of full rank on
+/// them, and at least twice as many measured coordinates as parameters — so that what a DH fit
+/// leaves is a residual to estimate CbD's hyperparameters (σ above all) on, not an interpolation
+/// (5 poses of the six-joint arm left 1e-9 mm, and the plan predicted it). `Err` gives the
+/// group's size and the poses it needs at least.
+pub fn measured_identify_group(nominal: &cbd_protocol::NominalModel, generic: &[f64], measured: &[f64]) -> Result<(), GroupNotIdentified> {
+    let (n, m) = (nominal.n_joints().max(1), nominal.task_dim());
+    let mut all = generic.to_vec();
+    all.extend_from_slice(measured);
+    let Some((jac, identifiable)) = crate::parametric::identification_jacobian(nominal, &all) else { return Ok(()) };
+    let count = generic.len() / n;
+    let mut group = Identifiability::new(&jac, m, count, &identifiable);
+    let poses = measured.len() / n;
+    for i in 0..poses {
+        group.add(count + i);
+    }
+    let p = group.parameters();
+    let needed = (2 * p).div_ceil(m.max(1));
+    if group.full_rank() && poses >= needed {
+        Ok(())
+    } else {
+        Err(GroupNotIdentified { poses, parameters: p, needed })
+    }
+}
+
+/// Measured poses that do not identify the geometric group ([`measured_identify_group`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GroupNotIdentified {
+    pub poses: usize,
+    pub parameters: usize,
+    /// Poses in general position needed at least (twice the parameters in coordinates).
+    pub needed: usize,
+}
+
 fn full_rank(info: &Mat<f64>) -> bool {
     if info.nrows() == 0 {
         return true;

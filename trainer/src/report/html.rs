@@ -80,17 +80,17 @@ fn is_stats(v: &Value) -> bool {
     ["mean", "median", "p99", "max"].iter().all(|k| field(v, k).is_some())
 }
 
-/// Reader-facing names of the demo's statistics keys.
-fn method_label(key: &str) -> String {
+/// Reader-facing names of the peers' rows by key (`cli::peers::labels`: `krr`, `dh+krr`, …).
+pub type MethodLabels<'a> = &'a [(String, &'a str)];
+
+/// Reader-facing names of the statistics keys: the bases' and the demo's here, the peers' from `labels`.
+fn method_label(key: &str, labels: MethodLabels<'_>) -> String {
     let base = key.trim_end_matches("_grid");
     match base {
         "nominal" => "nominal model".into(),
-        "calibrated" | "cbd" => "calibrated (CbD)".into(),
-        "krr" => "kernel ridge regression".into(),
+        "calibrated" => "calibrated (CbD)".into(),
         "dh" => "DH parameter calibration".into(),
-        "dh+krr" => "DH + kernel ridge".into(),
-        "dh+cbd" => "DH + CbD".into(),
-        other => other.replace('_', " "),
+        other => labels.iter().find(|(k, _)| k == other).map_or_else(|| other.replace('_', " "), |(_, label)| label.to_string()),
     }
 }
 
@@ -100,7 +100,7 @@ fn nominal_first(mut keys: Vec<String>) -> Vec<String> {
     keys
 }
 
-fn stats_table(out: &mut String, rows: &[(String, &Value)], unit: &str, extra: &[(&str, &str)]) {
+fn stats_table(out: &mut String, rows: &[(String, &Value)], unit: &str, extra: &[(&str, &str)], labels: MethodLabels<'_>) {
     let reference = rows.iter().find(|(k, _)| k.trim_end_matches("_grid") == "nominal").and_then(|(_, v)| field(v, "mean"));
     let _ = write!(out, "<table><tr><th>model</th><th>mean</th><th>median</th><th>p99</th><th>max</th>");
     if reference.is_some() {
@@ -111,7 +111,7 @@ fn stats_table(out: &mut String, rows: &[(String, &Value)], unit: &str, extra: &
     }
     let _ = writeln!(out, "</tr>");
     for (key, v) in rows {
-        let _ = write!(out, "<tr><td>{}</td>", escape(&method_label(key)));
+        let _ = write!(out, "<tr><td>{}</td>", escape(&method_label(key, labels)));
         for k in ["mean", "median", "p99", "max"] {
             let _ = write!(out, "<td class=num>{}</td>", field(v, k).map(num).unwrap_or_default());
         }
@@ -163,8 +163,9 @@ th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}
 details{margin:.5em 0}";
 
 /// The page for a run: `json` as written by `cbd demo --json` or `cbd compare --json`, `source`
-/// names it, `figures` are embedded in order, `unit` names the length unit of the errors.
-pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str) -> crate::Result<String> {
+/// names it, `figures` are embedded in order, `unit` names the length unit of the errors, `labels`
+/// the peers' rows.
+pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str, labels: MethodLabels<'_>) -> crate::Result<String> {
     let top = json
         .as_object()
         .ok_or_else(|| crate::Error::Path { path: source.into(), reason: "expected a JSON object at the top level".into() })?;
@@ -241,14 +242,14 @@ pub fn render_report(json: &Value, source: &str, figures: &[Figure], unit: &str)
             }
             let rows: Vec<(String, &Value)> = keys.iter().map(|k| (k.clone(), &top[k])).collect();
             let _ = writeln!(out, "<h3>{title}</h3>");
-            stats_table(&mut out, &rows, unit, &[]);
+            stats_table(&mut out, &rows, unit, &[], labels);
         }
     }
     if let Some(Value::Object(methods)) = top.get("methods") {
         out.push_str("<h2>Methods compared on the test set</h2>\n");
         let keys = nominal_first(methods.keys().cloned().collect());
         let rows: Vec<(String, &Value)> = keys.iter().map(|k| (k.clone(), &methods[k])).collect();
-        stats_table(&mut out, &rows, unit, &[("train_mean", "train mean"), ("fit_seconds", "fit [s]"), ("note", "note")]);
+        stats_table(&mut out, &rows, unit, &[("train_mean", "train mean"), ("fit_seconds", "fit [s]"), ("note", "note")], labels);
     }
     for (key, v) in top {
         if let Value::Object(o) = v {
@@ -373,8 +374,8 @@ pub fn collect_figures(dir: &Path) -> crate::Result<Vec<Figure>> {
 
 /// `cbd report`: reads the run's JSON at `json`, embeds the PNGs of `plots`, writes the page to
 /// `out`. The length unit is the JSON's `unit` / `length_unit` when present, else `unit`.
-/// Returns the number of figures embedded.
-pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str) -> crate::Result<usize> {
+/// `labels` name the peers' rows. Returns the number of figures embedded.
+pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &str, labels: MethodLabels<'_>) -> crate::Result<usize> {
     crate::io::note_input("--json", json_path);
     let text = std::fs::read_to_string(json_path).map_err(|e| crate::Error::io(json_path, e))?;
     let json: Value = serde_json::from_str(&text).map_err(|e| crate::Error::Json {
@@ -388,7 +389,7 @@ pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &s
         Some(dir) => collect_figures(dir)?,
         None => Vec::new(),
     };
-    let page = render_report(&json, &json_path.display().to_string(), &figures, &unit)?;
+    let page = render_report(&json, &json_path.display().to_string(), &figures, &unit, labels)?;
     crate::io::write_atomically(out, page.as_bytes())?;
     Ok(figures.len())
 }
@@ -396,6 +397,10 @@ pub fn write_report(json_path: &Path, plots: Option<&Path>, out: &Path, unit: &s
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn labels() -> Vec<(String, &'static str)> {
+        crate::cli::peers::labels(crate::cli::peers::PEERS)
+    }
 
     #[test]
     fn base64_matches_rfc4648_vectors() {
@@ -410,10 +415,10 @@ mod tests {
     #[test]
     fn an_object_with_nothing_to_show_is_refused() {
         for empty in [serde_json::json!({}), serde_json::json!({"log": [1, 2]})] {
-            let e = render_report(&empty, "d.json", &[], "m").unwrap_err().to_string();
+            let e = render_report(&empty, "d.json", &[], "m", &labels()).unwrap_err().to_string();
             assert!(e.starts_with("d.json: nothing to report"), "{e}");
         }
-        assert!(render_report(&serde_json::json!({"rows": 3}), "d.json", &[], "m").is_ok());
+        assert!(render_report(&serde_json::json!({"rows": 3}), "d.json", &[], "m", &labels()).is_ok());
     }
 
     #[test]
@@ -456,7 +461,7 @@ mod tests {
         let json_path = dir.join("demo.json");
         std::fs::write(&json_path, serde_json::to_string_pretty(&demo_json()).unwrap()).unwrap();
         let out = dir.join("report.html");
-        write_report(&json_path, Some(&plots), &out, "length units").unwrap();
+        write_report(&json_path, Some(&plots), &out, "length units", &labels()).unwrap();
         let page = std::fs::read_to_string(&out).unwrap();
         assert!(page.starts_with("<!DOCTYPE html>") && page.trim_end().ends_with("</html>"));
         for needle in [
@@ -485,7 +490,7 @@ mod tests {
             "cbd": {"mean": 1e-4, "median": 1e-4, "p99": 2e-4, "max": 3e-4, "fit_seconds": 9.0, "train_mean": 1e-6, "note": "σ = 1e-4"},
             "dh": {"mean": 1e-2, "median": 1e-2, "p99": 2e-2, "max": 3e-2, "fit_seconds": 0.1, "train_mean": 1e-2, "note": "rank 20 <of 24>"}},
             "dh": {"iterations": 5, "rank": 20}, "hyperparameters": {"krr": null, "dh+krr": null}});
-        let page = render_report(&json, "compare.json", &[], "mm").unwrap();
+        let page = render_report(&json, "compare.json", &[], "mm", &labels()).unwrap();
         let nominal = page.find("nominal model").unwrap();
         assert!(page.find("calibrated (CbD)").unwrap() > nominal && page.contains("DH parameter calibration"));
         assert!(page.contains("rank 20 &lt;of 24&gt;"), "notes are escaped");
@@ -498,9 +503,9 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let bad = dir.join("bad.json");
         std::fs::write(&bad, "{\n  \"nominal\": ,\n}").unwrap();
-        let err = write_report(&bad, None, &dir.join("r.html"), "m").unwrap_err().to_string();
+        let err = write_report(&bad, None, &dir.join("r.html"), "m", &labels()).unwrap_err().to_string();
         assert!(err.contains("bad.json") && err.contains("line 2"), "{err}");
-        let err = write_report(&dir.join("missing.json"), None, &dir.join("r.html"), "m").unwrap_err().to_string();
+        let err = write_report(&dir.join("missing.json"), None, &dir.join("r.html"), "m", &labels()).unwrap_err().to_string();
         assert!(err.contains("missing.json"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -513,7 +518,7 @@ mod tests {
         let Some(json) = std::env::var_os("CBD_REPORT_JSON") else { return };
         let plots = std::env::var_os("CBD_PLOTS_DIR").map(PathBuf::from);
         let out = std::env::var_os("CBD_REPORT_OUT").map(PathBuf::from).unwrap_or_else(|| std::env::temp_dir().join("cbd-report.html"));
-        let n = write_report(Path::new(&json), plots.as_deref(), &out, "length units").unwrap();
+        let n = write_report(Path::new(&json), plots.as_deref(), &out, "length units", &labels()).unwrap();
         errln!("wrote {} with {n} figures", out.display());
     }
 }

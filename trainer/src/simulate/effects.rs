@@ -1,5 +1,5 @@
 //! Physical effects injected into simulated measurements, implemented here independently of the
-//! runtime's `cbd_runtime::kinematics::effects` (gravity torques by differentiating the potential
+//! runtime's `cbd_runtime::kinematics::augmented` (gravity torques by differentiating the potential
 //! energy numerically, effects composed here; only the rigid DH frames come from the runtime's one
 //! walk, `dh_walk`, itself checked against a URDF chain walk in `nominal::urdf`): an independent check of what `cbd diagnose` finds and of what
 //! the runtime evaluates. Also effects outside the diagnosis library (a localized bump, a dead
@@ -345,8 +345,8 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
     let width = |positive: bool| -> Result<f64, EffectSpecError> {
         let w = num("width", None)?;
         match (positive, w) {
-            (true, w) if w <= 0.0 => Err(bad(format!("width = {w} must be positive"))),
-            (false, w) if w < 0.0 => Err(bad(format!("width = {w} must not be negative"))),
+            (true, w) if w <= 0.0 => Err(bad(format!("width = {} must be positive", crate::error::number(w)))),
+            (false, w) if w < 0.0 => Err(bad(format!("width = {} must not be negative", crate::error::number(w)))),
             _ => Ok(w),
         }
     };

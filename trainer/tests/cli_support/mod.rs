@@ -127,3 +127,69 @@ pub fn run(dir: &Path, args: &[&str]) -> String {
 pub fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
+
+/// CRC-32 (ISO-HDLC, zlib's), the blob's trailer.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+/// A blob whose payload `edit` changed, framed again (payload length and checksum valid): a crafted
+/// blob whose frame passes every check and whose model is whatever the edit made it.
+pub fn reframe(blob: &[u8], edit: impl FnOnce(&mut Vec<u8>)) -> Vec<u8> {
+    const HEADER: usize = 10;
+    let mut payload = blob[HEADER..blob.len() - 4].to_vec();
+    edit(&mut payload);
+    let mut out = blob[..6].to_vec();
+    out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    out.extend_from_slice(&payload);
+    let crc = crc32(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// Replaces the `nth` (0-based) occurrence of `from`'s little-endian bytes in `bytes` by `to`'s.
+pub fn replace_f64(bytes: &mut [u8], from: f64, to: f64, nth: usize) {
+    let pattern = from.to_le_bytes();
+    let at = bytes.windows(8).enumerate().filter(|(_, w)| *w == pattern).map(|(i, _)| i).nth(nth).expect("value in the payload");
+    bytes[at..at + 8].copy_from_slice(&to.to_le_bytes());
+}
+
+/// `cbd args` in `dir`, killed after `seconds`: a hang fails the test (panics) instead of
+/// blocking the suite. Output as [`cbd`]'s.
+#[track_caller]
+pub fn cbd_within(dir: &Path, seconds: u64, args: &[&str]) -> Output {
+    use std::process::Stdio;
+    let mut child = Command::new(CBD).args(args).current_dir(dir).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("run cbd");
+    // Drain both pipes while waiting: a chatty run must not block on a full pipe.
+    let (mut out, mut err) = (child.stdout.take().unwrap(), child.stderr.take().unwrap());
+    let stdout = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        std::io::Read::read_to_end(&mut out, &mut v).ok();
+        v
+    });
+    let stderr = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        std::io::Read::read_to_end(&mut err, &mut v).ok();
+        v
+    });
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed().as_secs() >= seconds {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("cbd {args:?} did not finish within {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    Output { status, stdout: stdout.join().unwrap(), stderr: stderr.join().unwrap() }
+}

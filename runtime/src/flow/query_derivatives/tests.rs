@@ -4,8 +4,10 @@
 
 extern crate std;
 use super::*;
+use crate::expansion::fields::ExpansionForm;
 use crate::expansion::{joint_row_len, write_joint_basis};
-use crate::kernel::write_features;
+use crate::flow::Fixed;
+use crate::kernel::{joint_features, write_features};
 use cbd_protocol::{IntegratorMethod, JointKernelAxis};
 use heapless::Vec as HVec;
 

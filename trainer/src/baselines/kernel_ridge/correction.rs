@@ -22,7 +22,8 @@ pub fn kernel_ridge_correction(search: &SearchOptions) -> impl Fn(&NominalModel,
     }
 }
 
-/// One line: widths, γ, σ (normalised and in data units), the likelihood and the search's cost.
+/// One line: widths, γ, σ (normalised and in data units), the likelihood, the rows it is on and the
+/// search's cost.
 pub fn describe(h: &Hyperparameters) -> String {
     let widths: Vec<String> = h
         .kernel
@@ -33,21 +34,28 @@ pub fn describe(h: &Hyperparameters) -> String {
             JointKernelAxis::Gaussian { width } => format!("l={width:.3}"),
         })
         .collect();
+    let rows = match (&h.weight_space, &h.weight_space_declined) {
+        (Some(w), _) => format!(
+            "on {} rows (weight space, {} functions, {} evaluations, {:.2} s; from the kernel form's {} evaluations on {} rows, lml={:.2} there)",
+            h.rows_used, w.weights, w.evaluations, w.seconds, h.evaluations, w.kernel_rows, w.kernel_log_marginal_likelihood
+        ),
+        (None, Some(why)) => format!("after {} evaluations on {} rows (every row declined: {why})", h.evaluations, h.rows_used),
+        (None, None) => format!("after {} evaluations on {} rows", h.evaluations, h.rows_used),
+    };
     format!(
-        "{} gamma={:.3e} sigma={:.3e} (normalised, scale {:.4}; sigma {:.4e} in data units) lml={:.2} after {} evaluations on {} rows",
+        "{} gamma={:.3e} sigma={:.3e} (normalised, scale {:.4}; sigma {:.4e} in data units) lml={:.2} {rows}",
         widths.join(" "),
         h.kernel.gamma,
         h.noise_sigma,
         h.task_scale,
         h.noise_sigma_data_units(),
         h.log_marginal_likelihood,
-        h.evaluations,
-        h.rows_used
     )
 }
 
 /// The `cbd compare --json` shape of the choice: `{"joint_axes": [{"periodic_b" | "gaussian_width"}],
-/// "gamma", "noise_sigma", "noise_sigma_data_units", "task_scale", "log_marginal_likelihood", …}`.
+/// "gamma", "noise_sigma", "noise_sigma_data_units", "task_scale", "log_marginal_likelihood", "rows_used",
+/// "weight_space" (null, or the refinement on every row), "weight_space_declined", …}`.
 pub fn to_json(h: &Hyperparameters) -> serde_json::Value {
     use serde_json::json;
     let widths: Vec<serde_json::Value> = h
@@ -63,12 +71,14 @@ pub fn to_json(h: &Hyperparameters) -> serde_json::Value {
         "joint_axes": widths, "gamma": h.kernel.gamma, "noise_sigma": h.noise_sigma,
         "noise_sigma_data_units": h.noise_sigma_data_units(), "task_scale": h.task_scale,
         "log_marginal_likelihood": h.log_marginal_likelihood, "evaluations": h.evaluations, "rows_used": h.rows_used,
+        "weight_space": h.weight_space, "weight_space_declined": h.weight_space_declined,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cli::peers::{CBD, KRR};
     use crate::evaluation::compare::compare_peers;
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
 
@@ -80,7 +90,7 @@ mod tests {
         let search = SearchOptions { max_evaluations: 100, ..SearchOptions::default() };
         // A stand-in correction for the CbD hook: kernel ridge again, to check the plumbing.
         let krr = kernel_ridge_correction(&search);
-        let c = compare_peers(&robot.nominal, &train, &test, Some(&krr), Some(&krr));
+        let c = compare_peers(&robot.nominal, &train, &test, &[KRR.with(&krr), CBD.with(&krr)]);
         let names: Vec<&str> = c.rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(names, ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"]);
         let get = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap().stats.mean;
@@ -122,7 +132,7 @@ mod tests {
         let search = SearchOptions { max_evaluations: 60, ..SearchOptions::default() };
         let krr = kernel_ridge_correction(&search);
         let nominal = NominalModel::planar(&[1.0, 0.5]).unwrap();
-        let c = compare_peers(&nominal, &train, &test, Some(&krr), Some(&krr));
+        let c = compare_peers(&nominal, &train, &test, &[KRR.with(&krr), CBD.with(&krr)]);
         let names: Vec<&str> = c.rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(names, ["nominal", "dh", "krr", "dh+krr", "cbd", "dh+cbd"]);
         let get = |n: &str| c.rows.iter().find(|r| r.name == n).unwrap().stats.mean;

@@ -7,8 +7,10 @@ pub mod correction;
 pub mod fit;
 pub mod peer;
 pub mod selection;
+pub mod weight_space;
 
 pub use correction::kernel_ridge_correction;
 pub use fit::{kernel_matrix, KernelRidge, KrrError};
 pub use peer::{fit_kernel_ridge_peer, SelectedKernelRidge};
 pub use selection::{choose_kernel_ridge_hyperparameters, HyperparameterError, Hyperparameters, SearchOptions};
+pub use weight_space::KrrWeightSpaceReport;

@@ -5,7 +5,9 @@
 //! γ K_V(x, x') + σ² δ, K_V the joint kernel with γ = 1 (periodic axes b (cos Δ − 1), Gaussian
 //! axes −Δ²/(2ℓ²)). The signal variance γ is profiled out in closed form; the search runs over
 //! log b_d (or log ℓ_d) — shared by all axes or per axis — and log(σ²/γ), by a deterministic
-//! coordinate (pattern) search with shrinking steps. Only the rows given are used: pass
+//! coordinate (pattern) search with shrinking steps on at most `max_points` evenly spaced rows;
+//! when that is a subset and every joint is revolute, its choice is refined on every row in weight
+//! space ([`super::weight_space`], as CbD's evidence is). Only the rows given are used: pass
 //! training rows, never test rows.
 //!
 //! For [`super::KernelRidge::fit`], predictions depend only on ridge / γ, so
@@ -14,6 +16,7 @@
 
 #[cfg(test)]
 use super::fit::kernel_matrix;
+use super::weight_space::{refine, KrrWeightSpaceReport};
 use crate::data::Measurements;
 use crate::evidence::joint_pair_table::JointPairTable;
 use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
@@ -42,8 +45,11 @@ pub struct SearchOptions {
     /// The pattern search stops after this many likelihood evaluations in all (each one N×N
     /// Cholesky factorisation); the coarse grid always runs ((2·grid_half_width + 1) × 7).
     pub max_evaluations: usize,
-    /// Use at most this many rows (evenly spaced) for the search.
+    /// Use at most this many rows (evenly spaced) for the kernel form's search.
     pub max_points: usize,
+    /// When that is a subset, refine its choice on every row in weight space if the truncated
+    /// periodic expansion needs at most this many functions (each evaluation O(r³ + N r m)).
+    pub max_weight_space_weights: usize,
 }
 
 impl Default for SearchOptions {
@@ -58,6 +64,7 @@ impl Default for SearchOptions {
             noise_ratio_range: (1e-12, 1e2),
             max_evaluations: 150,
             max_points: 1500,
+            max_weight_space_weights: 1200,
         }
     }
 }
@@ -72,8 +79,14 @@ pub struct Hyperparameters {
     pub task_scale: f64,
     /// Log marginal likelihood at the choice (all coordinates, rows used).
     pub log_marginal_likelihood: f64,
+    /// The kernel form's likelihood evaluations (each an N × N Cholesky factorisation).
     pub evaluations: usize,
+    /// Rows the chosen θ's likelihood was computed on: every row when refined in weight space.
     pub rows_used: usize,
+    /// The refinement on every row, when the kernel form's search took a subset.
+    pub weight_space: Option<KrrWeightSpaceReport>,
+    /// Why a subset's choice was not refined on every row.
+    pub weight_space_declined: Option<String>,
 }
 
 impl Hyperparameters {
@@ -126,7 +139,7 @@ pub fn log_marginal_likelihood(k: &Mat<f64>, residual: &Mat<f64>) -> Option<f64>
 
 /// Profiled log marginal likelihood for unit-γ kernel matrix `c` and noise ratio λ = σ²/γ:
 /// returns (value, γ̂).
-fn profiled_lml(c: &Mat<f64>, residual: &Mat<f64>, lambda: f64) -> Option<(f64, f64)> {
+pub fn profiled_lml(c: &Mat<f64>, residual: &Mat<f64>, lambda: f64) -> Option<(f64, f64)> {
     let (n, m) = (residual.nrows(), residual.ncols());
     let mut k = c.clone();
     for i in 0..n {
@@ -175,12 +188,11 @@ pub fn choose_kernel_ridge_hyperparameters(
     if count < 3 {
         return Err(HyperparameterError::TooFewRows(count));
     }
-    let (n, m) = (data.n_joints, data.task_dim);
+    let n = data.n_joints;
     let rows = crate::data::evenly_spaced_rows(count, options.max_points);
     let used = data.subset(&rows);
-    let nominal_pos: Vec<[f64; 3]> = (0..used.len()).map(|i| forward_kinematics(nominal, used.joints(i)).position).collect();
     let task_scale = options.task_scale.unwrap_or_else(|| crate::evidence::normalisation_of(data).task_scale);
-    let residual = Mat::from_fn(used.len(), m, |i, c| (used.position(i)[c] - nominal_pos[i][c]) / task_scale);
+    let residual = normalised_residual(nominal, &used, task_scale);
     let table = JointPairTable::new((0..n).map(|d| nominal.is_revolute(d)).collect(), &used);
     let init = data_start(&table, options);
     let gp = ResidualGp { table, residual, evaluations: std::cell::Cell::new(0) };
@@ -192,15 +204,39 @@ pub fn choose_kernel_ridge_hyperparameters(
         return Err(HyperparameterError::NoValidSetting);
     };
     pattern_search(&gp, &mut point, &bounds, options);
-    let gamma = point.value.1;
+    let (mut theta, mut log_lambda, mut gamma, mut lml, mut rows_used) =
+        (point.theta.clone(), point.log_lambda, point.value.1, point.value.0, used.len());
+    let (mut weight_space, mut weight_space_declined) = (None, None);
+    if used.len() < count {
+        // Every row, in weight space (as CbD's evidence): (ln b_d, ln λ) from the subset's choice.
+        let start: Vec<f64> = point.theta.iter().copied().chain([point.log_lambda]).collect();
+        let lower: Vec<f64> = (0..=n).map(|k| if k < n { bounds.width.0 } else { bounds.noise.0 }).collect();
+        let upper: Vec<f64> = (0..=n).map(|k| if k < n { bounds.width.1 } else { bounds.noise.1 }).collect();
+        let all = normalised_residual(nominal, data, task_scale);
+        match refine(nominal, data, &all, &start, &lower, &upper, options.max_weight_space_weights, (used.len(), point.value.0)) {
+            Ok(r) => {
+                (theta, log_lambda, gamma, lml, rows_used) = (r.param[..n].to_vec(), r.param[n], r.gamma, -r.nlml, count);
+                weight_space = Some(r.report);
+            }
+            Err(why) => weight_space_declined = Some(why.to_string()),
+        }
+    }
     Ok(Hyperparameters {
-        kernel: kernel_of(&gp.table.periodic, &point.theta, gamma),
-        noise_sigma: (point.log_lambda.exp() * gamma).sqrt(),
+        kernel: kernel_of(&gp.table.periodic, &theta, gamma),
+        noise_sigma: (log_lambda.exp() * gamma).sqrt(),
         task_scale,
-        log_marginal_likelihood: point.value.0,
+        log_marginal_likelihood: lml,
         evaluations: gp.evaluations.get(),
-        rows_used: used.len(),
+        rows_used,
+        weight_space,
+        weight_space_declined,
     })
+}
+
+/// The residual (y − k0(q)) / `task_scale` of every row of `data` (N × m).
+pub fn normalised_residual(nominal: &NominalModel, data: &Measurements, task_scale: f64) -> Mat<f64> {
+    let nominal_positions: Vec<[f64; 3]> = (0..data.len()).map(|i| forward_kinematics(nominal, data.joints(i)).position).collect();
+    Mat::from_fn(data.len(), data.task_dim, |i, c| (data.position(i)[c] - nominal_positions[i][c]) / task_scale)
 }
 
 /// Log widths where typical pairs of rows have kernel ½ ([`JointPairTable::half_kernel_log_widths`]
@@ -399,6 +435,44 @@ mod tests {
         let pred = krr.predict(&nominal, &test.joints);
         let rms = (pred.iter().zip(&test.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / test.len() as f64).sqrt();
         assert!(rms < 0.02, "test rms {rms}");
+    }
+
+    /// Above `max_points` rows the subset's choice is refined on every row in weight space: the
+    /// kernel form's profiled likelihood on every row (an independent check) is at least the subset's
+    /// choice's there, and equals what the refinement reports.
+    #[test]
+    fn refinement_on_every_row_keeps_or_improves_the_subsets_choice() {
+        let (nominal, train, _) = gp_sample(900, 7);
+        let opts = SearchOptions { task_scale: Some(1.0), max_points: 300, ..SearchOptions::default() };
+        let subset =
+            choose_kernel_ridge_hyperparameters(&nominal, &train, &SearchOptions { max_weight_space_weights: 0, ..opts.clone() }).unwrap();
+        assert_eq!((subset.rows_used, subset.weight_space.is_none()), (300, true));
+        assert!(subset.weight_space_declined.as_deref().is_some_and(|w| w.contains("limit 0")), "{:?}", subset.weight_space_declined);
+        let refined = choose_kernel_ridge_hyperparameters(&nominal, &train, &opts).unwrap();
+        let report = refined.weight_space.as_ref().expect("refined on every row");
+        assert_eq!((refined.rows_used, report.kernel_rows, refined.evaluations), (900, 300, subset.evaluations));
+        let residual = normalised_residual(&nominal, &train, 1.0);
+        // Profiled on every row: (lml, γ̂) at a choice's widths and noise ratio σ²/γ.
+        let every_row = |h: &Hyperparameters| {
+            let unit = JointKernel { gamma: 1.0, ..h.kernel.clone() };
+            profiled_lml(&kernel_matrix(&unit, &train.joints, &train.joints, 2), &residual, h.ridge() / h.kernel.gamma).unwrap()
+        };
+        let (before, after) = (every_row(&subset).0, every_row(&refined));
+        // Up to the truncation (≤ 0.01 nats from the kernel form, tested in `weight_space`).
+        assert!(after.0 >= before - 0.01, "every row: refined {} < the subset's choice {before}", after.0);
+        assert!(
+            (after.0 - refined.log_marginal_likelihood).abs() <= 0.01,
+            "kernel form {} vs weight space {}",
+            after.0,
+            refined.log_marginal_likelihood
+        );
+        assert!((after.1 / refined.kernel.gamma).ln().abs() <= 0.02 / 1800.0, "γ̂ {} vs {}", after.1, refined.kernel.gamma);
+        errln!(
+            "every row: subset's choice {before:.3}, refined {:.3} ({} functions, {} evaluations)",
+            after.0,
+            report.weights,
+            report.evaluations
+        );
     }
 
     #[test]

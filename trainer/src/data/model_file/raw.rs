@@ -1,7 +1,7 @@
 //! The model file's TOML as written, before any check (serde's `deny_unknown_fields` names an
 //! unknown field and its position).
 
-use super::{AngleUnit, LengthUnit, MeasurementSection};
+use super::{exact, AngleUnit, LengthUnit, MeasurementSection};
 use crate::data::effects_section::{RawEffect, RawGravity};
 use serde::Deserialize;
 use std::path::PathBuf;
@@ -61,11 +61,15 @@ pub(super) struct RawJoint {
 pub(super) struct RawTransform {
     /// `base = { register = true }`: the base is unknown (a tracker's frame) and registered on the data.
     pub(super) register: Option<bool>,
+    #[serde(default, deserialize_with = "exact::optional")]
     pub(super) translation: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "exact::optional")]
     pub(super) rpy: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "exact::optional_matrix")]
     pub(super) rotation: Option<[[f64; 3]; 3]>,
     /// `tool = { …, points = [[x, y, z], …] }`: the measured points, offsets in the tool frame
     /// (length unit); absent: one point at the tool origin.
+    #[serde(default, deserialize_with = "exact::optional_list")]
     pub(super) points: Option<Vec<[f64; 3]>>,
 }
 
@@ -86,6 +90,7 @@ pub(super) struct RawPlanar {
     pub(super) lengths: Vec<f64>,
     /// The arm's base in the measurements' plane (length unit), its yaw (angle unit) and the
     /// joint offsets (angle unit): y = R(yaw) k0(q + offsets) + base.
+    #[serde(default, deserialize_with = "exact::optional")]
     pub(super) base: Option<[f64; 2]>,
     pub(super) yaw: Option<f64>,
     pub(super) offsets: Option<Vec<f64>>,

@@ -13,22 +13,15 @@ use std::path::{Path, PathBuf};
 /// The nominal model and its joint names.
 type Section = (NominalModel, Vec<String>);
 
-/// `[chain] tool = { points = … }`: the tool points (length unit), each finite and within
-/// [`MAX_MAGNITUDE`], at most `cbd_protocol::MAX_TOOL_POINTS`, no two equal.
+/// `[chain] tool = { points = … }`: the tool points (length unit), checked by the rules every list
+/// of tool points obeys (`nominal::tool_points::check_tool_points`).
 pub(super) fn tool_points(chain: &RawChain, path: &Path) -> Result<Vec<[f64; 3]>, ImportError> {
-    let bad = |message: String| ImportError::Field { file: path.to_path_buf(), field: "[chain.tool] points".into(), message };
     let Some(points) = chain.tool.as_ref().and_then(|t| t.points.clone()) else { return Ok(Vec::new()) };
-    if points.is_empty() || points.len() > crate::data::MAX_TOOL_POINTS {
-        return Err(bad(format!("{} points; 1 to {} are supported", points.len(), crate::data::MAX_TOOL_POINTS)));
-    }
-    for (j, p) in points.iter().enumerate() {
-        if let Some(v) = p.iter().find(|v| !(v.is_finite() && v.abs() <= MAX_MAGNITUDE)) {
-            return Err(bad(format!("point {}: {v:e} is not a finite value within ±{MAX_MAGNITUDE:e}", j + 1)));
-        }
-        if let Some(k) = points[..j].iter().position(|o| o == p) {
-            return Err(bad(format!("points {} and {} are the same point", k + 1, j + 1)));
-        }
-    }
+    crate::nominal::tool_points::check_tool_points(&points).map_err(|message| ImportError::Field {
+        file: path.to_path_buf(),
+        field: "[chain.tool] points".into(),
+        message,
+    })?;
     Ok(points)
 }
 
@@ -109,7 +102,7 @@ pub(super) fn planar_frame(raw: &RawPlanar, deg: f64, path: &Path) -> Result<Opt
     let bad = |field: &str, message: String| ImportError::Field { file: path.to_path_buf(), field: format!("[planar] {field}"), message };
     let offsets = raw.offsets.clone().unwrap_or_else(|| vec![0.0; raw.lengths.len()]);
     if offsets.len() != raw.lengths.len() {
-        return Err(bad("offsets", format!("{} entries; the arm has {} joints", offsets.len(), raw.lengths.len())));
+        return Err(bad("offsets", format!("{} entries; the arm has {} joints ([planar] lengths)", offsets.len(), raw.lengths.len())));
     }
     let base = raw.base.unwrap_or([0.0; 2]);
     let yaw = raw.yaw.unwrap_or(0.0);
@@ -132,6 +125,24 @@ pub(super) fn planar(lengths: &[f64], path: &Path) -> Result<Section, ImportErro
     }
     let n = lengths.len();
     Ok((NominalModel::planar(lengths).expect("checked"), (1..=n).map(|i| format!("q{i}")).collect()))
+}
+
+/// A matrix orthonormal within the file's 1e-6 (printed digits) as the blob holds it: itself when
+/// orthonormal within a tenth of the protocol's [`cbd_protocol::ROTATION_TOLERANCE`] (the same bits:
+/// exact files keep their blobs), else the nearest rotation U Vᵀ of its SVD U Σ Vᵀ — the runtime
+/// refuses a base or tool beyond the tolerance.
+fn nearest_rotation(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let departure = (0..3)
+        .flat_map(|i| (0..3).map(move |j| (i, j)))
+        .map(|(i, j)| ((0..3).map(|k| m[i][k] * m[j][k]).sum::<f64>() - if i == j { 1.0 } else { 0.0 }).abs())
+        .fold(0.0, f64::max);
+    if departure <= 0.1 * cbd_protocol::ROTATION_TOLERANCE {
+        return m;
+    }
+    let a = faer::Mat::<f64>::from_fn(3, 3, |i, j| m[i][j]);
+    let Ok(svd) = a.svd() else { return m };
+    let (u, v) = (svd.U(), svd.V());
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| u[(i, k)] * v[(j, k)]).sum()))
 }
 
 /// The base or tool transform of `[chain]`; errors name `field` (`[chain.base]`) of `file`.
@@ -173,7 +184,7 @@ fn transform(raw: Option<&RawTransform>, deg: f64, field: &str, file: &Path) -> 
             if det < 0.0 {
                 return Err(bad("rotation has determinant −1 (a reflection)".into()));
             }
-            m
+            nearest_rotation(m)
         }
         (None, None) => Frame::IDENTITY.rotation(),
     };

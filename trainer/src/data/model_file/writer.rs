@@ -123,7 +123,13 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
             out += "\n[measurements.joint_map]\n";
             for (key, table) in [("sign", &map.sign), ("scale", &map.scale), ("offset", &map.offset)] {
                 let Some(table) = table else { continue };
-                let entries: Vec<String> = table.iter().map(|(name, v)| format!("{} = {}", quoted(name), f(*v))).collect();
+                // The file is written as a DH table, whose joints are q1 … qn: a URDF's joint names
+                // become their positions' names (the map read back names the same joints).
+                let written_name = |name: &str| match m.joint_names.iter().position(|j| j == name) {
+                    Some(i) if matches!(m.nominal, NominalModel::DhChain(_)) => format!("q{}", i + 1),
+                    _ => name.to_string(),
+                };
+                let entries: Vec<String> = table.iter().map(|(name, v)| format!("{} = {}", quoted(&written_name(name)), f(*v))).collect();
                 let _ = writeln!(out, "{key} = {{ {} }}", entries.join(", "));
             }
             if let Some(rows) = &map.coupling {

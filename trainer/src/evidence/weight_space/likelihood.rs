@@ -15,8 +15,8 @@
 
 use super::super::search::Criterion;
 use super::super::table::Theta;
+use super::prior::PeriodicShares;
 use super::WeightSpaceTable;
-use crate::expansion::weights::periodic_weights_and_log_derivatives;
 use crate::solver::FIXED_SPLIT;
 use cbd_runtime::expansion::for_each_task_basis;
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -38,14 +38,9 @@ impl Criterion for WeightSpaceTable {
         self.count * self.m
     }
 
-    /// Absolute, not per unknown: 1e-4 nats of value change and 1e-3 nats per unit of log θ of
-    /// gradient. The r × r system keeps the value to far better than the kernel form's ±1 nat, and its
-    /// optimum lies on a flat ridge (joint widths against γ_V): with the kernel form's 1e-4 nats per
-    /// unknown (0.8 nats at N m = 8192, 3.3 at 32768) the search stopped at its start or one step
-    /// after it, up to a nat short (noisy RR, N = 4096: b₂ 1.35e-3 where the optimum has 5.9e-4).
+    /// Absolute, not per unknown ([`super::boxes::absolute_tolerances`]).
     fn tolerances(&self) -> (f64, f64) {
-        let per_unknown = 1.0 / self.observations().max(1) as f64;
-        (1e-4 * per_unknown, 1e-3 * per_unknown)
+        super::boxes::absolute_tolerances(self.observations())
     }
 
     fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)> {
@@ -60,11 +55,9 @@ impl Criterion for WeightSpaceTable {
         // Every column of A': the kernels' weights, then the explicit ones.
         let r = kernel_weights + geo;
         // Joint prior variances λ_f = γ_V Π_d ω_{h_d}(b_d) and their d ln λ_f / d ln b_d.
-        let max_order = self.joint_orders.iter().copied().max().unwrap_or(0);
-        let axes: Vec<(Vec<f64>, Vec<f64>)> =
-            theta.log_widths.iter().map(|lb| periodic_weights_and_log_derivatives(lb.exp(), max_order)).collect();
+        let prior = PeriodicShares::new(&theta.log_widths, &self.joint_orders);
         let orders = |f: usize| &self.joint_orders[f * n..(f + 1) * n];
-        let lambda: Vec<f64> = (0..r_j).map(|f| gv * orders(f).iter().zip(&axes).map(|(&h, (w, _))| w[h]).product::<f64>()).collect();
+        let lambda: Vec<f64> = prior.shares.iter().map(|s| gv * s).collect();
         // Whitening per column: √λ_f for every joint column of f, √γ_W for the task columns.
         let scale: Vec<f64> = (0..r)
             .map(|k| {
@@ -186,7 +179,7 @@ impl Criterion for WeightSpaceTable {
         for k in 0..joint_width {
             let f = k / n;
             for (d, &h) in orders(f).iter().enumerate() {
-                grad[d] += variance_gradient[k] * axes[d].1[h];
+                grad[d] += variance_gradient[k] * prior.log_derivatives[d][h];
             }
             grad[n] += variance_gradient[k];
         }

@@ -9,26 +9,22 @@
 //! The basis is fixed for a box of θ around the kernel form's choice (narrower kernels need more
 //! functions) and the search stays in that box; an optimum on a face of it moves the box.
 
+pub(crate) mod boxes;
+pub(crate) mod design;
 mod likelihood;
+pub(crate) mod prior;
 
-use super::search::minimise;
 use super::table::Theta;
 use super::EvidenceOptions;
 use crate::data::Measurements;
 use crate::expansion::basis::{truncate, AxisSeries};
 use crate::expansion::{task_radius_of, tolerance_for};
 use crate::solver::FIXED_SPLIT;
-use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation, TaskKernel};
-use cbd_runtime::expansion::{joint_row_len, write_joint_basis};
+use boxes::{minimise_in_boxes, BoxedCriterion, BOX};
+use cbd_protocol::{NominalModel, Normalisation, TaskKernel};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat};
 use std::cell::RefCell;
-
-/// The box the fixed basis covers around the kernel form's θ: b_d up to BOX × b_d, a down to
-/// a / √BOX, σ down to σ / BOX (the truncation tolerance follows σ²).
-const BOX: f64 = 3.0;
-/// Times the box may move after an optimum on one of its faces.
-const MAX_ROUNDS: usize = 3;
 
 /// What the weight-space evidence was (the JSON's `evidence.weight_space`).
 #[derive(Debug, Clone, serde::Serialize)]
@@ -97,6 +93,13 @@ pub enum Declined {
     NotPositiveDefinite,
 }
 
+impl Declined {
+    /// [`Declined::Prismatic`] for the first of the `n` joints that is not revolute.
+    pub(crate) fn unless_revolute(nominal: &NominalModel, n: usize) -> Result<(), Declined> {
+        (0..n).find(|&d| !nominal.is_revolute(d)).map_or(Ok(()), |d| Err(Declined::Prismatic { joint: d + 1 }))
+    }
+}
+
 impl WeightSpaceTable {
     /// The table for the box around `theta` (packed, normalised units), or why not: a prismatic
     /// joint (its basis would depend on its width), or more than `max_weights` weights.
@@ -109,9 +112,7 @@ impl WeightSpaceTable {
         max_weights: usize,
     ) -> Result<Self, Declined> {
         let (n, m, count) = (data.n_joints, data.task_dim, data.len());
-        if let Some(d) = (0..n).find(|&d| !nominal.is_revolute(d)) {
-            return Err(Declined::Prismatic { joint: d + 1 });
-        }
+        Declined::unless_revolute(nominal, n)?;
         let theta = Theta::unpack(theta, n);
         let kin: Vec<_> = (0..count).map(|i| crate::nominal::row_kinematics(nominal, data.joints(i), i).normalised(norm)).collect();
         let nominal_positions: Vec<f64> = kin.iter().flat_map(|k| k.position[..m].to_vec()).collect();
@@ -129,29 +130,22 @@ impl WeightSpaceTable {
         if weights > max_weights {
             return Err(Declined::TooManyWeights { weights, tolerance, limit: max_weights });
         }
-        // Joint columns through the runtime's basis (periodic features do not depend on b).
-        let kernel = JointKernel { gamma: 1.0, axes: heapless::Vec::from_iter((0..n).map(|_| JointKernelAxis::Periodic { b: 1.0 })) };
-        let (r_j, row_len) = (joint.len(), joint_row_len(n));
-        let mut basis = vec![0.0; r_j * row_len];
+        // Joint columns: Dk0_i[c][e] φ_f(q_i), the periodic functions through the runtime's basis.
+        let r_j = joint.len();
+        let phi = design::periodic_design(&joint.codes, data);
         let mut joint_columns: Vec<Mat<f64>> = (0..m).map(|_| Mat::zeros(count, r_j * n)).collect();
         for (i, k) in kin.iter().enumerate() {
-            write_joint_basis(&kernel, &joint.codes, n, data.joints(i), &mut basis, false);
             for f in 0..r_j {
-                let phi = basis[f * row_len];
                 for (c, a) in joint_columns.iter_mut().enumerate() {
                     for e in 0..n {
-                        a[(i, f * n + e)] = k.jacobian[c][e] * phi;
+                        a[(i, f * n + e)] = k.jacobian[c][e] * phi[(i, f)];
                     }
                 }
             }
         }
         let shift = |i: usize, c: usize| geometry.map_or(0.0, |g| g.shift[i * m + c]);
         let residual: Vec<Mat<f64>> = (0..m)
-            .map(|c| {
-                Mat::from_fn(count, 1, |i, _| {
-                    (data.position(i)[c] - norm.task_offset[c]) / norm.task_scale - kin[i].position[c] + shift(i, c)
-                })
-            })
+            .map(|c| Mat::from_fn(count, 1, |i, _| norm.position_to_internal(c, data.position(i)[c]) - kin[i].position[c] + shift(i, c)))
             .collect();
         let explicit: Vec<Mat<f64>> = (0..m).map(|c| geometry.map_or_else(|| Mat::zeros(count, 0), |g| g.coordinate(c))).collect();
         let mut joint_gram = Mat::zeros(r_j * n, r_j * n);
@@ -240,29 +234,23 @@ pub(super) fn refine(
     kernel_rows: usize,
     evaluations: &RefCell<usize>,
 ) -> Result<(f64, Vec<f64>, WeightSpaceReport), Declined> {
-    let mut param = start.to_vec();
-    let mut rounds = 0;
-    loop {
-        rounds += 1;
-        let table = WeightSpaceTable::new(nominal, data, norm, geometry, &param, options.max_weight_space_weights)?;
-        let lo: Vec<f64> = lower.iter().zip(&table.box_lower).map(|(a, b)| a.max(*b)).collect();
-        let hi: Vec<f64> = upper.iter().zip(&table.box_upper).map(|(a, b)| a.min(*b)).collect();
-        let (nlml, found) = minimise(&table, &lo, &hi, &param, options.max_iterations, evaluations).ok_or(Declined::NotPositiveDefinite)?;
-        // On a face the box imposes (not the search's own bounds): the optimum may lie beyond it.
-        let on_face =
-            (0..found.len()).any(|k| (hi[k] < upper[k] && found[k] >= hi[k] - 1e-3) || (lo[k] > lower[k] && found[k] <= lo[k] + 1e-3));
-        param = found;
-        if !on_face || rounds == MAX_ROUNDS {
-            let report = WeightSpaceReport {
-                weights: table.weights(),
-                joint_functions: table.joint_functions,
-                task_functions: table.task_functions(),
-                tolerance: table.tolerance,
-                rounds,
-                kernel_rows,
-            };
-            return Ok((nlml, param, report));
-        }
+    let build = |param: &[f64]| WeightSpaceTable::new(nominal, data, norm, geometry, param, options.max_weight_space_weights);
+    let found = minimise_in_boxes(build, start, lower, upper, options.max_iterations, evaluations)?;
+    let table = &found.table;
+    let report = WeightSpaceReport {
+        weights: table.weights(),
+        joint_functions: table.joint_functions,
+        task_functions: table.task_functions(),
+        tolerance: table.tolerance,
+        rounds: found.rounds,
+        kernel_rows,
+    };
+    Ok((found.nlml, found.param, report))
+}
+
+impl BoxedCriterion for WeightSpaceTable {
+    fn box_bounds(&self) -> (&[f64], &[f64]) {
+        (&self.box_lower, &self.box_upper)
     }
 }
 

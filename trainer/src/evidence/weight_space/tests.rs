@@ -39,15 +39,7 @@ fn weight_space_gradient_matches_finite_differences() {
     let norm = crate::evidence::normalisation_of(&data);
     let p = theta().pack();
     let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, None, &p, 4000).unwrap();
-    let (_, grad) = ws.nlml_and_gradient(&p).unwrap();
-    for k in 0..p.len() {
-        let h = 1e-5;
-        let (mut up, mut down) = (p.clone(), p.clone());
-        up[k] += h;
-        down[k] -= h;
-        let fd = (ws.nlml_and_gradient(&up).unwrap().0 - ws.nlml_and_gradient(&down).unwrap().0) / (2.0 * h);
-        assert!((fd - grad[k]).abs() <= 1e-5 * fd.abs().max(1.0), "θ[{k}]: analytic {} vs finite differences {fd}", grad[k]);
-    }
+    super::super::search::assert_gradient_matches_central_differences(&ws, &p, 1e-5);
 }
 
 #[test]

@@ -78,13 +78,11 @@ pub(super) fn fit(
         Err(why) => return Ok(Err(why)),
     };
     let norm = &opts.normalisation;
-    let user = |k: &[f64]| -> Vec<f64> {
-        k.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect()
-    };
+    let user = |k: &[f64]| -> Vec<f64> { k.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.position_to_user(c, k[c]))).collect() };
     let train_predictions = user(&e.positions);
     let rms = |k: &[f64]| {
         let sum: f64 = k.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
-        norm.task_scale * (sum / cp.len().max(1) as f64).sqrt()
+        norm.length_to_user((sum / cp.len().max(1) as f64).sqrt())
     };
     let (blob, max_runtime_trainer_diff) = encode_checked(nominal, data, opts, &momenta, Some(&e), &train_predictions)?;
     let seconds = start.elapsed().as_secs_f64();
@@ -176,10 +174,10 @@ pub(super) fn fit_linear_scheme(
     let norm = &opts.normalisation;
     let m = cp.dims.m;
     let train_predictions: Vec<f64> =
-        linear.positions.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect();
+        linear.positions.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.position_to_user(c, k[c]))).collect();
     let (blob, max_runtime_trainer_diff) = encode_checked(nominal, data, opts, &momenta, Some(&linear), &train_predictions)?;
     let sum: f64 = linear.positions.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
-    let train_rms = norm.task_scale * (sum / cp.len().max(1) as f64).sqrt();
+    let train_rms = norm.length_to_user((sum / cp.len().max(1) as f64).sqrt());
     let seconds = start.elapsed().as_secs_f64();
     let report = FitReport {
         iterations: 1,

@@ -4,6 +4,7 @@
 use super::problem::{model_energy, Evaluated, Problem, Timers};
 use super::{CbdOptions, FitError, IterationLog, FIXED_SPLIT};
 use crate::report::progress::FitProgress;
+use crate::solver::levenberg_marquardt as lm;
 use crate::solver::step::StepFactor;
 use faer::Mat;
 use std::time::Instant;
@@ -65,194 +66,175 @@ pub(super) struct Outcome {
 /// Minimises energy (16) from P0 = 0.
 pub(super) fn minimise(problem: &Problem, opts: &CbdOptions, linear_scheme: bool, recorder: &mut Recorder) -> Result<Outcome, FitError> {
     let mut p = vec![0.0; problem.space.dim()];
-    let current = problem.evaluate(&p).ok_or(FitError::Diverged { iteration: 0, damping: 0.0 })?;
+    let mut current = problem.evaluate(&p).ok_or(FitError::Diverged { iteration: 0, damping: 0.0 })?;
     recorder.record(problem, 0, &current, 0.0, "");
     // Warm start: at P0 = 0 the model is linear, so the first Gauss–Newton step is the
     // linearised (kernel) model's solution; its Jacobian is known in closed form.
-    let jac = problem.space.start_jacobian(crate::solver::regulariser::linear_response(problem.cp));
-    let mut descent = Descent::new(current, jac);
-    let (mut iterations, mut converged, mut stop_reason) = (0, false, String::from("iteration limit"));
+    let mut jac = problem.space.start_jacobian(crate::solver::regulariser::linear_response(problem.cp));
     let mut first_iteration = 1;
     // Hamiltonian laws: the response at P0 = 0 is K_lin itself, so the linearised model's optimum
     // (the GP posterior mean) is P0 = (K_lin + σ² I)⁻¹ (y − k0) in closed form. Exact for Euler × 1;
     // the start of every other scheme. Steps on the stacked least squares reach it only slowly when
     // the evidence picks nearly singular kernels (σ² far below the proximal term's scale).
     if opts.law.joint_field_sign() < 0.0 {
-        let r: Vec<f64> = descent.current.residual.iter().map(|v| -v * problem.sigma).collect();
+        let r: Vec<f64> = current.residual.iter().map(|v| -v * problem.sigma).collect();
         let p_lin = Timers::time(&problem.timers.solve, || problem.space.linearised_solution(problem.sigma, &r));
         let better = p_lin.and_then(|p_lin| problem.evaluate(&p_lin).map(|e| (p_lin, e)));
-        if let Some((p_lin, e)) = better.filter(|(_, e)| e.energy < descent.current.energy) {
+        if let Some((p_lin, e)) = better.filter(|(_, e)| e.energy < current.energy) {
             p = p_lin;
-            descent.current = e;
-            iterations = 1;
+            current = e;
             first_iteration = 2;
-            recorder.record(problem, 1, &descent.current, 0.0, "  linearised model, closed form");
+            recorder.record(problem, 1, &current, 0.0, "  linearised model, closed form");
             if linear_scheme {
-                converged = true;
-                stop_reason = "closed form (the linearised model: Euler × 1)".into();
-                first_iteration = usize::MAX;
-            } else {
-                descent.jac = problem.exact_jacobian(&descent.current.flow);
+                let stop_reason = "closed form (the linearised model: Euler × 1)".into();
+                return Ok(Outcome { p, current, iterations: 1, converged: true, stop_reason });
             }
+            jac = problem.exact_jacobian(&current.flow);
         }
     }
-    for iteration in first_iteration..=opts.max_iterations {
-        iterations = iteration;
-        let Some(step) = descent.step(problem, &mut p, iteration, linear_scheme)? else {
-            converged = true;
-            stop_reason = "no further decrease at any damping (converged to rounding)".into();
-            break;
-        };
-        let kind = if step.exact { "exact J" } else { "chord" };
-        let detail = format!("  damping {:.1e}  {kind}  {:.1} s", step.damping, recorder.start.elapsed().as_secs_f64());
-        recorder.record(problem, iteration, &descent.current, step.damping, &detail);
-        let small = step.relative < opts.relative_tolerance;
-        if small && step.exact {
-            // Converged: a step with the exact Jacobian gains (almost) nothing.
-            converged = true;
-            stop_reason = format!("relative energy decrease below {:.0e}", opts.relative_tolerance);
-            break;
+    let options = lm::Options {
+        damping: lm::Damping::Marquardt {
+            first: FIRST_DAMPING,
+            growth: DAMPING_GROWTH,
+            limit: 1e12,
+            relax: lm::Relax::Remembering { divisor: 10.0 },
+        },
+        acceptance: lm::Acceptance::Decrease,
+        counting: lm::Counting::Steps,
+        first_iteration,
+        max_iterations: opts.max_iterations,
+    };
+    let mut steps = FlowSteps {
+        problem,
+        opts,
+        linear_scheme,
+        recorder,
+        jac,
+        jacobian_is_current: true,
+        exact: true,
+        factor: None,
+        previous_decrease: f64::INFINITY,
+        chords_pay: true,
+    };
+    let found = lm::minimise(&mut steps, p, current, &options)?;
+    let (iterations, converged, stop_reason) = match found.stop {
+        lm::Stop::Converged(words) => (found.iterations, true, words),
+        lm::Stop::NoProgress if found.iterations == 1 => {
+            return Err(FitError::Diverged { iteration: 1, damping: found.damping });
         }
-        if step.exact && step.moved < opts.prediction_tolerance {
-            // Settled: what is left of the energy's decrease is the regulariser in directions the
-            // data do not resolve to working precision, which the (necessary) damping lets converge
-            // only linearly. (An absolute length, not a multiple of σ: σ and the kernel amplitudes
-            // can be rescaled together without changing the model.)
-            converged = true;
-            stop_reason = format!("no training prediction moved by {:.0e} (normalised units)", opts.prediction_tolerance);
-            break;
+        lm::Stop::NoProgress | lm::Stop::NoStep => {
+            (found.iterations, true, "no further decrease at any damping (converged to rounding)".into())
         }
-        descent.prepare_next(problem, step.decrease, small, linear_scheme, iteration < opts.max_iterations);
-    }
-    Ok(Outcome { p, current: descent.current, iterations, converged, stop_reason })
+        lm::Stop::IterationLimit => (found.iterations, false, "iteration limit".into()),
+    };
+    Ok(Outcome { p: found.x, current: found.at, iterations, converged, stop_reason })
 }
 
-/// An accepted step.
-struct Step {
-    decrease: f64,
-    relative: f64,
-    /// Largest change of a training prediction, internal (normalised) length units.
-    moved: f64,
-    /// Taken with the Jacobian at the point it started from (else a chord step).
-    exact: bool,
-    /// The damping the step was taken with.
-    damping: f64,
-}
-
-/// The Levenberg–Marquardt state between iterations.
-struct Descent {
-    current: Evaluated,
+/// The fit as the least-squares driver sees it: each iteration a Gauss–Newton step as a least-squares
+/// problem, never forming JᵀJ (which would square the condition number): minimise
+/// |J δ/σ + r|² + (P + δ)ᵀ K (P + δ) + λ |D δ|², D² = diag(JᵀJ/σ² + K) (Marquardt scaling; see
+/// `step`), with chord steps (an older Jacobian's factorisation) while they pay.
+struct FlowSteps<'p, 'a, 'r> {
+    problem: &'p Problem<'a>,
+    opts: &'p CbdOptions,
+    linear_scheme: bool,
+    recorder: &'r mut Recorder,
     jac: Mat<f64>,
     /// Whether `jac` is the derivative at the current P0 (else it is an older one: a chord step).
     jacobian_is_current: bool,
+    /// Whether this iteration's step is taken with the Jacobian at the point it started from.
+    exact: bool,
     /// The step's factorisation for the Jacobian in `jac` and damping λ, reused by chord steps.
     factor: Option<StepFactor>,
-    /// The largest damping whose step failed with an exact Jacobian: relaxing stops above it.
-    failed_damping: Option<f64>,
-    /// Pure Gauss–Newton (the regulariser keeps it well posed); Marquardt damping only after a failed step.
-    damping: f64,
     previous_decrease: f64,
     chords_pay: bool,
 }
 
-impl Descent {
-    fn new(current: Evaluated, jac: Mat<f64>) -> Self {
-        Descent {
-            current,
-            jac,
-            jacobian_is_current: true,
-            factor: None,
-            failed_damping: None,
-            damping: 0.0,
-            previous_decrease: f64::INFINITY,
-            chords_pay: true,
-        }
+impl lm::Problem for FlowSteps<'_, '_, '_> {
+    type Eval = Evaluated;
+    type Error = FitError;
+
+    fn cost(&self, at: &Evaluated) -> f64 {
+        at.energy
     }
 
-    /// One iteration from `p` (updated in place): a Gauss–Newton step as a least-squares problem,
-    /// never forming JᵀJ (which would square the condition number): minimise
-    /// |J δ/σ + r|² + (P + δ)ᵀ K (P + δ) + λ |D δ|², D² = diag(JᵀJ/σ² + K) (Marquardt scaling; see
-    /// `step`), damping raised until the energy falls. None when it falls at no damping.
-    fn step(&mut self, problem: &Problem, p: &mut Vec<f64>, iteration: usize, linear_scheme: bool) -> Result<Option<Step>, FitError> {
+    fn prepare(&mut self, _p: &[f64], _at: &Evaluated) -> Result<(), FitError> {
+        self.exact = self.jacobian_is_current;
+        Ok(())
+    }
+
+    fn propose(&mut self, p: &[f64], at: &Evaluated, damping: f64, iteration: usize) -> Result<Option<lm::Step>, FitError> {
+        let problem = self.problem;
         let (k_reg, sigma) = (&problem.space.k_reg, problem.sigma);
-        let mut accepted = None;
-        let mut exact = self.jacobian_is_current;
-        loop {
-            let step = Timers::time(&problem.timers.solve, || -> Result<Vec<f64>, FitError> {
-                if self.factor.as_ref().is_none_or(|f| f.damping != self.damping) {
-                    let factor =
-                        StepFactor::new(&self.jac, k_reg, sigma, self.damping, problem.space.damping_scale(), PROXIMAL, FIXED_SPLIT);
-                    self.factor = Some(factor.ok_or(FitError::Singular { iteration, damping: self.damping })?);
-                }
-                Ok(self.factor.as_ref().map(|f| f.step(k_reg, &self.current.residual, p)).unwrap_or_default())
-            })?;
-            if step.iter().all(|v| v.is_finite()) {
-                let trial: Vec<f64> = p.iter().zip(&step).map(|(v, d)| v + d).collect();
-                if let Some(e) = problem.evaluate(&trial).filter(|e| e.energy < self.current.energy) {
-                    // The decrease the Gauss–Newton model promised, for the gain ratio below.
-                    let predicted = self.current.energy - model_energy(&self.jac, k_reg, sigma, &self.current.residual, &step, &trial);
-                    accepted = Some((trial, e, predicted));
-                    break;
-                }
+        let delta = Timers::time(&problem.timers.solve, || -> Result<Vec<f64>, FitError> {
+            if self.factor.as_ref().is_none_or(|f| f.damping != damping) {
+                let factor = StepFactor::new(&self.jac, k_reg, sigma, damping, problem.space.damping_scale(), PROXIMAL, FIXED_SPLIT);
+                self.factor = Some(factor.ok_or(FitError::Singular { iteration, damping })?);
             }
-            if !self.jacobian_is_current {
-                // A chord step (older Jacobian) failed: take the exact Jacobian here instead of
-                // damping, and no more chord steps (each failure costs a flow).
-                self.chords_pay = false;
-                self.jac = problem.exact_jacobian(&self.current.flow);
-                self.factor = None;
-                self.jacobian_is_current = true;
-                exact = true;
-                continue;
-            }
-            self.failed_damping = Some(self.failed_damping.map_or(self.damping, |f| f.max(self.damping)));
-            self.damping = if self.damping == 0.0 { FIRST_DAMPING } else { self.damping * DAMPING_GROWTH };
-            if self.damping > 1e12 {
-                break;
-            }
-        }
-        let Some((trial, e, predicted)) = accepted else {
-            if iteration == 1 {
-                return Err(FitError::Diverged { iteration, damping: self.damping });
-            }
-            return Ok(None);
-        };
-        let decrease = self.current.energy - e.energy;
-        let relative = decrease / self.current.energy;
-        if decrease > 0.5 * predicted {
-            // The model was good at this damping: lower levels that failed earlier, elsewhere in
-            // the landscape, may be tried again (otherwise one early failure at a high level pins
-            // the damping there for the rest of the fit).
-            self.failed_damping = None;
-        }
-        let moved = sigma * self.current.residual.iter().zip(&e.residual).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        *p = trial;
-        self.current = e;
-        self.jacobian_is_current = linear_scheme;
-        let damping = self.damping;
-        // Damping relaxes tenfold per success, back to pure Gauss–Newton, but not down to a level
-        // that already failed (each new level costs a factorisation).
-        self.damping = match damping / 10.0 {
-            _ if damping == 0.0 => 0.0,
-            relaxed if self.failed_damping.is_some_and(|f| relaxed <= f) => damping,
-            relaxed if relaxed < FIRST_DAMPING => 0.0,
-            relaxed => relaxed,
-        };
-        Ok(Some(Step { decrease, relative, moved, exact, damping }))
+            Ok(self.factor.as_ref().map(|f| f.step(k_reg, &at.residual, p)).unwrap_or_default())
+        })?;
+        Ok(Some(lm::Step { delta, predicted: None }))
     }
 
-    /// After an accepted step that `decrease`d the energy: keep the factorisation for a chord step
-    /// while the decrements shrink fast (at least CHORD_CONTRACTION per step); otherwise form the
-    /// exact Jacobian here (unless no iteration follows).
-    fn prepare_next(&mut self, problem: &Problem, decrease: f64, small: bool, linear_scheme: bool, more: bool) {
+    fn evaluate(&mut self, trial: &[f64], delta: &[f64]) -> Result<Option<Evaluated>, FitError> {
+        Ok(if delta.iter().all(|v| v.is_finite()) { self.problem.evaluate(trial) } else { None })
+    }
+
+    /// The decrease the Gauss–Newton model promised, for the gain ratio.
+    fn predicted_decrease(&mut self, _p: &[f64], at: &Evaluated, delta: &[f64], trial: &[f64]) -> f64 {
+        let (k_reg, sigma) = (&self.problem.space.k_reg, self.problem.sigma);
+        at.energy - model_energy(&self.jac, k_reg, sigma, &at.residual, delta, trial)
+    }
+
+    /// A chord step (older Jacobian) failed: take the exact Jacobian here instead of damping, and no
+    /// more chord steps (each failure costs a flow).
+    fn rejected(&mut self, at: &Evaluated) -> bool {
+        if self.jacobian_is_current {
+            return false;
+        }
+        self.chords_pay = false;
+        self.jac = self.problem.exact_jacobian(&at.flow);
+        self.factor = None;
+        self.jacobian_is_current = true;
+        self.exact = true;
+        true
+    }
+
+    fn accepted(&mut self, step: lm::Accepted<'_, Evaluated>) -> Option<String> {
+        let (problem, opts, iteration) = (self.problem, self.opts, step.iteration);
+        let (from, e) = (step.from, step.to);
+        let decrease = step.decrease;
+        let relative = decrease / from.energy;
+        // The largest change of a training prediction, internal (normalised) length units.
+        let moved = problem.sigma * from.residual.iter().zip(&e.residual).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        self.jacobian_is_current = self.linear_scheme;
+        let kind = if self.exact { "exact J" } else { "chord" };
+        let detail = format!("  damping {:.1e}  {kind}  {:.1} s", step.damping, self.recorder.start.elapsed().as_secs_f64());
+        self.recorder.record(problem, iteration, e, step.damping, &detail);
+        let small = relative < opts.relative_tolerance;
+        if small && self.exact {
+            // Converged: a step with the exact Jacobian gains (almost) nothing.
+            return Some(format!("relative energy decrease below {:.0e}", opts.relative_tolerance));
+        }
+        if self.exact && moved < opts.prediction_tolerance {
+            // Settled: what is left of the energy's decrease is the regulariser in directions the
+            // data do not resolve to working precision, which the (necessary) damping lets converge
+            // only linearly. (An absolute length, not a multiple of σ: σ and the kernel amplitudes
+            // can be rescaled together without changing the model.)
+            return Some(format!("no training prediction moved by {:.0e} (normalised units)", opts.prediction_tolerance));
+        }
+        // Keep the factorisation for a chord step while the decrements shrink fast (at least
+        // CHORD_CONTRACTION per step); otherwise form the exact Jacobian here (unless no iteration
+        // follows).
         let chord = self.chords_pay && !small && decrease <= CHORD_CONTRACTION * self.previous_decrease;
         self.previous_decrease = decrease;
-        if !linear_scheme && !chord {
+        if !self.linear_scheme && !chord {
             self.factor = None;
-            if more {
-                self.jac = problem.exact_jacobian(&self.current.flow);
+            if iteration < opts.max_iterations {
+                self.jac = problem.exact_jacobian(&e.flow);
                 self.jacobian_is_current = true;
             }
         }
+        None
     }
 }

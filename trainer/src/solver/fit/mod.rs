@@ -12,6 +12,7 @@
 
 mod encode;
 mod flow_expansion;
+mod hyperparameters;
 mod iterate;
 pub(crate) mod problem;
 mod search_space;
@@ -21,6 +22,7 @@ use crate::data::Measurements;
 use crate::flow::ControlPoints;
 use cbd_protocol::{Integrator, JointKernel, MomentumLaw, NominalModel, Normalisation, TaskKernel};
 use faer::Par;
+pub use hyperparameters::FlowHyperparameters;
 use problem::{cancellation_of, Problem};
 use search_space::SearchSpace;
 
@@ -58,17 +60,12 @@ pub struct CbdOptions {
 }
 
 impl CbdOptions {
-    /// A fit of the given kernels, noise, scheme and normalisation with the solver's defaults: the
-    /// Hamiltonian law, Levenberg–Marquardt's stopping rules, up to two threads, the method chosen
-    /// by size, the fields as momenta (the pipeline, `calibrate::options_for`, sets the user's
-    /// representation), no memory budget.
-    pub fn new(
-        joint_kernel: JointKernel,
-        task_kernel: TaskKernel,
-        sigma: f64,
-        integrator: Integrator,
-        normalisation: Normalisation,
-    ) -> Self {
+    /// A fit with the given kernels and noise (internal units), scheme and normalisation, and the
+    /// solver's defaults: the Hamiltonian law, Levenberg–Marquardt's stopping rules, up to two
+    /// threads, the method chosen by size, the fields as momenta (the pipeline,
+    /// `calibrate::options_for`, sets the user's representation), no memory budget.
+    pub fn new(hyperparameters: FlowHyperparameters, integrator: Integrator, normalisation: Normalisation) -> Self {
+        let FlowHyperparameters { joint_kernel, task_kernel, sigma } = hyperparameters;
         CbdOptions {
             joint_kernel,
             task_kernel,
@@ -95,13 +92,12 @@ impl CbdOptions {
         // Two Euler steps: a genuine (transported) flow that generalises best on the RR
         // benchmark; more stages add nonlinearity that the ill-conditioned momenta amplify.
         let integrator = Integrator { method: cbd_protocol::IntegratorMethod::Euler, steps: 2 };
-        CbdOptions::new(
-            cbd_protocol::paper_rr::joint_kernel(),
-            cbd_protocol::paper_rr::task_kernel(),
-            1e-6,
-            integrator,
-            Normalisation::IDENTITY,
-        )
+        let hyperparameters = FlowHyperparameters {
+            joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
+            task_kernel: cbd_protocol::paper_rr::task_kernel(),
+            sigma: 1e-6,
+        };
+        CbdOptions::new(hyperparameters, integrator, Normalisation::IDENTITY)
     }
 }
 
@@ -316,8 +312,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     check_shapes(nominal, data)?;
     let m = nominal.task_dim();
     let norm = &opts.normalisation;
-    let target: Vec<f64> =
-        data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| (y[c] - norm.task_offset[c]) / norm.task_scale)).collect();
+    let target: Vec<f64> = data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c]))).collect();
     let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
     // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
     // Jacobian stays exact everywhere and no tangent is ever needed.
@@ -357,9 +352,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let outcome = iterate::minimise(&problem, opts, linear_scheme, &mut recorder)?;
     recorder.finish(&outcome.stop_reason);
 
-    let user = |k: &[f64]| -> Vec<f64> {
-        k.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.task_offset[c] + norm.task_scale * k[c])).collect()
-    };
+    let user = |k: &[f64]| -> Vec<f64> { k.chunks_exact(m).flat_map(|k| (0..m).map(move |c| norm.position_to_user(c, k[c]))).collect() };
     let kernel_predictions = user(&outcome.current.flow.positions(cp.dims));
     let kernel_cancellation = if problem.space.basis.is_none() { cancellation_of(&problem.space.k_reg, &outcome.p) } else { f64::NAN };
     let momenta = problem.space.momenta_of(&outcome.p);

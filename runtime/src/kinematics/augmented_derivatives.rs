@@ -1,9 +1,9 @@
-//! D²k0_aug, the Hessian of the augmented kinematics of [`crate::kinematics::effects`] (its terms
+//! D²k0_aug, the Hessian of the augmented kinematics of [`crate::kinematics::augmented`] (its terms
 //! to second order come from `effect_terms`), beside the effects as the rigid chain's Hessian sits
 //! beside it in `rigid_derivatives`.
 
+use crate::kinematics::augmented::{deflected, effect_terms, without_effects};
 use crate::kinematics::chain::{at, at2, Order};
-use crate::kinematics::effects::{deflected, effect_terms, without_effects};
 use crate::kinematics::rigid_derivatives::NominalHessian;
 use cbd_protocol::{NominalModel, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
@@ -13,7 +13,7 @@ pub fn rigid_hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {
 }
 
 /// D²k0_aug = D²k_rigid(s)[A·, A·] + Dk_rigid(s) D²δ + D²b, A = I + Dδ, `[a][e][d]`, model units.
-/// (Out of line, like [`crate::kinematics::effects::kinematics`].)
+/// (Out of line, like [`crate::kinematics::augmented::kinematics`].)
 #[inline(never)]
 #[cold]
 pub fn hessian(model: &NominalModel, q: &[f64]) -> NominalHessian {

@@ -1,6 +1,6 @@
 //! Physical effects on top of the rigid nominal chain ([`cbd_protocol::Effects`]): the augmented
 //! kinematics and its Jacobian, and the effect terms δ, b to second order that its Hessian
-//! (`effects_derivatives`) builds on.
+//! (`augmented_derivatives`) builds on.
 //!
 //! ```text
 //! k0_aug(q)   = k_rigid(s) + b(q),                      s = q + δ(q),  A = I + Dδ(q)
@@ -487,7 +487,7 @@ pub(crate) mod tests {
             let q = config(n, 9);
             let q = &q[..n];
             assert_eq!(forward_kinematics(&rigid, q), rigid_kinematics(&model, q));
-            assert_eq!(nominal_hessian(&rigid, q), crate::kinematics::effects_derivatives::rigid_hessian(&model, q));
+            assert_eq!(nominal_hessian(&rigid, q), crate::kinematics::augmented_derivatives::rigid_hessian(&model, q));
             // Effects that are all zero change nothing either (the augmented path, same values).
             let mut zero = model.clone();
             for e in zero.effects_mut().list.iter_mut() {
