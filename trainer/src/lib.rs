@@ -1,7 +1,8 @@
 //! Offline trainer for Calibration by Diffeomorphisms, laid out by pipeline stage, bottom to top
 //! (docs/DESIGN.md §1 states the layers; `cargo test -p cbd-tests --test house` checks them):
-//! errors and files → worker threads and memory → data import and nominal models → simulation,
-//! flow (primal + tangent), reports → the kernels' expansions, the solver, parametric (DH)
+//! errors, files and the bound on imported values → worker threads and numerical building blocks
+//! (least squares, the Levenberg–Marquardt driver) → nominal models and memory → data import →
+//! simulation, flow (primal + tangent), reports → the kernels' expansions, the solver, parametric (DH)
 //! calibration → CbD's evidence → calibrate (the one pipeline) → diagnosis, planning, evaluation
 //! harnesses → the peers (kernel ridge) → the `cbd` CLI.
 
@@ -40,10 +41,14 @@ pub mod expansion;
 pub mod flow;
 /// Reading inputs and writing outputs safely (atomic writes, no writes through links).
 pub mod io;
+/// The bound every imported value obeys.
+pub mod limits;
 /// What a fit needs in memory, checked before it allocates.
 pub mod memory;
-/// Nominal models: DH chains, planar arms, URDF, base registration, batched k0.
+/// Nominal models: DH chains, planar arms, URDF, rigid fits, batched k0.
 pub mod nominal;
+/// Numerical building blocks: linear least squares, the Levenberg–Marquardt driver, faer's split.
+pub mod numeric;
 /// Parametric (DH / geometric) calibration: its Jacobian, identifiable set and least squares.
 pub mod parametric;
 /// Where to measure next (docs/DESIGN.md §13).
@@ -54,7 +59,7 @@ pub mod predict;
 pub mod report;
 /// Simulated arms: the paper's RR, a six-joint arm, injected physical effects.
 pub mod simulate;
-/// Energy (16) minimised over the momenta: closed form and Levenberg–Marquardt.
+/// Energy (16) minimised over the momenta: closed form and Levenberg–Marquardt (`numeric`'s driver).
 pub mod solver;
 /// The worker thread pool every command runs on.
 pub mod workers;

@@ -12,7 +12,7 @@ const CHECKED_CONFIGURATIONS: usize = 64;
 /// must be finite and within ±1e100 in the model's unit, the bound every imported measurement
 /// obeys (a model that fits its data predicts near them). The message names the configuration.
 pub fn check_calibrator(cal: &mut Calibrator) -> std::result::Result<(), DamagedModel> {
-    use crate::data::csv_import::MAX_MAGNITUDE;
+    use crate::limits::MAX_MAGNITUDE;
     let n = cal.model().n_joints().max(1);
     let points: Vec<f64> = cal.model().points.iter().collect();
     let count = points.len() / n;
@@ -37,7 +37,7 @@ pub enum DamagedModel {
     #[error("the model cannot be evaluated at its own training configuration {configuration} of {count}: {error}: the blob is damaged; fit it again")]
     Unevaluable { configuration: usize, count: usize, error: cbd_runtime::Error },
     /// A calibrated position there is not finite or beyond ±1e100.
-    #[error("the model evaluates to {value:.3e} at its own training configuration {configuration} of {count}, beyond ±{:e}: the blob is damaged; fit it again", crate::data::csv_import::MAX_MAGNITUDE)]
+    #[error("the model evaluates to {value:.3e} at its own training configuration {configuration} of {count}, beyond ±{:e}: the blob is damaged; fit it again", crate::limits::MAX_MAGNITUDE)]
     OutOfRange { value: f64, configuration: usize, count: usize },
 }
 

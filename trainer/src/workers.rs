@@ -7,7 +7,7 @@
 use std::sync::OnceLock;
 
 /// Most worker threads: faer's factorisations are split into a fixed two pieces
-/// (`solver::FIXED_SPLIT`), so a third thread would add a workspace and no speed.
+/// (`numeric::FIXED_SPLIT`), so a third thread would add a workspace and no speed.
 pub const MAX_WORKERS: usize = 2;
 
 /// Stack of each worker: the main thread's 8 MiB, since the command runs on a worker.

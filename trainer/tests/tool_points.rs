@@ -148,7 +148,7 @@ fn dh_pose_command(model: &cbd_protocol::NominalModel, target: &Frame, seed: &[f
     let error = |q: &[f64]| -> Option<(Vec<f64>, [[f64; cbd_protocol::MAX_JOINTS]; 6])> {
         let (fit, jac) = nominal_tool_frame(model, q)?;
         let current = Frame::new(fit.rotation, fit.origin);
-        let (axis, angle) = cbd_trainer::nominal::register::axis_angle(&current.inverse().compose(target));
+        let (axis, angle) = cbd_trainer::nominal::rigid_fit::axis_angle(&current.inverse().compose(target));
         let world_axis = current.rotate(axis);
         let e = (0..3).map(|a| target.translation()[a] - fit.origin[a]).chain((0..3).map(|a| LEVER * world_axis[a] * angle)).collect();
         Some((e, jac))

@@ -8,9 +8,9 @@ use cbd_trainer::cli::peers::{CBD, KRR};
 use cbd_trainer::data::model_file::{load_model_file, parse_model_file};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::evaluation::compare::{compare_peers, Comparison};
-use cbd_trainer::nominal::register::{axis_angle, register_base};
+use cbd_trainer::nominal::rigid_fit::axis_angle;
 use cbd_trainer::nominal::{rotation_about, Frame};
-use cbd_trainer::parametric::register::{folded_base, register_and_refine};
+use cbd_trainer::parametric::base_registration::{folded_base, register_and_refine, register_base};
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
 
 fn moved(data: &Measurements, motion: &Frame) -> Measurements {

@@ -138,7 +138,7 @@ pub fn run(args: CompensateArgs) -> Result<()> {
         return Err(Error::InvalidInput(format!("--iterations must be between 1 and 64, got {}", args.iterations)));
     }
     if let Some(t) = args.tolerance {
-        if !(t > 0.0 && t <= crate::data::csv_import::MAX_MAGNITUDE) {
+        if !(t > 0.0 && t <= crate::limits::MAX_MAGNITUDE) {
             return Err(Error::InvalidInput(format!(
                 "--tolerance must be a positive finite length within ±1e100, got {}",
                 crate::error::number(t)

@@ -67,7 +67,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let (mut nominal, spec) = load_nominal(&args.model)?;
-    type Read = (crate::data::Measurements, Option<crate::nominal::register::Registration>);
+    type Read = (crate::data::Measurements, Option<crate::parametric::base_registration::Registration>);
     let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
         let imported = crate::data::csv_import::read_measurements(path, &spec)?;
         for w in imported.warnings(path) {

@@ -174,13 +174,13 @@ fn take_registered_base(
             args.blob.display()
         )));
     };
-    let rms_before = crate::nominal::register::rms_from(chain, data);
-    let base = crate::parametric::register::folded_base(chain, fitted);
+    let rms_before = crate::parametric::base_registration::rms_from(chain, data);
+    let base = crate::parametric::base_registration::folded_base(chain, fitted);
     chain.base = base.to_transform();
-    let r = crate::nominal::register::Registration {
+    let r = crate::parametric::base_registration::Registration {
         base,
         rms_before,
-        rms_after: crate::nominal::register::rms_from(chain, data),
+        rms_after: crate::parametric::base_registration::rms_from(chain, data),
         refined: true,
         stopped_at_limit: None,
     };

@@ -72,13 +72,13 @@ pub fn register_base_if_unknown(
     nominal: &mut cbd_protocol::NominalModel,
     data: &crate::data::Measurements,
     data_path: &std::path::Path,
-) -> Result<Option<crate::nominal::register::Registration>> {
+) -> Result<Option<crate::parametric::base_registration::Registration>> {
     let Some(path) = &args.model else { return Ok(None) };
     let file = crate::data::model_file::load_model_file(path)?;
     if !file.register_base {
         return Ok(None);
     }
-    let r = crate::parametric::register::register_and_refine(nominal, data).context(data_path.display())?;
+    let r = crate::parametric::base_registration::register_and_refine(nominal, data).context(data_path.display())?;
     errln!("{}: {}", data_path.display(), r.describe(file.length_unit.name()));
     Ok(Some(r))
 }

@@ -208,7 +208,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let result = plan(&input, &options).context(&model_name)?;
     // A prediction is a finite length or none (group not identified): never "NaN mm".
     let predictions = result.measured_predicted_rms.iter().chain(result.poses.iter().filter_map(|p| p.predicted_rms.as_ref()));
-    if let Some(bad) = predictions.copied().find(|v| !(v.is_finite() && *v <= crate::data::csv_import::MAX_MAGNITUDE)) {
+    if let Some(bad) = predictions.copied().find(|v| !(v.is_finite() && *v <= crate::limits::MAX_MAGNITUDE)) {
         return Err(Error::InvalidInput(format!(
             "{model_name}: the predicted RMS error is {}: the model's lengths (reach {}) or the stated prior are beyond what the posterior can represent; check the DH table, the joint limits and --noise / --prior-error",
             crate::error::number(bad),

@@ -1,7 +1,7 @@
 //! `cbd simulate`: measurements of a simulated "real" robot, as CSV.
 
-use crate::data::csv_import::MAX_MAGNITUDE;
 use crate::error::{Error, Result};
+use crate::limits::MAX_MAGNITUDE;
 use crate::simulate::{add_noise, configurations, rr, Sampling};
 use std::path::PathBuf;
 

@@ -4,6 +4,7 @@
 pub use super::column_spec::{default_joint_limits, ColumnSpec, OrientationColumns, RANGE_FROM_MODEL_FILE};
 use super::import_error::ImportError;
 use super::Measurements;
+use crate::limits::MAX_MAGNITUDE;
 use cbd_protocol::JointKind;
 use std::collections::HashMap;
 use std::path::Path;
@@ -413,8 +414,6 @@ fn check_repeats(
     }
     Ok(duplicates)
 }
-
-pub use super::limits::MAX_MAGNITUDE;
 
 /// File lines of record starts, counted incrementally: the csv reader hands out records in file
 /// order, so counting from the previous record instead of from the file's start keeps the import

@@ -154,7 +154,7 @@ fn check_finite(at: &str, values: &[(&str, f64)]) -> Result<(), FieldError> {
 /// One value of an effect, in a model file or a simulation's `--effect`: finite and within the
 /// importer's bound ±1e100, so that what `cbd simulate` injects a model file could declare.
 pub fn check_effect_value(name: &str, v: f64) -> Result<(), EffectValueError> {
-    use crate::data::limits::MAX_MAGNITUDE;
+    use crate::limits::MAX_MAGNITUDE;
     if !v.is_finite() {
         Err(EffectValueError::NotFinite { name: name.into(), value: v })
     } else if v.abs() > MAX_MAGNITUDE {
@@ -180,7 +180,7 @@ pub fn check_encoder_scale(scale: f64) -> Result<(), EffectValueError> {
 pub enum EffectValueError {
     #[error("{name} = {value} is not finite")]
     NotFinite { name: String, value: f64 },
-    #[error("{name} = {value:e} is beyond ±{:e}", crate::data::limits::MAX_MAGNITUDE)]
+    #[error("{name} = {value:e} is beyond ±{:e}", crate::limits::MAX_MAGNITUDE)]
     TooLarge { name: String, value: f64 },
     #[error("scale = {scale:e}: an encoder scale error must lie within (-1, 1)")]
     EncoderScale { scale: f64 },

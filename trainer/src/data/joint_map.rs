@@ -70,8 +70,8 @@ impl JointMap {
                 };
                 let ok = match key {
                     "sign" => v == 1.0 || v == -1.0,
-                    "scale" => v.is_finite() && v != 0.0 && v.abs() <= super::limits::MAX_MAGNITUDE,
-                    _ => v.is_finite() && v.abs() <= super::limits::MAX_MAGNITUDE,
+                    "scale" => v.is_finite() && v != 0.0 && v.abs() <= crate::limits::MAX_MAGNITUDE,
+                    _ => v.is_finite() && v.abs() <= crate::limits::MAX_MAGNITUDE,
                 };
                 if !ok {
                     let need = match key {
@@ -140,7 +140,7 @@ impl JointMap {
             // The model joint's reach over the limit box: Σ_j |M_ij| L_j + |offset_i|.
             let reach: Option<f64> = (0..n).map(|j| term(self.factor[i] * coupling(i, j), finite[j], 0.0)).sum();
             if let Some(r) = reach.map(|r| r + self.offset[i].abs()) {
-                if !(r <= super::limits::MAX_MAGNITUDE) {
+                if !(r <= crate::limits::MAX_MAGNITUDE) {
                     return Err((
                         field(),
                         format!("maps the joint limits to model joint {} values of ±{}, beyond ±1e100", i + 1, number(r)),
@@ -154,7 +154,7 @@ impl JointMap {
             let Some(back) = (0..n).map(|i| term(inverse(j, i), finite[i], self.offset[i])).sum::<Option<f64>>() else {
                 continue;
             };
-            if !(back <= super::limits::MAX_MAGNITUDE && back <= MAX_CONDITION * own.max(f64::MIN_POSITIVE)) {
+            if !(back <= crate::limits::MAX_MAGNITUDE && back <= MAX_CONDITION * own.max(f64::MIN_POSITIVE)) {
                 return Err((
                     field(),
                     format!(

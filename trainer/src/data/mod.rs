@@ -121,7 +121,6 @@ pub use evenly_spaced::evenly_spaced_rows;
 pub mod import_error;
 pub mod joint_columns;
 pub mod joint_map;
-pub mod limits;
 pub mod model_file;
 pub mod nominal_check;
 pub mod units;

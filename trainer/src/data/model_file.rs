@@ -53,10 +53,11 @@
 //! Inside the program the model works in the file's length unit and in radians.
 //! Unknown fields are errors that name the field.
 
-use super::csv_import::{default_joint_limits, ColumnSpec, OrientationColumns, MAX_MAGNITUDE};
+use super::csv_import::{default_joint_limits, ColumnSpec, OrientationColumns};
 use super::effects_section;
 use super::joint_map::{JointMap, RawJointMap};
 use crate::error::number;
+use crate::limits::MAX_MAGNITUDE;
 use crate::nominal::planar::PlanarFrame;
 use cbd_protocol::{JointKind, NominalModel};
 use raw::RawModelFile;
@@ -95,7 +96,7 @@ pub struct ModelFile {
     /// `[planar]`'s base, yaw and joint offsets (radians): the chain sits in this frame.
     pub planar_frame: Option<PlanarFrame>,
     /// `[chain] base = { register = true }`: the base is unknown (identity in `nominal`) and is
-    /// registered on the training data (`nominal::register`).
+    /// registered on the training data (`parametric::base_registration`).
     pub register_base: bool,
     /// `[urdf]`: the URDF the chain was read from (`cbd export` rewrites its origins).
     pub urdf: Option<UrdfSource>,

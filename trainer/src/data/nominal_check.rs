@@ -3,8 +3,9 @@
 //! are far outside the measured ones (a DH length of −1e30, planar lengths [0, 0], a unit mistake),
 //! is fitted anyway but with a warning saying so — CbD only corrects small deformations.
 
-use super::csv_import::{bounding_box_diagonal, MAX_MAGNITUDE};
+use super::csv_import::bounding_box_diagonal;
 use super::Measurements;
+use crate::limits::MAX_MAGNITUDE;
 use cbd_protocol::NominalModel;
 use std::path::Path;
 

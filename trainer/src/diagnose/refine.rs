@@ -1,13 +1,13 @@
 //! Gauss–Newton refinement of the selected parameters on the full nonlinear augmented model,
 //! min_θ Σ_i |y_i − k(θ; q_i)|², with step halving (the one least-squares driver,
-//! `solver::levenberg_marquardt`), and their uncertainties from the
+//! `numeric::levenberg_marquardt`), and their uncertainties from the
 //! Gauss–Newton covariance σ̂² (JᵀJ)⁻¹, σ̂² = SSE / (observations − parameters).
 
 use super::library::{apply, jacobian, Param};
 use crate::data::Measurements;
 use crate::nominal::positions;
-use crate::solver::least_squares::TruncatedSvd;
-use crate::solver::levenberg_marquardt as lm;
+use crate::numeric::least_squares::TruncatedSvd;
+use crate::numeric::levenberg_marquardt as lm;
 use cbd_protocol::NominalModel;
 use faer::{Mat, Side};
 
@@ -48,7 +48,7 @@ struct Refinement<'a> {
     params: &'a [Param],
 }
 
-impl crate::solver::levenberg_marquardt::Problem for Refinement<'_> {
+impl crate::numeric::levenberg_marquardt::Problem for Refinement<'_> {
     /// The model, its residual y − k and the sum of squares.
     type Eval = (NominalModel, Vec<f64>, f64);
     type Error = super::DiagnoseError;

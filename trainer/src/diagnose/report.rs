@@ -274,7 +274,7 @@ pub fn plots(
 ) -> crate::Result<Vec<std::path::PathBuf>> {
     use super::library::{apply, jacobian};
     use crate::nominal::positions;
-    use crate::solver::least_squares::TruncatedSvd;
+    use crate::numeric::least_squares::TruncatedSvd;
     let n = model_start.n_joints();
     let m = d.train.task_dim;
     let gp: Vec<Param> =

@@ -7,7 +7,7 @@
 //! A_train = Q R, so a candidate set S is fitted on R's columns S and Qᵀr (P rows, not the
 //! training rows: the same least-squares problem); the held-out SSE is summed on the held rows.
 
-use crate::solver::least_squares::{column_norm, QrLeastSquares, TruncatedSvd};
+use crate::numeric::least_squares::{column_norm, QrLeastSquares, TruncatedSvd};
 use faer::{Mat, Par};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;

@@ -187,7 +187,7 @@ pub struct CompareInputs {
     pub test: crate::data::csv_import::ImportedMeasurements,
     pub warnings: Vec<String>,
     /// The base registered on the training rows (`[chain] base = { register = true }`).
-    pub registration: Option<crate::nominal::register::Registration>,
+    pub registration: Option<crate::parametric::base_registration::Registration>,
 }
 
 /// Reads a comparison's model file and measurement files (no fitting yet); an unknown base is
@@ -207,7 +207,7 @@ pub fn read_compare_files(
     let mut nominal = model.nominal;
     let registration =
         match model.register_base {
-            true => Some(crate::parametric::register::register_and_refine(&mut nominal, &train.measurements).map_err(|e| {
+            true => Some(crate::parametric::base_registration::register_and_refine(&mut nominal, &train.measurements).map_err(|e| {
                 ImportError::Csv { file: train_csv.as_ref().to_path_buf(), line: None, column: None, message: e.to_string() }
             })?),
             false => None,

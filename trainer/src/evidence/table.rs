@@ -68,7 +68,7 @@ impl PairTable {
         }
         let g = basis.matrix();
         let mut ggt = Mat::<f64>::zeros(g.nrows(), g.nrows());
-        faer::linalg::matmul::matmul(ggt.as_mut(), faer::Accum::Replace, g.as_ref(), g.transpose(), 1.0, crate::solver::FIXED_SPLIT);
+        faer::linalg::matmul::matmul(ggt.as_mut(), faer::Accum::Replace, g.as_ref(), g.transpose(), 1.0, crate::numeric::FIXED_SPLIT);
         self.explicit = Some(ggt);
         self
     }
@@ -108,7 +108,7 @@ impl PairTable {
     pub(super) fn factor(&self, theta: &Theta) -> Option<Factored> {
         let dim = self.dim();
         let (k, kv, kw) = self.covariance(theta);
-        let par = crate::solver::FIXED_SPLIT;
+        let par = crate::numeric::FIXED_SPLIT;
         let mut l = k;
         let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(dim, par, Default::default()));
         cholesky_in_place(l.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default()).ok()?;

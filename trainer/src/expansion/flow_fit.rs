@@ -14,9 +14,9 @@
 
 use super::basis::Basis;
 use super::solve::{prior_variances, task_exponents};
-use crate::solver::least_squares::QrLeastSquares;
-use crate::solver::levenberg_marquardt as lm;
-use crate::solver::FIXED_SPLIT;
+use crate::numeric::least_squares::QrLeastSquares;
+use crate::numeric::levenberg_marquardt as lm;
+use crate::numeric::FIXED_SPLIT;
 use cbd_protocol::{Integrator, IntegratorMethod, JointKernel, TaskKernel, MAX_TASK_DIM as MT};
 use cbd_runtime::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
 use cbd_runtime::flow::Dims;
@@ -351,7 +351,7 @@ impl lm::Problem for WeightSteps<'_, '_> {
     }
 }
 
-/// Levenberg–Marquardt (the one least-squares driver, `solver::levenberg_marquardt`) on
+/// Levenberg–Marquardt (the one least-squares driver, `numeric::levenberg_marquardt`) on
 /// ½ |k1(z) − y|²/σ² + ½ |z|² from `z`: pure Gauss–Newton until a step fails, then damping 1e-6,
 /// ×100 per failure, ×0.1 per success; converged when an accepted step
 /// lowers the energy by at most `relative_tolerance` of it or moves no training prediction by more

@@ -202,7 +202,7 @@ pub fn fit_linear_in(
     let weights = posterior_weights(&a, &variances, sigma, &residual).ok_or(Declined::Singular)?;
     let deformation = apply(&a, &weights);
     let positions: Vec<f64> = nominal.iter().zip(&deformation).map(|(k, d)| k + d).collect();
-    let cancellation = crate::solver::cancellation::cancellation_of(&a, &weights);
+    let cancellation = crate::numeric::cancellation::cancellation_of(&a, &weights);
     let largest_whitened_weight = weights.iter().zip(&variances).map(|(w, v)| w.abs() / v.sqrt()).fold(0.0, f64::max);
     Ok(ExpansionFit { tolerance, task_radius, joint, task, weights, positions, cancellation, largest_whitened_weight })
 }
@@ -276,7 +276,7 @@ pub fn fit_flow(
     let jacobians = cp.nominal_jacobians();
     let lp = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: target };
     let a = design(&lp, joint_kernel, task_kernel, &linear.joint, &linear.task);
-    let cancellation = crate::solver::cancellation::cancellation_of(&a, &mean);
+    let cancellation = crate::numeric::cancellation::cancellation_of(&a, &mean);
     let variances = prior_variances(joint_kernel.gamma, n, m, &linear.joint, &linear.task);
     let largest_whitened_weight =
         weights.iter().enumerate().map(|(k, w)| w.abs() / variances[k % variances.len()].sqrt()).fold(0.0, f64::max);

@@ -5,8 +5,8 @@
 //! [A Λ^{1/2}; σ I] — never the momenta, which cancel, and never the normal equations.
 
 use super::basis::Basis;
-use crate::solver::least_squares::QrLeastSquares;
-use crate::solver::FIXED_SPLIT;
+use crate::numeric::least_squares::QrLeastSquares;
+use crate::numeric::FIXED_SPLIT;
 use cbd_protocol::{JointKernel, TaskKernel, MAX_TASK_DIM};
 use cbd_runtime::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
 use cbd_runtime::flow::Dims;

@@ -8,7 +8,7 @@ pub mod export;
 pub mod planar;
 mod positions;
 pub use positions::{positions, row_kinematics};
-pub mod register;
+pub mod rigid_fit;
 pub mod tool_points;
 pub mod urdf;
 

@@ -1,7 +1,7 @@
 //! Several measured points on the tool (docs/DESIGN.md §12): a point's chain, a measured pose read
 //! as points, and the least-squares tool frame of a pose's points (for orientation errors).
 
-use super::register::{axis_angle, rigid_fit};
+use super::rigid_fit::{axis_angle, rigid_fit};
 use super::Frame;
 use cbd_protocol::{DhChain, NominalModel};
 
@@ -77,7 +77,7 @@ pub fn point_of_pose(origin: &[f64], r: &[[f64; 3]; 3], p: &[f64; 3]) -> [f64; 3
 }
 
 /// The least-squares tool frame of one pose's measured `points` (in the task frame), the rigid
-/// motion carrying the tool points onto them (Kabsch/Horn, `register::rigid_fit`); `None` for
+/// motion carrying the tool points onto them (Kabsch/Horn, `rigid_fit::rigid_fit`); `None` for
 /// fewer than 3 points or points on a line.
 pub fn tool_frame(tool_points: &[[f64; 3]], points: &[[f64; 3]]) -> Option<Frame> {
     rigid_fit(tool_points, points)

@@ -128,7 +128,7 @@ pub fn urdf_tip_pose(robot: &urdf_rs::Robot, base_link: &str, tip_link: &str, q:
 /// conversion (`xyz="1e307 0 0"` in millimetres is 1e310: infinite, and the NaN it made in the
 /// kinematics was blamed on the first data line).
 fn check_origin(joint: &urdf_rs::Joint, length_scale: f64) -> Result<()> {
-    let limit = crate::data::csv_import::MAX_MAGNITUDE;
+    let limit = crate::limits::MAX_MAGNITUDE;
     let values =
         [("origin xyz", scale(joint.origin.xyz.0, length_scale)), ("origin rpy", joint.origin.rpy.0), ("axis xyz", joint.axis.xyz.0)];
     for (what, v) in values {

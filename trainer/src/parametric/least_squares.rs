@@ -8,8 +8,8 @@ use super::residuals::residuals;
 use super::{DhCalibrationError, DhCalibrationOptions};
 use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for};
-use crate::solver::least_squares::TruncatedSvd;
-use crate::solver::levenberg_marquardt as lm;
+use crate::numeric::least_squares::TruncatedSvd;
+use crate::numeric::levenberg_marquardt as lm;
 use cbd_protocol::DhChain;
 use faer::Mat;
 
@@ -145,7 +145,7 @@ impl lm::Problem for DhSteps<'_> {
     }
 }
 
-/// Levenberg–Marquardt (the one least-squares driver, `solver::levenberg_marquardt`, with Nielsen's
+/// Levenberg–Marquardt (the one least-squares driver, `numeric::levenberg_marquardt`, with Nielsen's
 /// damping) on the scaled Jacobian's SVD from the nominal `chain0` (residuals `r` there), the
 /// `out_of_plane` parameters fixed. Stage 1 keeps the parameters redundant at the nominal fixed
 /// (well conditioned, fast); stage 2 frees them all.

@@ -7,20 +7,20 @@
 //! One operation per file: the residuals k(p; x_i) − y_i (`residuals`), their analytic
 //! identification Jacobian ∂k/∂p (`jacobian`), the identifiable parameters by column-pivoted QR
 //! (`identifiable`), the damped least-squares loop (`least_squares`), the fit itself
-//! (`calibrate_dh`) and a tracker frame's base refined by it (`register`).
+//! (`calibrate_dh`) and a tracker frame's base registered and refined by it (`base_registration`).
 //!
 //! Columns are scaled to unit norm; the damped steps come from the SVD of the scaled Jacobian
-//! (`solver::least_squares::TruncatedSvd`, never JᵀJ itself), and directions whose eigenvalue of
+//! (`numeric::least_squares::TruncatedSvd`, never JᵀJ itself), and directions whose eigenvalue of
 //! the scaled JᵀJ (σ²) is below `rank_tolerance × λ_max` are dropped: unidentifiable combinations
 //! (e.g. d₂ + d₃ + d₄ for parallel axes, base yaw vs θ₁ offset) stay at their nominal values (the
 //! minimum-norm change in scaled parameters) and are reported by name.
 
+pub mod base_registration;
 mod calibrate_dh;
 pub mod identifiable;
 pub mod jacobian;
 pub mod least_squares;
 mod linearised;
-pub mod register;
 mod residuals;
 #[cfg(test)]
 pub(crate) mod tests;
@@ -98,7 +98,7 @@ pub enum DhCalibrationError {
     TooFewMeasurements { rows: usize },
     /// The SVD of the Jacobian failed (non-finite data?).
     #[error("DH calibration: {0}")]
-    Numerical(#[from] crate::solver::least_squares::LeastSquaresError),
+    Numerical(#[from] crate::numeric::least_squares::LeastSquaresError),
 }
 
 impl From<DhCalibrationError> for crate::Error {

@@ -4,7 +4,7 @@
 //! The regulariser and damping terms combine exactly: with M = L Lᵀ,
 //! Pᵀ K P + 2 δᵀ K P + δᵀ M δ = |Lᵀ δ + L⁻¹ K P|² + const, so the damping costs no extra rows.
 
-use super::least_squares::QrLeastSquares;
+use crate::numeric::least_squares::QrLeastSquares;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::matmul::matmul;

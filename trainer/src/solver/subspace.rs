@@ -13,7 +13,7 @@
 //! Y = K Ω, one power step, Rayleigh–Ritz. Ω is a fixed pseudo-random matrix and every product
 //! runs with faer's fixed work split, so the result does not depend on the thread count.
 
-use super::least_squares::QrLeastSquares;
+use crate::numeric::least_squares::QrLeastSquares;
 use faer::diag::Diag;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::evd::{self_adjoint_evd, self_adjoint_evd_scratch, ComputeEigenvectors};

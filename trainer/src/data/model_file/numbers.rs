@@ -3,7 +3,7 @@
 //! own message; this walk over the whole TOML catches whatever a section does not (a field added
 //! later, a value only a unit conversion reads), naming the field by its path.
 
-use crate::data::limits::MAX_MAGNITUDE;
+use crate::limits::MAX_MAGNITUDE;
 
 /// The first number of `text` (already parsed once: valid TOML) that is not finite or beyond
 /// ±[`MAX_MAGNITUDE`]: its field (`[chain] tool.translation[3]`, 1-based indices) and message.

@@ -3,7 +3,7 @@
 
 use super::raw::{RawChain, RawConvention, RawKind, RawPlanar, RawTransform, RawUrdf};
 use super::{ImportError, LengthUnit};
-use crate::data::csv_import::MAX_MAGNITUDE;
+use crate::limits::MAX_MAGNITUDE;
 use crate::nominal::planar::PlanarFrame;
 use crate::nominal::urdf::chain_from_urdf;
 use crate::nominal::{rpy, Frame};

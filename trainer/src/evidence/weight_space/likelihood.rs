@@ -17,7 +17,7 @@ use super::super::search::Criterion;
 use super::super::table::Theta;
 use super::prior::PeriodicShares;
 use super::WeightSpaceTable;
-use crate::solver::FIXED_SPLIT;
+use crate::numeric::FIXED_SPLIT;
 use cbd_runtime::expansion::for_each_task_basis;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};

@@ -19,7 +19,7 @@ use super::EvidenceOptions;
 use crate::data::Measurements;
 use crate::expansion::basis::{truncate, AxisSeries};
 use crate::expansion::{task_radius_of, tolerance_for};
-use crate::solver::FIXED_SPLIT;
+use crate::numeric::FIXED_SPLIT;
 use boxes::{minimise_in_boxes, BoxedCriterion, BOX};
 use cbd_protocol::{NominalModel, Normalisation, TaskKernel};
 use faer::linalg::matmul::matmul;

@@ -7,10 +7,11 @@
 
 use super::encode::encode_checked;
 use super::problem::cancellation_of;
-use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
+use super::{CbdFit, CbdOptions, ExpansionReport, FitError, FitReport, IterationLog, DENSE_MAX_UNKNOWNS};
 use crate::data::Measurements;
 use crate::expansion::{fit_flow, fit_linear, fit_linear_in, linear_basis, Declined, ExpansionFit, Representation, CANCELLATION_LIMIT};
 use crate::flow::ControlPoints;
+use crate::numeric::FIXED_SPLIT;
 use crate::solver::regulariser::regulariser_matrix;
 use crate::solver::step::solve_regularised;
 use cbd_protocol::NominalModel;

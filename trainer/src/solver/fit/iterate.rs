@@ -2,9 +2,10 @@
 //! chord steps while they pay, until the energy or the predictions stop moving.
 
 use super::problem::{model_energy, Evaluated, Problem, Timers};
-use super::{CbdOptions, FitError, IterationLog, FIXED_SPLIT};
+use super::{CbdOptions, FitError, IterationLog};
+use crate::numeric::levenberg_marquardt as lm;
+use crate::numeric::FIXED_SPLIT;
 use crate::report::progress::FitProgress;
-use crate::solver::levenberg_marquardt as lm;
 use crate::solver::step::StepFactor;
 use faer::Mat;
 use std::time::Instant;

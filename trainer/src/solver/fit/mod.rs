@@ -21,7 +21,6 @@ use super::regulariser::regulariser_matrix;
 use crate::data::Measurements;
 use crate::flow::ControlPoints;
 use cbd_protocol::{Integrator, JointKernel, MomentumLaw, NominalModel, Normalisation, TaskKernel};
-use faer::Par;
 pub use hyperparameters::FlowHyperparameters;
 use problem::{cancellation_of, Problem};
 use search_space::SearchSpace;
@@ -296,12 +295,6 @@ impl From<FitError> for crate::Error {
     }
 }
 
-/// Faer's work split for the factorisations: fixed, so the arithmetic (and the blob) does not
-/// depend on how many threads the pool running it has (`Par::Seq` would round differently).
-pub const FIXED_SPLIT: Par = Par::Rayon(match std::num::NonZeroUsize::new(2) {
-    Some(n) => n,
-    None => unreachable!(),
-});
 /// Fits the initial momenta to `data` (user units) on top of `nominal`, on `opts.threads` threads.
 pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
     crate::flow::with_threads(opts.threads, || fit_in_pool(nominal, data, opts))

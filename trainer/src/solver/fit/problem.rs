@@ -3,7 +3,7 @@
 use super::search_space::SearchSpace;
 use crate::flow::tangent::{position_jacobian_in_pool, TangentAlong};
 use crate::flow::{ControlPoints, PrimalFlow};
-pub use crate::solver::cancellation::cancellation_of;
+pub use crate::numeric::cancellation::cancellation_of;
 use faer::Mat;
 use std::cell::{Cell, OnceCell};
 use std::time::Instant;

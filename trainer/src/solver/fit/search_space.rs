@@ -1,7 +1,8 @@
 //! Which momenta the solver searches: all N·m of them, or coordinates p with P0 = S p in K_lin's
 //! dominant eigenspace (the regulariser is then Sᵀ K S).
 
-use super::{SolverMethod, DENSE_MAX_UNKNOWNS, FIXED_SPLIT};
+use super::{SolverMethod, DENSE_MAX_UNKNOWNS};
+use crate::numeric::FIXED_SPLIT;
 use crate::solver::step::DampingScale;
 use crate::solver::subspace::{dominant_eigenspace, Declined, Eigenspace};
 use faer::linalg::matmul::matmul;

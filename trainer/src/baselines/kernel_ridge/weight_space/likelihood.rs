@@ -15,7 +15,7 @@ use super::ResidualWeightSpace;
 use crate::evidence::search::Criterion;
 use crate::evidence::weight_space::boxes::absolute_tolerances;
 use crate::evidence::weight_space::prior::PeriodicShares;
-use crate::solver::FIXED_SPLIT;
+use crate::numeric::FIXED_SPLIT;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::cholesky::llt::inverse::{inverse as llt_inverse, inverse_scratch as llt_inverse_scratch};

@@ -16,7 +16,7 @@ use crate::evidence::weight_space::design::periodic_design;
 use crate::evidence::weight_space::Declined;
 use crate::expansion::basis::{truncate, AxisSeries};
 use crate::expansion::tolerance_for;
-use crate::solver::FIXED_SPLIT;
+use crate::numeric::FIXED_SPLIT;
 use cbd_protocol::NominalModel;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat};

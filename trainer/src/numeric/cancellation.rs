@@ -3,7 +3,7 @@
 
 use faer::Mat;
 
-/// max_i Σ_j |K_ij p_j| / max_i |Σ_j K_ij p_j| (see [`crate::solver::FitReport::cancellation`]); K may be
+/// max_i Σ_j |K_ij p_j| / max_i |Σ_j K_ij p_j| (the fit report's `cancellation`); K may be
 /// rectangular (the expansion's design matrix and weights).
 pub fn cancellation_of(k: &Mat<f64>, p: &[f64]) -> f64 {
     let (mut sum, mut abs) = (vec![0.0; k.nrows()], vec![0.0; k.nrows()]);

@@ -1,13 +1,30 @@
 //! Tracker frames: a base declared unknown (`[chain] base = { register = true }`) is registered
-//! on the training data before anything else — the rigid motion that best carries the nominal
-//! positions (base = identity) onto the measured ones (Kabsch/Horn) — so that "nominal" means
-//! nominal in the registered frame. `parametric::register` refines it with the geometric group
-//! (the pipelines call that); the DH and diagnose pipelines then fit the base with the rest of the
-//! geometric group, as they do a declared one.
+//! on the training data before anything else, in two steps.
+//!
+//! First the rigid motion that best carries the nominal positions (base = identity) onto the
+//! measured ones (Kabsch/Horn, `nominal::rigid_fit`: [`register_base`]), so that "nominal" means
+//! nominal in the registered frame. Then that rigid registration refined by the geometric group
+//! ([`register_and_refine`], what the pipelines call); the DH and diagnose pipelines then fit the
+//! base with the rest of the geometric group, as they do a declared one.
+//!
+//! The rigid fit of the nominal positions to the measured ones also takes up
+//! whatever of the arm's DH errors looks rigid (0.02–0.2 mm and 0.01–0.03° off the true joint-1
+//! axis on the simulated six-joint arm); fitting every DH parameter, the base and the tool
+//! together separates them, and the base is what remains of that fit once joint 1's constant
+//! part is folded into it.
+//!
+//! The fold: joint 1's transform is P ∘ Rz(q₁ + θ₁) ∘ Tz(d₁) (P = identity in standard DH,
+//! Rx(α₀) Tx(a₀) in Craig's), and Rz(Δθ) Tz(Δd) commutes with Rz(q₁ + θ₁) Tz(d₁), so
+//! B ∘ P' ∘ Rz(q₁ + θ₁') Tz(d₁') = [B ∘ P' ∘ Rz(θ₁' − θ₁) Tz(d₁' − d₁) ∘ P⁻¹] ∘ P ∘ Rz(q₁ + θ₁) Tz(d₁)
+//! exactly: the bracket is the base that, with the nominal joint 1, places joint 1's frame where
+//! the calibration put it. Base yaw vs θ₁ and base z vs d₁ cannot be told apart by any data;
+//! the fold makes the answer independent of which member the calibration kept.
 
-use super::Frame;
+use super::{calibrate_dh, DhCalibrationOptions};
 use crate::data::Measurements;
-use cbd_protocol::NominalModel;
+use crate::nominal::rigid_fit::{axis_angle, rigid_fit};
+use crate::nominal::{norm, rotation_about, row_kinematics, sub, Frame};
+use cbd_protocol::{DhChain, DhConvention, DhJoint, NominalModel};
 
 /// A registered base and what it did.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,7 +35,7 @@ pub struct Registration {
     /// base, and with the registered one.
     pub rms_before: f64,
     pub rms_after: f64,
-    /// Whether the rigid fit was refined by the geometric group (`parametric::register`).
+    /// Whether the rigid fit was refined by the geometric group ([`register_and_refine`]).
     pub refined: bool,
     /// The refinement stopped at its iteration limit (this many iterations) without converging:
     /// every loop after registration is bounded, and a bound hit is said.
@@ -60,51 +77,12 @@ impl Registration {
     }
 }
 
-/// Axis and angle (radians) of a pose's rotation: angle from the trace, axis from the skew part.
-pub fn axis_angle(p: &Frame) -> ([f64; 3], f64) {
-    let r = p.rotation();
-    let s = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
-    let sin2 = super::norm(s);
-    let cos = (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0;
-    let angle = sin2.atan2(2.0 * cos);
-    if sin2 == 0.0 {
-        return ([0.0, 0.0, 1.0], angle);
-    }
-    (super::scale(s, 1.0 / sin2), angle)
-}
-
-/// Kabsch/Horn: the rotation R and translation t minimising Σ |R p_i + t − y_i|² — R from the SVD
-/// of the cross-covariance H = Σ (p_i − p̄)(y_i − ȳ)ᵀ = U Σ Vᵀ, R = V diag(1, 1, det(V Uᵀ)) Uᵀ,
-/// t = ȳ − R p̄. `None` for fewer than 3 points or a degenerate SVD.
-pub fn rigid_fit(p: &[[f64; 3]], y: &[[f64; 3]]) -> Option<Frame> {
-    let n = p.len();
-    if n < 3 || y.len() != n {
-        return None;
-    }
-    let mean = |v: &[[f64; 3]]| -> [f64; 3] { std::array::from_fn(|c| v.iter().map(|x| x[c]).sum::<f64>() / n as f64) };
-    let (pm, ym) = (mean(p), mean(y));
-    let h = faer::Mat::<f64>::from_fn(3, 3, |a, b| p.iter().zip(y).map(|(pi, yi)| (pi[a] - pm[a]) * (yi[b] - ym[b])).sum());
-    let svd = h.svd().ok()?;
-    let (u, v) = (svd.U(), svd.V());
-    let vu = |a: usize, b: usize, last: f64| -> f64 { (0..3).map(|k| v[(a, k)] * u[(b, k)] * if k == 2 { last } else { 1.0 }).sum() };
-    let det = {
-        let m: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| vu(a, b, 1.0)));
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let sign = if det < 0.0 { -1.0 } else { 1.0 };
-    let r: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| vu(a, b, sign)));
-    let rotated = Frame::new(r, [0.0; 3]).rotate(pm);
-    let pose = Frame::new(r, std::array::from_fn(|c| ym[c] - rotated[c]));
-    pose.iter().flatten().all(|v| v.is_finite()).then_some(pose)
-}
-
 /// RMS distance of `chain`'s nominal positions from the measured ones.
 pub fn rms_from(chain: &cbd_protocol::DhChain, data: &Measurements) -> f64 {
     let model = NominalModel::DhChain(chain.clone());
     let s: f64 = (0..data.len())
         .map(|i| {
-            let p = super::row_kinematics(&model, data.joints(i), i).position;
+            let p = row_kinematics(&model, data.joints(i), i).position;
             (0..3).map(|c| (p[c] - data.position(i)[c]).powi(2)).sum::<f64>()
         })
         .sum();
@@ -118,7 +96,7 @@ pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<
         return Err(RegisterError::NotADhChain);
     };
     let model = NominalModel::DhChain(chain.clone());
-    let p: Vec<[f64; 3]> = (0..data.len()).map(|i| super::row_kinematics(&model, data.joints(i), i).position).collect();
+    let p: Vec<[f64; 3]> = (0..data.len()).map(|i| row_kinematics(&model, data.joints(i), i).position).collect();
     let y: Vec<[f64; 3]> = (0..data.len()).map(|i| std::array::from_fn(|c| data.position(i)[c])).collect();
     check_geometry(&p, &y)?;
     let base = rigid_fit(&p, &y).ok_or(RegisterError::Degenerate { rows: data.len() })?;
@@ -151,13 +129,13 @@ fn check_geometry(p: &[[f64; 3]], y: &[[f64; 3]]) -> Result<(), RegisterError> {
     }
     let rms = |fit: Option<Frame>, y: &[[f64; 3]]| {
         fit.map_or(f64::INFINITY, |f| {
-            (p.iter().zip(y).map(|(a, b)| super::norm(super::sub(f.apply(*a), *b)).powi(2)).sum::<f64>() / p.len().max(1) as f64).sqrt()
+            (p.iter().zip(y).map(|(a, b)| norm(sub(f.apply(*a), *b)).powi(2)).sum::<f64>() / p.len().max(1) as f64).sqrt()
         })
     };
     let mirrored: Vec<[f64; 3]> = y.iter().map(|v| [-v[0], v[1], v[2]]).collect();
     let (rotation, reflection) = (rms(rigid_fit(p, y), y), rms(rigid_fit(p, &mirrored), &mirrored));
     let mean: [f64; 3] = std::array::from_fn(|c| y.iter().map(|v| v[c]).sum::<f64>() / y.len().max(1) as f64);
-    let spread = (y.iter().map(|v| super::norm(super::sub(*v, mean)).powi(2)).sum::<f64>() / y.len().max(1) as f64).sqrt();
+    let spread = (y.iter().map(|v| norm(sub(*v, mean)).powi(2)).sum::<f64>() / y.len().max(1) as f64).sqrt();
     if rotation > 2.0 * reflection && rotation > 1e-3 * spread {
         return Err(RegisterError::Mirrored { rotation, reflection });
     }
@@ -196,31 +174,97 @@ impl From<RegisterError> for crate::Error {
     }
 }
 
+/// Joint 1's constant part before its rotation: P (identity in standard DH, Rx(α) Tx(a) in Craig's).
+fn before_joint(convention: DhConvention, joint: &DhJoint) -> Frame {
+    match convention {
+        DhConvention::Standard => Frame::IDENTITY,
+        DhConvention::Modified => {
+            rotation_about([1.0, 0.0, 0.0], joint.alpha).compose(&Frame::IDENTITY.with_translation([joint.a, 0.0, 0.0]))
+        }
+    }
+}
+
+/// The base that, with `nominal`'s joint 1, puts joint 1's frame where `calibrated` puts it
+/// (the fold of the module's comment).
+pub fn folded_base(nominal: &DhChain, calibrated: &DhChain) -> Frame {
+    let base = Frame::from_transform(&calibrated.base);
+    let (Some(j0), Some(j1)) = (nominal.joints.first(), calibrated.joints.first()) else { return base };
+    let shift = rotation_about([0.0, 0.0, 1.0], j1.theta_offset - j0.theta_offset).with_translation([0.0, 0.0, j1.d - j0.d]);
+    base.compose(&before_joint(calibrated.convention, j1)).compose(&shift).compose(&before_joint(nominal.convention, j0).inverse())
+}
+
+/// Registers the base of `nominal` on `data` (rigid fit, [`register_base`]) and
+/// refines it by the geometric group (DH calibration of every parameter, base and tool; the base
+/// folded as in the module's comment). When the calibration cannot run (too few rows) the rigid
+/// registration stands and `refined` says so.
+pub fn register_and_refine(nominal: &mut NominalModel, data: &Measurements) -> Result<Registration, RegisterError> {
+    let rigid = register_base(nominal, data)?;
+    let NominalModel::DhChain(chain) = &*nominal else { return Ok(rigid) };
+    let Ok(calibration) = calibrate_dh(nominal, data, &DhCalibrationOptions::default()) else { return Ok(rigid) };
+    let NominalModel::DhChain(calibrated) = &calibration.model else { return Ok(rigid) };
+    let base = folded_base(chain, calibrated);
+    if !base.iter().flatten().all(|v| v.is_finite()) {
+        return Ok(rigid);
+    }
+    let mut refined = chain.clone();
+    refined.base = base.to_transform();
+    let stats = &calibration.stats;
+    let registration = Registration {
+        base,
+        rms_before: rigid.rms_before,
+        rms_after: rms_from(&refined, data),
+        refined: true,
+        stopped_at_limit: (!stats.converged).then_some(stats.iterations),
+    };
+    *nominal = NominalModel::DhChain(refined);
+    Ok(registration)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn chain(convention: DhConvention) -> DhChain {
+        let NominalModel::DhChain(mut c) = crate::simulate::six_joint::SixJointRobot::ur5_like(3).nominal else { unreachable!() };
+        c.convention = convention;
+        c.joints[0].a = 40.0;
+        c.joints[0].alpha = 0.3;
+        c
+    }
+
+    /// The fold is exact: the nominal joint 1 on the folded base walks to the same frames as the
+    /// calibrated joint 1 on the calibrated base, in both conventions, for any q₁.
     #[test]
-    fn rigid_fit_recovers_a_known_motion_and_refuses_too_few_points() {
-        let motion = crate::nominal::rotation_about([0.6, 0.0, 0.8], 30f64.to_radians()).with_translation([4000.0, -1200.0, 300.0]);
-        let p: Vec<[f64; 3]> = (0..20).map(|k| [(k as f64 * 0.7).sin() * 500.0, (k as f64 * 1.3).cos() * 400.0, k as f64 * 20.0]).collect();
-        let y: Vec<[f64; 3]> = p.iter().map(|x| motion.apply(*x)).collect();
-        let got = rigid_fit(&p, &y).unwrap();
-        for i in 0..3 {
-            assert!((got.translation()[i] - motion.translation()[i]).abs() < 1e-9, "{got:?}");
-            for j in 0..3 {
-                assert!((got.rotation()[i][j] - motion.rotation()[i][j]).abs() < 1e-12, "{got:?}");
+    fn folded_base_with_the_nominal_joint_one_reproduces_the_calibrated_chain() {
+        for convention in [DhConvention::Standard, DhConvention::Modified] {
+            let nominal = chain(convention);
+            let mut calibrated = nominal.clone();
+            calibrated.base = rotation_about([0.36, 0.48, 0.8], 0.02)
+                .with_translation([1.5, -0.7, 2.0])
+                .compose(&Frame::from_transform(&nominal.base))
+                .to_transform();
+            calibrated.joints[0].theta_offset += 0.004;
+            calibrated.joints[0].d -= 0.8;
+            if convention == DhConvention::Modified {
+                calibrated.joints[0].alpha += 0.001;
+                calibrated.joints[0].a += 0.3;
             }
+            let mut folded = nominal.clone();
+            folded.base = folded_base(&nominal, &calibrated).to_transform();
+            // Only the base and joint 1's folded parameters differ: the other joints stay nominal.
+            for q1 in [-2.0, 0.0, 0.7, 3.0] {
+                let q = [q1, -1.0, 0.5, 0.2, 1.1, -0.4];
+                let want = cbd_runtime::kinematics::rigid::dh_walk(&calibrated, &q);
+                let got = cbd_runtime::kinematics::rigid::dh_walk(&folded, &q);
+                for (a, b) in want.ends.iter().zip(&got.ends) {
+                    for k in 0..3 {
+                        assert!((a[k] - b[k]).abs() < 1e-9, "{convention:?} q1 = {q1}: {a:?} vs {b:?}");
+                    }
+                }
+            }
+            let (_, angle) = axis_angle(&Frame::from_transform(&folded.base).inverse().compose(&Frame::from_transform(&nominal.base)));
+            assert!(angle > 0.01, "the fold moved the base");
         }
-        let (axis, angle) = axis_angle(&got);
-        assert!((angle.to_degrees() - 30.0).abs() < 1e-9 && (axis[0] - 0.6).abs() < 1e-9 && (axis[2] - 0.8).abs() < 1e-9);
-        // A reflection is never returned: a mirrored set gets the best proper rotation.
-        let mirrored: Vec<[f64; 3]> = y.iter().map(|v| [-v[0], v[1], v[2]]).collect();
-        let r = rigid_fit(&p, &mirrored).unwrap().rotation();
-        let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
-            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
-        assert!((det - 1.0).abs() < 1e-12);
-        assert!(rigid_fit(&p[..2], &y[..2]).is_none());
     }
 
     /// Issue 39 case 7: mirrored or collinear tracker data were registered anyway and the fits over
