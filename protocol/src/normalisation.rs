@@ -4,7 +4,9 @@
 //!
 //! Each conversion is written once here so that its floating-point operations, and so every blob's
 //! bytes, are the same wherever it is used: the division is a division (not a multiplication by
-//! 1/scale), the offset is subtracted before it and added after the product.
+//! 1/scale), the offset is subtracted before it and added after the product. k0 and the task
+//! flows' starts have always been normalised by the reciprocal, (y − o) · (1/s), which rounds
+//! differently and which blobs record: the `_by_reciprocal` pair is that arithmetic, written once.
 
 use serde::{Deserialize, Serialize};
 
@@ -39,6 +41,21 @@ impl Normalisation {
     #[inline]
     pub fn position_to_user(&self, axis: usize, internal: f64) -> f64 {
         self.offset(axis) + self.task_scale * internal
+    }
+
+    /// Coordinate `axis` of a position, user → internal by the reciprocal: (y − o_axis) · (1/s).
+    /// Not [`Self::position_to_internal`]'s bits: k0's normalisation (`Kinematics::normalised`,
+    /// trainer and runtime) and the runtime's task flows multiply, and blobs record the product.
+    #[inline]
+    pub fn position_to_internal_by_reciprocal(&self, axis: usize, user: f64) -> f64 {
+        (user - self.offset(axis)) * (1.0 / self.task_scale)
+    }
+
+    /// A length (a derivative of a position), user → internal by the reciprocal: l · (1/s), as
+    /// [`Self::position_to_internal_by_reciprocal`] (k0's Jacobian and Hessian).
+    #[inline]
+    pub fn length_to_internal_by_reciprocal(&self, user: f64) -> f64 {
+        user * (1.0 / self.task_scale)
     }
 
     /// A length (a kernel width, σ, a displacement, an RMS error), user → internal: l / s.
@@ -85,5 +102,9 @@ mod tests {
         assert_eq!(norm.variance_to_internal(2.0).to_bits(), (2.0f64 / (0.7 * 0.7)).to_bits());
         assert_eq!(norm.variance_to_user(2.0).to_bits(), (2.0f64 * 0.7 * 0.7).to_bits());
         assert!((norm.variance_to_user(norm.variance_to_internal(3.0)) - 3.0).abs() < 1e-15);
+        let inv = 1.0f64 / 0.7;
+        assert_eq!(norm.position_to_internal_by_reciprocal(1, 2.0).to_bits(), ((2.0f64 - -0.2) * inv).to_bits());
+        assert_eq!(norm.length_to_internal_by_reciprocal(2.0).to_bits(), (2.0f64 * inv).to_bits());
+        assert_ne!((0.3f64 * inv).to_bits(), (0.3f64 / 0.7).to_bits(), "the reciprocal rounds differently");
     }
 }

@@ -91,7 +91,7 @@ impl CompensateOptions {
 /// precision ([`Calibrator::precision`]) when that is coarser — a target is reached when the
 /// residual is as small as the model's own evaluation can resolve (issue 25).
 pub fn reach_tolerance(cal: &Calibrator<'_>) -> f64 {
-    let fixed = 1e-9 * cal.model.normalisation.task_scale;
+    let fixed = cal.model.normalisation.length_to_user(1e-9);
     if cal.precision > fixed {
         cal.precision
     } else {

@@ -170,6 +170,8 @@ fn weighted(target: &Target, pose: &Pose, lever: f64) -> (SVector<f64, 6>, SMatr
 fn damped_pose_direction(j: &SMatrix<f64, 6, NJ>, e: &SVector<f64, 6>, scale: f64) -> Option<SVector<f64, NJ>> {
     let gram = j * j.transpose();
     let mean = gram.trace() / 6.0;
+    // The residual relative to the task's size, for the damping (not a unit conversion: the
+    // nominal solve takes a bare scale, no offset).
     let rho = e.norm() / scale;
     let mut system = gram;
     for a in 0..6 {

@@ -201,7 +201,6 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
     // query can leak into this one.
     y.fill(0.0);
     scratch.fill(0.0);
-    let inv_scale = 1.0 / norm.task_scale;
     {
         let (primal, tangents) = y.split_at_mut_checked(ql).ok_or(Error::Internal)?;
         let (y_k, y_jac) = primal.split_at_mut_checked(m).ok_or(Error::Internal)?;
@@ -221,7 +220,7 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
             }
             for (dst_row, h_a) in t_jac.chunks_exact_mut(n.max(1)).zip(h0.iter()) {
                 for (dst, h_ae) in dst_row.iter_mut().zip(h_a.iter()) {
-                    *dst = (h_ae.get(d).copied().unwrap_or(0.0) * inv_scale) as Real;
+                    *dst = norm.length_to_internal_by_reciprocal(h_ae.get(d).copied().unwrap_or(0.0)) as Real;
                 }
             }
         }
@@ -251,13 +250,13 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
     };
     let (primal, tangents) = y.split_at_checked(ql).ok_or(Error::Internal)?;
     let (y_k, y_jac) = primal.split_at_checked(m).ok_or(Error::Internal)?;
-    for ((dst, offset), v) in out.position.iter_mut().zip(norm.task_offset.iter()).zip(y_k) {
-        *dst = offset + norm.task_scale * crate::real::to_f64(*v);
+    for (axis, (dst, v)) in out.position.iter_mut().zip(y_k).enumerate() {
+        *dst = norm.position_to_user(axis, crate::real::to_f64(*v));
     }
     for (a, y_row) in y_jac.chunks_exact(n.max(1)).enumerate() {
         for (d, v) in y_row.iter().enumerate() {
             if let Some(dst) = out.transported_jacobian.get_mut((a, d)) {
-                *dst = norm.task_scale * crate::real::to_f64(*v);
+                *dst = norm.length_to_user(crate::real::to_f64(*v));
             }
         }
     }
@@ -265,7 +264,7 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
         for (d, t) in tangents.chunks_exact(ql.max(1)).enumerate() {
             for (a, v) in t.iter().take(m).enumerate() {
                 if let Some(dst) = out.jacobian.get_mut((a, d)) {
-                    *dst = norm.task_scale * crate::real::to_f64(*v);
+                    *dst = norm.length_to_user(crate::real::to_f64(*v));
                 }
             }
         }

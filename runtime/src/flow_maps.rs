@@ -47,10 +47,9 @@ fn task_flow_shaped<S: Shape>(cal: &Calibrator<'_>, shape: S, y: &[f64], directi
         return Err(Error::TargetDimension { expected: m, found: if y.len() != m { y.len() } else { out.len() } });
     }
     let norm = &cal.model.normalisation;
-    let inv_scale = 1.0 / norm.task_scale;
     let mut state = [0.0 as Real; MT];
-    for ((dst, v), o) in state.iter_mut().zip(y).zip(norm.task_offset.iter()) {
-        *dst = ((v - o) * inv_scale) as Real;
+    for (axis, (dst, v)) in state.iter_mut().zip(y).enumerate() {
+        *dst = norm.position_to_internal_by_reciprocal(axis, *v) as Real;
     }
     let kernel = cal.model.task_kernel;
     let sign: Real = if direction == Direction::Forward { 1.0 } else { -1.0 };
@@ -73,8 +72,8 @@ fn task_flow_shaped<S: Shape>(cal: &Calibrator<'_>, shape: S, y: &[f64], directi
         }
         Ok(())
     })?;
-    for ((dst, v), o) in out.iter_mut().zip(state.iter()).zip(norm.task_offset.iter()) {
-        *dst = o + norm.task_scale * to_f64(*v);
+    for (axis, (dst, v)) in out.iter_mut().zip(state.iter()).enumerate() {
+        *dst = norm.position_to_user(axis, to_f64(*v));
     }
     if out.iter().all(|v| v.is_finite()) {
         Ok(())

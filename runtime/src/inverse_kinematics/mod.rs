@@ -48,6 +48,8 @@ pub fn damped_min_norm_direction(
     let m = m.clamp(1, MT);
     let gram = jacobian * jacobian.transpose();
     let mean_eigenvalue = gram.trace() / m as f64;
+    // The residual relative to the task's size, for the damping (not a unit conversion: the
+    // nominal inverse kinematics takes a bare scale, no offset).
     let rho = residual.norm() / scale;
     let damping_sq = mean_eigenvalue * (rho * rho + 1e-14);
     // Rows ≥ m of J are zero: their diagonal gets 1 so the padded system stays definite (their

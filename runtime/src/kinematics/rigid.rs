@@ -17,13 +17,13 @@ pub struct Kinematics {
 impl Kinematics {
     const ZERO: Kinematics = Kinematics { position: [0.0; MAX_TASK_DIM], jacobian: [[0.0; MAX_JOINTS]; MAX_TASK_DIM] };
 
-    /// Maps user units to internal ones: (y − offset)/scale, J/scale.
+    /// Maps user units to internal ones: (y − offset) · (1/scale), J · (1/scale) (the reciprocal:
+    /// blobs record these bits, `Normalisation::position_to_internal_by_reciprocal`).
     pub fn normalised(mut self, norm: &Normalisation) -> Kinematics {
-        let inv = 1.0 / norm.task_scale;
-        for ((p, o), row) in self.position.iter_mut().zip(norm.task_offset.iter()).zip(self.jacobian.iter_mut()) {
-            *p = (*p - o) * inv;
+        for (axis, (p, row)) in self.position.iter_mut().zip(self.jacobian.iter_mut()).enumerate() {
+            *p = norm.position_to_internal_by_reciprocal(axis, *p);
             for j in row.iter_mut() {
-                *j *= inv;
+                *j = norm.length_to_internal_by_reciprocal(*j);
             }
         }
         self

@@ -19,7 +19,7 @@ use super::fit::kernel_matrix;
 use super::weight_space::{refine, KrrWeightSpaceReport};
 use crate::data::Measurements;
 use crate::evidence::joint_pair_table::JointPairTable;
-use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel};
+use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
 use cbd_runtime::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
 
@@ -96,7 +96,7 @@ impl Hyperparameters {
     }
     /// Noise standard deviation in the data's length unit.
     pub fn noise_sigma_data_units(&self) -> f64 {
-        self.noise_sigma * self.task_scale
+        scale_only(self.task_scale).length_to_user(self.noise_sigma)
     }
 }
 
@@ -236,7 +236,13 @@ pub fn choose_kernel_ridge_hyperparameters(
 /// The residual (y − k0(q)) / `task_scale` of every row of `data` (N × m).
 pub fn normalised_residual(nominal: &NominalModel, data: &Measurements, task_scale: f64) -> Mat<f64> {
     let nominal_positions: Vec<[f64; 3]> = (0..data.len()).map(|i| forward_kinematics(nominal, data.joints(i)).position).collect();
-    Mat::from_fn(data.len(), data.task_dim, |i, c| (data.position(i)[c] - nominal_positions[i][c]) / task_scale)
+    let norm = scale_only(task_scale);
+    Mat::from_fn(data.len(), data.task_dim, |i, c| norm.length_to_internal(data.position(i)[c] - nominal_positions[i][c]))
+}
+
+/// Kernel ridge's normalisation: its residuals are differences, so only the scale applies.
+fn scale_only(task_scale: f64) -> Normalisation {
+    Normalisation { task_scale, ..Normalisation::IDENTITY }
 }
 
 /// Log widths where typical pairs of rows have kernel ½ ([`JointPairTable::half_kernel_log_widths`]

@@ -27,7 +27,7 @@ pub(super) struct Recorder {
     progress: FitProgress,
     print_lines: bool,
     start: Instant,
-    task_scale: f64,
+    normalisation: cbd_protocol::Normalisation,
 }
 
 impl Recorder {
@@ -35,12 +35,12 @@ impl Recorder {
         // A bar on a terminal; plain lines when verbose output goes to a pipe or file.
         let progress = FitProgress::new(opts.max_iterations, !opts.verbose, "");
         let print_lines = opts.verbose && !progress.is_visible();
-        Recorder { log: Vec::new(), progress, print_lines, start, task_scale: opts.normalisation.task_scale }
+        Recorder { log: Vec::new(), progress, print_lines, start, normalisation: opts.normalisation.clone() }
     }
 
     /// Logs iteration `iteration` at `e`; `detail` ends the printed line.
     fn record(&mut self, problem: &Problem, iteration: usize, e: &Evaluated, damping: f64, detail: &str) {
-        let train_rms = problem.rms(&e.residual, self.task_scale);
+        let train_rms = problem.rms(&e.residual, &self.normalisation);
         let seconds = self.start.elapsed().as_secs_f64();
         self.log.push(IterationLog { iteration, energy: e.energy, regulariser: e.regulariser, train_rms, damping, seconds });
         self.progress.update(iteration, e.energy, train_rms);

@@ -4,6 +4,7 @@ use super::search_space::SearchSpace;
 use crate::flow::tangent::{position_jacobian_in_pool, TangentAlong};
 use crate::flow::{ControlPoints, PrimalFlow};
 pub use crate::numeric::cancellation::cancellation_of;
+use cbd_protocol::Normalisation;
 use faer::Mat;
 use std::cell::{Cell, OnceCell};
 use std::time::Instant;
@@ -73,9 +74,9 @@ impl<'a> Problem<'a> {
     }
 
     /// RMS position error of normalised residual `r` ((k1 − y)/σ), in user units.
-    pub fn rms(&self, r: &[f64], task_scale: f64) -> f64 {
+    pub fn rms(&self, r: &[f64], norm: &Normalisation) -> f64 {
         let m = self.cp.dims.m;
-        (r.iter().map(|v| v * v).sum::<f64>() / (r.len() / m) as f64).sqrt() * self.sigma * task_scale
+        norm.length_to_user((r.iter().map(|v| v * v).sum::<f64>() / (r.len() / m) as f64).sqrt() * self.sigma)
     }
 }
 
