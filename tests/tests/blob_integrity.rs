@@ -18,8 +18,8 @@ use cbd_trainer::solver::{fit_cbd, CbdOptions};
 fn solver_blob() -> Vec<u8> {
     let data = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: 6 }, 2));
     let mut opts = CbdOptions::paper_rr();
-    opts.max_iterations = 3;
-    opts.verbose = false;
+    opts.solver.max_iterations = 3;
+    opts.solver.verbose = false;
     fit_cbd(&rr::nominal(), &data, &opts).expect("fit").blob
 }
 

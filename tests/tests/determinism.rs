@@ -20,9 +20,9 @@ fn rr_data(per_axis: usize) -> Measurements {
 
 fn rr_fit(data: &Measurements, threads: usize, iterations: usize) -> Vec<u8> {
     let mut opts = CbdOptions::paper_rr();
-    opts.max_iterations = iterations;
-    opts.threads = threads;
-    opts.verbose = false;
+    opts.solver.max_iterations = iterations;
+    opts.solver.threads = threads;
+    opts.solver.verbose = false;
     let fit = fit_cbd(&rr::nominal(), data, &opts).expect("fit");
     assert!(
         fit.report.iterations >= 2 && fit.report.tangents >= 1,
@@ -68,9 +68,9 @@ fn eigenspace_solver_blob_is_identical_across_thread_counts() {
     let data = rr_data(12);
     let blob = |threads: usize| {
         let mut opts = CbdOptions::paper_rr();
-        opts.max_iterations = 4;
-        opts.threads = threads;
-        opts.method = cbd_trainer::solver::SolverMethod::Eigenspace;
+        opts.solver.max_iterations = 4;
+        opts.solver.threads = threads;
+        opts.solver.method = cbd_trainer::solver::SolverMethod::Eigenspace;
         let fit = fit_cbd(&rr::nominal(), &data, &opts).expect("fit");
         assert!(fit.report.method == "eigenspace" && fit.report.tangents >= 1);
         fit.blob
@@ -97,11 +97,11 @@ fn ur5_blob_is_identical_across_thread_counts() {
     base.joint_kernel.gamma = 1.0;
     base.task_kernel.width = 1.0;
     base.sigma = 1e-3;
-    base.max_iterations = 3;
-    base.verbose = false;
+    base.solver.max_iterations = 3;
+    base.solver.verbose = false;
     let blob = |threads: usize| {
         let mut opts = base.clone();
-        opts.threads = threads;
+        opts.solver.threads = threads;
         fit_cbd(&model.nominal, &data, &opts).expect("fit").blob
     };
     let (one, two, two_again) = (blob(1), blob(2), blob(2));
@@ -209,7 +209,10 @@ fn pipeline_blob_is_identical_across_thread_counts() {
     let mut data = rr_data(8);
     cbd_trainer::simulate::add_noise(&mut data.positions, 1e-4, 3);
     let blob = |threads: usize| {
-        let settings = cbd_trainer::calibrate::Settings { threads: Some(threads), ..Default::default() };
+        let settings = cbd_trainer::calibrate::Settings {
+            solver: cbd_trainer::solver::SolverSettings { threads, ..Default::default() },
+            ..Default::default()
+        };
         let c = cbd_trainer::calibrate::calibrate(&rr::nominal(), &data, &settings).expect("calibrate");
         assert!(c.evidence.is_some() && !c.scheme.cross_validation.is_empty());
         c.fit.blob

@@ -290,7 +290,7 @@ fn trainer_blob_with_effects_round_trips_and_its_exact_jacobian_matches_finite_d
     let train = real.measure(&configurations(Sampling::Grid { per_axis: 8 }, 2), 0.0, 1);
     let nominal = with_effects(&rr::nominal(), &effects);
     let mut opts = cbd_trainer::solver::CbdOptions::paper_rr();
-    opts.max_iterations = 8;
+    opts.solver.max_iterations = 8;
     let fit = cbd_trainer::solver::fit_cbd(&nominal, &train, &opts).expect("fit");
     let mut storage = vec![0.0; 100_000];
     let mut cal = Calibrator::load(&fit.blob, &mut storage).expect("load");

@@ -11,6 +11,7 @@ use cbd_trainer::calibrate::{calibrate, Settings};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::expansion::Representation;
 use cbd_trainer::simulate::{add_noise, configurations, rr::RealRr, Sampling};
+use cbd_trainer::solver::SolverSettings;
 
 /// The RR benchmark's 16 × 16 grid with noise `sigma` (0: none), and 3000 random test rows.
 fn rr_data(sigma: f64) -> (Measurements, Measurements) {
@@ -84,10 +85,13 @@ fn trained_rr_models_carry_a_well_conditioned_expansion() {
     for sigma in [1e-4, 1e-5, 0.0] {
         let (train, test) = rr_data(sigma);
         let nominal = cbd_trainer::simulate::rr::nominal();
-        let auto = calibrate(&nominal, &train, &Settings { verbose: false, ..Default::default() }).unwrap();
-        let kernel =
-            calibrate(&nominal, &train, &Settings { verbose: false, representation: Representation::Kernel, ..Default::default() })
-                .unwrap();
+        let auto = calibrate(&nominal, &train, &Settings::default()).unwrap();
+        let kernel = calibrate(
+            &nominal,
+            &train,
+            &Settings { solver: SolverSettings { representation: Representation::Kernel, ..Default::default() }, ..Default::default() },
+        )
+        .unwrap();
         let report = &auto.fit.report;
         assert_eq!(report.representation, "expansion", "σ = {sigma}: {:?}", report.expansion_declined);
         let e = report.expansion.as_ref().unwrap();
@@ -121,7 +125,7 @@ fn multi_step_schemes_train_in_weight_space() {
     let (train, test) = rr_data(1e-4);
     let nominal = cbd_trainer::simulate::rr::nominal();
     let fit = |method: IntegratorMethod, steps: u16| {
-        let settings = Settings { verbose: false, integrator: Some(method), steps: Some(steps), ..Default::default() };
+        let settings = Settings { integrator: Some(method), steps: Some(steps), ..Default::default() };
         calibrate(&nominal, &train, &settings).unwrap()
     };
     let linear = mean_error(&fit(IntegratorMethod::Euler, 1).fit.blob, &test);

@@ -8,8 +8,8 @@ use cbd_trainer::solver::{fit_cbd, CbdOptions};
 fn small_fit(threads: usize) -> (cbd_trainer::solver::CbdFit, cbd_trainer::data::Measurements) {
     let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: 8 }, 2));
     let mut opts = CbdOptions::paper_rr();
-    opts.max_iterations = 8;
-    opts.threads = threads;
+    opts.solver.max_iterations = 8;
+    opts.solver.threads = threads;
     (fit_cbd(&rr::nominal(), &train, &opts).expect("fit"), train)
 }
 

@@ -82,7 +82,7 @@ impl Arm {
     /// its geometry chosen by the evidence (a planar arm: the nominal, its blob holds lengths only).
     fn reached(&self, data: &Measurements, test: &[f64]) -> f64 {
         let (n, m) = (self.nominal.n_joints(), self.nominal.task_dim());
-        let settings = Settings { integrator: Some(IntegratorMethod::Euler), steps: Some(1), verbose: false, ..Default::default() };
+        let settings = Settings { integrator: Some(IntegratorMethod::Euler), steps: Some(1), ..Default::default() };
         let cal = calibrate(&self.nominal, data, &settings).expect("fit");
         let got = cbd_trainer::predict::evaluate_blob(&cal.fit.blob, test).unwrap();
         let count = test.len() / n;

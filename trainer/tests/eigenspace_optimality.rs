@@ -24,7 +24,7 @@ fn eigenspace_optimum_is_a_full_space_optimum_at_n_1024() {
         data.joints.clone(),
         o.joint_kernel.clone(),
         o.task_kernel,
-        o.law,
+        o.solver.law,
         o.integrator,
     );
     let k = regulariser_matrix(&cp);

@@ -87,7 +87,6 @@ fn compare(nominal: &NominalModel, train: &Measurements, test: &Measurements) ->
         },
         steps: Some(1),
         integrator: Some(cbd_protocol::IntegratorMethod::Euler),
-        verbose: false,
         ..Default::default()
     };
     let fitter = cbd_trainer::cli::args::cbd_fitter(&settings);

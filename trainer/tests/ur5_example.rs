@@ -108,7 +108,7 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
         opts.joint_kernel = cbd_trainer::evidence::default_joint_kernel(nominal);
         opts.task_kernel.width = 1.0;
         opts.sigma = opts.normalisation.length_to_internal(robot.noise_std);
-        opts.max_iterations = 15;
+        opts.solver.max_iterations = 15;
         let fit = fit_cbd(nominal, data, &opts)?;
         let predictor: Predictor =
             Box::new(move |joints: &[f64]| cbd_trainer::predict::evaluate_blob(&fit.blob, joints).expect("blob evaluates"));

@@ -248,7 +248,7 @@ fn cross_validated_scores(
     folds: usize,
 ) -> crate::Result<GeometryScores> {
     let mut quiet = settings.clone();
-    quiet.verbose = false;
+    quiet.solver.verbose = false;
     let opts = options_for(&plain.hyperparameters, norm, Integrator { method: IntegratorMethod::Euler, steps: 1 }, &quiet);
     let (mut sse, mut count, mut parameters) = ([0.0; 2], 0usize, 0);
     for fold in 0..folds {

@@ -22,7 +22,7 @@ use crate::data::Measurements;
 use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_with_geometry, CbdHyperparameters, Evidence, GeometricBasis};
 use crate::parametric::DhFitStats;
 use crate::report::noise_floor::{FloorVerdict, NoiseFloor};
-use crate::solver::{fit_cbd, CbdFit, CbdOptions};
+use crate::solver::{fit_cbd, CbdFit, CbdOptions, SolverSettings};
 use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation};
 
 /// A calibrated model and how it was chosen.
@@ -58,21 +58,14 @@ pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
 /// The fit's options for hyperparameters `h`, normalisation `norm` and scheme `integrator`.
 pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Integrator, settings: &Settings) -> CbdOptions {
     let mut opts = CbdOptions::new(h.to_internal(norm), integrator, norm.clone());
-    opts.law = settings.law;
-    opts.max_iterations = settings.max_iterations;
-    opts.method = settings.solver;
-    opts.verbose = settings.verbose;
-    opts.memory_budget = settings.memory_budget;
-    // Recorded in the blob (format 7): what `cbd eval` sets a table's noise floor by.
-    opts.noise_sigma = Some(h.sigma);
     // The paper's reproduction keeps the paper's form, momenta, unless asked otherwise.
-    opts.representation = match (settings.source, settings.representation) {
+    let representation = match (settings.source, settings.solver.representation) {
         (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
         (_, r) => r,
     };
-    if let Some(t) = settings.threads {
-        opts.threads = t;
-    }
+    opts.solver = SolverSettings { representation, ..settings.solver };
+    // Recorded in the blob (format 7): what `cbd eval` sets a table's noise floor by.
+    opts.noise_sigma = Some(h.sigma);
     opts
 }
 
@@ -131,7 +124,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
     let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
     let fit = fit_cbd(&base, data, &options)?;
-    let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.max_iterations);
+    let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.solver.max_iterations);
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
     }

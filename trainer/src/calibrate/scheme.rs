@@ -70,7 +70,7 @@ pub fn choose_scheme(
         });
     }
     let mut quiet = settings.clone();
-    quiet.verbose = false;
+    quiet.solver.verbose = false;
     let mut cross_validation = Vec::new();
     for integrator in candidates {
         let opts = options_for(h, norm, integrator, &quiet);

@@ -1,8 +1,8 @@
 //! What a user can set for a calibration; anything unset is chosen by the pipeline.
 
 use crate::evidence::{CbdHyperparameters, EvidenceOptions};
-use crate::solver::SolverMethod;
-use cbd_protocol::{IntegratorMethod, JointKernelAxis, MomentumLaw, NominalModel};
+use crate::solver::SolverSettings;
+use cbd_protocol::{IntegratorMethod, JointKernelAxis, NominalModel};
 
 /// Where the hyperparameters come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,20 +74,13 @@ pub struct Settings {
     pub steps: Option<u16>,
     /// Folds of the scheme's cross-validation.
     pub scheme_folds: usize,
-    pub law: MomentumLaw,
     /// Deform the nominal chain, or calibrate its geometric group (DH parameters, base, tool) first
     /// and deform that; `Auto` (the default): whichever CbD's evidence scores higher.
     pub geometry: super::Geometry,
-    pub max_iterations: usize,
-    pub solver: SolverMethod,
-    /// Threads for the fit; `None`: the solver's default (results never depend on it).
-    pub threads: Option<usize>,
-    /// Points and momenta only, or also the fields in the kernels' own basis (docs/DESIGN.md §11).
-    pub representation: crate::expansion::Representation,
-    /// Bytes the kernel form's (N m)² matrices may take; a fit that would need more is refused
-    /// (`FitError::TooLarge`) before allocating. `None`: unchecked.
-    pub memory_budget: Option<f64>,
-    pub verbose: bool,
+    /// How the fit runs (law, iterations, method, threads, representation, memory budget,
+    /// verbosity): the fit's own options take it whole (`options_for`), but for the paper's
+    /// reproduction, which keeps the momenta when the representation is `Auto`.
+    pub solver: SolverSettings,
 }
 
 impl Settings {
@@ -107,14 +100,8 @@ impl Default for Settings {
             integrator: None,
             steps: None,
             scheme_folds: 4,
-            law: MomentumLaw::Hamiltonian,
             geometry: super::Geometry::Auto,
-            max_iterations: 30,
-            solver: SolverMethod::Auto,
-            threads: None,
-            representation: crate::expansion::Representation::default(),
-            memory_budget: None,
-            verbose: false,
+            solver: SolverSettings::default(),
         }
     }
 }

@@ -118,14 +118,14 @@ impl SolverArgs {
             s.integrator = Some(parse_integrator(method)?);
         }
         s.steps = self.steps;
-        s.max_iterations = self.max_iterations;
+        s.solver.max_iterations = self.max_iterations;
         if let Some(solver) = &self.solver {
-            s.solver = parse_solver(solver)?;
+            s.solver.method = parse_solver(solver)?;
         }
-        s.verbose = !self.quiet;
-        s.representation = self.representation;
+        s.solver.verbose = !self.quiet;
+        s.solver.representation = self.representation;
         if self.no_divergence {
-            s.law = cbd_protocol::MomentumLaw::HamiltonianWithoutDivergence;
+            s.solver.law = cbd_protocol::MomentumLaw::HamiltonianWithoutDivergence;
         }
         Ok(s)
     }
@@ -184,7 +184,7 @@ pub fn cbd_fitter(
           data: &crate::data::Measurements|
           -> crate::Result<crate::evaluation::correction::FittedCorrection> {
         let calibration = crate::calibrate::calibrate(nominal, data, &settings)?;
-        print_calibration(&calibration, !settings.verbose);
+        print_calibration(&calibration, !settings.solver.verbose);
         let mut note = calibration.describe_hyperparameters();
         if let Some(e) = &calibration.evidence {
             note += &format!("; evidence {:.2} on {} rows ({:.2} s)", e.log_evidence, e.rows_used, e.seconds);

@@ -223,7 +223,7 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench> {
     let settings =
         crate::calibrate::Settings { source: crate::calibrate::HyperparameterSource::PaperRr, steps: Some(2), ..Default::default() };
     let threads = check_size(n, "--sizes")?;
-    let settings = crate::calibrate::Settings { threads: Some(threads), ..settings };
+    let settings = crate::calibrate::Settings { solver: crate::solver::SolverSettings { threads, ..settings.solver }, ..settings };
     let fit = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))?.fit;
     crate::io::write_atomically(blob_out, &fit.blob)?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
@@ -262,7 +262,8 @@ fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<Eviden
     let krr_test_mean =
         crate::report::stats::ErrorStats::of_positions(&peer.regression.predict(&nominal, &test.joints), &test.positions, 2).mean;
     let t0 = Instant::now();
-    let settings = crate::calibrate::Settings { memory_budget, ..Default::default() };
+    let settings =
+        crate::calibrate::Settings { solver: crate::solver::SolverSettings { memory_budget, ..Default::default() }, ..Default::default() };
     let c = crate::calibrate::calibrate(&nominal, &train, &settings)?;
     let cbd_seconds = t0.elapsed().as_secs_f64();
     let predicted = crate::predict::evaluate_blob(&c.fit.blob, &test.joints)?;
@@ -328,7 +329,7 @@ fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench> {
 /// representation and scheme) timed as [`eval_one`] does.
 fn eval_demo() -> Result<EvalBench> {
     let train = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis: 16 }, 2));
-    let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
+    let settings = crate::calibrate::Settings::default();
     let c = crate::calibrate::calibrate(&rr::nominal(), &train, &settings)?;
     let mut e = eval_one(256, &c.fit.blob)?;
     let i = c.options.integrator;

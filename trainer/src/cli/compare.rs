@@ -90,7 +90,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     }
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.
-    settings.verbose = false;
+    settings.solver.verbose = false;
     // Each row deforms the model it is handed: `cbd` the nominal, `dh+cbd` the DH-calibrated chain.
     settings.geometry = crate::calibrate::Geometry::Nominal;
     let inputs = read_compare_files(&args.model, &args.train, &args.test)?;
@@ -121,7 +121,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         train,
         "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
     )?;
-    settings.threads = Some(threads);
+    settings.solver.threads = threads;
     let context = PeerContext { settings: settings.clone(), search: Default::default() };
     let mut comparison = crate::workers::on_workers(threads, || {
         let fitters = fitters(PEERS, &context);
@@ -182,8 +182,7 @@ mod tests {
         command: crate::evaluation::commanded::Commander,
         count: usize,
     ) -> CommandedAccuracy {
-        let context =
-            PeerContext { settings: crate::calibrate::Settings { verbose: false, ..Default::default() }, search: Default::default() };
+        let context = PeerContext { settings: crate::calibrate::Settings::default(), search: Default::default() };
         let fitters = fitters(PEERS, &context);
         let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
         fit_and_command(arm, nominal, train, &peers, command, count, 7).unwrap()

@@ -376,7 +376,7 @@ mod tests {
     fn commands_reach_reachable_targets_of_a_trained_model() {
         let real = crate::simulate::rr::RealRr::default();
         let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 12 }, 2));
-        let settings = crate::calibrate::Settings { verbose: false, ..Default::default() };
+        let settings = crate::calibrate::Settings::default();
         let blob = crate::calibrate::calibrate(&crate::simulate::rr::nominal(), &train, &settings).unwrap().fit.blob;
         let joints = crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 50, seed: 9 }, 2);
         let targets: Vec<Vec<f64>> = joints.chunks_exact(2).map(|q| crate::predict::evaluate_blob(&blob, q).unwrap()).collect();

@@ -73,8 +73,8 @@ fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, ava
     use crate::expansion::Representation;
     let flag = format!("--grid {}", args.grid);
     let rows = args.grid.checked_mul(args.grid).ok_or_else(|| MemoryError("too many rows".into())).context(&flag)?;
-    let kernel = settings.representation == Representation::Kernel
-        || (settings.source == HyperparameterSource::PaperRr && settings.representation == Representation::Auto);
+    let kernel = settings.solver.representation == Representation::Kernel
+        || (settings.source == HyperparameterSource::PaperRr && settings.solver.representation == Representation::Auto);
     let threads = match kernel {
         true => crate::cli::memory::check_fit(rows, 2, available, "lower --grid").context(&flag)?,
         false => crate::cli::memory::check_workers(available).context(&flag)?,
@@ -129,10 +129,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // before anything is allocated: the fit of every grid row as `cbd fit` checks it, kernel ridge's
     // N² matrices, the test points at their bytes each.
     let threads = check_demo_memory(&args, &settings, crate::cli::memory::available_bytes())?;
-    settings.memory_budget = crate::cli::memory::kernel_form_budget(threads);
+    settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads);
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
-    settings.threads = Some(threads);
+    settings.solver.threads = threads;
     let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings))?;
     crate::cli::args::print_calibration(&calibration, args.solver.quiet);
     let (opts, fit) = (&calibration.options, &calibration.fit);

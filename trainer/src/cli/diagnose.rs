@@ -101,8 +101,8 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     options.selection.folds = args.folds;
     options.selection.margin = args.margin;
     let mut settings = args.solver.settings()?;
-    settings.verbose = false;
-    settings.threads = Some(threads);
+    settings.solver.verbose = false;
+    settings.solver.threads = threads;
     let d = crate::workers::on_workers(threads, || {
         let fitter = crate::cli::args::cbd_fitter(&settings);
         let cbd: Option<crate::evaluation::correction::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };

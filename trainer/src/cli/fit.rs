@@ -121,14 +121,14 @@ pub fn fit_measurements(
     // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
     // the solver checks only if it falls back to the kernel form (against what the workers leave).
     // The workers' own memory (faer's multiply workspace, stacks) is checked either way.
-    let threads = if settings.representation == crate::expansion::Representation::Kernel {
+    let threads = if settings.solver.representation == crate::expansion::Representation::Kernel {
         crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?
     } else {
         crate::cli::memory::check_workers_of(&args.data)?
     };
-    settings.memory_budget = crate::cli::memory::kernel_form_budget(threads);
+    settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads);
     settings.geometry = if args.dh_first { crate::calibrate::Geometry::Calibrated } else { args.geometry };
-    settings.threads = Some(threads);
+    settings.solver.threads = threads;
     let calibration =
         crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &settings)).context(args.data.display())?;
     print_calibration(&calibration, args.solver.quiet);

@@ -197,7 +197,7 @@ mod tests {
         let train = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Grid { per_axis: 8 }, 2));
         let test = real.measure(&crate::simulate::configurations(crate::simulate::Sampling::Uniform { count: 40, seed: 9 }, 2));
         let nominal = crate::simulate::rr::nominal();
-        let context = PeerContext { settings: Settings { verbose: false, ..Default::default() }, search: Default::default() };
+        let context = PeerContext { settings: Settings::default(), search: Default::default() };
         let fitters = fitters(WITH_OFFSET, &context);
         let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
 

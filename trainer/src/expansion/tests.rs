@@ -64,13 +64,23 @@ fn the_posterior_mean_is_the_kernel_forms_without_the_cancellation() {
     let mut data = real.measure(&joints);
     crate::simulate::add_noise(&mut data.positions, 1e-4, 3);
     let nominal = crate::simulate::rr::nominal();
-    let settings = crate::calibrate::Settings { verbose: false, representation: Representation::Kernel, ..Default::default() };
+    let settings = crate::calibrate::Settings {
+        solver: crate::solver::SolverSettings { representation: Representation::Kernel, ..Default::default() },
+        ..Default::default()
+    };
     let kernel_form = crate::calibrate::calibrate(&nominal, &data, &settings).unwrap();
     let opts = &kernel_form.options;
     assert_eq!(opts.integrator, Integrator { method: IntegratorMethod::Euler, steps: 1 });
     let norm = &opts.normalisation;
-    let cp =
-        ControlPoints::new(&nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
+    let cp = ControlPoints::new(
+        &nominal,
+        norm,
+        data.joints.clone(),
+        opts.joint_kernel.clone(),
+        opts.task_kernel,
+        opts.solver.law,
+        opts.integrator,
+    );
     let target: Vec<f64> = data.positions.chunks_exact(2).flat_map(|y| (0..2).map(move |c| norm.position_to_internal(c, y[c]))).collect();
     let e = fit_linear(&cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, &target).unwrap();
     assert!(e.len() < 512, "{} weights for 512 momenta", e.len());

@@ -49,7 +49,7 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
 /// its evidence — for the calibrated geometry on what the DH fit leaves, read as measurements of the
 /// nominal, y − (k_dh(q) − k0(q)), the residual the posterior's geometric basis starts from.
 pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> crate::Result<(CbdHyperparameters, GeometryChoice)> {
-    let settings = Settings { geometry: Geometry::Auto, verbose: false, ..Settings::default() };
+    let settings = Settings { geometry: Geometry::Auto, ..Settings::default() };
     let norm = crate::evidence::normalisation_of(data);
     let (hypothesis, choice) = crate::calibrate::geometry::choose_geometry(nominal, data, &norm, &settings)?;
     Ok((hypothesis.hyperparameters, choice))

@@ -10,4 +10,6 @@ pub mod regulariser;
 pub mod step;
 pub mod subspace;
 
-pub use fit::{fit_cbd, CbdFit, CbdOptions, FitError, FitReport, FlowHyperparameters, IterationLog, SolverMethod, DENSE_MAX_UNKNOWNS};
+pub use fit::{
+    fit_cbd, CbdFit, CbdOptions, FitError, FitReport, FlowHyperparameters, IterationLog, SolverMethod, SolverSettings, DENSE_MAX_UNKNOWNS,
+};

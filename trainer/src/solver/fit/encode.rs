@@ -24,7 +24,7 @@ pub(super) fn encode_checked(
         joint_kernel: opts.joint_kernel.clone(),
         task_kernel: opts.task_kernel,
         integrator: opts.integrator,
-        momentum_law: opts.law,
+        momentum_law: opts.solver.law,
         sigma: opts.sigma,
         n_points: data.len() as u32,
         points: F64Slice::from_le_bytes(&points),

@@ -30,10 +30,10 @@ pub(super) fn fit(
     start: Instant,
 ) -> Result<Result<CbdFit, Declined>, FitError> {
     let m = cp.dims.m;
-    if opts.representation == Representation::Kernel {
+    if opts.solver.representation == Representation::Kernel {
         return Ok(Err(Declined::KernelRequested));
     }
-    if opts.law.joint_field_sign() > 0.0 {
+    if opts.solver.law.joint_field_sign() > 0.0 {
         return Ok(Err(Declined::NotHamiltonian));
     }
     // The linear model's expansion first: the flow starts from it, and `auto` decides on its length
@@ -44,7 +44,7 @@ pub(super) fn fit(
         Err(why) => return Ok(Err(why)),
     };
     let (weights, momenta_len) = (basis.weights(cp.dims.n, m), cp.len() * m);
-    let longer = opts.representation == Representation::Auto && weights > momenta_len;
+    let longer = opts.solver.representation == Representation::Auto && weights > momenta_len;
     let dense = if longer && momenta_len <= DENSE_MAX_UNKNOWNS { Some(dense_momenta(cp, opts, target)?) } else { None };
     // A cancellation not measured (NaN, large N) is not known to be large.
     if let Some((_, cancellation)) = dense.as_ref().filter(|(_, c)| !(*c > CANCELLATION_LIMIT)) {
@@ -70,9 +70,9 @@ pub(super) fn fit(
         target,
         linear,
         opts.integrator,
-        opts.max_iterations,
-        opts.relative_tolerance,
-        opts.prediction_tolerance,
+        opts.solver.max_iterations,
+        opts.solver.relative_tolerance,
+        opts.solver.prediction_tolerance,
     ) {
         Ok(r) => r,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),
@@ -117,7 +117,7 @@ pub(super) fn fit(
         expansion: Some(ExpansionReport::of(&e, f64::NAN)),
         expansion_declined: None,
     };
-    if opts.verbose {
+    if opts.solver.verbose {
         errln!(
             "expansion: {} weights over {} stages ({} joint, {} task functions, tolerance {:.0e}), {iterations} iterations, training RMS {:.3e}",
             e.len(),
@@ -163,7 +163,7 @@ pub(super) fn fit_linear_scheme(
     target: &[f64],
     start: Instant,
 ) -> Result<Result<CbdFit, Declined>, FitError> {
-    if opts.representation == Representation::Kernel {
+    if opts.solver.representation == Representation::Kernel {
         return Ok(Err(Declined::KernelRequested));
     }
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
@@ -201,7 +201,7 @@ pub(super) fn fit_linear_scheme(
         expansion: Some(ExpansionReport::of(&linear, f64::NAN)),
         expansion_declined: None,
     };
-    if opts.verbose {
+    if opts.solver.verbose {
         errln!(
             "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), closed form in weight space, cancellation {:.1e}",
             linear.len(),

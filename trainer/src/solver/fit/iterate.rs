@@ -33,8 +33,8 @@ pub(super) struct Recorder {
 impl Recorder {
     pub fn new(opts: &CbdOptions, start: Instant) -> Self {
         // A bar on a terminal; plain lines when verbose output goes to a pipe or file.
-        let progress = FitProgress::new(opts.max_iterations, !opts.verbose, "");
-        let print_lines = opts.verbose && !progress.is_visible();
+        let progress = FitProgress::new(opts.solver.max_iterations, !opts.solver.verbose, "");
+        let print_lines = opts.solver.verbose && !progress.is_visible();
         Recorder { log: Vec::new(), progress, print_lines, start, normalisation: opts.normalisation.clone() }
     }
 
@@ -77,7 +77,7 @@ pub(super) fn minimise(problem: &Problem, opts: &CbdOptions, linear_scheme: bool
     // (the GP posterior mean) is P0 = (K_lin + σ² I)⁻¹ (y − k0) in closed form. Exact for Euler × 1;
     // the start of every other scheme. Steps on the stacked least squares reach it only slowly when
     // the evidence picks nearly singular kernels (σ² far below the proximal term's scale).
-    if opts.law.joint_field_sign() < 0.0 {
+    if opts.solver.law.joint_field_sign() < 0.0 {
         let r: Vec<f64> = current.residual.iter().map(|v| -v * problem.sigma).collect();
         let p_lin = Timers::time(&problem.timers.solve, || problem.space.linearised_solution(problem.sigma, &r));
         let better = p_lin.and_then(|p_lin| problem.evaluate(&p_lin).map(|e| (p_lin, e)));
@@ -103,7 +103,7 @@ pub(super) fn minimise(problem: &Problem, opts: &CbdOptions, linear_scheme: bool
         acceptance: lm::Acceptance::Decrease,
         counting: lm::Counting::Steps,
         first_iteration,
-        max_iterations: opts.max_iterations,
+        max_iterations: opts.solver.max_iterations,
     };
     let mut steps = FlowSteps {
         problem,
@@ -212,17 +212,17 @@ impl lm::Problem for FlowSteps<'_, '_, '_> {
         let kind = if self.exact { "exact J" } else { "chord" };
         let detail = format!("  damping {:.1e}  {kind}  {:.1} s", step.damping, self.recorder.start.elapsed().as_secs_f64());
         self.recorder.record(problem, iteration, e, step.damping, &detail);
-        let small = relative < opts.relative_tolerance;
+        let small = relative < opts.solver.relative_tolerance;
         if small && self.exact {
             // Converged: a step with the exact Jacobian gains (almost) nothing.
-            return Some(format!("relative energy decrease below {:.0e}", opts.relative_tolerance));
+            return Some(format!("relative energy decrease below {:.0e}", opts.solver.relative_tolerance));
         }
-        if self.exact && moved < opts.prediction_tolerance {
+        if self.exact && moved < opts.solver.prediction_tolerance {
             // Settled: what is left of the energy's decrease is the regulariser in directions the
             // data do not resolve to working precision, which the (necessary) damping lets converge
             // only linearly. (An absolute length, not a multiple of σ: σ and the kernel amplitudes
             // can be rescaled together without changing the model.)
-            return Some(format!("no training prediction moved by {:.0e} (normalised units)", opts.prediction_tolerance));
+            return Some(format!("no training prediction moved by {:.0e} (normalised units)", opts.solver.prediction_tolerance));
         }
         // Keep the factorisation for a chord step while the decrements shrink fast (at least
         // CHORD_CONTRACTION per step); otherwise form the exact Jacobian here (unless no iteration
@@ -231,7 +231,7 @@ impl lm::Problem for FlowSteps<'_, '_, '_> {
         self.previous_decrease = decrease;
         if !self.linear_scheme && !chord {
             self.factor = None;
-            if iteration < opts.max_iterations {
+            if iteration < opts.solver.max_iterations {
                 self.jac = problem.exact_jacobian(&e.flow);
                 self.jacobian_is_current = true;
             }

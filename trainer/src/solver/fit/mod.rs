@@ -27,7 +27,9 @@ use search_space::SearchSpace;
 
 use std::time::Instant;
 
-/// Everything that defines a CbD fit besides the data.
+/// Everything that defines a CbD fit besides the data: the model (kernels, σ, scheme,
+/// normalisation) and how the solver runs ([`SolverSettings`], the pipeline's `Settings` hands its
+/// own over whole: `calibrate::options_for`).
 #[derive(Debug, Clone)]
 pub struct CbdOptions {
     pub joint_kernel: JointKernel,
@@ -35,34 +37,63 @@ pub struct CbdOptions {
     /// Noise level σ in internal units.
     pub sigma: f64,
     pub integrator: Integrator,
-    pub law: MomentumLaw,
     pub normalisation: Normalisation,
+    pub solver: SolverSettings,
+    /// The noise σ per coordinate in the data's unit the blob records (format 7; the pipeline sets
+    /// it, `calibrate::options_for`); `None`: not recorded.
+    pub noise_sigma: Option<f64>,
+}
+
+/// How a fit runs, besides its model: one struct that the pipeline's `Settings` (what a user sets,
+/// `cbd`'s solver arguments) and [`CbdOptions`] both hold, so that no field is copied by hand.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverSettings {
+    /// The momentum law; the Hamiltonian by default (v = −K_V Jᵀ P: the linearisation is the GP
+    /// with covariance K_lin, see `MomentumLaw`).
+    pub law: MomentumLaw,
     pub max_iterations: usize,
     /// Stop when an accepted step lowers the energy by less than this fraction.
     pub relative_tolerance: f64,
     /// Or when an exact Gauss–Newton step moves no training prediction by more than this, in
     /// internal units (normalised: the workspace's scale is about 1).
     pub prediction_tolerance: f64,
-    /// Threads for the tangent's column chunks and the factorisations (results do not depend on it).
+    /// Threads for the tangent's column chunks and the factorisations (results do not depend on
+    /// it); up to two by default.
     pub threads: usize,
     /// Which momenta the solver searches over (see [`SolverMethod`]).
     pub method: SolverMethod,
     /// Print one line per iteration to stderr.
     pub verbose: bool,
-    /// Whether the blob also carries the fields in the kernels' own expansion (docs/DESIGN.md §11).
+    /// Whether the blob also carries the fields in the kernels' own expansion (docs/DESIGN.md §11);
+    /// `Auto` by default ([`CbdOptions::new`]: the momenta).
     pub representation: crate::expansion::Representation,
-    /// Bytes the kernel form's (N·m)² matrices may take ([`kernel_form_bytes`]); `None`: unchecked.
+    /// Bytes the kernel form's (N·m)² matrices may take ([`kernel_form_bytes`]); a fit that would
+    /// need more is refused (`FitError::TooLarge`) before allocating. `None`: unchecked.
     pub memory_budget: Option<f64>,
-    /// The noise σ per coordinate in the data's unit the blob records (format 7; the pipeline sets
-    /// it, `calibrate::options_for`); `None`: not recorded.
-    pub noise_sigma: Option<f64>,
+}
+
+impl Default for SolverSettings {
+    /// The Hamiltonian law, Levenberg–Marquardt's stopping rules, up to 30 iterations on up to two
+    /// threads, the method chosen by size, the representation chosen by cost, no memory budget.
+    fn default() -> Self {
+        SolverSettings {
+            law: MomentumLaw::Hamiltonian,
+            max_iterations: 30,
+            relative_tolerance: 1e-5,
+            prediction_tolerance: 1e-10,
+            threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
+            method: SolverMethod::Auto,
+            verbose: false,
+            representation: crate::expansion::Representation::Auto,
+            memory_budget: None,
+        }
+    }
 }
 
 impl CbdOptions {
     /// A fit with the given kernels and noise (internal units), scheme and normalisation, and the
-    /// solver's defaults: the Hamiltonian law, Levenberg–Marquardt's stopping rules, up to two
-    /// threads, the method chosen by size, the fields as momenta (the pipeline,
-    /// `calibrate::options_for`, sets the user's representation), no memory budget.
+    /// solver's defaults ([`SolverSettings::default`]) but the fields as momenta (the pipeline,
+    /// `calibrate::options_for`, sets the user's representation).
     pub fn new(hyperparameters: FlowHyperparameters, integrator: Integrator, normalisation: Normalisation) -> Self {
         let FlowHyperparameters { joint_kernel, task_kernel, sigma } = hyperparameters;
         CbdOptions {
@@ -70,17 +101,8 @@ impl CbdOptions {
             task_kernel,
             sigma,
             integrator,
-            // v = −K_V Jᵀ P: the linearisation is the GP with covariance K_lin (see MomentumLaw).
-            law: MomentumLaw::Hamiltonian,
             normalisation,
-            max_iterations: 30,
-            relative_tolerance: 1e-5,
-            prediction_tolerance: 1e-10,
-            threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1).min(2),
-            method: SolverMethod::Auto,
-            verbose: false,
-            representation: crate::expansion::Representation::Kernel,
-            memory_budget: None,
+            solver: SolverSettings { representation: crate::expansion::Representation::Kernel, ..SolverSettings::default() },
             noise_sigma: None,
         }
     }
@@ -295,9 +317,9 @@ impl From<FitError> for crate::Error {
     }
 }
 
-/// Fits the initial momenta to `data` (user units) on top of `nominal`, on `opts.threads` threads.
+/// Fits the initial momenta to `data` (user units) on top of `nominal`, on `opts.solver.threads` threads.
 pub fn fit_cbd(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
-    crate::flow::with_threads(opts.threads, || fit_in_pool(nominal, data, opts))
+    crate::flow::with_threads(opts.solver.threads, || fit_in_pool(nominal, data, opts))
 }
 
 fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> Result<CbdFit, FitError> {
@@ -306,13 +328,21 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let m = nominal.task_dim();
     let norm = &opts.normalisation;
     let target: Vec<f64> = data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c]))).collect();
-    let cp = ControlPoints::new(nominal, norm, data.joints.clone(), opts.joint_kernel.clone(), opts.task_kernel, opts.law, opts.integrator);
+    let cp = ControlPoints::new(
+        nominal,
+        norm,
+        data.joints.clone(),
+        opts.joint_kernel.clone(),
+        opts.task_kernel,
+        opts.solver.law,
+        opts.integrator,
+    );
     // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
     // Jacobian stays exact everywhere and no tangent is ever needed.
     let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
     // One Euler step of a Hamiltonian law is solved in closed form, (K_lin + σ² I)⁻¹ r: one Cholesky
     // of all N·m momenta, exact, where an eigenspace would drop the directions between σ² and its cutoff.
-    let closed_form = linear_scheme && opts.law.joint_field_sign() < 0.0 && opts.method == SolverMethod::Auto;
+    let closed_form = linear_scheme && opts.solver.law.joint_field_sign() < 0.0 && opts.solver.method == SolverMethod::Auto;
     // Multi-step schemes in weight space when the expansion serves (flow_expansion), else the
     // kernel form's iterations below.
     let mut declined_flow = None;
@@ -328,15 +358,15 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         }
     }
     let unknowns = cp.len() * m;
-    if let Some(budget) = opts.memory_budget.filter(|b| kernel_form_bytes(unknowns) > *b) {
+    if let Some(budget) = opts.solver.memory_budget.filter(|b| kernel_form_bytes(unknowns) > *b) {
         let expansion_declined = declined_flow.clone().unwrap_or_else(|| "not tried for this scheme and size".into());
         return Err(FitError::TooLarge { unknowns, need: kernel_form_bytes(unknowns), budget, expansion_declined });
     }
     let t0 = Instant::now();
-    let space = SearchSpace::new(opts.method, regulariser_matrix(&cp), closed_form);
+    let space = SearchSpace::new(opts.solver.method, regulariser_matrix(&cp), closed_form);
     let seconds_basis = t0.elapsed().as_secs_f64();
     let (method, dim) = (space.method(), space.dim());
-    if opts.verbose {
+    if opts.solver.verbose {
         errln!("solver: {method}, {dim} unknowns for {} momenta ({seconds_basis:.2} s to choose)", cp.len() * m);
     }
     let problem = Problem::new(&cp, target.clone(), opts.sigma, space);
@@ -361,7 +391,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
         }
         None => (kernel_predictions, kernel_cancellation, None),
     };
-    if opts.verbose {
+    if opts.solver.verbose {
         match &expansion_report {
             Some(e) => errln!(
                 "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), cancellation {:.1e} (momenta {:.1e})",
@@ -415,10 +445,10 @@ fn choose_expansion(
     kernel_cancellation: f64,
 ) -> Result<(Option<crate::expansion::ExpansionFit>, Option<String>), FitError> {
     use crate::expansion::{fit_linear_in, linear_basis, Declined, Representation, CANCELLATION_LIMIT};
-    if opts.representation == Representation::Kernel {
+    if opts.solver.representation == Representation::Kernel {
         return Ok((None, Some("kernel form requested".into())));
     }
-    if !linear_scheme || opts.law.joint_field_sign() > 0.0 {
+    if !linear_scheme || opts.solver.law.joint_field_sign() > 0.0 {
         return Ok((None, Some("only the Hamiltonian laws have the Gaussian-process prior the expansion uses".into())));
     }
     let momenta = cp.len() * cp.dims.m;
@@ -429,7 +459,7 @@ fn choose_expansion(
     // Its length decides before the solve (a QR of N m × W): a longer expansion is kept only when
     // the momenta cancel or it was asked for.
     let weights = basis.weights(cp.dims.n, cp.dims.m);
-    if opts.representation == Representation::Auto && weights > momenta && !(kernel_cancellation > CANCELLATION_LIMIT) {
+    if opts.solver.representation == Representation::Auto && weights > momenta && !(kernel_cancellation > CANCELLATION_LIMIT) {
         return Ok((
             None,
             Some(format!(

@@ -8,7 +8,15 @@ use faer::Mat;
 fn rr_points(per_axis: usize) -> (ControlPoints, Measurements) {
     let data = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis }, 2));
     let o = CbdOptions::paper_rr();
-    let cp = ControlPoints::new(&rr::nominal(), &o.normalisation, data.joints.clone(), o.joint_kernel, o.task_kernel, o.law, o.integrator);
+    let cp = ControlPoints::new(
+        &rr::nominal(),
+        &o.normalisation,
+        data.joints.clone(),
+        o.joint_kernel,
+        o.task_kernel,
+        o.solver.law,
+        o.integrator,
+    );
     (cp, data)
 }
 
@@ -33,10 +41,10 @@ fn eigenspace_steps_match_dense_steps_when_nothing_is_cut() {
     for iterations in [1, 2] {
         let mut opts = CbdOptions::paper_rr();
         opts.sigma = 1e-3;
-        opts.max_iterations = iterations;
-        opts.method = SolverMethod::Dense;
+        opts.solver.max_iterations = iterations;
+        opts.solver.method = SolverMethod::Dense;
         let dense = fit_cbd(&rr::nominal(), &data, &opts).unwrap();
-        opts.method = SolverMethod::Eigenspace;
+        opts.solver.method = SolverMethod::Eigenspace;
         let sub = fit_cbd(&rr::nominal(), &data, &opts).unwrap();
         assert_eq!((dense.report.method.as_str(), sub.report.method.as_str()), ("dense", "eigenspace"));
         let scale = dense.momenta.iter().fold(0.0f64, |s, v| s.max(v.abs()));
