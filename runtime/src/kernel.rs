@@ -1,25 +1,30 @@
-//! The two reproducing kernels: K_V on joint space, K_W on task space (docs/DESIGN.md §1).
+//! The two reproducing kernels: K_V on joint space, K_W on task space (docs/DESIGN.md §1). K_V's
+//! per-axis forms are [`axis`]'s; the functions here are written once over any [`AxisKernel`].
+
+pub mod axis;
+pub(crate) mod hermite;
+
+pub use axis::AxisKernel;
 
 use crate::real::{exp, Real};
-use cbd_protocol::{JointKernel, JointKernelAxis, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
+use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
 
 /// Values per joint of a configuration's kernel features ([`joint_features`]).
 pub const FEATURES_PER_JOINT: usize = 2;
 
-/// The per-joint quantities K_V needs from one configuration: (cos x_d, sin x_d) on periodic
-/// axes, (x_d, 0) on Gaussian axes. Computed once per configuration (for the control points at
-/// load time), so that a kernel value costs one `exp` and no other transcendental.
+/// The per-joint quantities K_V needs from one configuration ([`AxisKernel::features`]: (cos x_d,
+/// sin x_d) on periodic axes, (x_d, 0) on Gaussian axes). Computed once per configuration (for the
+/// control points at load time), so that a kernel value costs one `exp` and no other transcendental.
 #[inline]
 pub fn joint_features(kernel: &JointKernel, x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
-    for (o, (axis, xd)) in out.iter_mut().zip(kernel.axes.iter().zip(x.iter())) {
-        *o = match axis {
-            JointKernelAxis::Periodic { .. } => {
-                // In f64, rounded once to the evaluation scalar.
-                let (s, c) = libm::sincos(*xd);
-                [c as Real, s as Real]
-            }
-            JointKernelAxis::Gaussian { .. } => [*xd as Real, 0.0],
-        };
+    axes_features(&kernel.axes, x, out)
+}
+
+/// [`joint_features`] of any axes.
+#[inline]
+pub fn axes_features<A: AxisKernel>(axes: &[A], x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
+    for (o, (axis, xd)) in out.iter_mut().zip(axes.iter().zip(x.iter())) {
+        *o = axis.features(*xd);
     }
 }
 
@@ -56,8 +61,7 @@ pub fn read_features(features: &[Real], n: usize, j: usize) -> [[Real; FEATURES_
 
 /// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) from both configurations' [`joint_features`], with the
 /// per-axis first and second derivatives f'_d, f''_d (with respect to x) in `first`, `second`.
-/// Periodic: f = b (cos Δ − 1), cos Δ = cos x cos x' + sin x sin x', sin Δ = sin x cos x' − cos x sin x'.
-/// Gaussian: f = −Δ²/(2ℓ²).
+/// f_d and its derivatives are the axis form's ([`AxisKernel::terms`]).
 #[inline]
 pub fn joint_kernel_parts(
     kernel: &JointKernel,
@@ -79,15 +83,29 @@ pub fn joint_kernel_parts_n(
     first: &mut [Real; MAX_JOINTS],
     second: &mut [Real; MAX_JOINTS],
 ) -> Real {
+    axes_kernel_parts_n(kernel.gamma, &kernel.axes, n, fx, fxp, first, second)
+}
+
+/// [`joint_kernel_parts_n`] of amplitude `gamma` and any axes.
+#[inline(always)]
+pub fn axes_kernel_parts_n<A: AxisKernel>(
+    gamma: f64,
+    axes: &[A],
+    n: usize,
+    fx: &[[Real; FEATURES_PER_JOINT]],
+    fxp: &[[Real; FEATURES_PER_JOINT]],
+    first: &mut [Real; MAX_JOINTS],
+    second: &mut [Real; MAX_JOINTS],
+) -> Real {
     let mut exponent = 0.0;
-    let axes = first.iter_mut().zip(second.iter_mut()).zip(kernel.axes.iter().zip(fx.iter().zip(fxp.iter())));
+    let axes = first.iter_mut().zip(second.iter_mut()).zip(axes.iter().zip(fx.iter().zip(fxp.iter())));
     for ((f1, f2), (axis, (a, b))) in axes.take(n) {
-        let (f, df, ddf) = axis_terms(axis, a, b);
+        let (f, df, ddf) = axis.terms(a, b);
         exponent += f;
         *f1 = df;
         *f2 = ddf;
     }
-    kernel.gamma as Real * exp(exponent)
+    gamma as Real * exp(exponent)
 }
 
 /// Σ_d f_d(x_d − x'_d) over at most `n` axes, K_V = γ e^{that} ([`joint_kernel_parts_n`]'s exponent, the same sum).
@@ -100,28 +118,9 @@ pub fn joint_kernel_exponent_n(
 ) -> Real {
     let mut exponent = 0.0;
     for (axis, (a, b)) in kernel.axes.iter().zip(fx.iter().zip(fxp.iter())).take(n) {
-        exponent += axis_terms(axis, a, b).0;
+        exponent += axis.terms(a, b).0;
     }
     exponent
-}
-
-/// f_d, f'_d and f''_d of one axis from the two configurations' features (the one place of the formula).
-#[inline(always)]
-fn axis_terms(axis: &JointKernelAxis, a: &[Real; FEATURES_PER_JOINT], b: &[Real; FEATURES_PER_JOINT]) -> (Real, Real, Real) {
-    match *axis {
-        JointKernelAxis::Periodic { b: beta } => {
-            let beta = beta as Real;
-            let cos_delta = a[0] * b[0] + a[1] * b[1];
-            let sin_delta = a[1] * b[0] - a[0] * b[1];
-            (beta * (cos_delta - 1.0), -beta * sin_delta, -beta * cos_delta)
-        }
-        JointKernelAxis::Gaussian { width } => {
-            let width = width as Real;
-            let s = 1.0 / (width * width);
-            let delta = a[0] - b[0];
-            (-0.5 * delta * delta * s, -delta * s, -s)
-        }
-    }
 }
 
 /// K_V(x, x') and its gradient with respect to x (`grad_d = K f'_d`) from [`joint_features`].
@@ -141,7 +140,7 @@ pub fn joint_kernel_from_features(
 }
 
 /// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) and its gradient with respect to x.
-/// f_d = b (cos Δ − 1) on periodic axes, −Δ²/(2ℓ²) on Gaussian axes. The same arithmetic as
+/// f_d the axis form's ([`AxisKernel::terms`]). The same arithmetic as
 /// [`joint_kernel_from_features`] (which the flows use), so every caller gets identical values.
 #[inline]
 pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [Real; MAX_JOINTS]) -> Real {
@@ -172,6 +171,7 @@ pub fn task_kernel(kernel: &TaskKernel, diff: &[Real; MAX_TASK_DIM], m: usize, g
 #[cfg(test)]
 mod tests {
     use super::*;
+    use cbd_protocol::JointKernelAxis;
     use heapless::Vec as HVec;
 
     fn mixed_kernel() -> JointKernel {
