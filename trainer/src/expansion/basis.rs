@@ -2,7 +2,7 @@
 //! with the largest shares of its total weight, until what is dropped is at most the tolerance.
 
 use super::weights::{gaussian_weights, periodic_weights};
-use cbd_protocol::{JointKernel, JointKernelAxis, MAX_EXPANSION_ORDER};
+use cbd_protocol::MAX_EXPANSION_ORDER;
 
 /// Modes enumerated at most while searching for the truncation (a guard on time and memory: a
 /// kernel that needs more is kept in the kernel form).
@@ -141,19 +141,6 @@ fn expand_modes(axes: &[AxisSeries], modes: &[(f64, Vec<usize>)], dropped: f64) 
         }
     }
     Basis { codes, variances, dropped }
-}
-
-/// The joint kernel's axes as series: periodic axes exactly, Gaussian axes on |x_d| ≤ `ranges[d]`.
-pub fn joint_axes(kernel: &JointKernel, ranges: &[f64]) -> Vec<AxisSeries> {
-    kernel
-        .axes
-        .iter()
-        .zip(ranges)
-        .map(|(axis, &range)| match *axis {
-            JointKernelAxis::Periodic { b } => AxisSeries::periodic(b),
-            JointKernelAxis::Gaussian { width } => AxisSeries::gaussian(range / width),
-        })
-        .collect()
 }
 
 #[cfg(test)]
