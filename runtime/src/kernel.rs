@@ -7,7 +7,30 @@ pub(crate) mod hermite;
 pub use axis::AxisKernel;
 
 use crate::real::{exp, Real};
-use cbd_protocol::{JointKernel, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
+use cbd_protocol::{JointKernel, JointKernelAxis, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
+
+/// A joint kernel K_V = γ exp(Σ_d f_d): its amplitude and its axes. The blob's [`JointKernel`]; the
+/// kernel functions here and the flow (`crate::flow::FlowParams`) are written once over it.
+pub trait JointAxes {
+    /// The axes' form type.
+    type Axis: AxisKernel;
+    /// γ.
+    fn gamma(&self) -> f64;
+    /// f_d, one per joint.
+    fn axes(&self) -> &[Self::Axis];
+}
+
+impl JointAxes for JointKernel {
+    type Axis = JointKernelAxis;
+    #[inline(always)]
+    fn gamma(&self) -> f64 {
+        self.gamma
+    }
+    #[inline(always)]
+    fn axes(&self) -> &[JointKernelAxis] {
+        &self.axes
+    }
+}
 
 /// Values per joint of a configuration's kernel features ([`joint_features`]).
 pub const FEATURES_PER_JOINT: usize = 2;
@@ -16,8 +39,8 @@ pub const FEATURES_PER_JOINT: usize = 2;
 /// sin x_d) on periodic axes, (x_d, 0) on Gaussian axes). Computed once per configuration (for the
 /// control points at load time), so that a kernel value costs one `exp` and no other transcendental.
 #[inline]
-pub fn joint_features(kernel: &JointKernel, x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
-    axes_features(&kernel.axes, x, out)
+pub fn joint_features<K: JointAxes + ?Sized>(kernel: &K, x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
+    axes_features(kernel.axes(), x, out)
 }
 
 /// [`joint_features`] of any axes.
@@ -34,7 +57,7 @@ pub const fn features_len(n_points: usize, n_joints: usize) -> usize {
 }
 
 /// The [`joint_features`] of every configuration in `points` (N × n), N × n × 2 values.
-pub fn write_features(kernel: &JointKernel, n: usize, points: &[f64], features: &mut [Real]) {
+pub fn write_features<K: JointAxes + ?Sized>(kernel: &K, n: usize, points: &[f64], features: &mut [Real]) {
     let mut f = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     for (x, out) in points.chunks_exact(n.max(1)).zip(features.chunks_exact_mut((n * FEATURES_PER_JOINT).max(1))) {
         joint_features(kernel, x, &mut f);
@@ -63,8 +86,8 @@ pub fn read_features(features: &[Real], n: usize, j: usize) -> [[Real; FEATURES_
 /// per-axis first and second derivatives f'_d, f''_d (with respect to x) in `first`, `second`.
 /// f_d and its derivatives are the axis form's ([`AxisKernel::terms`]).
 #[inline]
-pub fn joint_kernel_parts(
-    kernel: &JointKernel,
+pub fn joint_kernel_parts<K: JointAxes + ?Sized>(
+    kernel: &K,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
     first: &mut [Real; MAX_JOINTS],
@@ -75,15 +98,15 @@ pub fn joint_kernel_parts(
 
 /// [`joint_kernel_parts`] (bit-identical) over at most `n` axes: with `n` a constant the loop unrolls.
 #[inline(always)]
-pub fn joint_kernel_parts_n(
-    kernel: &JointKernel,
+pub fn joint_kernel_parts_n<K: JointAxes + ?Sized>(
+    kernel: &K,
     n: usize,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
     first: &mut [Real; MAX_JOINTS],
     second: &mut [Real; MAX_JOINTS],
 ) -> Real {
-    axes_kernel_parts_n(kernel.gamma, &kernel.axes, n, fx, fxp, first, second)
+    axes_kernel_parts_n(kernel.gamma(), kernel.axes(), n, fx, fxp, first, second)
 }
 
 /// [`joint_kernel_parts_n`] of amplitude `gamma` and any axes.
@@ -110,14 +133,14 @@ pub fn axes_kernel_parts_n<A: AxisKernel>(
 
 /// Σ_d f_d(x_d − x'_d) over at most `n` axes, K_V = γ e^{that} ([`joint_kernel_parts_n`]'s exponent, the same sum).
 #[inline(always)]
-pub fn joint_kernel_exponent_n(
-    kernel: &JointKernel,
+pub fn joint_kernel_exponent_n<K: JointAxes + ?Sized>(
+    kernel: &K,
     n: usize,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
 ) -> Real {
     let mut exponent = 0.0;
-    for (axis, (a, b)) in kernel.axes.iter().zip(fx.iter().zip(fxp.iter())).take(n) {
+    for (axis, (a, b)) in kernel.axes().iter().zip(fx.iter().zip(fxp.iter())).take(n) {
         exponent += axis.terms(a, b).0;
     }
     exponent
@@ -125,15 +148,15 @@ pub fn joint_kernel_exponent_n(
 
 /// K_V(x, x') and its gradient with respect to x (`grad_d = K f'_d`) from [`joint_features`].
 #[inline]
-pub fn joint_kernel_from_features(
-    kernel: &JointKernel,
+pub fn joint_kernel_from_features<K: JointAxes + ?Sized>(
+    kernel: &K,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
     grad: &mut [Real; MAX_JOINTS],
 ) -> Real {
     let mut second = [0.0; MAX_JOINTS];
     let value = joint_kernel_parts(kernel, fx, fxp, grad, &mut second);
-    for g in grad.iter_mut().take(kernel.axes.len()) {
+    for g in grad.iter_mut().take(kernel.axes().len()) {
         *g *= value;
     }
     value
@@ -143,7 +166,7 @@ pub fn joint_kernel_from_features(
 /// f_d the axis form's ([`AxisKernel::terms`]). The same arithmetic as
 /// [`joint_kernel_from_features`] (which the flows use), so every caller gets identical values.
 #[inline]
-pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [Real; MAX_JOINTS]) -> Real {
+pub fn joint_kernel<K: JointAxes + ?Sized>(kernel: &K, x: &[f64], xp: &[f64], grad: &mut [Real; MAX_JOINTS]) -> Real {
     let mut fx = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     let mut fxp = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     joint_features(kernel, x, &mut fx);
@@ -171,7 +194,6 @@ pub fn task_kernel(kernel: &TaskKernel, diff: &[Real; MAX_TASK_DIM], m: usize, g
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cbd_protocol::JointKernelAxis;
     use heapless::Vec as HVec;
 
     fn mixed_kernel() -> JointKernel {

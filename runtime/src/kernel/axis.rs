@@ -287,4 +287,94 @@ mod tests {
             }
         }
     }
+
+    /// K_V of half-turn axes: the flow's kernel type, as the blob's `JointKernel` is.
+    struct HalfTurnKernel {
+        gamma: f64,
+        axes: [HalfTurn; 2],
+    }
+
+    impl crate::kernel::JointAxes for HalfTurnKernel {
+        type Axis = HalfTurn;
+        fn gamma(&self) -> f64 {
+            self.gamma
+        }
+        fn axes(&self) -> &[HalfTurn] {
+            &self.axes
+        }
+    }
+
+    /// The generic flow (eq. 17, 19) with the new form: its control-point rates against the
+    /// formulas written out, dk = w(k) − J v(x), dP = −Dw(k)ᵀ P − (div v)(x) P, and its integration.
+    #[test]
+    fn a_new_form_drives_the_generic_flow() {
+        use crate::flow::{
+            control_point_rates, control_point_rates_with_features, control_points::integrate_control_points, write_samples, Dims,
+            FlowParams,
+        };
+        use crate::kernel::write_features;
+        use cbd_protocol::{Integrator, IntegratorMethod, MomentumLaw, TaskKernel};
+        const COUNT: usize = 5;
+        let dims = Dims { n: 2, m: 2 };
+        let kernel = HalfTurnKernel { gamma: 1.7, axes: [HalfTurn { b: 0.7 }, HalfTurn { b: 1.3 }] };
+        let task = TaskKernel { width: 0.9 };
+        let params = FlowParams { dims, joint_kernel: &kernel, task_kernel: &task, law: MomentumLaw::WithDivergence };
+        let points: [f64; 2 * COUNT] = [0.1, -2.0, 1.5, 0.3, -0.7, 2.9, 3.0, -1.1, 0.4, -2.5];
+        // State per point: k (2), J (2 × 2, row-major), P (2).
+        let mut state = [0.0 as Real; 8 * COUNT];
+        let mut r = 0x9e37_79b9u32;
+        for v in state.iter_mut() {
+            r = r.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            *v = ((r >> 8) as f64 / 16_777_216.0 - 0.5) as Real;
+        }
+        let mut samples = [0.0 as Real; 6 * COUNT];
+        write_samples(dims, &state, &mut samples);
+        let mut rates = [0.0 as Real; 8 * COUNT];
+        control_point_rates(&params, &points, &state, &samples, 0..COUNT, &mut rates);
+        let mut features = [0.0 as Real; 4 * COUNT];
+        write_features(&kernel, 2, &points, &mut features);
+        let mut from_features = [0.0 as Real; 8 * COUNT];
+        control_point_rates_with_features(&params, &features, &state, &samples, 0..COUNT, &mut from_features);
+        assert_eq!(rates, from_features);
+        let tol = 1e3 * Real::EPSILON as f64;
+        let s = |i: usize, k: usize| state[8 * i + k] as f64;
+        for i in 0..COUNT {
+            let (mut v, mut div, mut w, mut dw) = ([0.0; 2], 0.0, [0.0; 2], [[0.0; 2]; 2]);
+            for j in 0..COUNT {
+                let u = [0, 1].map(|d| s(j, 2 + d) * s(j, 6) + s(j, 4 + d) * s(j, 7)); // Jᵀ P
+                let delta = [0, 1].map(|d| points[2 * i + d] - points[2 * j + d]);
+                let k = kernel.gamma * libm::exp((0..2).map(|d| kernel.axes[d].b * (libm::cos(2.0 * delta[d]) - 1.0)).sum::<f64>());
+                for d in 0..2 {
+                    v[d] += k * u[d];
+                    div += u[d] * k * (-2.0 * kernel.axes[d].b * libm::sin(2.0 * delta[d]));
+                }
+                let e = [s(i, 0) - s(j, 0), s(i, 1) - s(j, 1)];
+                let kw = libm::exp(-(e[0] * e[0] + e[1] * e[1]) / (2.0 * task.width * task.width));
+                for a in 0..2 {
+                    w[a] += kw * s(j, 6 + a);
+                    for c in 0..2 {
+                        dw[a][c] += s(j, 6 + a) * kw * (-e[c] / (task.width * task.width));
+                    }
+                }
+            }
+            for a in 0..2 {
+                let dk = w[a] - (s(i, 2 + 2 * a) * v[0] + s(i, 3 + 2 * a) * v[1]);
+                let dp = -(dw[0][a] * s(i, 6) + dw[1][a] * s(i, 7)) - div * s(i, 6 + a);
+                let (got_k, got_p) = (rates[8 * i + a] as f64, rates[8 * i + 6 + a] as f64);
+                assert!((got_k - dk).abs() < tol * (1.0 + dk.abs()), "point {i}: dk[{a}] {got_k} vs {dk}");
+                assert!((got_p - dp).abs() < tol * (1.0 + dp.abs()), "point {i}: dP[{a}] {got_p} vs {dp}");
+            }
+        }
+        // The control points integrate with it (Heun × 2), every stage's state finite.
+        let integrator = Integrator { method: IntegratorMethod::Heun, steps: 2 };
+        let (mut scratch, mut trajectory) = ([0.0 as Real; 8 * COUNT * 8], [0.0 as Real; 6 * COUNT * 4]);
+        let mut stages = 0;
+        integrate_control_points(&params, integrator, &points, &mut state, &mut scratch, &mut trajectory, |_, y| {
+            assert!(y.iter().all(|v| v.is_finite()));
+            stages += 1;
+        })
+        .unwrap();
+        assert_eq!(stages, 4);
+        assert!(state.iter().all(|v| v.is_finite()));
+    }
 }
