@@ -1,25 +1,53 @@
-//! The two reproducing kernels: K_V on joint space, K_W on task space (docs/DESIGN.md §1).
+//! The two reproducing kernels: K_V on joint space, K_W on task space (docs/DESIGN.md §1). K_V's
+//! per-axis forms are [`axis`]'s; the functions here are written once over any [`AxisKernel`].
+
+pub mod axis;
+pub(crate) mod hermite;
+
+pub use axis::AxisKernel;
 
 use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, JointKernelAxis, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
 
+/// A joint kernel K_V = γ exp(Σ_d f_d): its amplitude and its axes. The blob's [`JointKernel`]; the
+/// kernel functions here and the flow (`crate::flow::FlowParams`) are written once over it.
+pub trait JointAxes {
+    /// The axes' form type.
+    type Axis: AxisKernel;
+    /// γ.
+    fn gamma(&self) -> f64;
+    /// f_d, one per joint.
+    fn axes(&self) -> &[Self::Axis];
+}
+
+impl JointAxes for JointKernel {
+    type Axis = JointKernelAxis;
+    #[inline(always)]
+    fn gamma(&self) -> f64 {
+        self.gamma
+    }
+    #[inline(always)]
+    fn axes(&self) -> &[JointKernelAxis] {
+        &self.axes
+    }
+}
+
 /// Values per joint of a configuration's kernel features ([`joint_features`]).
 pub const FEATURES_PER_JOINT: usize = 2;
 
-/// The per-joint quantities K_V needs from one configuration: (cos x_d, sin x_d) on periodic
-/// axes, (x_d, 0) on Gaussian axes. Computed once per configuration (for the control points at
-/// load time), so that a kernel value costs one `exp` and no other transcendental.
+/// The per-joint quantities K_V needs from one configuration ([`AxisKernel::features`]: (cos x_d,
+/// sin x_d) on periodic axes, (x_d, 0) on Gaussian axes). Computed once per configuration (for the
+/// control points at load time), so that a kernel value costs one `exp` and no other transcendental.
 #[inline]
-pub fn joint_features(kernel: &JointKernel, x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
-    for (o, (axis, xd)) in out.iter_mut().zip(kernel.axes.iter().zip(x.iter())) {
-        *o = match axis {
-            JointKernelAxis::Periodic { .. } => {
-                // In f64, rounded once to the evaluation scalar.
-                let (s, c) = libm::sincos(*xd);
-                [c as Real, s as Real]
-            }
-            JointKernelAxis::Gaussian { .. } => [*xd as Real, 0.0],
-        };
+pub fn joint_features<K: JointAxes + ?Sized>(kernel: &K, x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
+    axes_features(kernel.axes(), x, out)
+}
+
+/// [`joint_features`] of any axes.
+#[inline]
+pub fn axes_features<A: AxisKernel>(axes: &[A], x: &[f64], out: &mut [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]) {
+    for (o, (axis, xd)) in out.iter_mut().zip(axes.iter().zip(x.iter())) {
+        *o = axis.features(*xd);
     }
 }
 
@@ -29,7 +57,7 @@ pub const fn features_len(n_points: usize, n_joints: usize) -> usize {
 }
 
 /// The [`joint_features`] of every configuration in `points` (N × n), N × n × 2 values.
-pub fn write_features(kernel: &JointKernel, n: usize, points: &[f64], features: &mut [Real]) {
+pub fn write_features<K: JointAxes + ?Sized>(kernel: &K, n: usize, points: &[f64], features: &mut [Real]) {
     let mut f = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     for (x, out) in points.chunks_exact(n.max(1)).zip(features.chunks_exact_mut((n * FEATURES_PER_JOINT).max(1))) {
         joint_features(kernel, x, &mut f);
@@ -56,11 +84,10 @@ pub fn read_features(features: &[Real], n: usize, j: usize) -> [[Real; FEATURES_
 
 /// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) from both configurations' [`joint_features`], with the
 /// per-axis first and second derivatives f'_d, f''_d (with respect to x) in `first`, `second`.
-/// Periodic: f = b (cos Δ − 1), cos Δ = cos x cos x' + sin x sin x', sin Δ = sin x cos x' − cos x sin x'.
-/// Gaussian: f = −Δ²/(2ℓ²).
+/// f_d and its derivatives are the axis form's ([`AxisKernel::terms`]).
 #[inline]
-pub fn joint_kernel_parts(
-    kernel: &JointKernel,
+pub fn joint_kernel_parts<K: JointAxes + ?Sized>(
+    kernel: &K,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
     first: &mut [Real; MAX_JOINTS],
@@ -71,8 +98,22 @@ pub fn joint_kernel_parts(
 
 /// [`joint_kernel_parts`] (bit-identical) over at most `n` axes: with `n` a constant the loop unrolls.
 #[inline(always)]
-pub fn joint_kernel_parts_n(
-    kernel: &JointKernel,
+pub fn joint_kernel_parts_n<K: JointAxes + ?Sized>(
+    kernel: &K,
+    n: usize,
+    fx: &[[Real; FEATURES_PER_JOINT]],
+    fxp: &[[Real; FEATURES_PER_JOINT]],
+    first: &mut [Real; MAX_JOINTS],
+    second: &mut [Real; MAX_JOINTS],
+) -> Real {
+    axes_kernel_parts_n(kernel.gamma(), kernel.axes(), n, fx, fxp, first, second)
+}
+
+/// [`joint_kernel_parts_n`] of amplitude `gamma` and any axes.
+#[inline(always)]
+pub fn axes_kernel_parts_n<A: AxisKernel>(
+    gamma: f64,
+    axes: &[A],
     n: usize,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
@@ -80,71 +121,52 @@ pub fn joint_kernel_parts_n(
     second: &mut [Real; MAX_JOINTS],
 ) -> Real {
     let mut exponent = 0.0;
-    let axes = first.iter_mut().zip(second.iter_mut()).zip(kernel.axes.iter().zip(fx.iter().zip(fxp.iter())));
+    let axes = first.iter_mut().zip(second.iter_mut()).zip(axes.iter().zip(fx.iter().zip(fxp.iter())));
     for ((f1, f2), (axis, (a, b))) in axes.take(n) {
-        let (f, df, ddf) = axis_terms(axis, a, b);
+        let (f, df, ddf) = axis.terms(a, b);
         exponent += f;
         *f1 = df;
         *f2 = ddf;
     }
-    kernel.gamma as Real * exp(exponent)
+    gamma as Real * exp(exponent)
 }
 
 /// Σ_d f_d(x_d − x'_d) over at most `n` axes, K_V = γ e^{that} ([`joint_kernel_parts_n`]'s exponent, the same sum).
 #[inline(always)]
-pub fn joint_kernel_exponent_n(
-    kernel: &JointKernel,
+pub fn joint_kernel_exponent_n<K: JointAxes + ?Sized>(
+    kernel: &K,
     n: usize,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
 ) -> Real {
     let mut exponent = 0.0;
-    for (axis, (a, b)) in kernel.axes.iter().zip(fx.iter().zip(fxp.iter())).take(n) {
-        exponent += axis_terms(axis, a, b).0;
+    for (axis, (a, b)) in kernel.axes().iter().zip(fx.iter().zip(fxp.iter())).take(n) {
+        exponent += axis.terms(a, b).0;
     }
     exponent
 }
 
-/// f_d, f'_d and f''_d of one axis from the two configurations' features (the one place of the formula).
-#[inline(always)]
-fn axis_terms(axis: &JointKernelAxis, a: &[Real; FEATURES_PER_JOINT], b: &[Real; FEATURES_PER_JOINT]) -> (Real, Real, Real) {
-    match *axis {
-        JointKernelAxis::Periodic { b: beta } => {
-            let beta = beta as Real;
-            let cos_delta = a[0] * b[0] + a[1] * b[1];
-            let sin_delta = a[1] * b[0] - a[0] * b[1];
-            (beta * (cos_delta - 1.0), -beta * sin_delta, -beta * cos_delta)
-        }
-        JointKernelAxis::Gaussian { width } => {
-            let width = width as Real;
-            let s = 1.0 / (width * width);
-            let delta = a[0] - b[0];
-            (-0.5 * delta * delta * s, -delta * s, -s)
-        }
-    }
-}
-
 /// K_V(x, x') and its gradient with respect to x (`grad_d = K f'_d`) from [`joint_features`].
 #[inline]
-pub fn joint_kernel_from_features(
-    kernel: &JointKernel,
+pub fn joint_kernel_from_features<K: JointAxes + ?Sized>(
+    kernel: &K,
     fx: &[[Real; FEATURES_PER_JOINT]],
     fxp: &[[Real; FEATURES_PER_JOINT]],
     grad: &mut [Real; MAX_JOINTS],
 ) -> Real {
     let mut second = [0.0; MAX_JOINTS];
     let value = joint_kernel_parts(kernel, fx, fxp, grad, &mut second);
-    for g in grad.iter_mut().take(kernel.axes.len()) {
+    for g in grad.iter_mut().take(kernel.axes().len()) {
         *g *= value;
     }
     value
 }
 
 /// K_V(x, x') = γ exp(Σ_d f_d(x_d − x'_d)) and its gradient with respect to x.
-/// f_d = b (cos Δ − 1) on periodic axes, −Δ²/(2ℓ²) on Gaussian axes. The same arithmetic as
+/// f_d the axis form's ([`AxisKernel::terms`]). The same arithmetic as
 /// [`joint_kernel_from_features`] (which the flows use), so every caller gets identical values.
 #[inline]
-pub fn joint_kernel(kernel: &JointKernel, x: &[f64], xp: &[f64], grad: &mut [Real; MAX_JOINTS]) -> Real {
+pub fn joint_kernel<K: JointAxes + ?Sized>(kernel: &K, x: &[f64], xp: &[f64], grad: &mut [Real; MAX_JOINTS]) -> Real {
     let mut fx = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     let mut fxp = [[0.0; FEATURES_PER_JOINT]; MAX_JOINTS];
     joint_features(kernel, x, &mut fx);

@@ -13,10 +13,11 @@
 //! the model family reaches at all — a diagnosis, never a selection rule).
 
 use cbd_protocol::*;
+use cbd_trainer::axis_forms::joint_series;
 use cbd_trainer::baselines::kernel_ridge::{fit_kernel_ridge_peer, KernelRidge};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::evidence::CbdHyperparameters;
-use cbd_trainer::expansion::basis::{joint_axes, truncate, AxisSeries};
+use cbd_trainer::expansion::basis::{truncate, AxisSeries};
 use cbd_trainer::expansion::solve::{apply, design, posterior_weights, prior_variances, LinearProblem};
 use cbd_trainer::expansion::{task_radius_of, tolerance_for};
 use cbd_trainer::flow::ControlPoints;
@@ -56,7 +57,7 @@ fn cbd_at(
     let mean_j2 = jac.iter().map(|v| v * v).sum::<f64>() / nom.len() as f64;
     let tolerance = (tolerance_for(sigma, 1.0 + jk.gamma * mean_j2) * tol_factor).max(1e-16);
     let ranges = vec![1.25 * std::f64::consts::PI; 2];
-    let Some(joint) = truncate(&joint_axes(&jk, &ranges), tolerance) else { return None };
+    let Some(joint) = joint_series(&jk, &ranges).and_then(|axes| truncate(&axes, tolerance)) else { return None };
     let Some(task) = truncate(&vec![AxisSeries::gaussian(task_radius_of(&nom, m) / tk.width); m], tolerance) else { return None };
     let variances = prior_variances(jk.gamma, n, m, &joint, &task);
     let tcp = ControlPoints::new(nominal, &norm, test.to_vec(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);

@@ -19,6 +19,8 @@ macro_rules! errln {
     }};
 }
 
+/// The joint kernel's axis forms: one descriptor per form (docs/DESIGN.md §4).
+pub mod axis_forms;
 /// The peers CbD is compared with (kernel ridge on the residual).
 pub mod baselines;
 /// The one calibration pipeline: hyperparameters, scheme, fit, blob.

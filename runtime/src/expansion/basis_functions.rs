@@ -1,213 +1,20 @@
 //! The basis functions of the fields' expansions (format 5, docs/DESIGN.md §11): the joint basis
-//! φ_f(x) = Π_d F_d(x_d) (periodic axes cos(h x)/sin(h x), Gaussian axes the Hermite functions
-//! e^{−u²/2} u^k/√(k!), u = x/ℓ) and the task basis ψ_g(y) = Π_c e^{−u_c²/2} u_c^{α_c}/√(α_c!), u = y/a,
+//! φ_f(x) = Π_d F_d(x_d) (each axis form's own factors, `crate::kernel::axis`: periodic axes
+//! cos(h x)/sin(h x), Gaussian axes the Hermite functions e^{−u²/2} u^k/√(k!), u = x/ℓ) and the task basis ψ_g(y) = Π_c e^{−u_c²/2} u_c^{α_c}/√(α_c!), u = y/a,
 //! with their gradients and Hessians. The trainer builds its design matrices with these same
 //! functions, so trainer and runtime use the same bits.
 
-use core::ops::{Add, Mul, Neg, Sub};
-
 use crate::flow::Shape;
+use crate::kernel::axis::AxisKernel;
+use crate::kernel::hermite::{hermite_factors, ORDERS};
+#[cfg(test)]
+use crate::kernel::hermite::{Scalar, INV_SQRT, SQRT};
 use crate::real::Real;
-use cbd_protocol::{code_order, JointKernel, JointKernelAxis, TaskKernel, MAX_EXPANSION_ORDER, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
-
-/// Entries of a per-axis table: orders 0..=MAX_EXPANSION_ORDER.
-const ORDERS: usize = MAX_EXPANSION_ORDER as usize + 1;
-
-/// √k, k = 0..=63, correctly rounded.
-const SQRT: [f64; ORDERS] = [
-    0.0,
-    1.0,
-    core::f64::consts::SQRT_2,
-    1.7320508075688772,
-    2.0,
-    2.23606797749979,
-    2.449489742783178,
-    2.6457513110645907,
-    2.8284271247461903,
-    3.0,
-    3.1622776601683795,
-    3.3166247903554,
-    3.4641016151377544,
-    3.605551275463989,
-    3.7416573867739413,
-    3.872983346207417,
-    4.0,
-    4.123105625617661,
-    4.242640687119285,
-    4.358898943540674,
-    4.47213595499958,
-    4.58257569495584,
-    4.69041575982343,
-    4.795831523312719,
-    4.898979485566356,
-    5.0,
-    5.0990195135927845,
-    5.196152422706632,
-    5.291502622129181,
-    5.385164807134504,
-    5.477225575051661,
-    5.5677643628300215,
-    5.656854249492381,
-    5.744562646538029,
-    5.830951894845301,
-    5.916079783099616,
-    6.0,
-    6.082762530298219,
-    6.164414002968976,
-    6.244997998398398,
-    6.324555320336759,
-    6.4031242374328485,
-    6.48074069840786,
-    6.557438524302,
-    6.6332495807108,
-    6.708203932499369,
-    6.782329983125268,
-    6.855654600401044,
-    6.928203230275509,
-    7.0,
-    7.0710678118654755,
-    7.14142842854285,
-    7.211102550927978,
-    7.280109889280518,
-    7.3484692283495345,
-    7.416198487095663,
-    7.483314773547883,
-    7.54983443527075,
-    7.615773105863909,
-    7.681145747868608,
-    7.745966692414834,
-    7.810249675906654,
-    7.874007874011811,
-    7.937253933193772,
-];
-/// 1/√k, k = 1..=63, correctly rounded (entry 0 unused).
-const INV_SQRT: [f64; ORDERS] = [
-    0.0,
-    1.0,
-    core::f64::consts::FRAC_1_SQRT_2,
-    0.5773502691896257,
-    0.5,
-    0.4472135954999579,
-    0.408248290463863,
-    0.37796447300922725,
-    0.3535533905932738,
-    0.3333333333333333,
-    0.31622776601683794,
-    0.30151134457776363,
-    0.28867513459481287,
-    0.2773500981126146,
-    0.2672612419124244,
-    0.25819888974716115,
-    0.25,
-    0.24253562503633297,
-    0.23570226039551584,
-    0.22941573387056177,
-    0.22360679774997896,
-    0.2182178902359924,
-    0.21320071635561044,
-    0.20851441405707477,
-    0.2041241452319315,
-    0.2,
-    0.19611613513818404,
-    0.19245008972987526,
-    0.18898223650461363,
-    0.18569533817705186,
-    0.18257418583505536,
-    0.1796053020267749,
-    0.1767766952966369,
-    0.17407765595569785,
-    0.17149858514250885,
-    0.1690308509457033,
-    0.16666666666666666,
-    0.1643989873053573,
-    0.16222142113076254,
-    0.16012815380508713,
-    0.15811388300841897,
-    0.15617376188860607,
-    0.1543033499620919,
-    0.15249857033260467,
-    0.15075567228888181,
-    0.14907119849998599,
-    0.14744195615489714,
-    0.14586499149789456,
-    0.14433756729740643,
-    0.14285714285714285,
-    0.1414213562373095,
-    0.14002800840280097,
-    0.1386750490563073,
-    0.13736056394868904,
-    0.13608276348795434,
-    0.13483997249264842,
-    0.1336306209562122,
-    0.13245323570650439,
-    0.13130643285972254,
-    0.13018891098082386,
-    0.12909944487358058,
-    0.12803687993289598,
-    0.1270001270001905,
-    0.12598815766974242,
-];
+use cbd_protocol::{code_order, JointKernel, TaskKernel, MAX_EXPANSION_ORDER, MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// Values per joint-basis row: φ, ∇φ (n), ∇²φ (n×n) — the layout of the query's kernel rows.
 pub const fn joint_row_len(n: usize) -> usize {
     1 + n + n * n
-}
-
-/// The scalars the basis is computed in: f64 for the joint features (rounded once to [`Real`]),
-/// [`Real`] for the task basis at the flow's state.
-pub(crate) trait Scalar: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Neg<Output = Self> {
-    const ZERO: Self;
-    const ONE: Self;
-    fn of(x: f64) -> Self;
-    fn exp(self) -> Self;
-}
-
-impl Scalar for f64 {
-    const ZERO: f64 = 0.0;
-    const ONE: f64 = 1.0;
-    #[inline(always)]
-    fn of(x: f64) -> f64 {
-        x
-    }
-    #[inline(always)]
-    fn exp(self) -> f64 {
-        crate::real::exp_f64(self)
-    }
-}
-
-impl Scalar for f32 {
-    const ZERO: f32 = 0.0;
-    const ONE: f32 = 1.0;
-    #[inline(always)]
-    fn of(x: f64) -> f32 {
-        x as f32
-    }
-    #[inline(always)]
-    fn exp(self) -> f32 {
-        libm::expf(self)
-    }
-}
-
-/// The Hermite functions q_k = e^{−u²/2} u^k/√(k!), k = 0, 1, …, by their recurrence q_0 = e^{−u²/2},
-/// q_k = q_{k−1} u/√k (no overflow: every q_k is the function's own value, at most about 1), with
-/// each one's factor F = q_k and its first two derivatives in u,
-/// F' = √k q_{k−1} − u q_k, F'' = √k √(k−1) q_{k−2} − 2u √k q_{k−1} + (u² − 1) q_k:
-/// `each(k, F, F', F'')` for k = 0..=order.
-#[inline(always)]
-fn hermite_factors<T: Scalar>(u: T, order: usize, mut each: impl FnMut(usize, T, T, T)) {
-    let sqrt = |i: usize| T::of(SQRT.get(i).copied().unwrap_or(0.0));
-    // q_k, q_{k−1}, q_{k−2} (zero below q_0).
-    let (mut q0, mut q1, mut q2) = ((T::of(-0.5) * u * u).exp(), T::ZERO, T::ZERO);
-    for k in 0..=order.min(MAX_EXPANSION_ORDER as usize) {
-        if k > 0 {
-            (q2, q1) = (q1, q0);
-            q0 = q0 * u * T::of(INV_SQRT.get(k).copied().unwrap_or(0.0));
-        }
-        let raised = sqrt(k) * q1;
-        let first = raised - u * q0;
-        let second = sqrt(k) * sqrt(k.saturating_sub(1)) * q2 - T::of(2.0) * u * raised + (u * u - T::ONE) * q0;
-        each(k, q0, first, second);
-    }
 }
 
 /// Multiplies factor `f` = (F, F', F'') of axis d into a product basis function's running value,
@@ -322,79 +129,73 @@ pub(crate) fn write_joint_basis_shaped<S: Shape>(
     rows: &mut [Real],
     hessian: bool,
 ) {
+    write_axes_basis_shaped(shape, &joint_kernel.axes, codes, orders, x, rows, hessian)
+}
+
+/// [`write_joint_basis_with_orders`] of any axes ([`AxisKernel::basis_factors`]).
+pub fn write_axes_basis<A: AxisKernel>(axes: &[A], codes: &[u8], orders: &[u8; NJ], n: usize, x: &[f64], rows: &mut [Real], hessian: bool) {
+    write_axes_basis_shaped(crate::flow::Dims { n, m: 0 }, axes, codes, orders, x, rows, hessian)
+}
+
+/// [`write_joint_basis_shaped`] of any axes.
+#[inline(always)]
+fn write_axes_basis_shaped<S: Shape, A: AxisKernel>(
+    shape: S,
+    axes: &[A],
+    codes: &[u8],
+    orders: &[u8; NJ],
+    x: &[f64],
+    rows: &mut [Real],
+    hessian: bool,
+) {
     // One instance per case: the flags' branches stay out of the per-row loop. Orders below
     // SMALL_ORDERS (the common case): every axis's tables at once, each row formed in registers,
     // for two and six joints with n known at compile time; higher orders: one axis at a time.
     let small = (orders.iter().copied().max().unwrap_or(0) as usize) < SMALL_ORDERS;
     let n = shape.n();
     match (hessian, small, n) {
-        (true, true, 2) => joint_basis_rows::<true, 2, true>(2, joint_kernel, codes, orders, x, rows),
-        (true, true, 6) => joint_basis_rows::<true, 6, true>(6, joint_kernel, codes, orders, x, rows),
-        (true, true, _) => joint_basis_rows::<true, NJ, false>(n, joint_kernel, codes, orders, x, rows),
-        (false, true, 2) => joint_basis_rows::<false, 2, true>(2, joint_kernel, codes, orders, x, rows),
-        (false, true, 6) => joint_basis_rows::<false, 6, true>(6, joint_kernel, codes, orders, x, rows),
-        (false, true, _) => joint_basis_rows::<false, NJ, false>(n, joint_kernel, codes, orders, x, rows),
-        (true, false, _) => joint_basis_axes::<true>(n, joint_kernel, codes, orders, x, rows),
-        (false, false, _) => joint_basis_axes::<false>(n, joint_kernel, codes, orders, x, rows),
+        (true, true, 2) => joint_basis_rows::<true, 2, true, A>(2, axes, codes, orders, x, rows),
+        (true, true, 6) => joint_basis_rows::<true, 6, true, A>(6, axes, codes, orders, x, rows),
+        (true, true, _) => joint_basis_rows::<true, NJ, false, A>(n, axes, codes, orders, x, rows),
+        (false, true, 2) => joint_basis_rows::<false, 2, true, A>(2, axes, codes, orders, x, rows),
+        (false, true, 6) => joint_basis_rows::<false, 6, true, A>(6, axes, codes, orders, x, rows),
+        (false, true, _) => joint_basis_rows::<false, NJ, false, A>(n, axes, codes, orders, x, rows),
+        (true, false, _) => joint_basis_axes::<true, A>(n, axes, codes, orders, x, rows),
+        (false, false, _) => joint_basis_axes::<false, A>(n, axes, codes, orders, x, rows),
     }
 }
 
 /// Codes `h << 1 | s` of orders below SMALL_ORDERS.
 const SMALL_CODES: usize = 2 * SMALL_ORDERS;
 
-/// The factors F, F', F'' (HESSIAN) of every code of one axis up to `order` (≤ CODES/2 − 1) at x_d,
-/// computed in f64 and rounded once to [`Real`]; entries above are left as they are.
+/// The factors F, F', F'' (HESSIAN) of every code of one axis up to `order` (≤ CODES/2 − 1) at x_d
+/// ([`AxisKernel::basis_factors`], in f64), rounded once to [`Real`]; entries above are left as they are.
 #[inline(always)]
-fn axis_factors<const HESSIAN: bool, const CODES: usize>(
-    axis: &JointKernelAxis,
+fn axis_factors<const HESSIAN: bool, const CODES: usize, A: AxisKernel>(
+    axis: &A,
     xd: f64,
     order: usize,
     f0s: &mut [Real; CODES],
     f1s: &mut [Real; CODES],
     f2s: &mut [Real; CODES],
 ) {
-    let mut set = |code: usize, f0: f64, f1: f64, f2: f64| {
+    axis.basis_factors(xd, order, |code: usize, f0: f64, f1: f64, f2: f64| {
         if let (Some(d0), Some(d1), Some(d2)) = (f0s.get_mut(code), f1s.get_mut(code), f2s.get_mut(code)) {
             (*d0, *d1) = (f0 as Real, f1 as Real);
             if HESSIAN {
                 *d2 = f2 as Real;
             }
         }
-    };
-    match *axis {
-        // cos hx: (cos, −h sin, −h² cos); sin hx: (sin, h cos, −h² sin), harmonics by
-        // cos((h+1)x) = cos hx cos x − sin hx sin x, sin((h+1)x) = sin hx cos x + cos hx sin x.
-        JointKernelAxis::Periodic { .. } => {
-            let (s1, c1) = libm::sincos(xd);
-            let (mut c, mut s) = (1.0, 0.0);
-            for k in 0..=order {
-                let h = k as f64;
-                set(2 * k, c, -h * s, -(h * h) * c);
-                set(2 * k + 1, s, h * c, -(h * h) * s);
-                (c, s) = (c * c1 - s * s1, s * c1 + c * s1);
-            }
-        }
-        // The Hermite function of u = x/ℓ; its derivatives in x are those in u over ℓ, ℓ².
-        // (Gaussian codes have no sine bit; both entries hold the factor, as the order does.)
-        JointKernelAxis::Gaussian { width } => {
-            let u = xd / width;
-            let inv_width = 1.0 / width;
-            hermite_factors(u, order, |k, f0, f1, f2| {
-                let (f1, f2) = (f1 * inv_width, f2 * (inv_width * inv_width));
-                set(2 * k, f0, f1, f2);
-                set(2 * k + 1, f0, f1, f2);
-            });
-        }
-    }
+    });
 }
 
 /// The joint basis with every axis's factor tables at once (orders below SMALL_ORDERS): each row's
 /// product, gradient and (HESSIAN) Hessian formed axis by axis in registers, then written once.
 /// `EXACT`: n is AXES (loops unrolled); otherwise n ≤ AXES at run time.
 #[inline(never)]
-fn joint_basis_rows<const HESSIAN: bool, const AXES: usize, const EXACT: bool>(
+fn joint_basis_rows<const HESSIAN: bool, const AXES: usize, const EXACT: bool, A: AxisKernel>(
     n: usize,
-    joint_kernel: &JointKernel,
+    axes: &[A],
     codes: &[u8],
     orders: &[u8; NJ],
     x: &[f64],
@@ -409,8 +210,8 @@ fn joint_basis_rows<const HESSIAN: bool, const AXES: usize, const EXACT: bool>(
     let (mut f0s, mut f1s, mut f2s) =
         ([[0.0 as Real; SMALL_CODES]; AXES], [[0.0 as Real; SMALL_CODES]; AXES], [[0.0 as Real; SMALL_CODES]; AXES]);
     let tables = f0s.iter_mut().zip(f1s.iter_mut()).zip(f2s.iter_mut());
-    for (((axis, &xd), &order), ((t0, t1), t2)) in joint_kernel.axes.iter().zip(x.iter()).zip(orders.iter()).zip(tables).take(n) {
-        axis_factors::<HESSIAN, SMALL_CODES>(axis, xd, (order as usize).min(SMALL_ORDERS - 1), t0, t1, t2);
+    for (((axis, &xd), &order), ((t0, t1), t2)) in axes.iter().zip(x.iter()).zip(orders.iter()).zip(tables).take(n) {
+        axis_factors::<HESSIAN, SMALL_CODES, A>(axis, xd, (order as usize).min(SMALL_ORDERS - 1), t0, t1, t2);
     }
     // Rows and codes walked by splitting (a zip of two `chunks_exact` keeps a division-by-zero
     // panic path the optimiser cannot remove).
@@ -448,9 +249,9 @@ fn joint_basis_rows<const HESSIAN: bool, const AXES: usize, const EXACT: bool>(
 /// The joint basis one axis at a time (tables of every order, 2 × 64 codes): each axis's factors
 /// multiplied into every row before the next axis.
 #[inline(never)]
-fn joint_basis_axes<const HESSIAN: bool>(
+fn joint_basis_axes<const HESSIAN: bool, A: AxisKernel>(
     n: usize,
-    joint_kernel: &JointKernel,
+    axes: &[A],
     codes: &[u8],
     orders: &[u8; NJ],
     x: &[f64],
@@ -464,8 +265,8 @@ fn joint_basis_axes<const HESSIAN: bool>(
     // Per code: F, F', F'' of the current axis. One set of tables for every axis: a code of axis d
     // is at most 2 order_d + 1, and those entries are written for axis d before its rows.
     let (mut f0s, mut f1s, mut f2s) = ([0.0 as Real; CODES], [0.0 as Real; CODES], [0.0 as Real; CODES]);
-    for (d, ((axis, &xd), &order)) in joint_kernel.axes.iter().zip(x.iter()).zip(orders.iter()).enumerate().take(n) {
-        axis_factors::<HESSIAN, CODES>(axis, xd, (order as usize).min(ORDERS - 1), &mut f0s, &mut f1s, &mut f2s);
+    for (d, ((axis, &xd), &order)) in axes.iter().zip(x.iter()).zip(orders.iter()).enumerate().take(n) {
+        axis_factors::<HESSIAN, CODES, A>(axis, xd, (order as usize).min(ORDERS - 1), &mut f0s, &mut f1s, &mut f2s);
         let mut code_rows = codes;
         for row in rows.chunks_exact_mut(row_len.max(1)) {
             let Some((code_row, rest)) = code_rows.split_at_checked(n) else { break };

@@ -5,7 +5,7 @@
 use crate::error::Error;
 use crate::flow::{control_point_rates, control_point_rates_with_features, write_samples, Dims, FlowParams};
 use crate::integrate::{integrate_checked, scratch_len};
-use crate::kernel::features_len;
+use crate::kernel::{features_len, JointAxes};
 use crate::kinematics::{forward_kinematics, with_tool_point, Kinematics};
 use crate::real::Real;
 use cbd_protocol::{Integrator, Model, NominalModel, MAX_JOINTS};
@@ -68,8 +68,8 @@ fn copy_kinematics(k0: &Kinematics, k: &mut [Real], jac: &mut [Real], n: usize) 
 /// every stage in `trajectory` and calling `on_stage(stage, state)` with each stage's input state.
 /// `state` holds the initial state on entry and the final state on return.
 #[allow(clippy::too_many_arguments)]
-pub fn integrate_control_points(
-    params: &FlowParams<'_>,
+pub fn integrate_control_points<K: JointAxes + ?Sized>(
+    params: &FlowParams<'_, K>,
     integrator: Integrator,
     points: &[f64],
     state: &mut [Real],
@@ -86,8 +86,8 @@ pub fn integrate_control_points(
 /// [`integrate_control_points`] (bit-identical) from the configurations' kernel-feature table
 /// ([`crate::kernel::write_features`]) instead of the configurations: no transcendental per pair but one exp.
 #[allow(clippy::too_many_arguments)]
-pub fn integrate_control_points_with_features(
-    params: &FlowParams<'_>,
+pub fn integrate_control_points_with_features<K: JointAxes + ?Sized>(
+    params: &FlowParams<'_, K>,
     integrator: Integrator,
     features: &[Real],
     state: &mut [Real],

@@ -13,7 +13,7 @@ pub mod inverse;
 pub mod query_derivatives;
 pub(crate) mod stage_fields;
 
-use crate::kernel::{joint_features, joint_kernel_from_features, read_features, FEATURES_PER_JOINT};
+use crate::kernel::{joint_features, joint_kernel_from_features, read_features, JointAxes, FEATURES_PER_JOINT};
 use crate::real::{exp, Real};
 use cbd_protocol::{JointKernel, MomentumLaw, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
 
@@ -315,22 +315,31 @@ pub fn momentum_rate(dims: Dims, law: MomentumLaw, p: &[Real], tf: &TaskField, j
 }
 
 /// Everything the control-point dynamics need besides the state.
-#[derive(Debug, Clone, Copy)]
-pub struct FlowParams<'m> {
+#[derive(Debug)]
+pub struct FlowParams<'m, K: JointAxes + ?Sized = JointKernel> {
     /// n and m.
     pub dims: Dims,
-    /// K_V as the flow uses it (γ carries the law's sign: [`JointKernel::for_flow`]).
-    pub joint_kernel: &'m JointKernel,
+    /// K_V as the flow uses it (γ carries the law's sign: [`JointKernel::for_flow`]); the blob's,
+    /// or any [`JointAxes`] (a test's axis form).
+    pub joint_kernel: &'m K,
     /// K_W.
     pub task_kernel: &'m TaskKernel,
     /// Whether the momenta carry the −(div v) P term.
     pub law: MomentumLaw,
 }
 
+impl<K: JointAxes + ?Sized> Clone for FlowParams<'_, K> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<K: JointAxes + ?Sized> Copy for FlowParams<'_, K> {}
+
 /// eq. (17) + (19): the rates of control points `rows` (k, J, P), given the stage's samples of all
 /// points and their configurations `points` (N × n). `out` holds the rates of `rows` only.
-pub fn control_point_rates(
-    params: &FlowParams<'_>,
+pub fn control_point_rates<K: JointAxes + ?Sized>(
+    params: &FlowParams<'_, K>,
     points: &[f64],
     state: &[Real],
     samples: &[Real],
@@ -350,8 +359,8 @@ pub fn control_point_rates(
 
 /// [`control_point_rates`] (bit-identical) with the configurations' kernel features precomputed
 /// ([`crate::kernel::write_features`]): no transcendental per pair of points but one exp.
-pub fn control_point_rates_with_features(
-    params: &FlowParams<'_>,
+pub fn control_point_rates_with_features<K: JointAxes + ?Sized>(
+    params: &FlowParams<'_, K>,
     features: &[Real],
     state: &[Real],
     samples: &[Real],
@@ -365,8 +374,8 @@ pub fn control_point_rates_with_features(
 
 /// The rates of control points `rows`, given their own kernel features (`own`) and every
 /// point's (`features_of(j)`).
-fn point_rates(
-    params: &FlowParams<'_>,
+fn point_rates<K: JointAxes + ?Sized>(
+    params: &FlowParams<'_, K>,
     own: impl Iterator<Item = [[Real; FEATURES_PER_JOINT]; MAX_JOINTS]>,
     state: &[Real],
     samples: &[Real],

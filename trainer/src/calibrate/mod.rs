@@ -23,7 +23,7 @@ use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_wit
 use crate::parametric::DhFitStats;
 use crate::report::noise_floor::{FloorVerdict, NoiseFloor};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions, SolverSettings};
-use cbd_protocol::{Integrator, JointKernelAxis, NominalModel, Normalisation};
+use cbd_protocol::{Integrator, NominalModel, Normalisation};
 
 /// A calibrated model and how it was chosen.
 #[derive(Debug, Clone)]
@@ -97,9 +97,7 @@ pub fn choose_cbd_hyperparameters_with_overrides(
 /// One axis per joint of `base`, for overrides that replace every field.
 fn placeholder_hyperparameters(base: &NominalModel) -> CbdHyperparameters {
     let mut h = paper_rr_hyperparameters();
-    h.joint_axes = (0..base.n_joints())
-        .map(|d| if base.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 1.0 } })
-        .collect();
+    h.joint_axes = crate::axis_forms::default_axes(base);
     h
 }
 
@@ -214,9 +212,9 @@ pub fn describe(h: &CbdHyperparameters) -> String {
     let axes: Vec<String> = h
         .joint_axes
         .iter()
-        .map(|a| match a {
-            JointKernelAxis::Periodic { b } => format!("b={b}"),
-            JointKernelAxis::Gaussian { width } => format!("l={width}"),
+        .map(|a| {
+            let (form, p) = crate::axis_forms::form_and_parameter(a);
+            format!("{}={p}", form.label())
         })
         .collect();
     format!(

@@ -7,7 +7,7 @@
 
 use crate::error::Error;
 use crate::nominal::Frame;
-use cbd_protocol::{Effect, JointKernelAxis, Model};
+use cbd_protocol::{Effect, Model};
 use cbd_runtime::{CompensateOptions, PoseCompensateOptions};
 
 /// What is wrong with one written row (none: `ok`).
@@ -51,7 +51,9 @@ pub fn periodic_joints(model: &Model<'_>) -> Vec<bool> {
         |d: usize| model.nominal.effects().list.iter().any(|e| matches!(e, Effect::EncoderScale { joint, .. } if *joint as usize == d));
     (0..model.n_joints())
         .map(|d| {
-            model.nominal.is_revolute(d) && matches!(model.joint_kernel.axes.get(d), Some(JointKernelAxis::Periodic { .. })) && !scaled(d)
+            model.nominal.is_revolute(d)
+                && model.joint_kernel.axes.get(d).is_some_and(|a| crate::axis_forms::form_of(a).periodic())
+                && !scaled(d)
         })
         .collect()
 }

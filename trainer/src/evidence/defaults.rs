@@ -2,7 +2,7 @@
 //! (docs/DESIGN.md §1) and one unit kernel axis per joint.
 
 use crate::data::Measurements;
-use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
+use cbd_protocol::{JointKernel, NominalModel, Normalisation};
 
 /// Task-space normalisation from data: offset = mean position, scale = RMS distance to it.
 pub fn normalisation_of(data: &Measurements) -> Normalisation {
@@ -21,10 +21,6 @@ pub fn normalisation_of(data: &Measurements) -> Normalisation {
 
 /// One axis per joint: periodic (b = 1) for revolute joints, Gaussian (width 1) for prismatic ones.
 pub fn default_joint_kernel(nominal: &NominalModel) -> JointKernel {
-    let mut axes = heapless::Vec::new();
-    for d in 0..nominal.n_joints() {
-        let axis = if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 1.0 } };
-        let _ = axes.push(axis);
-    }
+    let axes = crate::axis_forms::default_axes(nominal).into_iter().take(cbd_protocol::MAX_JOINTS).collect();
     JointKernel { gamma: 1.0, axes }
 }

@@ -6,6 +6,7 @@
 //! units ([`Theta`]), hands its choice back by [`Theta::to_user`].
 
 use super::table::Theta;
+use crate::axis_forms::{axes_at, AxisForm};
 use crate::solver::fit::FlowHyperparameters;
 use cbd_protocol::{JointKernel, JointKernelAxis, Normalisation, TaskKernel};
 
@@ -44,14 +45,9 @@ impl CbdHyperparameters {
 
 impl Theta {
     /// Internal → user: the evidence's θ (logarithms, normalised units) in the data's units;
-    /// `periodic[d]`: joint d's axis is periodic (b), else Gaussian (ℓ).
-    pub(super) fn to_user(&self, periodic: &[bool], norm: &Normalisation) -> CbdHyperparameters {
-        let joint_axes = self
-            .log_widths
-            .iter()
-            .zip(periodic)
-            .map(|(w, &p)| if p { JointKernelAxis::Periodic { b: w.exp() } } else { JointKernelAxis::Gaussian { width: w.exp() } })
-            .collect();
+    /// `forms[d]`: joint d's axis form (its parameter is not normalised: joint values are not).
+    pub(super) fn to_user(&self, forms: &[&dyn AxisForm], norm: &Normalisation) -> CbdHyperparameters {
+        let joint_axes = axes_at(forms, &self.log_widths);
         CbdHyperparameters {
             joint_axes,
             joint_gamma: self.log_gamma_v.exp(),
@@ -71,7 +67,7 @@ mod tests {
     fn the_conversions_meet_in_normalised_units() {
         let norm = Normalisation { task_offset: [3.0, -1.0, 0.5], task_scale: 250.0 };
         let theta = Theta { log_widths: vec![0.3f64.ln(), 2.0f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -5.0 };
-        let user = theta.to_user(&[true, false], &norm);
+        let user = theta.to_user(&[&crate::axis_forms::Periodic, &crate::axis_forms::Gaussian], &norm);
         assert_eq!(
             user.joint_axes,
             vec![JointKernelAxis::Periodic { b: 0.3f64.ln().exp() }, JointKernelAxis::Gaussian { width: 2.0f64.ln().exp() }]

@@ -233,7 +233,7 @@ fn choose(
             (nlml, param, rows_used, weight_space, weight_space_declined) = (v, p, data.len(), Some(report), None);
         }
     }
-    let hyperparameters = Theta::unpack(&param, n).to_user(&table.joint.periodic, norm);
+    let hyperparameters = Theta::unpack(&param, n).to_user(&table.joint.forms, norm);
     let log_evidence = in_data_units(nlml, rows_used);
     let evaluations = evaluations.into_inner();
     Ok(Evidence {
@@ -265,5 +265,40 @@ mod tests {
         let table = PairTable::new(&rr::nominal(), &data, &norm);
         let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
         search::assert_gradient_matches_central_differences(&table, &theta.pack(), 1e-6);
+    }
+
+    /// The worked change's test-only axis form (docs/DESIGN.md §4 "Worked changes (issue 41)":
+    /// b (cos 2Δ − 1), `axis_forms::tests::HalfTurn`) in the evidence: its descriptor alone sets the
+    /// pair table's terms, the starts, the box, the gradient and the search; only the choice's
+    /// conversion to a blob's axes (`Theta::to_user`) needs a protocol variant.
+    #[test]
+    fn a_new_axis_form_plugs_into_the_evidence_search() {
+        use crate::axis_forms::{tests::HalfTurn, AxisForm};
+        use joint_pair_table::JointPairTable;
+        let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 25, seed: 3 }, 2));
+        let norm = crate::evidence::normalisation_of(&data);
+        let mut table = PairTable::new(&rr::nominal(), &data, &norm);
+        let forms: Vec<&'static dyn AxisForm> = vec![&HalfTurn, table.joint.forms[1]];
+        table.joint = JointPairTable::new(forms, &data);
+        let delta = data.joints(4)[0] - data.joints(1)[0];
+        assert_eq!(table.joint.terms_of(JointPairTable::pair_index(4, 1))[0], (2.0 * delta).cos() - 1.0);
+        let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
+        search::assert_gradient_matches_central_differences(&table, &theta.pack(), 1e-6);
+        // The starts' widths lie in the box, and the search from each stays in it and does not end
+        // worse than it began.
+        let scales = DataScales::of(&table);
+        let (lower, upper) = scales.bounds(&table);
+        let evaluations = RefCell::new(0usize);
+        let inside = |p: &[f64]| p.iter().zip(lower.iter().zip(&upper)).all(|(v, (lo, hi))| lo <= v && v <= hi);
+        let mut found = 0;
+        for start in scales.starts(&table) {
+            let p: Vec<f64> = start.pack().iter().zip(lower.iter().zip(&upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect();
+            assert!(inside(&start.log_widths), "{:?}", start.log_widths);
+            let Some((begin, _)) = search::Criterion::nlml_and_gradient(&table, &p) else { continue };
+            let (end, at) = minimise(&table, &lower, &upper, &p, 30, &evaluations).expect("a feasible start");
+            assert!(inside(&at) && end <= begin, "{begin} → {end} at {at:?}");
+            found += 1;
+        }
+        assert!(found > 0);
     }
 }

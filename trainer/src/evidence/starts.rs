@@ -9,9 +9,8 @@ pub(super) struct DataScales {
     var_r: f64,
     /// γ_V that gives the joint field half the residual's variance.
     gamma_v0: f64,
-    /// Periodic b and Gaussian ℓ (logs) at which typical pairs of rows have kernel ½.
-    log_b0: f64,
-    log_l0: f64,
+    /// Per axis, the log parameter (periodic b, Gaussian ℓ) at which typical pairs of rows have kernel ½.
+    log_half: Vec<f64>,
     /// ln of the median distance from a row's nominal position to its nearest other row's.
     log_spacing: f64,
 }
@@ -25,14 +24,14 @@ impl DataScales {
             (0..count).map(|i| table.jj[(i * (i + 1) / 2 + i) * m * m..][..m * m].iter().step_by(m + 1).sum::<f64>()).sum::<f64>()
                 / (count * m) as f64;
         // Typical pairs (the mean over every pair) at kernel ½.
-        let (log_b0, log_l0) = table.joint.half_kernel_log_widths(0..table.dist2.len());
+        let log_half = table.joint.half_kernel_log_widths(0..table.dist2.len());
         let gamma_v0 = (0.5 * var_r / mean_jj.max(1e-30)).ln();
-        DataScales { var_r, gamma_v0, log_b0, log_l0, log_spacing: median_spacing(table).ln() }
+        DataScales { var_r, gamma_v0, log_half, log_spacing: median_spacing(table).ln() }
     }
 
-    /// Joint widths shifted by `shift` in log b (ℓ moves by half as much the other way).
+    /// Joint widths shifted by `shift` in log weight (log b; ℓ moves by half as much the other way).
     fn widths(&self, table: &PairTable, shift: f64) -> Vec<f64> {
-        (0..table.n).map(|d| if table.joint.periodic[d] { self.log_b0 + shift } else { self.log_l0 - 0.5 * shift }).collect()
+        table.joint.forms.iter().zip(&self.log_half).map(|(f, l)| l + shift / f.log_weight_slope()).collect()
     }
 
     /// The four starts: balanced, smooth, nearly noise-free, rough.
@@ -74,16 +73,17 @@ impl DataScales {
         ]
     }
 
-    /// The box θ stays in (lower, upper), packed like θ. Periodic b from 1e-5 to 1e3, Gaussian
-    /// widths 1e±3 around the typical pair's, γ_V and γ_W from 1e-12 to 1e8 of the residual's
+    /// The box θ stays in (lower, upper), packed like θ. The joint axes' each form's
+    /// ([`crate::axis_forms::AxisForm::evidence_bounds`]: periodic b from 1e-5 to 1e3, Gaussian
+    /// widths 1e±3 around the typical pair's), γ_V and γ_W from 1e-12 to 1e8 of the residual's
     /// scale, the task width from the rows' spacing (at least 1e-2) to 1e3, σ below.
     pub fn bounds(&self, table: &PairTable) -> (Vec<f64>, Vec<f64>) {
-        let (n, var_r, gamma_v0, log_l0) = (table.n, self.var_r, self.gamma_v0, self.log_l0);
+        let (n, var_r, gamma_v0) = (table.n, self.var_r, self.gamma_v0);
         let ln = |v: f64| v.ln();
         let mut lower = vec![0.0; n + 4];
         let mut upper = vec![0.0; n + 4];
         for d in 0..n {
-            (lower[d], upper[d]) = if table.joint.periodic[d] { (ln(1e-5), ln(1e3)) } else { (log_l0 - ln(1e3), log_l0 + ln(1e3)) };
+            (lower[d], upper[d]) = table.joint.forms[d].evidence_bounds(self.log_half[d]);
         }
         (lower[n], upper[n]) = (gamma_v0 - ln(1e12), gamma_v0 + ln(1e8));
         // A task kernel narrower than the rows' spacing correlates almost no two measurements: the

@@ -36,7 +36,6 @@ pub(crate) struct PairTable {
 impl PairTable {
     pub(crate) fn new(nominal: &NominalModel, data: &Measurements, norm: &Normalisation) -> Self {
         let (n, m, count) = (data.n_joints, data.task_dim, data.len());
-        let periodic: Vec<bool> = (0..n).map(|d| nominal.is_revolute(d)).collect();
         let kin: Vec<_> = (0..count).map(|i| crate::nominal::row_kinematics(nominal, data.joints(i), i).normalised(norm)).collect();
         let residual: Vec<f64> = (0..count)
             .flat_map(|i| {
@@ -57,7 +56,17 @@ impl PairTable {
             }
         }
         let fields_variance = variance(&residual);
-        PairTable { n, m, count, joint: JointPairTable::new(periodic, data), jj, dist2, residual, explicit: None, fields_variance }
+        PairTable {
+            n,
+            m,
+            count,
+            joint: JointPairTable::new(crate::axis_forms::forms_of(nominal), data),
+            jj,
+            dist2,
+            residual,
+            explicit: None,
+            fields_variance,
+        }
     }
 
     /// The table of "CbD with the geometry calibrated": `nominal` the fitted chain, the residual
@@ -151,8 +160,8 @@ impl PairTable {
                 let t = weight * t * gw * f.kw[at];
                 let terms = self.joint.terms_of(at);
                 for d in 0..n {
-                    // Periodic: ∂(b f)/∂ log b = b f; Gaussian: ∂(f/ℓ²)/∂ log ℓ = −2 f/ℓ².
-                    let dexp = if self.joint.periodic[d] { w[d] * terms[d] } else { -2.0 * w[d] * terms[d] };
+                    // The form's ∂(w t)/∂ log p: periodic ∂(b f)/∂ log b = b f; Gaussian ∂(f/ℓ²)/∂ log ℓ = −2 f/ℓ².
+                    let dexp = self.joint.forms[d].exponent_log_derivative(w[d], terms[d]);
                     grad[d] += s * dexp;
                 }
                 grad[n] += s;

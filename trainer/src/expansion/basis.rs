@@ -1,35 +1,11 @@
 //! Which basis functions an expansion keeps (docs/DESIGN.md §11): the modes of a product kernel
 //! with the largest shares of its total weight, until what is dropped is at most the tolerance.
 
-use super::weights::{gaussian_weights, periodic_weights};
-use cbd_protocol::{JointKernel, JointKernelAxis, MAX_EXPANSION_ORDER};
+pub use crate::axis_forms::series::AxisSeries;
 
 /// Modes enumerated at most while searching for the truncation (a guard on time and memory: a
 /// kernel that needs more is kept in the kernel form).
 const MAX_MODES: usize = 200_000;
-
-/// One axis of a product kernel: for each order, its share of the total weight (summing to one) and
-/// the prior variance of each of its basis functions; periodic orders h ≥ 1 have two (cos, sin).
-#[derive(Debug, Clone)]
-pub struct AxisSeries {
-    pub share: Vec<f64>,
-    pub variance: Vec<f64>,
-    pub periodic: bool,
-}
-
-impl AxisSeries {
-    /// The periodic kernel exp(b (cos Δ − 1)): share = variance = e^{−b} I_h(b) (2 − δ_h0) … per function ω_h (cos and sin each).
-    pub fn periodic(b: f64) -> AxisSeries {
-        let w = periodic_weights(b, MAX_EXPANSION_ORDER as usize);
-        // Each of cos hx cos hx' + sin hx sin hx' carries the whole ω_h as its prior variance.
-        AxisSeries { variance: w.clone(), share: w, periodic: true }
-    }
-    /// A Gaussian factor exp(−Δ²/2ℓ²) on |x| ≤ ρ ℓ: share = Poisson(ρ²), variance 1 (the features carry 1/√k!).
-    pub fn gaussian(rho: f64) -> AxisSeries {
-        let share = gaussian_weights(rho, MAX_EXPANSION_ORDER as usize);
-        AxisSeries { variance: vec![1.0; share.len()], share, periodic: false }
-    }
-}
 
 /// A kept basis: per function, its code per axis (the protocol's encoding) and prior variance.
 #[derive(Debug, Clone, PartialEq)]
@@ -141,19 +117,6 @@ fn expand_modes(axes: &[AxisSeries], modes: &[(f64, Vec<usize>)], dropped: f64) 
         }
     }
     Basis { codes, variances, dropped }
-}
-
-/// The joint kernel's axes as series: periodic axes exactly, Gaussian axes on |x_d| ≤ `ranges[d]`.
-pub fn joint_axes(kernel: &JointKernel, ranges: &[f64]) -> Vec<AxisSeries> {
-    kernel
-        .axes
-        .iter()
-        .zip(ranges)
-        .map(|(axis, &range)| match *axis {
-            JointKernelAxis::Periodic { b } => AxisSeries::periodic(b),
-            JointKernelAxis::Gaussian { width } => AxisSeries::gaussian(range / width),
-        })
-        .collect()
 }
 
 #[cfg(test)]

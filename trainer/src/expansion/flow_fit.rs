@@ -383,7 +383,8 @@ pub fn minimise(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::expansion::basis::{joint_axes, truncate, AxisSeries};
+    use crate::axis_forms::joint_series;
+    use crate::expansion::basis::{truncate, AxisSeries};
     use crate::flow::ControlPoints;
     use cbd_protocol::*;
 
@@ -411,7 +412,7 @@ mod tests {
                 integrator,
             );
             let initial = cp.nominal_kinematics();
-            let joint = truncate(&joint_axes(&kernel, &[4.0, 4.0]), 1e-6).unwrap();
+            let joint = truncate(&joint_series(&kernel, &[4.0, 4.0]).unwrap(), 1e-6).unwrap();
             let task = truncate(&vec![AxisSeries::gaussian(1.8 / 1.5); 2], 1e-6).unwrap();
             let target = vec![0.0; 14];
             let problem = StageProblem::new(cp.dims, &cp.points, initial, &target, &kernel, &task_kernel, &joint, &task, 1e-3, integrator);

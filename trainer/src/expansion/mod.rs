@@ -9,10 +9,10 @@
 pub mod basis;
 pub mod flow_fit;
 pub mod solve;
-pub mod weights;
 
+use crate::axis_forms::joint_series;
 use crate::flow::ControlPoints;
-use basis::{joint_axes, truncate, AxisSeries, Basis};
+use basis::{truncate, AxisSeries, Basis};
 use cbd_protocol::{JointKernel, TaskKernel};
 use solve::{apply, design, posterior_weights, prior_variances, LinearProblem};
 
@@ -151,7 +151,9 @@ pub fn linear_basis(cp: &ControlPoints, joint_kernel: &JointKernel, task_kernel:
     let mean_j2 = jacobians.iter().map(|v| v * v).sum::<f64>() / (count * m).max(1) as f64;
     let tolerance = tolerance_for(sigma, 1.0 + joint_kernel.gamma * mean_j2);
     let ranges: Vec<f64> = (0..n).map(|d| 1.25 * cp.points.chunks_exact(n).map(|x| x[d].abs()).fold(0.0f64, f64::max).max(1e-3)).collect();
-    let joint = truncate(&joint_axes(joint_kernel, &ranges), tolerance).ok_or_else(|| {
+    let joint_axes = joint_series(joint_kernel, &ranges)
+        .ok_or_else(|| Declined::TooLong("the joint kernel has an axis form without a series of its own".into()))?;
+    let joint = truncate(&joint_axes, tolerance).ok_or_else(|| {
         Declined::TooLong(format!("the joint kernel needs orders above 63 or over 200000 modes at tolerance {tolerance:.0e}"))
     })?;
     let task_radius = task_radius_of(&nominal, m);

@@ -35,7 +35,7 @@ fn the_expansions_covariance_is_the_kernel_matrix() {
         let jacobians = cp.nominal_jacobians();
         let zero = vec![0.0; nominal.len()];
         let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: &zero };
-        let joint = truncate(&joint_axes(&kernel, &[4.0, 4.0]), tolerance).unwrap();
+        let joint = truncate(&crate::axis_forms::joint_series(&kernel, &[4.0, 4.0]).unwrap(), tolerance).unwrap();
         let task = truncate(&vec![AxisSeries::gaussian(task_radius_of(&nominal, m) / width); m], tolerance).unwrap();
         let a = design(&problem, &kernel, &cp.task_kernel, &joint, &task);
         let lambda = prior_variances(gamma, n, m, &joint, &task);

@@ -6,7 +6,7 @@
 use crate::calibrate::{Geometry, GeometryChoice, Settings};
 use crate::data::Measurements;
 use crate::evidence::CbdHyperparameters;
-use cbd_protocol::{JointKernelAxis, NominalModel};
+use cbd_protocol::NominalModel;
 use cbd_runtime::kinematics::forward_kinematics;
 
 /// What is assumed before any pose is measured, in the model's length unit.
@@ -34,9 +34,7 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
         / count as f64;
     let e2 = prior.error * prior.error;
     CbdHyperparameters {
-        joint_axes: (0..n)
-            .map(|d| if nominal.is_revolute(d) { JointKernelAxis::Periodic { b: 1.0 } } else { JointKernelAxis::Gaussian { width: 1.0 } })
-            .collect(),
+        joint_axes: crate::axis_forms::default_axes(nominal),
         joint_gamma: if mean_j2 > 0.0 { 0.5 * e2 / mean_j2 } else { 0.0 },
         task_width: reach,
         task_gamma: 0.5 * e2 / m as f64,

@@ -1,6 +1,6 @@
 extern crate std;
 use super::*;
-use cbd_protocol::MAX_JOINTS;
+use cbd_protocol::{JointKernelAxis, MAX_JOINTS};
 use heapless::Vec as HVec;
 
 fn mixed_kernel() -> JointKernel {

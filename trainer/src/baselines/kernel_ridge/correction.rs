@@ -5,7 +5,7 @@ use super::peer::fit_kernel_ridge_peer;
 use super::selection::{Hyperparameters, SearchOptions};
 use crate::data::Measurements;
 use crate::evaluation::correction::FittedCorrection;
-use cbd_protocol::{JointKernelAxis, NominalModel};
+use cbd_protocol::NominalModel;
 
 /// The kernel-ridge correction with hyperparameters by `search` (`crate::evaluation::correction::CorrectionFitter`).
 pub fn kernel_ridge_correction(search: &SearchOptions) -> impl Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> + '_ {
@@ -29,9 +29,9 @@ pub fn describe(h: &Hyperparameters) -> String {
         .kernel
         .axes
         .iter()
-        .map(|a| match a {
-            JointKernelAxis::Periodic { b } => format!("b={b:.3}"),
-            JointKernelAxis::Gaussian { width } => format!("l={width:.3}"),
+        .map(|a| {
+            let (form, p) = crate::axis_forms::form_and_parameter(a);
+            format!("{}={p:.3}", form.label())
         })
         .collect();
     let rows = match (&h.weight_space, &h.weight_space_declined) {
@@ -58,15 +58,7 @@ pub fn describe(h: &Hyperparameters) -> String {
 /// "weight_space" (null, or the refinement on every row), "weight_space_declined", …}`.
 pub fn to_json(h: &Hyperparameters) -> serde_json::Value {
     use serde_json::json;
-    let widths: Vec<serde_json::Value> = h
-        .kernel
-        .axes
-        .iter()
-        .map(|a| match a {
-            JointKernelAxis::Periodic { b } => json!({ "periodic_b": b }),
-            JointKernelAxis::Gaussian { width } => json!({ "gaussian_width": width }),
-        })
-        .collect();
+    let widths: Vec<serde_json::Value> = h.kernel.axes.iter().map(crate::axis_forms::axis_json).collect();
     json!({
         "joint_axes": widths, "gamma": h.kernel.gamma, "noise_sigma": h.noise_sigma,
         "noise_sigma_data_units": h.noise_sigma_data_units(), "task_scale": h.task_scale,

@@ -17,9 +17,10 @@
 #[cfg(test)]
 use super::fit::kernel_matrix;
 use super::weight_space::{refine, KrrWeightSpaceReport};
+use crate::axis_forms::{axes_at, forms_of, AxisForm};
 use crate::data::Measurements;
 use crate::evidence::joint_pair_table::JointPairTable;
-use cbd_protocol::{JointKernel, JointKernelAxis, NominalModel, Normalisation};
+use cbd_protocol::{JointKernel, NominalModel, Normalisation};
 use cbd_runtime::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
 
@@ -159,21 +160,9 @@ pub fn profiled_lml(c: &Mat<f64>, residual: &Mat<f64>, lambda: f64) -> Option<(f
     Some((value, gamma))
 }
 
-/// The kernel for log-parameters `theta` (one per axis) and unit γ.
-fn kernel_of(template: &[bool], theta: &[f64], gamma: f64) -> JointKernel {
-    let axes = template
-        .iter()
-        .zip(theta)
-        .map(
-            |(&periodic, &t)| {
-                if periodic {
-                    JointKernelAxis::Periodic { b: t.exp() }
-                } else {
-                    JointKernelAxis::Gaussian { width: t.exp() }
-                }
-            },
-        )
-        .collect::<Vec<_>>();
+/// The kernel for log-parameters `theta` (one per axis of `forms`) and amplitude γ.
+fn kernel_of(forms: &[&dyn AxisForm], theta: &[f64], gamma: f64) -> JointKernel {
+    let axes = axes_at(forms, theta);
     JointKernel { gamma, axes: heapless::Vec::from_slice(&axes).expect("at most MAX_JOINTS axes") }
 }
 
@@ -193,7 +182,7 @@ pub fn choose_kernel_ridge_hyperparameters(
     let used = data.subset(&rows);
     let task_scale = options.task_scale.unwrap_or_else(|| crate::evidence::normalisation_of(data).task_scale);
     let residual = normalised_residual(nominal, &used, task_scale);
-    let table = JointPairTable::new((0..n).map(|d| nominal.is_revolute(d)).collect(), &used);
+    let table = JointPairTable::new(forms_of(nominal), &used);
     let init = data_start(&table, options);
     let gp = ResidualGp { table, residual, evaluations: std::cell::Cell::new(0) };
     let bounds = Bounds {
@@ -222,7 +211,7 @@ pub fn choose_kernel_ridge_hyperparameters(
         }
     }
     Ok(Hyperparameters {
-        kernel: kernel_of(&gp.table.periodic, &theta, gamma),
+        kernel: kernel_of(&gp.table.forms, &theta, gamma),
         noise_sigma: (log_lambda.exp() * gamma).sqrt(),
         task_scale,
         log_marginal_likelihood: lml,
@@ -250,10 +239,10 @@ fn scale_only(task_scale: f64) -> Normalisation {
 fn data_start(table: &JointPairTable, options: &SearchOptions) -> Vec<f64> {
     let count = table.count;
     let pairs = (0..count.min(200)).map(|i| JointPairTable::pair_index(i, (i * 7919 + 1) % count));
-    let (log_b0, log_l0) = table.half_kernel_log_widths(pairs);
-    let log_b0 = options.initial_b.map_or(log_b0, f64::ln);
-    let log_l0 = options.initial_width.map_or(log_l0, f64::ln);
-    table.periodic.iter().map(|&p| if p { log_b0 } else { log_l0 }).collect()
+    let half = table.half_kernel_log_widths(pairs);
+    // The given start: b for the periodic forms, the width for the others.
+    let given = |f: &&dyn AxisForm| if f.periodic() { options.initial_b } else { options.initial_width };
+    table.forms.iter().zip(half).map(|(f, l)| given(f).map_or(l, f64::ln)).collect()
 }
 
 /// The GP on the residual for one joint kernel, its profiled marginal likelihood counted per call.
@@ -299,15 +288,11 @@ struct SearchPoint {
 }
 
 /// Coarse grid on (shared width factor, noise ratio). A wider periodic kernel has smaller b, a
-/// wider Gaussian one larger ℓ: the factor multiplies b and divides ℓ² alike.
+/// wider Gaussian one larger ℓ: the factor multiplies every form's weight alike (b, 1/ℓ²).
 fn grid_search(gp: &ResidualGp, init: &[f64], bounds: &Bounds, half_width: i32) -> Option<SearchPoint> {
     let (lo_b, hi_b) = bounds.width;
-    let shift = |k: f64| -> Vec<f64> {
-        init.iter()
-            .zip(&gp.table.periodic)
-            .map(|(t, &p)| if p { (t + k).clamp(lo_b, hi_b) } else { (t - 0.5 * k).clamp(lo_b, hi_b) })
-            .collect()
-    };
+    let shift =
+        |k: f64| -> Vec<f64> { init.iter().zip(&gp.table.forms).map(|(t, f)| (t + k / f.log_weight_slope()).clamp(lo_b, hi_b)).collect() };
     let mut best: Option<SearchPoint> = None;
     for k in -half_width..=half_width {
         let th = shift(k as f64 * 4f64.ln());
@@ -326,7 +311,7 @@ fn grid_search(gp: &ResidualGp, init: &[f64], bounds: &Bounds, half_width: i32) 
 /// Compass search from `point` within the evaluation budget: λ and the shared width first, then
 /// (per axis) every axis alone; steps from a factor 2 halving down to 5 %.
 fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, options: &SearchOptions) {
-    let n = gp.table.periodic.len();
+    let n = gp.table.forms.len();
     let (lo_b, hi_b) = bounds.width;
     let budget = options.max_evaluations.max(4);
     // Coordinates: 0 = λ, 1 = shared width (all axes), 2.. = single axes (second phase).
@@ -346,8 +331,8 @@ fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, opt
                         0 => ll = (ll + dir * step).clamp(bounds.noise.0, bounds.noise.1),
                         1 => th
                             .iter_mut()
-                            .zip(&gp.table.periodic)
-                            .for_each(|(t, &p)| *t = (*t + if p { dir * step } else { -0.5 * dir * step }).clamp(lo_b, hi_b)),
+                            .zip(&gp.table.forms)
+                            .for_each(|(t, f)| *t = (*t + dir * step / f.log_weight_slope()).clamp(lo_b, hi_b)),
                         a => th[a - 2] = (th[a - 2] + dir * step).clamp(lo_b, hi_b),
                     }
                     if th == point.theta && ll == point.log_lambda {
@@ -373,6 +358,7 @@ fn pattern_search(gp: &ResidualGp, point: &mut SearchPoint, bounds: &Bounds, opt
 mod tests {
     use super::super::KernelRidge;
     use super::*;
+    use cbd_protocol::JointKernelAxis;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

@@ -2,7 +2,7 @@
 //! its share of the unit product kernel λ_f = Π_d ω_{h_fd}(b_d) (docs/DESIGN.md §11), with
 //! d ln λ_f / d ln b_d = d ln ω_{h_fd} / d ln b_d for the chain rule to the widths.
 
-use crate::expansion::weights::periodic_weights_and_log_derivatives;
+use crate::axis_forms::weights::periodic_weights_and_log_derivatives;
 
 /// Shares and log-derivatives at log widths `log_widths` for functions of orders `orders` (r × n).
 pub(crate) struct PeriodicShares {
