@@ -56,7 +56,7 @@ use cbd_protocol::{Effect, GravityModel, NominalModel, MAX_EFFECTS};
 use serde::Deserialize;
 use std::fmt::Write as _;
 
-pub use crate::effects::{check_effect_value, encoder_scale::check_encoder_scale, EffectValueError, FieldError, RawEffect};
+pub use crate::effects::{FieldError, RawEffect};
 
 /// `[gravity]` as written in the file.
 #[derive(Debug, Deserialize)]
@@ -173,11 +173,9 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
     }
     let units = FileUnits { rad_per_unit, revolute: &revolute };
     for (k, raw) in effects.iter().enumerate() {
-        let entry = k + 1;
-        let effect = raw.read(entry, &units)?;
-        let at = || FieldError::new(format!("[[effects]] entry {entry}"), "too many effects");
-        let effect = effect.to_blob().ok_or_else(|| FieldError::new(format!("[[effects]] entry {entry}"), "not a blob effect"))?;
-        target.list.push(effect).map_err(|_| at())?;
+        let at = format!("[[effects]] entry {}", k + 1);
+        let effect = raw.read(k + 1, &units)?.to_blob().ok_or_else(|| FieldError::new(&at, "this effect has no blob form"))?;
+        target.list.push(effect).map_err(|_| FieldError::new(&at, "too many effects"))?;
     }
     for effect in moments {
         target.list.push(effect).map_err(|_| FieldError::new("[[gravity.link_moments]]", "too many effects"))?;

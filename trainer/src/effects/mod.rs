@@ -19,7 +19,7 @@ use cbd_runtime::kinematics::augmented::{effect_terms, Order};
 use std::collections::BTreeMap;
 
 /// Every effect kind, in the order the library offers them at a joint and `--effect` lists them.
-pub static KINDS: &[Kind] = &[encoder_scale::KIND, transmission::KIND, gravity_compliance::KIND, link_bending::KIND, gravity_moment::KIND];
+pub static KINDS: &[Kind] = &[encoder_scale::KIND, transmission::KIND, gravity_compliance::KIND, gravity_moment::KIND, link_bending::KIND];
 
 /// Where an effect acts: `index` its 0-based joint (or link), `sub` what else names it (a
 /// transmission's harmonic, a gravity moment's link; 0 otherwise).
