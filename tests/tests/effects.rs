@@ -14,20 +14,6 @@ use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
 use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
 use cbd_trainer::simulate::{configurations, rr, Sampling};
 
-fn injected(e: &Effect) -> InjectedEffect {
-    match *e {
-        Effect::EncoderScale { joint, scale } => InjectedEffect::EncoderScale { joint: joint as usize, scale },
-        Effect::Transmission { joint, harmonic, cos, sin } => {
-            InjectedEffect::Transmission { joint: joint as usize, harmonic: harmonic as u32, cos, sin }
-        }
-        Effect::GravityCompliance { joint, compliance } => InjectedEffect::GravityCompliance { joint: joint as usize, compliance },
-        Effect::LinkBending { link, compliance } => InjectedEffect::LinkBending { link: link as usize, compliance },
-        Effect::GravityMoment { joint, link, mass, first_moment } => {
-            InjectedEffect::GravityMoment { joint: joint as usize, link: link as usize, mass, first_moment }
-        }
-    }
-}
-
 /// `model` with `list` as its effects.
 fn with_effects(model: &NominalModel, list: &[Effect]) -> NominalModel {
     let mut m = model.clone();
@@ -140,7 +126,7 @@ fn cases() -> Vec<Case> {
 fn runtime_vs_simulator(case: &Case, list: &[Effect]) -> f64 {
     let model = with_effects(&case.rigid, list);
     let mut arm = EffectArm::new(case.rigid.clone());
-    arm.effects = list.iter().map(injected).collect();
+    arm.effects = list.iter().map(|e| InjectedEffect::from(*e)).collect();
     let n = model.n_joints();
     case.configurations
         .chunks_exact(n)
@@ -286,7 +272,7 @@ fn trainer_blob_with_effects_round_trips_and_its_exact_jacobian_matches_finite_d
         Effect::LinkBending { link: 1, compliance: 3e-3 },
     ];
     let mut real = EffectArm::new(NominalModel::planar(&[1.02, 0.48]).unwrap());
-    real.effects = effects.iter().map(injected).collect();
+    real.effects = effects.iter().map(|e| InjectedEffect::from(*e)).collect();
     let train = real.measure(&configurations(Sampling::Grid { per_axis: 8 }, 2), 0.0, 1);
     let nominal = with_effects(&rr::nominal(), &effects);
     let mut opts = cbd_trainer::solver::CbdOptions::paper_rr();

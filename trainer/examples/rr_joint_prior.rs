@@ -28,10 +28,10 @@
 mod rr_prior;
 
 use cbd_protocol::*;
+use cbd_trainer::axis_forms::weights::periodic_weights;
 use cbd_trainer::baselines::kernel_ridge::fit_kernel_ridge_peer;
 use cbd_trainer::expansion::basis::{truncate, AxisSeries};
 use cbd_trainer::expansion::solve::{apply, design, LinearProblem};
-use cbd_trainer::axis_forms::weights::periodic_weights;
 use cbd_trainer::expansion::{task_radius_of, tolerance_for};
 use cbd_trainer::flow::ControlPoints;
 use cbd_trainer::simulate::rr;

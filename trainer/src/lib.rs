@@ -31,6 +31,8 @@ pub mod cli;
 pub mod data;
 /// Residual diagnosis: which physical effects the data show.
 pub mod diagnose;
+/// One descriptor per physical effect kind: file entry, simulator, library, labels (docs/DESIGN.md §7).
+pub mod effects;
 /// The trainer's one error type (every stage's error enters it as a source).
 pub mod error;
 /// Evaluation harnesses: side-by-side comparison and commanded accuracy, any fitter through a hook.

@@ -6,9 +6,10 @@
 
 mod common;
 
+use cbd_protocol::Effect;
 use cbd_protocol::NominalModel;
 use cbd_trainer::data::Measurements;
-use cbd_trainer::diagnose::library::{GroupKind, Param};
+use cbd_trainer::diagnose::library::GroupKind;
 use cbd_trainer::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
 use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
 use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
@@ -37,7 +38,7 @@ fn summary(d: &Diagnosis) -> String {
 
 #[test]
 fn second_harmonic_transmission_error_of_the_rr_arm() {
-    let arm = rr_real().with(InjectedEffect::Transmission { joint: 1, harmonic: 2, cos: 0.002, sin: -0.001 });
+    let arm = rr_real().with(Effect::Transmission { joint: 1, harmonic: 2, cos: 0.002, sin: -0.001 });
     let (train, test) = (rr_data(&arm, 300, 1), rr_data(&arm, 300, 2));
     let nominal = cbd_trainer::simulate::rr::nominal();
     let d = diagnose(&nominal, &train, Some(&test), None, &DiagnoseOptions::default()).unwrap();
@@ -45,12 +46,12 @@ fn second_harmonic_transmission_error_of_the_rr_arm() {
     let physical = d.physical_effects();
     assert_eq!(physical.len(), 1, "{}", summary(&d));
     let f = physical[0];
-    assert_eq!((f.kind, f.joint), (GroupKind::Transmission { harmonic: 2 }, Some(1)), "{}", summary(&d));
+    assert_eq!((f.kind, f.joint), (GroupKind::effect("transmission", Some(2)), Some(1)), "{}", summary(&d));
     for p in &f.parameters {
-        let truth = match p.param {
-            Param::TransmissionCos { .. } => 0.002,
-            Param::TransmissionSin { .. } => -0.001,
-            other => panic!("{other:?}"),
+        let truth = match p.param.component_name() {
+            "cos" => 0.002,
+            "sin" => -0.001,
+            _ => panic!("{:?}", p.param),
         };
         assert!((p.value - truth).abs() < 5e-5, "{} = {} ± {} (truth {truth})", p.name, p.value, p.std_error);
         assert!((p.value - truth).abs() < 5.0 * p.std_error.max(1e-7), "{} = {} ± {}", p.name, p.value, p.std_error);
@@ -80,14 +81,14 @@ fn gravity_compliance_of_one_joint_of_the_six_joint_arm() {
     // Unit masses at the link ends (the library's default mass model); compliance of joint 3
     // in rad per (mass·mm): about 0.5 mrad at full torque, ~0.2–0.4 mm at the tool.
     let (nominal, arm) = six_arm(5);
-    let arm = arm.with(InjectedEffect::GravityCompliance { joint: 2, compliance: 4e-7 });
+    let arm = arm.with(Effect::GravityCompliance { joint: 2, compliance: 4e-7 });
     let (train, test) = (six_data(&arm, 400, 1), six_data(&arm, 300, 2));
     let d = diagnose(&nominal, &train, Some(&test), None, &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", summary(&d));
     let physical = d.physical_effects();
     assert_eq!(physical.len(), 1, "{}", summary(&d));
     let f = physical[0];
-    assert_eq!((f.kind, f.joint), (GroupKind::GravityCompliance, Some(2)), "{}", summary(&d));
+    assert_eq!((f.kind, f.joint), (GroupKind::effect("gravity_compliance", None), Some(2)), "{}", summary(&d));
     // The deflection curve, not one moment (individual moments may be unidentifiable).
     let gap = common::gravity_deflection_gap(&d, &arm, 2, &test.joints);
     assert!(gap < 0.05, "deflection of q3 off by {:.1} % (rms): {}", 100.0 * gap, summary(&d));
@@ -111,7 +112,7 @@ fn six_joint_compliance_and_harmonic_are_named_and_nothing_else() {
     for (seed, noise) in (1..=5u64).flat_map(|s| [(s, 0.01), (s, 0.03)]) {
         let (nominal, arm) = six_arm(20 + seed);
         let arm = arm.with_mass_distribution(&UR5_MASSES, &UR5_CENTRES);
-        let arm = arm.with(InjectedEffect::GravityCompliance { joint: 1, compliance: 3e-7 }).with(InjectedEffect::Transmission {
+        let arm = arm.with(Effect::GravityCompliance { joint: 1, compliance: 3e-7 }).with(Effect::Transmission {
             joint: 3,
             harmonic: 1,
             cos: 0.0015,
@@ -128,7 +129,8 @@ fn six_joint_compliance_and_harmonic_are_named_and_nothing_else() {
         );
         let mut named: Vec<(GroupKind, Option<usize>)> = d.physical_effects().iter().map(|f| (f.kind, f.joint)).collect();
         named.sort_by_key(|(k, j)| (format!("{k:?}"), *j));
-        let mut expected = vec![(GroupKind::GravityCompliance, Some(1)), (GroupKind::Transmission { harmonic: 1 }, Some(3))];
+        let mut expected =
+            vec![(GroupKind::effect("gravity_compliance", None), Some(1)), (GroupKind::effect("transmission", Some(1)), Some(3))];
         expected.sort_by_key(|(k, j)| (format!("{k:?}"), *j));
         assert_eq!(named, expected, "seed {seed}: {} dropped {:?}", summary(&d), d.dropped);
         for f in d.physical_effects() {
@@ -176,7 +178,7 @@ fn an_effect_outside_the_library_is_unexplained_structure_absorbed_by_cbd() {
 fn cbd_runs_on_top_of_the_effects_found() {
     // A transmission error (in the library) and a bump (outside it): the diagnosis finds the
     // former, and CbD on nominal + effects (the runtime evaluates them) absorbs the latter.
-    let arm = rr_real().with(InjectedEffect::Transmission { joint: 1, harmonic: 2, cos: 0.002, sin: -0.001 }).with(InjectedEffect::Bump {
+    let arm = rr_real().with(Effect::Transmission { joint: 1, harmonic: 2, cos: 0.002, sin: -0.001 }).with(InjectedEffect::Bump {
         centre: vec![1.0, 2.0],
         width: 0.5,
         amplitude: [0.0, 2e-3, 0.0],
@@ -189,7 +191,7 @@ fn cbd_runs_on_top_of_the_effects_found() {
     let d = diagnose(&nominal, &train, Some(&test), Some(&fitter), &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", summary(&d));
     assert!(
-        d.physical_effects().iter().any(|f| (f.kind, f.joint) == (GroupKind::Transmission { harmonic: 2 }, Some(1))),
+        d.physical_effects().iter().any(|f| (f.kind, f.joint) == (GroupKind::effect("transmission", Some(2)), Some(1))),
         "{}",
         summary(&d)
     );

@@ -6,7 +6,7 @@
 
 mod common;
 
-use cbd_protocol::NominalModel;
+use cbd_protocol::{Effect, NominalModel};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::diagnose::library::{GroupKind, Param};
 use cbd_trainer::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
@@ -93,12 +93,12 @@ fn planar_base_and_joint_offsets_are_geometry_and_nothing_else() {
 fn planar_second_harmonic_on_joint_2_is_named_with_its_amplitude() {
     let (c, s) = (0.002, -0.001);
     planar_sweep(
-        |seed| planar_real(seed).with(InjectedEffect::Transmission { joint: 1, harmonic: 2, cos: c, sin: s }),
+        |seed| planar_real(seed).with(Effect::Transmission { joint: 1, harmonic: 2, cos: c, sin: s }),
         |d, _, case| {
-            assert_eq!(named(d), [(GroupKind::Transmission { harmonic: 2 }, Some(1))], "{case}");
+            assert_eq!(named(d), [(GroupKind::effect("transmission", Some(2)), Some(1))], "{case}");
             let f = d.physical_effects()[0];
             let value = |want: fn(&Param) -> bool| f.parameters.iter().find(|p| want(&p.param)).unwrap().value;
-            let (fc, fs) = (value(|p| matches!(p, Param::TransmissionCos { .. })), value(|p| matches!(p, Param::TransmissionSin { .. })));
+            let (fc, fs) = (value(|p| p.component_name() == "cos"), value(|p| p.component_name() == "sin"));
             let (amplitude, truth) = (fc.hypot(fs), c.hypot(s));
             assert!((amplitude - truth).abs() < 0.05 * truth, "{case}: amplitude {amplitude} vs {truth}");
             assert!(!d.unexplained_structure, "{case}");
@@ -111,18 +111,18 @@ fn planar_second_harmonic_on_joint_2_is_named_with_its_amplitude() {
 /// link does, gravity's component across that link, and the two are not distinguishable.)
 #[test]
 fn each_library_effect_type_is_named_alone() {
-    let cases: [(InjectedEffect, GroupKind, usize, f64); 4] = [
-        (InjectedEffect::EncoderScale { joint: 0, scale: 2e-3 }, GroupKind::EncoderScale, 0, 2e-3),
-        (InjectedEffect::Transmission { joint: 0, harmonic: 3, cos: 0.0, sin: 1.5e-3 }, GroupKind::Transmission { harmonic: 3 }, 0, 1.5e-3),
-        (InjectedEffect::GravityCompliance { joint: 0, compliance: 1e-3 }, GroupKind::GravityCompliance, 0, 1e-3),
-        (InjectedEffect::LinkBending { link: 0, compliance: 2e-3 }, GroupKind::LinkBending, 0, 2e-3),
+    let cases: [(Effect, GroupKind, usize, f64); 4] = [
+        (Effect::EncoderScale { joint: 0, scale: 2e-3 }, GroupKind::effect("encoder_scale", None), 0, 2e-3),
+        (Effect::Transmission { joint: 0, harmonic: 3, cos: 0.0, sin: 1.5e-3 }, GroupKind::effect("transmission", Some(3)), 0, 1.5e-3),
+        (Effect::GravityCompliance { joint: 0, compliance: 1e-3 }, GroupKind::effect("gravity_compliance", None), 0, 1e-3),
+        (Effect::LinkBending { link: 0, compliance: 2e-3 }, GroupKind::effect("link_bending", None), 0, 2e-3),
     ];
     for (effect, kind, joint, size) in cases {
         planar_sweep_with_arm(
             |seed| planar_real(seed).with(effect.clone()),
             |d, _, case, arm, test| {
                 assert_eq!(named(d), [(kind, Some(joint))], "{effect:?} {case}");
-                if kind == GroupKind::GravityCompliance {
+                if kind == GroupKind::effect("gravity_compliance", None) {
                     // Compliance × moment products: compare the deflection curves (the regressor's
                     // identifiable combinations are not the one compliance that made the data).
                     let gap = common::gravity_deflection_gap(d, arm, joint, &test.joints);

@@ -4,7 +4,8 @@
 
 mod cli_support;
 
-use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
+use cbd_protocol::Effect;
+use cbd_trainer::simulate::effects::EffectArm;
 use cbd_trainer::simulate::rr::planar_arm;
 use cbd_trainer::simulate::{configurations, Sampling};
 use cli_support::*;
@@ -27,7 +28,7 @@ fn diagnose_writes_a_planar_file_whose_nominal_is_the_diagnosed_effects_row() {
     let dir = scratch("planar-frame");
     // Base moved by (3, −2) cm and turned by 0.01 rad, joint offsets 0.008 and −0.012 rad,
     // lengths 1.03 and 0.48 m, a second harmonic on joint 2, 0.1 mm noise.
-    let arm = EffectArm::new(planar_arm(&[1.03, 0.48], [0.03, -0.02], 0.01, &[0.008, -0.012])).with(InjectedEffect::Transmission {
+    let arm = EffectArm::new(planar_arm(&[1.03, 0.48], [0.03, -0.02], 0.01, &[0.008, -0.012])).with(Effect::Transmission {
         joint: 1,
         harmonic: 2,
         cos: 2e-3,

@@ -28,16 +28,8 @@ pub struct SimulateArgs {
     /// Output CSV (columns q1, q2 in radians, x, y in length units).
     #[arg(long)]
     pub out: PathBuf,
-    /// Inject an effect nobody declares (repeatable): `type:key=value,...` with joints/links
-    /// 1-based, angles in radians, lengths in the model's unit (rr: 1 = l1; six: mm), compliance
-    /// in rad per (mass·length) under unit link masses and unit gravity (−y for rr, −z for six).
-    /// Library types: encoder_scale:joint=,scale= | transmission:joint=,harmonic=,cos=,sin= |
-    /// gravity_compliance:joint=,compliance= | link_bending:link=,compliance=. Outside the
-    /// library: bump:centre=q1;q2;...,width=,dx=,dy=,dz= | dead_zone:joint=,width= |
-    /// thermal:dx=,dy=,dz= (drift per row). With any --effect the robot is its geometry (rr:
-    /// link lengths 1.09, 0.46; six: its DH, base and tool errors) plus these effects only: the
-    /// built-in bending/stretch/base offset (rr) and joint compliance (six) are left out.
-    #[arg(long = "effect")]
+    /// Inject an effect nobody declares (repeatable): [`effect_help`].
+    #[arg(long = "effect", help = effect_help())]
     pub effects: Vec<String>,
     /// Measure at these poses instead of sampling (`cbd plan --out`): a CSV with the robot's joint
     /// columns (rr: q1, q2 in radians; six: q1_deg … q6_deg), one pose per row; --sampling, --grid and
@@ -383,4 +375,23 @@ fn check_simulation_memory(args: &SimulateArgs, available: Option<f64>) -> Resul
         .into()),
         _ => Ok(()),
     }
+}
+
+/// `--effect`'s help: the library's types from `effects::KINDS` (those with a model-file entry,
+/// keys in its order), then the simulator's own.
+fn effect_help() -> String {
+    let library: Vec<String> = crate::effects::KINDS
+        .iter()
+        .filter(|k| !k.file_fields().is_empty())
+        .map(|k| format!("{}:{}", k.name(), k.file_fields().iter().map(|(key, _)| format!("{key}=")).collect::<Vec<_>>().join(",")))
+        .collect();
+    format!(
+        "Inject an effect nobody declares (repeatable): `type:key=value,...` with joints/links 1-based, angles in radians, \
+         lengths in the model's unit (rr: 1 = l1; six: mm), compliance in rad per (mass·length) under unit link masses and \
+         unit gravity (−y for rr, −z for six). Library types: {}. Outside the library: bump:centre=q1;q2;...,width=,dx=,dy=,dz= \
+         | dead_zone:joint=,width= | thermal:dx=,dy=,dz= (drift per row). With any --effect the robot is its geometry (rr: \
+         link lengths 1.09, 0.46; six: its DH, base and tool errors) plus these effects only: the built-in \
+         bending/stretch/base offset (rr) and joint compliance (six) are left out",
+        library.join(" | ")
+    )
 }

@@ -51,9 +51,12 @@
 //! compliance = 0.05                # length_unit
 //! ```
 
+use crate::effects::{check_values, FileUnits, Instance};
 use cbd_protocol::{Effect, GravityModel, NominalModel, MAX_EFFECTS};
 use serde::Deserialize;
 use std::fmt::Write as _;
+
+pub use crate::effects::{FieldError, RawEffect};
 
 /// `[gravity]` as written in the file.
 #[derive(Debug, Deserialize)]
@@ -72,26 +75,6 @@ pub struct RawLinkMoment {
     link: usize,
     mass: f64,
     first_moment: Vec<f64>,
-}
-
-/// A `[gravity]` or `[[effects]]` value that is not valid: `field` names it (`[[effects]] entry 2`,
-/// `[gravity] link_masses`), `message` says what is wrong. The model file reader adds the file.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{field}: {message}")]
-pub struct FieldError {
-    pub field: String,
-    pub message: String,
-}
-
-impl FieldError {
-    fn new(field: impl Into<String>, message: impl Into<String>) -> FieldError {
-        FieldError { field: field.into(), message: message.into() }
-    }
-}
-
-/// How an error names one `[[effects]]` entry (1-based, file order).
-fn effects_entry(entry: usize) -> String {
-    format!("[[effects]] entry {entry}")
 }
 
 /// The `[[gravity.link_moments]]` entries as effects (joint units per `rad_per_unit`).
@@ -117,7 +100,7 @@ fn link_moments(raw: &[RawLinkMoment], n: usize, planar: bool, revolute: &[bool]
         }
         let mut values = vec![("mass", m.mass)];
         values.extend(m.first_moment.iter().map(|v| ("first_moment", *v)));
-        check_finite(&at, &values)?;
+        check_values(&at, &values)?;
         // A revolute joint deflects by an angle (the gauge c_j = 1 angle unit per mass·length).
         let unit = if revolute[joint] { rad_per_unit } else { 1.0 };
         let mut first_moment = [0.0; 3];
@@ -127,63 +110,6 @@ fn link_moments(raw: &[RawLinkMoment], n: usize, planar: bool, revolute: &[bool]
         out.push(Effect::GravityMoment { joint: joint as u8, link: link as u8, mass: m.mass * unit, first_moment });
     }
     Ok(out)
-}
-
-/// One `[[effects]]` entry as written in the file (1-based joints, the file's angle unit).
-#[derive(Debug, Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
-pub enum RawEffect {
-    EncoderScale { joint: usize, scale: f64 },
-    Transmission { joint: usize, harmonic: u8, cos: f64, sin: f64 },
-    GravityCompliance { joint: usize, compliance: f64 },
-    LinkBending { link: usize, compliance: f64 },
-}
-
-fn check_index(entry: usize, what: &str, value: usize, n: usize) -> Result<u8, FieldError> {
-    if value == 0 || value > n {
-        return Err(FieldError::new(effects_entry(entry), format!("{what} = {value}, the model has {n} (1 to {n})")));
-    }
-    Ok((value - 1) as u8)
-}
-
-/// Finite and within the importer's magnitude bound (squares must stay finite downstream).
-fn check_finite(at: &str, values: &[(&str, f64)]) -> Result<(), FieldError> {
-    values.iter().try_for_each(|(name, v)| check_effect_value(name, *v)).map_err(|e| FieldError::new(at, e.to_string()))
-}
-
-/// One value of an effect, in a model file or a simulation's `--effect`: finite and within the
-/// importer's bound ±1e100, so that what `cbd simulate` injects a model file could declare.
-pub fn check_effect_value(name: &str, v: f64) -> Result<(), EffectValueError> {
-    use crate::limits::MAX_MAGNITUDE;
-    if !v.is_finite() {
-        Err(EffectValueError::NotFinite { name: name.into(), value: v })
-    } else if v.abs() > MAX_MAGNITUDE {
-        Err(EffectValueError::TooLarge { name: name.into(), value: v })
-    } else {
-        Ok(())
-    }
-}
-
-/// An encoder scale error δ = scale·q: a relative error of 100 % or more is not an encoder's scale
-/// error (it reverses or doubles every angle) but a wrong value or unit.
-pub fn check_encoder_scale(scale: f64) -> Result<(), EffectValueError> {
-    check_effect_value("scale", scale)?;
-    if scale.abs() >= 1.0 {
-        return Err(EffectValueError::EncoderScale { scale });
-    }
-    Ok(())
-}
-
-/// An effect's value out of range ([`check_effect_value`], [`check_encoder_scale`]): `name` is
-/// the value's key (`compliance`, `scale`).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum EffectValueError {
-    #[error("{name} = {value} is not finite")]
-    NotFinite { name: String, value: f64 },
-    #[error("{name} = {value:e} is beyond ±{:e}", crate::limits::MAX_MAGNITUDE)]
-    TooLarge { name: String, value: f64 },
-    #[error("scale = {scale:e}: an encoder scale error must lie within (-1, 1)")]
-    EncoderScale { scale: f64 },
 }
 
 /// Puts the file's `[gravity]` and `[[effects]]` into `nominal` (lengths already in the model's
@@ -245,45 +171,24 @@ pub fn apply(gravity: Option<&RawGravity>, effects: &[RawEffect], rad_per_unit: 
     if effects.len() > MAX_EFFECTS {
         return Err(FieldError::new("[[effects]]", format!("{} entries; at most {MAX_EFFECTS} are supported", effects.len())));
     }
+    let units = FileUnits { rad_per_unit, revolute: &revolute };
     for (k, raw) in effects.iter().enumerate() {
-        let entry = k + 1;
-        let effect = match *raw {
-            RawEffect::EncoderScale { joint, scale } => {
-                check_encoder_scale(scale).map_err(|e| FieldError::new(effects_entry(entry), e.to_string()))?;
-                Effect::EncoderScale { joint: check_index(entry, "joint", joint, n)?, scale }
-            }
-            RawEffect::Transmission { joint, harmonic, cos, sin } => {
-                check_finite(&effects_entry(entry), &[("cos", cos), ("sin", sin)])?;
-                if !(1..=16).contains(&harmonic) {
-                    return Err(FieldError::new(effects_entry(entry), format!("harmonic = {harmonic}, needs 1 to 16")));
-                }
-                let joint = check_index(entry, "joint", joint, n)?;
-                if !revolute[joint as usize] {
-                    return Err(FieldError::new(
-                        effects_entry(entry),
-                        format!("joint {} is prismatic; a transmission harmonic needs a revolute joint", joint + 1),
-                    ));
-                }
-                Effect::Transmission { joint, harmonic, cos: cos * rad_per_unit, sin: sin * rad_per_unit }
-            }
-            RawEffect::GravityCompliance { joint, compliance } => {
-                check_finite(&effects_entry(entry), &[("compliance", compliance)])?;
-                let joint = check_index(entry, "joint", joint, n)?;
-                // A revolute joint deflects by an angle, a prismatic one by a length.
-                let unit = if revolute[joint as usize] { rad_per_unit } else { 1.0 };
-                Effect::GravityCompliance { joint, compliance: compliance * unit }
-            }
-            RawEffect::LinkBending { link, compliance } => {
-                check_finite(&effects_entry(entry), &[("compliance", compliance)])?;
-                Effect::LinkBending { link: check_index(entry, "link", link, n)?, compliance }
-            }
-        };
-        target.list.push(effect).map_err(|_| FieldError::new(effects_entry(entry), "too many effects"))?;
+        let at = format!("[[effects]] entry {}", k + 1);
+        let effect = raw.read(k + 1, &units)?.to_blob().ok_or_else(|| FieldError::new(&at, "this effect has no blob form"))?;
+        target.list.push(effect).map_err(|_| FieldError::new(&at, "too many effects"))?;
     }
     for effect in moments {
         target.list.push(effect).map_err(|_| FieldError::new("[[gravity.link_moments]]", "too many effects"))?;
     }
     Ok(())
+}
+
+/// One `[[effects]]` entry of `effect` (empty for a kind written elsewhere).
+pub fn write_entry(effect: &Instance, units: &FileUnits) -> String {
+    if effect.kind.file_fields().is_empty() {
+        return String::new();
+    }
+    format!("\n[[effects]]\ntype = \"{}\"\n{}", effect.kind.name(), effect.kind.write(effect, units))
 }
 
 /// The `[gravity]` (when not the default) and `[[effects]]` sections of `nominal`, angles in the
@@ -315,31 +220,10 @@ pub fn write(nominal: &NominalModel, rad_per_unit: f64) -> String {
             );
         }
     }
+    let revolute: Vec<bool> = (0..nominal.n_joints()).map(|d| nominal.is_revolute(d)).collect();
+    let units = FileUnits { rad_per_unit, revolute: &revolute };
     for e in &effects.list {
-        if matches!(e, Effect::GravityMoment { .. }) {
-            continue;
-        }
-        out += "\n[[effects]]\n";
-        let _ = match *e {
-            Effect::GravityMoment { .. } => Ok(()),
-            Effect::EncoderScale { joint, scale } => {
-                writeln!(out, "type = \"encoder_scale\"\njoint = {}\nscale = {scale:?}", joint + 1)
-            }
-            Effect::Transmission { joint, harmonic, cos, sin } => writeln!(
-                out,
-                "type = \"transmission\"\njoint = {}\nharmonic = {harmonic}\ncos = {:?}\nsin = {:?}",
-                joint + 1,
-                cos / rad_per_unit,
-                sin / rad_per_unit
-            ),
-            Effect::GravityCompliance { joint, compliance } => {
-                let unit = if nominal.is_revolute(joint as usize) { rad_per_unit } else { 1.0 };
-                writeln!(out, "type = \"gravity_compliance\"\njoint = {}\ncompliance = {:?}", joint + 1, compliance / unit)
-            }
-            Effect::LinkBending { link, compliance } => {
-                writeln!(out, "type = \"link_bending\"\nlink = {}\ncompliance = {compliance:?}", link + 1)
-            }
-        };
+        out += &write_entry(&Instance::of(e), &units);
     }
     out
 }

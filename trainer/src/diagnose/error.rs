@@ -12,6 +12,9 @@ pub enum DiagnoseError {
     /// The found effects do not fit in one model's effect list.
     #[error("more than {} effects", cbd_protocol::MAX_EFFECTS)]
     TooManyEffects,
+    /// An effect kind the blob cannot hold (a test's) was to be written into the model.
+    #[error("{kind} has no blob form")]
+    NotInBlob { kind: &'static str },
     /// The nonparametric correction of a table row failed: `on` names the model it corrects;
     /// `source` is the trainer's error (`crate::Error`).
     #[error("CbD on {on}: {source}")]

@@ -3,16 +3,13 @@
 //! the diagnosis, the CbD fit on top of it and the controller all use one implementation. (The
 //! simulator's independent implementation, `simulate::effects`, only makes test data.)
 
-use cbd_protocol::{Effect, NominalModel};
+use cbd_protocol::NominalModel;
 use cbd_runtime::kinematics::augmented::{effect_terms, Order};
 use cbd_runtime::kinematics::tool_point::forward_kinematics_at;
 
-/// What one effect adds at q, with its own parameter values: to δ (joint) or to b (task).
-#[derive(Debug, Clone, PartialEq)]
-pub enum Response {
-    Joint(Vec<f64>),
-    Task([f64; 3]),
-}
+/// What one effect adds at q, with its own parameter values: to δ (joint) or to b (task)
+/// (each kind's `effects::EffectKind::response`).
+pub use crate::effects::Response;
 
 /// k0_aug(q) at tool point `point` (0 for a model without tool points), the first `m`
 /// coordinates (the data's: 2 for a planar arm's DH form). Data row r measures tool point
@@ -42,15 +39,6 @@ pub fn deflected_rigid_jacobian(model: &NominalModel, rigid: &NominalModel, q: &
     let moved: Vec<f64> = q.iter().zip(&delta).map(|(a, b)| a + b).collect();
     let k = forward_kinematics_at(rigid, &moved, point);
     (0..model.task_dim()).flat_map(|c| k.jacobian[c][..n].to_vec()).collect()
-}
-
-/// The contribution of `effect` at q (its own parameter values).
-pub fn response(model: &NominalModel, effect: &Effect, q: &[f64]) -> Response {
-    let t = effect_terms(model, std::slice::from_ref(effect), q, Order::Value);
-    match effect {
-        Effect::LinkBending { .. } => Response::Task(t.b),
-        _ => Response::Joint(t.delta.iter().copied().take(q.len()).collect()),
-    }
 }
 
 /// Gravity torque τ_j(q) of the nominal chain under its mass model.

@@ -9,11 +9,14 @@
 
 use super::kinematics::{self, Response};
 use crate::data::Measurements;
+use crate::effects::{Instance, Kind, Site, KINDS};
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for, parameter_names_for};
 use crate::nominal::positions;
 use cbd_protocol::{Effect, NominalModel};
 use cbd_runtime::kinematics::augmented::{effect_terms, Order};
 use faer::Mat;
+
+pub use crate::effects::LibraryOptions;
 
 /// One scalar parameter of the library.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -21,50 +24,54 @@ pub enum Param {
     /// Index into the DH parameter vector (`nominal::dh_parameters::parameter_names_for`) or, for a planar
     /// chain, the link index.
     Geometric(usize),
-    EncoderScale {
-        joint: usize,
-    },
-    TransmissionCos {
-        joint: usize,
-        harmonic: u8,
-    },
-    TransmissionSin {
-        joint: usize,
-        harmonic: u8,
-    },
-    GravityCompliance {
-        joint: usize,
-    },
-    /// c_j·m_k (`component` 0) or c_j·s_k along x, y, z of link k's frame (1, 2, 3): one column of
-    /// compliant joint j's gravity regressor, ∂/∂q_j g·o_k or ∂/∂q_j g·R_k e_i (gauge c_j = 1).
-    GravityMoment {
-        joint: usize,
-        link: usize,
-        component: u8,
-    },
-    LinkBending {
-        link: usize,
-    },
+    /// Parameter `component` (of [`EffectKind::components`](crate::effects::EffectKind::components)) of an effect of `kind` at `site`.
+    Effect { kind: Kind, site: Site, component: usize },
 }
 
-/// What kind of effect a group is.
+impl Param {
+    /// The effect this parameter stands for with value `v` (`None`: geometric).
+    pub fn effect(&self, v: f64) -> Option<Instance> {
+        match *self {
+            Param::Geometric(_) => None,
+            Param::Effect { kind, site, component } => Some(Instance::single(kind, site, component, v)),
+        }
+    }
+
+    /// The parameter's name among its kind's components (`cos`, `scale`; `geometric` for the chain's).
+    pub fn component_name(&self) -> &'static str {
+        match self {
+            Param::Geometric(_) => "geometric",
+            Param::Effect { kind, component, .. } => kind.components()[*component],
+        }
+    }
+}
+
+/// What kind of effect a group is: the chain's geometry, or an effect of the library with the
+/// `type` it reports (and a transmission's harmonic).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum GroupKind {
     Geometric,
-    EncoderScale,
-    Transmission { harmonic: u8 },
-    GravityCompliance,
-    LinkBending,
+    Effect { type_name: &'static str, harmonic: Option<u8> },
 }
 
 impl GroupKind {
+    /// An effect group's kind: `GroupKind::effect("transmission", Some(2))`.
+    pub fn effect(type_name: &'static str, harmonic: Option<u8>) -> GroupKind {
+        GroupKind::Effect { type_name, harmonic }
+    }
+
     pub fn type_name(&self) -> &'static str {
         match self {
             GroupKind::Geometric => "geometric",
-            GroupKind::EncoderScale => "encoder_scale",
-            GroupKind::Transmission { .. } => "transmission",
-            GroupKind::GravityCompliance => "gravity_compliance",
-            GroupKind::LinkBending => "link_bending",
+            GroupKind::Effect { type_name, .. } => type_name,
+        }
+    }
+
+    /// A transmission group's harmonic.
+    pub fn harmonic(&self) -> Option<u8> {
+        match self {
+            GroupKind::Geometric => None,
+            GroupKind::Effect { harmonic, .. } => *harmonic,
         }
     }
 }
@@ -79,35 +86,24 @@ pub struct Group {
     pub params: Vec<Param>,
 }
 
-/// Settings of the library.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LibraryOptions {
-    /// Transmission harmonics 1..=H per revolute joint.
-    pub harmonics: u8,
-}
-
-impl Default for LibraryOptions {
-    fn default() -> Self {
-        LibraryOptions { harmonics: 3 }
+impl Group {
+    /// The effect kind of the group's parameters (`None`: geometric).
+    pub fn effect_kind(&self) -> Option<Kind> {
+        self.params.iter().find_map(|p| match p {
+            Param::Effect { kind, .. } => Some(*kind),
+            Param::Geometric(_) => None,
+        })
     }
 }
 
-/// Names of the parameters (1-based joints), e.g. `a2`, `transmission q3 h2 cos`.
+/// Names of the parameters (1-based joints), e.g. `a2`, `q3 h2 cos`.
 pub fn param_name(model: &NominalModel, p: &Param) -> String {
     match *p {
         Param::Geometric(k) => match model {
             NominalModel::DhChain(c) => parameter_names_for(c)[k].clone(),
             NominalModel::PlanarChain { .. } => format!("l{}", k + 1),
         },
-        Param::EncoderScale { joint } => format!("scale q{}", joint + 1),
-        Param::TransmissionCos { joint, harmonic } => format!("q{} h{harmonic} cos", joint + 1),
-        Param::TransmissionSin { joint, harmonic } => format!("q{} h{harmonic} sin", joint + 1),
-        Param::GravityCompliance { joint } => format!("compliance q{}", joint + 1),
-        Param::GravityMoment { joint, link, component: 0 } => format!("q{} link {} mass", joint + 1, link + 1),
-        Param::GravityMoment { joint, link, component } => {
-            format!("q{} link {} first moment {}", joint + 1, link + 1, ["x", "y", "z"][(component as usize - 1).min(2)])
-        }
-        Param::LinkBending { link } => format!("bending link {}", link + 1),
+        Param::Effect { kind, site, component } => kind.param_name(site, component),
     }
 }
 
@@ -118,7 +114,6 @@ pub fn is_angle(model: &NominalModel, p: &Param) -> bool {
             let name = &parameter_names_for(c)[*k];
             name.starts_with("alpha") || name.starts_with("theta") || name.starts_with("base_r") || name.starts_with("tool_r")
         }
-        (_, Param::TransmissionCos { .. } | Param::TransmissionSin { .. }) => true,
         _ => false,
     }
 }
@@ -134,6 +129,12 @@ fn geometric_count(model: &NominalModel) -> usize {
 /// not yet pruned to an identifiable set). A DH chain read in two coordinates (a planar arm's DH
 /// form) has the in-plane geometric parameters only.
 pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions, m: usize) -> Vec<Group> {
+    candidate_groups_of(KINDS, model, options, m)
+}
+
+/// [`candidate_groups`] of the effect kinds `kinds`: the geometric group, then per joint each
+/// kind's groups in the list's order.
+pub fn candidate_groups_of(kinds: &[Kind], model: &NominalModel, options: &LibraryOptions, m: usize) -> Vec<Group> {
     let n = model.n_joints();
     let geometric = match model {
         NominalModel::DhChain(_) if m < model.task_dim() => crate::nominal::planar::in_plane_parameters(n),
@@ -146,103 +147,32 @@ pub fn candidate_groups(model: &NominalModel, options: &LibraryOptions, m: usize
         params: geometric.into_iter().map(Param::Geometric).collect(),
     }];
     for j in 0..n {
-        let revolute = model.is_revolute(j);
-        groups.push(Group {
-            name: format!("encoder scale q{}", j + 1),
-            kind: GroupKind::EncoderScale,
-            joint: Some(j),
-            params: vec![Param::EncoderScale { joint: j }],
-        });
-        if revolute {
-            for h in 1..=options.harmonics {
-                groups.push(Group {
-                    name: format!("transmission q{} harmonic {h}", j + 1),
-                    kind: GroupKind::Transmission { harmonic: h },
-                    joint: Some(j),
-                    params: vec![Param::TransmissionCos { joint: j, harmonic: h }, Param::TransmissionSin { joint: j, harmonic: h }],
-                });
-            }
+        for &kind in kinds {
+            groups.extend(kind.groups(model, options, m, j).into_iter().map(|g| Group {
+                name: g.name,
+                kind: GroupKind::Effect { type_name: g.type_name, harmonic: g.harmonic },
+                joint: Some(g.joint),
+                params: g.params.into_iter().map(|(site, component)| Param::Effect { kind, site, component }).collect(),
+            }));
         }
-        groups.push(Group {
-            name: format!("gravity compliance q{}", j + 1),
-            kind: GroupKind::GravityCompliance,
-            joint: Some(j),
-            params: gravity_regressor(n, j, m),
-        });
-        groups.push(Group {
-            name: format!("link bending {}", j + 1),
-            kind: GroupKind::LinkBending,
-            joint: Some(j),
-            params: vec![Param::LinkBending { link: j }],
-        });
     }
     groups
 }
 
-/// Compliant joint j's gravity regressor as parameters: c_j·m_k and c_j·s_k for every link
-/// k ≥ j (in-plane data: the first moment's z component does nothing and is left out). Which
-/// combinations the data identify is decided on the Jacobian (`diagnose::usable_columns`).
-fn gravity_regressor(n: usize, j: usize, m: usize) -> Vec<Param> {
-    let components = if m < 3 { 3 } else { 4 };
-    (j..n).flat_map(|link| (0..components).map(move |component| Param::GravityMoment { joint: j, link, component })).collect()
-}
-
-/// The effect a non-geometric parameter stands for, with value `v`.
-fn effect_of(p: &Param, v: f64) -> Option<Effect> {
-    Some(match *p {
-        Param::Geometric(_) => return None,
-        Param::EncoderScale { joint } => Effect::EncoderScale { joint: joint as u8, scale: v },
-        Param::TransmissionCos { joint, harmonic } => Effect::Transmission { joint: joint as u8, harmonic, cos: v, sin: 0.0 },
-        Param::TransmissionSin { joint, harmonic } => Effect::Transmission { joint: joint as u8, harmonic, cos: 0.0, sin: v },
-        Param::GravityCompliance { joint } => Effect::GravityCompliance { joint: joint as u8, compliance: v },
-        Param::GravityMoment { joint, link, component } => {
-            let (mass, mut first_moment) = if component == 0 { (v, [0.0; 3]) } else { (0.0, [0.0; 3]) };
-            if let Some(s) = first_moment.get_mut((component as usize).wrapping_sub(1)) {
-                *s = v;
-            }
-            Effect::GravityMoment { joint: joint as u8, link: link as u8, mass, first_moment }
-        }
-        Param::LinkBending { link } => Effect::LinkBending { link: link as u8, compliance: v },
-    })
-}
-
-/// Adds `e` to `list`, merging it into an entry of the same type and joint (parameters add).
-fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>, e: Effect) -> Result<(), super::DiagnoseError> {
+/// Adds `e` to `list`, merging it into an entry of the same kind and site (parameters add).
+fn merge_effect(list: &mut heapless::Vec<Effect, { cbd_protocol::MAX_EFFECTS }>, e: Instance) -> Result<(), super::DiagnoseError> {
     for old in list.iter_mut() {
-        match (old, e) {
-            (Effect::EncoderScale { joint: a, scale }, Effect::EncoderScale { joint: b, scale: s }) if *a == b => {
-                *scale += s;
-                return Ok(());
+        let mut merged = Instance::of(old);
+        if merged.kind == e.kind && merged.site == e.site {
+            for (o, v) in merged.values.iter_mut().zip(&e.values) {
+                *o += v;
             }
-            (Effect::Transmission { joint: a, harmonic: h, cos, sin }, Effect::Transmission { joint: b, harmonic: g, cos: c, sin: s })
-                if *a == b && *h == g =>
-            {
-                *cos += c;
-                *sin += s;
-                return Ok(());
-            }
-            (Effect::GravityCompliance { joint: a, compliance }, Effect::GravityCompliance { joint: b, compliance: c }) if *a == b => {
-                *compliance += c;
-                return Ok(());
-            }
-            (Effect::LinkBending { link: a, compliance }, Effect::LinkBending { link: b, compliance: c }) if *a == b => {
-                *compliance += c;
-                return Ok(());
-            }
-            (
-                Effect::GravityMoment { joint: a, link: k, mass, first_moment },
-                Effect::GravityMoment { joint: b, link: l, mass: m, first_moment: s },
-            ) if *a == b && *k == l => {
-                *mass += m;
-                for (o, v) in first_moment.iter_mut().zip(s) {
-                    *o += v;
-                }
-                return Ok(());
-            }
-            _ => {}
+            *old = merged.to_blob().expect("a blob effect's kind has a blob form");
+            return Ok(());
         }
     }
-    list.push(e).map_err(|_| super::DiagnoseError::TooManyEffects)
+    let blob = e.to_blob().ok_or(super::DiagnoseError::NotInBlob { kind: e.kind.name() })?;
+    list.push(blob).map_err(|_| super::DiagnoseError::TooManyEffects)
 }
 
 /// `model` changed by `values` of `params`: geometric changes written into the chain, effects
@@ -273,7 +203,7 @@ pub fn apply(model: &NominalModel, params: &[Param], values: &[f64]) -> Result<N
         }
     };
     for (param, v) in params.iter().zip(values) {
-        if let Some(e) = effect_of(param, *v) {
+        if let Some(e) = param.effect(*v) {
             merge_effect(&mut out.effects_mut().list, e)?;
         }
     }
@@ -365,7 +295,7 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
     }
     // Effect columns: responses of unit-valued effects.
     let rigid = kinematics::rigid(model);
-    let effects: Vec<(usize, Effect)> = params.iter().enumerate().filter_map(|(col, p)| effect_of(p, 1.0).map(|e| (col, e))).collect();
+    let effects: Vec<(usize, Instance)> = params.iter().enumerate().filter_map(|(col, p)| p.effect(1.0).map(|e| (col, e))).collect();
     if effects.is_empty() {
         return jac;
     }
@@ -373,7 +303,7 @@ pub fn jacobian(model: &NominalModel, data: &Measurements, params: &[Param]) -> 
         let q = data.joints(i);
         let dk = kinematics::deflected_rigid_jacobian(model, &rigid, q, kinematics::point_of_row(model, i));
         for (col, e) in &effects {
-            match kinematics::response(model, e, q) {
+            match e.kind.response(model, e, q) {
                 Response::Joint(delta) => {
                     for c in 0..m {
                         jac[(m * i + c, *col)] = (0..n).map(|d| dk[c * n + d] * delta[d]).sum();
@@ -451,7 +381,8 @@ mod tests {
         let jac = jacobian(&model, &data, &params);
         // The points differ: a rotation's column (θ offset 1, the q2 transmission) read at the tool
         // origin for every row would not match.
-        let transmission = params.iter().position(|p| matches!(p, Param::TransmissionCos { joint: 1, harmonic: 1 })).unwrap();
+        let cos = |p: &Param| p.component_name() == "cos" && matches!(p, Param::Effect { site: Site { index: 1, sub: 1 }, .. });
+        let transmission = params.iter().position(cos).unwrap();
         for col in [3, transmission] {
             assert!((0..3).any(|c| (jac[(c, col)] - jac[(3 + c, col)]).abs() > 1e-3), "rows 0 and 1 share column {col}");
         }

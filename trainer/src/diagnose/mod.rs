@@ -14,6 +14,8 @@ pub mod refine;
 pub mod report;
 pub mod selection;
 pub mod structure;
+#[cfg(test)]
+mod test_effect;
 
 use crate::data::Measurements;
 use crate::evaluation::correction::{fit_on, CorrectionFitter};
@@ -235,8 +237,7 @@ fn shape_outside_library(
     groups: &[Group],
     options: &StructureOptions,
 ) -> Option<DroppedEffect> {
-    let is_joint_deflection =
-        |g: &usize| matches!(groups[*g].kind, GroupKind::EncoderScale | GroupKind::Transmission { .. } | GroupKind::GravityCompliance);
+    let is_joint_deflection = |g: &usize| groups[*g].effect_kind().is_some_and(|k| !k.task_space());
     if !kept.iter().any(is_joint_deflection) {
         return None;
     }
@@ -297,7 +298,7 @@ fn usable_columns(groups: &[Group], offsets: &[usize], jac: &faer::Mat<f64>, tol
             if group.kind == GroupKind::Geometric {
                 geometric = independent_columns(jac.as_ref(), &norms, &cols, tol);
                 geometric.clone()
-            } else if group.kind == GroupKind::GravityCompliance {
+            } else if group.effect_kind().is_some_and(|k| k.regressor()) {
                 // The gravity regressor's identifiable combinations: the columns column-pivoted
                 // QR keeps beside the geometric ones (the others are fitted as zero).
                 let with: Vec<usize> = geometric.iter().chain(&cols).copied().collect();

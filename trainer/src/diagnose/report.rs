@@ -16,27 +16,19 @@ pub struct Units<'a> {
 
 /// Unit of a parameter, as printed: angles in the file's angle unit, lengths in its length unit.
 fn unit_of(model: &NominalModel, p: &Param, units: &Units) -> String {
-    let (length, angle) = (units.length, units.angle.name());
-    match p {
-        _ if is_angle(model, p) => angle.into(),
-        Param::Geometric(_) => length.into(),
-        Param::EncoderScale { .. } => "(ratio)".into(),
-        Param::GravityCompliance { joint } if !model.is_revolute(*joint) => format!("{length}/(mass·{length})"),
-        Param::GravityCompliance { .. } => format!("{angle}/(mass·{length})"),
-        Param::LinkBending { .. } => length.into(),
-        // Products c_j·m_k, c_j·s_k in the gauge c_j = 1 (angle or length unit per mass·length).
-        Param::GravityMoment { component: 0, .. } => "mass".into(),
-        Param::GravityMoment { .. } => format!("mass·{length}"),
-        _ => String::new(),
+    match *p {
+        Param::Geometric(_) if is_angle(model, p) => units.angle.name().into(),
+        Param::Geometric(_) => units.length.into(),
+        Param::Effect { kind, site, component } => kind.unit(model, site, component, units.length, units.angle.name()).0,
     }
 }
 
 /// A value (or standard error) in the file's units: what is an angle, or an angle per torque
 /// (a revolute joint's compliance), converted from radians.
 fn shown(model: &NominalModel, p: &Param, v: f64, units: &Units) -> f64 {
-    let per_angle = match p {
-        Param::GravityCompliance { joint } | Param::GravityMoment { joint, .. } => model.is_revolute(*joint),
-        _ => is_angle(model, p),
+    let per_angle = match *p {
+        Param::Geometric(_) => is_angle(model, p),
+        Param::Effect { kind, site, component } => kind.unit(model, site, component, units.length, units.angle.name()).1,
     };
     if per_angle {
         v / units.angle.radians()
@@ -193,7 +185,7 @@ fn effect_json(model: &NominalModel, f: &FoundEffect, units: &Units) -> Value {
         "name": f.name,
         "type": f.kind.type_name(),
         "joint": f.joint.map(|j| j + 1),
-        "harmonic": match f.kind { GroupKind::Transmission { harmonic } => Some(harmonic), _ => None },
+        "harmonic": f.kind.harmonic(),
         "explains": f.partial_share,
         "share_in_selection_order": f.share,
         "cv_rms_after": f.cv_rms,

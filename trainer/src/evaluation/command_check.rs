@@ -7,7 +7,7 @@
 
 use crate::error::Error;
 use crate::nominal::Frame;
-use cbd_protocol::{Effect, Model};
+use cbd_protocol::Model;
 use cbd_runtime::{CompensateOptions, PoseCompensateOptions};
 
 /// What is wrong with one written row (none: `ok`).
@@ -48,7 +48,7 @@ impl RowFlags {
 /// joint's command may be turned into the limits.
 pub fn periodic_joints(model: &Model<'_>) -> Vec<bool> {
     let scaled =
-        |d: usize| model.nominal.effects().list.iter().any(|e| matches!(e, Effect::EncoderScale { joint, .. } if *joint as usize == d));
+        |d: usize| model.nominal.effects().list.iter().map(crate::effects::Instance::of).any(|e| !e.kind.periodic() && e.site.index == d);
     (0..model.n_joints())
         .map(|d| {
             model.nominal.is_revolute(d)

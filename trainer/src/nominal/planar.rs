@@ -124,11 +124,10 @@ pub fn as_planar_in_frame(model: &NominalModel) -> Option<(NominalModel, PlanarF
     let g = effects.gravity.direction;
     effects.gravity.direction = [co * g[0] + s * g[1], -s * g[0] + co * g[1], 0.0];
     for e in effects.list.iter_mut() {
-        if let cbd_protocol::Effect::Transmission { joint, harmonic, cos, sin } = e {
-            // c cos(h(q' − o)) + s sin(h(q' − o)) in terms of q'.
-            let (sh, ch) = (*harmonic as f64 * frame.offsets[*joint as usize]).sin_cos();
-            (*cos, *sin) = (*cos * ch - *sin * sh, *cos * sh + *sin * ch);
-        }
+        let mut shifted = crate::effects::Instance::of(e);
+        let kind = shifted.kind;
+        kind.shift_joints(&mut shifted, &frame.offsets);
+        *e = shifted.to_blob().expect("a blob effect's kind has a blob form");
     }
     *chain.effects_mut() = effects;
     Some((chain, frame))

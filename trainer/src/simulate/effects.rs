@@ -7,26 +7,19 @@
 //!
 //! Augmented kinematics (as `cbd_protocol::effects` defines it): k(q) = k_rigid(q + δ(q)) + b(q) (+ the outside terms).
 
-use crate::nominal::{dot, norm, scale, sub, Frame};
-use cbd_protocol::{GravityModel, NominalModel};
+pub use crate::effects::EffectSpecError;
+use crate::effects::{Injected, Instance, Kind, SimulatedArm, Spec, KINDS};
+use crate::nominal::{dot, Frame};
+use cbd_protocol::{Effect, GravityModel, NominalModel};
 use cbd_runtime::kinematics::forward_kinematics;
 use cbd_runtime::kinematics::rigid::dh_walk;
 
-/// One injected effect. `joint`/`link` are 0-based.
+/// One injected effect: a kind of the library (`effects::KINDS`, its blob form converts with
+/// `From<Effect>`), or one outside it. `joint` is 0-based.
 #[derive(Debug, Clone, PartialEq)]
 pub enum InjectedEffect {
-    /// δ_j += scale · q_j.
-    EncoderScale { joint: usize, scale: f64 },
-    /// δ_j += cos · cos(h q_j) + sin · sin(h q_j).
-    Transmission { joint: usize, harmonic: u32, cos: f64, sin: f64 },
-    /// δ_j += compliance · τ_j(q), τ_j = ∂V/∂q_j with V(q) = Σ_k m_k g·(o_k(q) + R_k(q) r_k) (rigid
-    /// chain at q; m_k the arm's link masses, r_k its centres of mass in the link frames, 0 = link end).
-    GravityCompliance { joint: usize, compliance: f64 },
-    /// δ_j += ∂/∂q_j g·(mass·o_k(q) + R_k(q)·first_moment), k = `link`: one link's compliance-weighted
-    /// mass moments (`cbd_protocol::Effect::GravityMoment`).
-    GravityMoment { joint: usize, link: usize, mass: f64, first_moment: [f64; 3] },
-    /// b += compliance · (g − (g·u_k) u_k), u_k the unit direction of link k (rigid chain at q).
-    LinkBending { link: usize, compliance: f64 },
+    /// An effect of the library, injected by its descriptor (`effects::EffectKind::inject`).
+    Library(Instance),
     /// Outside the library: task-space displacement `amplitude` · exp(−|q − centre|² / (2 width²))
     /// (joint-space distance, angles wrapped to (−π, π]).
     Bump { centre: Vec<f64>, width: f64, amplitude: [f64; 3] },
@@ -38,17 +31,22 @@ pub enum InjectedEffect {
     ThermalDrift { per_row: [f64; 3] },
 }
 
+impl From<Effect> for InjectedEffect {
+    fn from(e: Effect) -> InjectedEffect {
+        InjectedEffect::Library(Instance::of(&e))
+    }
+}
+
+impl From<Instance> for InjectedEffect {
+    fn from(e: Instance) -> InjectedEffect {
+        InjectedEffect::Library(e)
+    }
+}
+
 impl InjectedEffect {
     /// Whether `cbd diagnose`'s library can represent it.
     pub fn in_library(&self) -> bool {
-        matches!(
-            self,
-            InjectedEffect::EncoderScale { .. }
-                | InjectedEffect::Transmission { .. }
-                | InjectedEffect::GravityCompliance { .. }
-                | InjectedEffect::GravityMoment { .. }
-                | InjectedEffect::LinkBending { .. }
-        )
+        matches!(self, InjectedEffect::Library(_))
     }
 }
 
@@ -201,29 +199,20 @@ impl EffectArm {
         }
     }
 
-    pub fn with(mut self, effect: InjectedEffect) -> EffectArm {
-        self.effects.push(effect);
+    pub fn with(mut self, effect: impl Into<InjectedEffect>) -> EffectArm {
+        self.effects.push(effect.into());
         self
     }
 
     /// Joint deflection δ(q).
     pub fn deflection(&self, q: &[f64]) -> Vec<f64> {
         let mut delta = vec![0.0; q.len()];
-        let mut tau: Option<Vec<f64>> = None;
         for e in &self.effects {
             match *e {
-                InjectedEffect::EncoderScale { joint, scale } => delta[joint] += scale * q[joint],
-                InjectedEffect::Transmission { joint, harmonic, cos, sin } => {
-                    let hq = harmonic as f64 * q[joint];
-                    delta[joint] += cos * hq.cos() + sin * hq.sin();
-                }
-                InjectedEffect::GravityCompliance { joint, compliance } => {
-                    let t = tau.get_or_insert_with(|| self.gravity_torques(q));
-                    delta[joint] += compliance * t[joint];
-                }
-                InjectedEffect::GravityMoment { joint, link, mass, first_moment } => {
-                    let one = |k: usize| if k == link { (mass, first_moment) } else { (0.0, [0.0; 3]) };
-                    delta[joint] += gradient(q, |x| moment_potential(&self.rigid, &self.gravity, x, &one))[joint];
+                InjectedEffect::Library(ref e) if !e.kind.task_space() => {
+                    if let Injected::Joint(joint, v) = e.kind.inject(e, self, q) {
+                        delta[joint] += v;
+                    }
                 }
                 InjectedEffect::DeadZone { joint, width } => {
                     let v = q[joint];
@@ -238,18 +227,12 @@ impl EffectArm {
     /// Task-space terms that do not go through the joints: bending, bumps, drift at row `row`.
     fn task_terms(&self, q: &[f64], row: usize) -> [f64; 3] {
         let mut b = [0.0; 3];
-        let g = gravity_vector(&self.rigid, &self.gravity);
         for e in &self.effects {
             match e {
-                InjectedEffect::LinkBending { link, compliance } => {
-                    let pts = link_points(&self.rigid, q);
-                    let along = sub(pts[link + 1], pts[*link]);
-                    let len = norm(along);
-                    if len > 0.0 {
-                        let u = scale(along, 1.0 / len);
-                        let gu = dot(g, u);
+                InjectedEffect::Library(e) if e.kind.task_space() => {
+                    if let Injected::Task(v) = e.kind.inject(e, self, q) {
                         for c in 0..3 {
-                            b[c] += compliance * (g[c] - gu * u[c]);
+                            b[c] += v[c];
                         }
                     }
                 }
@@ -301,17 +284,19 @@ impl EffectArm {
     }
 }
 
-/// A `--effect` specification that does not parse: the spec and what is wrong with it.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("--effect {spec}: {reason}")]
-pub struct EffectSpecError {
-    pub spec: String,
-    pub reason: String,
-}
-
-impl From<EffectSpecError> for crate::Error {
-    fn from(e: EffectSpecError) -> crate::Error {
-        crate::Error::stage("effects", e)
+impl SimulatedArm for EffectArm {
+    fn gravity_torques(&self, q: &[f64]) -> Vec<f64> {
+        EffectArm::gravity_torques(self, q)
+    }
+    fn moment_torque(&self, q: &[f64], joint: usize, link: usize, mass: f64, first_moment: [f64; 3]) -> f64 {
+        let one = |k: usize| if k == link { (mass, first_moment) } else { (0.0, [0.0; 3]) };
+        gradient(q, |x| moment_potential(&self.rigid, &self.gravity, x, &one))[joint]
+    }
+    fn link_points(&self, q: &[f64]) -> Vec<[f64; 3]> {
+        link_points(&self.rigid, q)
+    }
+    fn gravity(&self) -> [f64; 3] {
+        gravity_vector(&self.rigid, &self.gravity)
     }
 }
 
@@ -321,89 +306,55 @@ impl From<EffectSpecError> for crate::Error {
 /// (compliance), link_bending (link, compliance), bump (centre=a;b;..., width, dx, dy, dz),
 /// dead_zone (width), thermal (dx, dy, dz per row).
 pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
-    use crate::data::effects_section::{check_effect_value, check_encoder_scale};
-    let bad = |reason: String| EffectSpecError { spec: crate::error::excerpt_of(spec, 120), reason };
-    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
-    let mut kv = std::collections::BTreeMap::new();
-    for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
-        let (k, v) = part.split_once('=').ok_or_else(|| bad(format!("`{}` is not key=value", crate::error::excerpt(part))))?;
-        kv.insert(k.trim().to_string(), v.trim().to_string());
+    parse_effect_of(KINDS, spec, n_joints)
+}
+
+/// [`parse_effect`] with the library's effect kinds `kinds` (the `--effect` types are those with
+/// a model-file entry).
+pub fn parse_effect_of(kinds: &[Kind], spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
+    let (kind, s) = Spec::parse(spec, n_joints)?;
+    if let Some(effect) = kinds.iter().filter(|k| k.name() == kind).find_map(|k| k.parse_spec(&s)) {
+        return Ok(InjectedEffect::Library(effect?));
     }
-    let num = |k: &str, default: Option<f64>| -> Result<f64, EffectSpecError> {
-        match kv.get(k) {
-            Some(v) => {
-                let x = v.parse::<f64>().ok().filter(|x| x.is_finite());
-                let x = x.ok_or_else(|| bad(format!("{k}={} is not a finite number", crate::error::excerpt(v))))?;
-                // The model file's bound on effect values: what is injected could be declared.
-                check_effect_value(k, x).map_err(|e| bad(e.to_string()))?;
-                Ok(x)
-            }
-            None => default.ok_or_else(|| bad(format!("missing {k}="))),
-        }
-    };
     // A width is a distance: positive for a bump's, not negative for a dead zone's.
     let width = |positive: bool| -> Result<f64, EffectSpecError> {
-        let w = num("width", None)?;
+        let w = s.number("width", None)?;
         match (positive, w) {
-            (true, w) if w <= 0.0 => Err(bad(format!("width = {} must be positive", crate::error::number(w)))),
-            (false, w) if w < 0.0 => Err(bad(format!("width = {} must not be negative", crate::error::number(w)))),
+            (true, w) if w <= 0.0 => Err(s.bad(format!("width = {} must be positive", crate::error::number(w)))),
+            (false, w) if w < 0.0 => Err(s.bad(format!("width = {} must not be negative", crate::error::number(w)))),
             _ => Ok(w),
         }
     };
-    let index = |k: &str| -> Result<usize, EffectSpecError> {
-        let v = num(k, None)?;
-        if v.fract() != 0.0 || v < 1.0 || v > n_joints as f64 {
-            return Err(bad(format!("{k} must be between 1 and {n_joints}")));
-        }
-        Ok(v as usize - 1)
-    };
-    let effect = match kind {
-        "encoder_scale" => {
-            let scale = num("scale", None)?;
-            check_encoder_scale(scale).map_err(|e| bad(e.to_string()))?;
-            InjectedEffect::EncoderScale { joint: index("joint")?, scale }
-        }
-        "transmission" => {
-            let h = num("harmonic", None)?;
-            if h.fract() != 0.0 || !(1.0..=16.0).contains(&h) {
-                return Err(bad(format!("harmonic must be an integer from 1 to 16")));
-            }
-            InjectedEffect::Transmission {
-                joint: index("joint")?,
-                harmonic: h as u32,
-                cos: num("cos", Some(0.0))?,
-                sin: num("sin", Some(0.0))?,
-            }
-        }
-        "gravity_compliance" => InjectedEffect::GravityCompliance { joint: index("joint")?, compliance: num("compliance", None)? },
-        "link_bending" => InjectedEffect::LinkBending { link: index("link")?, compliance: num("compliance", None)? },
+    let effect = match kind.as_str() {
         "bump" => {
-            let centre: Result<Vec<f64>, EffectSpecError> = kv
+            let centre: Result<Vec<f64>, EffectSpecError> = s
                 .get("centre")
-                .ok_or_else(|| bad(format!("missing centre=q1;q2;...")))?
+                .ok_or_else(|| s.bad("missing centre=q1;q2;...".to_string()))?
                 .split(';')
                 .map(|v| {
                     let x = v.trim().parse::<f64>().ok().filter(|x| x.is_finite());
-                    let x = x.ok_or_else(|| bad(format!("bad centre value `{}`", crate::error::excerpt(v))))?;
-                    check_effect_value("centre", x).map(|()| x).map_err(|e| bad(e.to_string()))
+                    let x = x.ok_or_else(|| s.bad(format!("bad centre value `{}`", crate::error::excerpt(v))))?;
+                    crate::effects::check_effect_value("centre", x).map(|()| x).map_err(|e| s.bad(e.to_string()))
                 })
                 .collect();
             let centre = centre?;
             if centre.len() != n_joints {
-                return Err(bad(format!("centre needs {n_joints} values")));
+                return Err(s.bad(format!("centre needs {n_joints} values")));
             }
             InjectedEffect::Bump {
                 centre,
                 width: width(true)?,
-                amplitude: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?],
+                amplitude: [s.number("dx", Some(0.0))?, s.number("dy", Some(0.0))?, s.number("dz", Some(0.0))?],
             }
         }
-        "dead_zone" => InjectedEffect::DeadZone { joint: index("joint")?, width: width(false)? },
-        "thermal" => InjectedEffect::ThermalDrift { per_row: [num("dx", Some(0.0))?, num("dy", Some(0.0))?, num("dz", Some(0.0))?] },
+        "dead_zone" => InjectedEffect::DeadZone { joint: s.index("joint")?, width: width(false)? },
+        "thermal" => {
+            InjectedEffect::ThermalDrift { per_row: [s.number("dx", Some(0.0))?, s.number("dy", Some(0.0))?, s.number("dz", Some(0.0))?] }
+        }
         other => {
-            return Err(bad(format!(
-                "unknown type `{other}` (encoder_scale, transmission, gravity_compliance, link_bending, bump, dead_zone, thermal)"
-            )))
+            let mut names: Vec<&str> = kinds.iter().filter(|k| !k.file_fields().is_empty()).map(|k| k.name()).collect();
+            names.extend(["bump", "dead_zone", "thermal"]);
+            return Err(s.bad(format!("unknown type `{other}` ({})", names.join(", "))));
         }
     };
     Ok(effect)
@@ -428,7 +379,7 @@ mod tests {
 
     #[test]
     fn transmission_moves_the_joint_by_the_stated_angle() {
-        let arm = EffectArm::new(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap()).with(InjectedEffect::Transmission {
+        let arm = EffectArm::new(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap()).with(Effect::Transmission {
             joint: 1,
             harmonic: 2,
             cos: 0.01,
@@ -446,7 +397,7 @@ mod tests {
     #[test]
     fn bending_of_a_horizontal_link_is_along_gravity() {
         let arm = EffectArm::new(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap())
-            .with(InjectedEffect::LinkBending { link: 0, compliance: 0.01 });
+            .with(Effect::LinkBending { link: 0, compliance: 0.01 });
         let rigid = forward_kinematics(&arm.rigid, &[0.0, 0.4]).position;
         let p = arm.position(&[0.0, 0.4], 0);
         assert!((p[0] - rigid[0]).abs() < 1e-15 && (p[1] - rigid[1] + 0.01).abs() < 1e-15);
@@ -459,7 +410,7 @@ mod tests {
     #[test]
     fn parses_effect_specs() {
         let e = parse_effect("transmission:joint=2,harmonic=2,cos=0.001", 2).unwrap();
-        assert_eq!(e, InjectedEffect::Transmission { joint: 1, harmonic: 2, cos: 0.001, sin: 0.0 });
+        assert_eq!(e, InjectedEffect::from(Effect::Transmission { joint: 1, harmonic: 2, cos: 0.001, sin: 0.0 }));
         assert!(parse_effect("transmission:joint=3,harmonic=2", 2).is_err());
         assert!(parse_effect("wobble:joint=1", 2).is_err());
         let b = parse_effect("bump:centre=1;2,width=0.3,dy=0.01", 2).unwrap();
