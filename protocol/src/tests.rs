@@ -1,4 +1,5 @@
 use super::*;
+use crate::codec::{payload_error, CRC32};
 extern crate std;
 use std::vec::Vec;
 

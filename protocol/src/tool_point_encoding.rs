@@ -4,9 +4,8 @@
 
 use heapless::Vec as HVec;
 
+use crate::error::{DecodeError, ModelError};
 use crate::limits::MAX_TOOL_POINTS;
-use crate::validate::ModelError;
-use crate::DecodeError;
 
 /// Writes `points` into `out`; the bytes written, or `None` when `out` is too small.
 pub(crate) fn write(points: &[[f64; 3]], out: &mut [u8]) -> Option<usize> {

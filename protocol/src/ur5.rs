@@ -2,7 +2,9 @@
 //! 31 mm tool offset along the flange z axis. The trainer's six-joint simulator and the firmware
 //! check's six-joint blob both build on it, so the table is typed once.
 
-use crate::{DhChain, DhConvention, DhJoint, Effects, JointKind, Transform};
+use crate::limits::MAX_JOINTS;
+use crate::model::{DhChain, DhConvention, DhJoint, JointKind, Transform};
+use crate::physical_effects::Effects;
 use core::f64::consts::FRAC_PI_2;
 
 /// One revolute row (a and d in mm, α in radians, no θ offset).
@@ -21,7 +23,7 @@ pub const DH_TABLE: [DhJoint; 6] = [
 ];
 
 // Every build holds the six rows (MAX_JOINTS ≥ 7).
-const _: () = assert!(DH_TABLE.len() <= crate::MAX_JOINTS);
+const _: () = assert!(DH_TABLE.len() <= MAX_JOINTS);
 
 /// The tool point's offset along the flange z axis (mm).
 pub const TOOL_Z: f64 = 31.0;

@@ -1,55 +1,10 @@
 //! Consistency checks run on every encode and decode.
 
+use crate::error::ModelError;
 use crate::expansion::{code_is_sin, code_order, FieldExpansion};
 use crate::limits::{MAX_EXPANSION_FEATURES, MAX_EXPANSION_ORDER, MAX_STEPS, MAX_TOOL_POINT_COORDINATE, ROTATION_TOLERANCE};
 use crate::model::*;
 use crate::physical_effects::{Effect, Effects, GRAVITY_UNIT_TOLERANCE, MAX_HARMONIC};
-
-/// What is wrong with a model, naming the field.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ModelError {
-    /// A field holds NaN or ±∞.
-    NonFinite {
-        /// The field's path in the model.
-        field: &'static str,
-        /// The value's position in the field.
-        index: usize,
-    },
-    /// A field is outside its allowed range (e.g. a width ≤ 0).
-    OutOfRange {
-        /// The field's path in the model (with the reason in parentheses where there are several).
-        field: &'static str,
-    },
-    /// Array or table sizes disagree.
-    Dimension {
-        /// The field's path in the model.
-        field: &'static str,
-        /// The size the other fields imply.
-        expected: usize,
-        /// The field's size.
-        found: usize,
-    },
-    /// A field of entry `index` of a list is outside its allowed range (e.g. the joint of an effect).
-    OutOfRangeAt {
-        /// The field's path in the model.
-        field: &'static str,
-        /// The entry's position in its list.
-        index: usize,
-    },
-}
-
-impl core::fmt::Display for ModelError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            ModelError::NonFinite { field, index } => write!(f, "field `{field}` has a non-finite value at index {index}"),
-            ModelError::OutOfRange { field } => write!(f, "field `{field}` is out of range"),
-            ModelError::OutOfRangeAt { field, index } => write!(f, "field `{field}` is out of range at index {index}"),
-            ModelError::Dimension { field, expected, found } => {
-                write!(f, "field `{field}` has size {found}, expected {expected}")
-            }
-        }
-    }
-}
 
 fn finite(field: &'static str, values: impl IntoIterator<Item = f64>) -> Result<(), ModelError> {
     for (index, v) in values.into_iter().enumerate() {
@@ -104,7 +59,7 @@ fn rotation(field: &'static str, r: &[f64; 9]) -> Result<(), ModelError> {
 /// Control points are pose-major, each pose's configuration repeated for its `per_pose` tool
 /// points (docs/DESIGN.md §12): a blob whose tool-point count regroups the rows (2 or 4 points
 /// over data of 3) breaks this and is refused; `index` is the first control point that differs.
-fn poses_repeat_their_configuration(points: crate::F64Slice<'_>, n: usize, per_pose: usize) -> Result<(), ModelError> {
+fn poses_repeat_their_configuration(points: crate::f64_slice::F64Slice<'_>, n: usize, per_pose: usize) -> Result<(), ModelError> {
     if per_pose <= 1 || n == 0 {
         return Ok(());
     }
