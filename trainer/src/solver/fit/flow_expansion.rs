@@ -95,28 +95,11 @@ pub(super) fn fit(
         damping: 0.0,
         seconds,
     };
-    let report = FitReport {
-        iterations,
-        converged,
-        stop_reason: if converged { "converged (per-stage weights, Levenberg–Marquardt)" } else { "iteration limit (per-stage weights)" }
-            .into(),
-        log: vec![last],
-        seconds,
-        seconds_flow: 0.0,
-        seconds_tangent: 0.0,
-        seconds_solve: seconds,
-        tangents: iterations,
-        method: "expansion".into(),
-        unknowns: e.len(),
-        seconds_basis: 0.0,
-        max_runtime_trainer_diff,
-        cancellation: e.cancellation,
-        kernel_cancellation,
-        representation: "expansion".into(),
-        // The kernel form holds the linearised model, not this flow: no like-for-like difference.
-        expansion: Some(ExpansionReport::of(&e, f64::NAN)),
-        expansion_declined: None,
-    };
+    let stop_reason =
+        if converged { "converged (per-stage weights, Levenberg–Marquardt)" } else { "iteration limit (per-stage weights)" };
+    // The kernel form holds the linearised model, not this flow: no like-for-like difference.
+    let report = expansion_report(&e, stop_reason, last, iterations, kernel_cancellation, max_runtime_trainer_diff);
+    let report = FitReport { converged, ..report };
     if opts.solver.verbose {
         errln!(
             "expansion: {} weights over {} stages ({} joint, {} task functions, tolerance {:.0e}), {iterations} iterations, training RMS {:.3e}",
@@ -180,27 +163,10 @@ pub(super) fn fit_linear_scheme(
     let sum: f64 = linear.positions.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum();
     let train_rms = norm.length_to_user((sum / cp.len().max(1) as f64).sqrt());
     let seconds = start.elapsed().as_secs_f64();
-    let report = FitReport {
-        iterations: 1,
-        converged: true,
-        stop_reason: "closed form (the linearised model: Euler × 1, in the expansion)".into(),
-        log: vec![IterationLog { iteration: 1, energy: f64::NAN, regulariser: f64::NAN, train_rms, damping: 0.0, seconds }],
-        seconds,
-        seconds_flow: 0.0,
-        seconds_tangent: 0.0,
-        seconds_solve: seconds,
-        tangents: 0,
-        method: "expansion".into(),
-        unknowns: linear.len(),
-        seconds_basis: 0.0,
-        max_runtime_trainer_diff,
-        cancellation: linear.cancellation,
-        kernel_cancellation,
-        representation: "expansion".into(),
-        // The momenta come from the expansion: no independent kernel-form difference.
-        expansion: Some(ExpansionReport::of(&linear, f64::NAN)),
-        expansion_declined: None,
-    };
+    let log = IterationLog { iteration: 1, energy: f64::NAN, regulariser: f64::NAN, train_rms, damping: 0.0, seconds };
+    // The momenta come from the expansion: no independent kernel-form difference.
+    let stop_reason = "closed form (the linearised model: Euler × 1, in the expansion)";
+    let report = FitReport { tangents: 0, ..expansion_report(&linear, stop_reason, log, 1, kernel_cancellation, max_runtime_trainer_diff) };
     if opts.solver.verbose {
         errln!(
             "expansion: {} weights ({} joint, {} task functions, tolerance {:.0e}), closed form in weight space, cancellation {:.1e}",
@@ -212,4 +178,37 @@ pub(super) fn fit_linear_scheme(
         );
     }
     Ok(Ok(CbdFit { blob, momenta, train_predictions, report }))
+}
+
+/// The fit report of a blob whose fields are the expansion `e` (converged; `tangents` = `iterations`,
+/// the flow fit's count of tangent solves); `last` is the final iteration's log.
+fn expansion_report(
+    e: &ExpansionFit,
+    stop_reason: &str,
+    last: IterationLog,
+    iterations: usize,
+    kernel_cancellation: f64,
+    max_runtime_trainer_diff: f64,
+) -> FitReport {
+    let seconds = last.seconds;
+    FitReport {
+        iterations,
+        converged: true,
+        stop_reason: stop_reason.into(),
+        log: vec![last],
+        seconds,
+        seconds_flow: 0.0,
+        seconds_tangent: 0.0,
+        seconds_solve: seconds,
+        tangents: iterations,
+        method: "expansion".into(),
+        unknowns: e.len(),
+        seconds_basis: 0.0,
+        max_runtime_trainer_diff,
+        cancellation: e.cancellation,
+        kernel_cancellation,
+        representation: "expansion".into(),
+        expansion: Some(ExpansionReport::of(e, f64::NAN)),
+        expansion_declined: None,
+    }
 }
