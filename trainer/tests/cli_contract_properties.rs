@@ -12,14 +12,18 @@ mod cli_support;
 
 use cli_support::*;
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestRunner};
+use proptest::test_runner::{Config, TestRng, TestRunner};
 use std::path::Path;
 
 /// The longest a single probe may take (the slowest are fits of 60 rows without a search).
 const BOUND: u64 = 60;
 
+/// A runner with proptest's fixed seed: the probes, and so how many rows each property exercises,
+/// are the same on every run (a fresh seed once drew 9 `ok` rows where the check wants more than 10).
 fn runner(cases: u32) -> TestRunner {
-    TestRunner::new(Config { cases, failure_persistence: None, ..Config::default() })
+    let config = Config { cases, failure_persistence: None, ..Config::default() };
+    let rng = TestRng::deterministic_rng(config.rng_algorithm);
+    TestRunner::new_with_rng(config, rng)
 }
 
 /// Exit 1, exactly one `error:` line and it is the last, no panic; returns stderr.
@@ -71,7 +75,7 @@ fn every_compensated_row_flagged_ok_holds_its_contract() {
         prop::collection::vec(target, 6..12),
     );
     let (probes, ok_rows, flagged) = (std::cell::Cell::new(0), std::cell::Cell::new(0), std::cell::Cell::new(0));
-    runner(12)
+    runner(40)
         .run(&strategy, |(sign, scale, offset, coupling, limits, targets)| {
             probes.set(probes.get() + 1);
             write(&dir, "mapped.toml", rr_mapped(sign, scale, offset, coupling, limits));
