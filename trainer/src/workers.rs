@@ -1,7 +1,7 @@
 //! The worker threads a `cbd` command computes on: one rayon pool, built before the command runs
 //! and sized here, so that every parallel piece of faer and of the flow runs on threads the memory
 //! check counts. Without it faer's `Par::Rayon` reached rayon's global pool, which has a thread per
-//! core (each holding faer's matrix-multiply workspace, `memory::gemm_workspace_bytes`)
+//! core (each holding faer's matrix-multiply buffers, `memory::gemm_workspace_bytes`)
 //! and panics ("the global thread pool has not been initialized") when its threads cannot start.
 
 use std::sync::OnceLock;
@@ -30,8 +30,14 @@ pub fn current_workers() -> usize {
     }
 }
 
+/// The workers a command starts on this machine ([`workers_for_cores`] of its cores).
 pub fn default_workers() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_WORKERS)
+    workers_for_cores(std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+/// The workers a command starts on a machine with `cores` cores: one per core, at most [`MAX_WORKERS`].
+pub fn workers_for_cores(cores: usize) -> usize {
+    cores.clamp(1, MAX_WORKERS)
 }
 
 /// Runs `f` on a new pool of `threads` workers (the results do not depend on the count: the work is

@@ -340,13 +340,14 @@ fn messages_name_the_real_cause() {
     assert!(!err.contains("command line"), "{err}");
 }
 
-/// Item 2 as the issue saw it, on a server whose L3 figure makes faer's workspace 960 MiB
+/// Item 2 as the issue saw it, on a server whose L3 figure made faer's workspace 960 MiB
 /// (`memory allocation of 1006632960 bytes failed` under `ulimit -v 4000000`): here emulated by
-/// binding a 480 MiB L3 size over sysfs in a user and mount namespace (`unshare -rm`), where
-/// private-gemm-x86 and the memory check read it. Skipped, saying so, where unprivileged namespaces
-/// are not allowed.
+/// binding a 480 MiB L3 size over sysfs in a user and mount namespace (`unshare -rm`), where faer's
+/// multiply and the memory check read it. Since issue 48 the multiply's buffers follow the problem,
+/// so the 256-row fit runs under every limit from 500 MB (it was refused there: "raise the memory
+/// limit"). Skipped, saying so, where unprivileged namespaces are not allowed.
 #[test]
-fn a_large_server_cache_fits_under_2_gb_or_is_refused_up_front() {
+fn a_large_server_cache_fits_from_500_mb_of_address_space() {
     let dir = scratch("memory-limit-large-l3");
     if !std::process::Command::new("unshare").args(["-rm", "true"]).status().is_ok_and(|s| s.success()) {
         eprintln!("skipped: no unprivileged user namespaces here (unshare -rm)");
@@ -377,18 +378,7 @@ fn a_large_server_cache_fits_under_2_gb_or_is_refused_up_front() {
         let out = fit(kib);
         let err = stderr(&out);
         assert!(!err.contains("panicked") && !err.contains("memory allocation"), "ulimit -v {kib}: {err}");
-        match (kib, out.status.code()) {
-            (500_000, _) => {
-                fails_with(&out, &["faer's matrix-multiply workspace", "raise the memory limit"]);
-            }
-            (4_000_000, _) => {
-                succeeds(&out);
-            }
-            (_, Some(0)) => {}
-            _ => {
-                fails_with(&out, &["raise the memory limit"]);
-            }
-        }
+        succeeds(&out);
     }
     // Item 3 there: bench's evidence sizes run after its other work, whose workspace the address
     // space already holds; checked once up front, they ran (a second check counted it twice).

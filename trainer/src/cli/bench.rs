@@ -175,15 +175,17 @@ fn check_size(n: usize, flag: &str) -> Result<usize> {
     if flag == "--sizes" {
         return memory::check_fit(n, 2, available, &format!("lower {flag}")).context(format!("{flag} {n}"));
     }
-    let threads = memory::check_workers(available).context(format!("{flag} {n}"))?;
+    let threads = memory::check_workers(available, 2 * n).context(format!("{flag} {n}"))?;
     let krr = KRR_MATRIX_COPIES * (n as f64).powi(2) * 8.0;
     match available {
-        Some(a) if krr + memory::fixed_fit_bytes(threads) > a => Err(Error::from(MemoryError(format!(
-            "kernel ridge's {n} × {n} kernel matrix and its factor need about {}, more than the {} this process may use; lower {flag}",
-            memory::gigabytes(krr),
-            memory::gigabytes(a)
-        )))
-        .context(format!("{flag} {n}"))),
+        Some(a) if krr + memory::fixed_fit_bytes(&memory::CacheSizes::of_this_host(), threads, 2 * n) > a => {
+            Err(Error::from(MemoryError(format!(
+                "kernel ridge's {n} × {n} kernel matrix and its factor need about {}, more than the {} this process may use; lower {flag}",
+                memory::gigabytes(krr),
+                memory::gigabytes(a)
+            )))
+            .context(format!("{flag} {n}")))
+        }
         _ => Ok(threads),
     }
 }
@@ -358,7 +360,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         check_size(n, "--sizes")?;
     }
     let evidence_threads: Vec<usize> = args.evidence_sizes.iter().map(|&n| check_size(n, "--evidence-sizes")).collect::<Result<_, _>>()?;
-    let budget = crate::cli::memory::kernel_form_budget(evidence_threads.iter().copied().max().unwrap_or(1));
+    let largest = 2 * args.evidence_sizes.iter().copied().max().unwrap_or(0);
+    let budget = crate::cli::memory::kernel_form_budget(evidence_threads.iter().copied().max().unwrap_or(1), largest);
     // The UR5 example's files are checked before any fit, not after minutes of them.
     if !args.no_ur5 {
         for file in ["ur5.toml", "train.csv", "test.csv"] {

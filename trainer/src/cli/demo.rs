@@ -77,10 +77,10 @@ fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, ava
         || (settings.source == HyperparameterSource::PaperRr && settings.solver.representation == Representation::Auto);
     let threads = match kernel {
         true => crate::cli::memory::check_fit(rows, 2, available, "lower --grid").context(&flag)?,
-        false => crate::cli::memory::check_workers(available).context(&flag)?,
+        false => crate::cli::memory::check_workers(available, 2 * rows).context(&flag)?,
     };
     let Some(a) = available else { return Ok(threads) };
-    let fixed = crate::cli::memory::fixed_fit_bytes(threads);
+    let fixed = crate::cli::memory::fixed_fit_bytes(&crate::cli::memory::CacheSizes::of_this_host(), threads, 2 * rows);
     let gb = crate::cli::memory::gigabytes;
     let krr = 2.0 * (rows as f64).powi(2) * 8.0;
     if krr + fixed > a {
@@ -129,7 +129,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // before anything is allocated: the fit of every grid row as `cbd fit` checks it, kernel ridge's
     // N² matrices, the test points at their bytes each.
     let threads = check_demo_memory(&args, &settings, crate::cli::memory::available_bytes())?;
-    settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads);
+    settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads, 2 * args.grid * args.grid);
     let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
     settings.solver.threads = threads;

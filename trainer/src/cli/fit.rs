@@ -82,11 +82,39 @@ pub fn run(args: FitArgs) -> Result<()> {
     if crate::cli::is_stdout(&args.out) {
         errln!("{summary}");
         errln!("{}", fitted.noise_floor);
+        if !args.solver.quiet {
+            errln!("{}", fitted.memory);
+        }
     } else {
         outln!("{summary}");
         outln!("{}", fitted.noise_floor);
+        if !args.solver.quiet {
+            outln!("{}", fitted.memory);
+        }
     }
     Ok(())
+}
+
+/// What the memory checks estimated before allocating and what this process held at its peak
+/// (address space: what `ulimit -v` must allow; resident: what a cgroup limit must allow), bytes.
+fn memory_report() -> serde_json::Value {
+    use crate::cli::memory;
+    serde_json::json!({
+        "estimated_bytes": memory::needed_so_far(),
+        "peak_address_space_bytes": memory::peak_mapped_bytes(),
+        "peak_resident_bytes": memory::peak_resident_bytes(),
+    })
+}
+
+/// "memory: about 412 MB estimated before allocating; peak address space 398 MB, resident 376 MB".
+fn describe_memory(m: &serde_json::Value) -> String {
+    let gb = |key: &str| m[key].as_f64().map_or("unknown".to_string(), crate::cli::memory::gigabytes);
+    format!(
+        "memory: about {} estimated before allocating; peak address space {}, resident {}",
+        gb("estimated_bytes"),
+        gb("peak_address_space_bytes"),
+        gb("peak_resident_bytes")
+    )
 }
 
 /// What [`fit_measurements`] produced: the blob, the `--json` report, the summary line and the
@@ -96,6 +124,8 @@ pub struct Fitted {
     pub report: serde_json::Value,
     pub summary: String,
     pub noise_floor: String,
+    /// What the memory checks estimated and the process's peak ([`describe_memory`]).
+    pub memory: String,
 }
 
 /// The fit `cbd fit` runs, on measurements already read with the model's column spec (`args.data`
@@ -124,9 +154,9 @@ pub fn fit_measurements(
     let threads = if settings.solver.representation == crate::expansion::Representation::Kernel {
         crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?
     } else {
-        crate::cli::memory::check_workers_of(&args.data)?
+        crate::cli::memory::check_workers_of(&args.data, data.len() * data.task_dim)?
     };
-    settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads);
+    settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads, data.len() * data.task_dim);
     settings.geometry = if args.dh_first { crate::calibrate::Geometry::Calibrated } else { args.geometry };
     settings.solver.threads = threads;
     let calibration =
@@ -149,5 +179,7 @@ pub fn fit_measurements(
     // The model's length unit (the data are read into it): the floor's line names it.
     let unit = load_nominal(&args.model)?.1.model_length_unit.name();
     let noise_floor = describe_noise_floor(&calibration, unit);
-    Ok(Fitted { blob: calibration.fit.blob, report, summary, noise_floor })
+    report["memory"] = memory_report();
+    let memory = describe_memory(&report["memory"]);
+    Ok(Fitted { blob: calibration.fit.blob, report, summary, noise_floor, memory })
 }

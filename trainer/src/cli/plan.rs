@@ -152,9 +152,19 @@ pub fn run(args: PlanArgs) -> Result<()> {
         user_candidates.len() / nominal.n_joints().max(1),
         measured.as_ref().map_or(0, |d| d.len()),
     );
-    crate::cli::memory::room_for(bytes)
-        .map_err(|e| crate::cli::memory::MemoryError(format!("{}; lower --count, --candidates or --workspace", e.0)))
-        .context(format!("--candidates {} --workspace {} --count {}", args.candidates, args.workspace, args.count))?;
+    // The largest matrix side: the candidates' or a workspace's covariance rows, or the measured
+    // and planned poses' (each of m coordinates).
+    let measured_rows = measured.as_ref().map_or(0, |d| d.len());
+    let dim = nominal.task_dim()
+        * [candidate_count, args.workspace.max(args.exchange_workspace), measured_rows + args.count].into_iter().max().unwrap_or(1);
+    // The flags that size the need: --exchange-workspace where it is the larger workspace.
+    let (workspace_flag, workspace) = match args.exchange > 0 && args.exchange_workspace > args.workspace {
+        true => ("--exchange-workspace", args.exchange_workspace),
+        false => ("--workspace", args.workspace),
+    };
+    crate::cli::memory::room_for(bytes, dim)
+        .map_err(|e| crate::cli::memory::MemoryError(format!("{}; lower --count, --candidates or {workspace_flag}", e.0)))
+        .context(format!("--candidates {} {workspace_flag} {workspace} --count {}", args.candidates, args.count))?;
     let sample: Vec<f64> = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2))
         .chunks_exact(limits.len())
         .flat_map(to_model)

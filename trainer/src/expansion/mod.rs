@@ -196,7 +196,7 @@ pub fn fit_linear_in(
     let residual: Vec<f64> = target.iter().zip(&nominal).map(|(y, k)| y - k).collect();
     let LinearBasis { tolerance, task_radius, joint, task } = basis;
     let weights_len = joint.len() * n + task.len() * m;
-    crate::memory::room_for(crate::memory::expansion_bytes(count * m, weights_len))
+    crate::memory::room_for(crate::memory::expansion_bytes(count * m, weights_len), count * m + weights_len)
         .map_err(|why| Declined::Memory(format!("the expansion's {weights_len} weights {why}")))?;
     let problem = LinearProblem { dims: cp.dims, points: &cp.points, nominal: &nominal, jacobians: &jacobians, residual: &residual };
     let a = design(&problem, joint_kernel, task_kernel, &joint, &task);
@@ -243,7 +243,7 @@ pub fn fit_flow(
             2.0 * (cp.len() * m + 2 * params) as f64 * (params as f64).powi(2)
         )));
     }
-    crate::memory::room_for(crate::memory::flow_expansion_bytes(cp.len() * m, params))
+    crate::memory::room_for(crate::memory::flow_expansion_bytes(cp.len() * m, params), cp.len() * m + 2 * params)
         .map_err(|why| Declined::Memory(format!("the {params} weights over {} stages {why}", integrator.stage_count())))?;
     let initial = cp.nominal_kinematics();
     let problem = flow_fit::StageProblem::new(

@@ -265,6 +265,8 @@ pub enum FitError {
     /// The kernel form's matrices would need more memory than the budget (bytes).
     TooLarge {
         unknowns: usize,
+        /// Coordinates per measurement (the unknowns are rows × this).
+        task_dim: usize,
         need: f64,
         budget: f64,
         /// Why the expansion, which needs no (N·m)² matrix, could not serve.
@@ -290,12 +292,20 @@ impl std::fmt::Display for FitError {
                 write!(f, "the normal equations are singular at iteration {iteration} (damping {damping:.1e})")
             }
             FitError::Encode(e) => write!(f, "could not encode the model: {e}"),
-            FitError::TooLarge { unknowns, need, budget, expansion_declined } => write!(
-                f,
-                "the kernel form of {unknowns} momenta needs about {:.1} GB, more than the {:.1} GB this process may use (the expansion, which would not, declined: {expansion_declined}); fit fewer rows (--max-rows)",
-                need / 1e9,
-                budget / 1e9
-            ),
+            FitError::TooLarge { unknowns, task_dim, need, budget, expansion_declined } => {
+                // The rows whose kernel form fits the budget: a remedy only when a few do.
+                let rows = ((budget / kernel_form_bytes(1)).sqrt() / (*task_dim).max(1) as f64).floor() as usize;
+                let remedy = match rows >= 3 {
+                    true => format!("at most {rows} rows fit: fit fewer rows (--max-rows)"),
+                    false => "raise the memory limit".to_string(),
+                };
+                write!(
+                    f,
+                    "the kernel form of {unknowns} momenta needs about {}, more than the {} this process may use (the expansion, which would not, declined: {expansion_declined}); {remedy}",
+                    crate::memory::gigabytes(*need),
+                    crate::memory::gigabytes(*budget)
+                )
+            }
             FitError::RuntimeMismatch(e) => write!(f, "the runtime does not reproduce the fit: {e}"),
             FitError::Memory(why) => write!(f, "{why}: raise the memory limit, or fit the kernel form (--representation kernel)"),
         }
@@ -360,8 +370,9 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     let unknowns = cp.len() * m;
     if let Some(budget) = opts.solver.memory_budget.filter(|b| kernel_form_bytes(unknowns) > *b) {
         let expansion_declined = declined_flow.clone().unwrap_or_else(|| "not tried for this scheme and size".into());
-        return Err(FitError::TooLarge { unknowns, need: kernel_form_bytes(unknowns), budget, expansion_declined });
+        return Err(FitError::TooLarge { unknowns, task_dim: m, need: kernel_form_bytes(unknowns), budget, expansion_declined });
     }
+    crate::memory::note_need(kernel_form_bytes(unknowns), unknowns);
     let t0 = Instant::now();
     let space = SearchSpace::new(opts.solver.method, regulariser_matrix(&cp), closed_form);
     let seconds_basis = t0.elapsed().as_secs_f64();
