@@ -25,7 +25,10 @@ impl Rows {
 }
 
 /// `value` as an (n, `cols`) float64 matrix; `what` says what its columns are, for the message.
-pub fn matrix(name: &str, value: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Rows> {
+/// `answer_bytes_per_row`: what the call makes of each row (results, text), so that the copy and
+/// the answer are checked against the memory this process may use before either is allocated — a
+/// broadcast view of 10⁹ rows is a `CbdError`, not an abort of the interpreter.
+pub fn matrix(name: &str, value: &Bound<'_, PyAny>, cols: usize, what: &str, answer_bytes_per_row: usize) -> PyResult<Rows> {
     let expected = format!("{name} must be a float64 numpy array of shape (n, {cols}) ({what})");
     let Ok(untyped) = value.cast::<PyUntypedArray>() else {
         let kind = value.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into());
@@ -42,6 +45,15 @@ pub fn matrix(name: &str, value: &Bound<'_, PyAny>, cols: usize, what: &str) -> 
     if shape[1] != cols {
         return Err(cbd_error(format!("{expected}; got shape ({}, {})", shape[0], shape[1])));
     }
+    // The copy (and a row-vector copy of it where a call needs one) and the answer.
+    let bytes = shape[0] as f64 * (2.0 * 8.0 * cols as f64 + answer_bytes_per_row as f64);
+    cbd_trainer::memory::room_for(bytes, 0).map_err(|e| {
+        cbd_error(format!(
+            "{name}: an array of shape ({}, {cols}) {}; pass fewer rows at a time",
+            shape[0],
+            e.0.replacen("needs", "needs, read and answered,", 1)
+        ))
+    })?;
     let readonly = array.try_readonly().map_err(|e| cbd_error(format!("{name}: {e}")))?;
     // `as_slice` also lends a Fortran-ordered array's memory (column-major): only a C-ordered one's
     // memory is its rows; any other is read in logical (row-major) order.

@@ -32,8 +32,9 @@ impl Model {
         Ok(Model { blob, report, n_joints, task_dim, tool_points })
     }
 
-    fn queries(&self, name: &str, q: &Bound<'_, PyAny>) -> PyResult<crate::arrays::Rows> {
-        matrix(name, q, self.n_joints, "joints in radians (prismatic: the model's length unit), the model's order")
+    /// `q` as joint rows, each answered by `answer_values` f64 values.
+    fn queries(&self, name: &str, q: &Bound<'_, PyAny>, answer_values: usize) -> PyResult<crate::arrays::Rows> {
+        matrix(name, q, self.n_joints, "joints in radians (prismatic: the model's length unit), the model's order", 8 * answer_values)
     }
 }
 
@@ -103,7 +104,7 @@ impl Model {
     /// `jacobian=True`, `(positions, jacobians)`, the exact Jacobians as (n, task_dim, joints).
     #[pyo3(signature = (q, jacobian=false, point=0))]
     fn evaluate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool, point: usize) -> PyResult<Bound<'py, PyAny>> {
-        let q = self.queries("q", q)?;
+        let q = self.queries("q", q, self.task_dim * (1 + if jacobian { self.n_joints } else { 0 }))?;
         if point >= self.tool_points {
             return Err(cbd_error(format!("point {point}: the model has {} tool point(s)", self.tool_points)));
         }
@@ -139,7 +140,7 @@ impl Model {
     /// rows, then rotation rows).
     #[pyo3(signature = (q, jacobian=false))]
     fn evaluate_pose<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool) -> PyResult<Bound<'py, PyTuple>> {
-        let q = self.queries("q", q)?;
+        let q = self.queries("q", q, 12 + if jacobian { 6 * self.n_joints } else { 0 })?;
         let (n, rows) = (self.n_joints, q.rows);
         let (origins, rotations, jacobians) = py
             .detach(|| {
@@ -181,8 +182,10 @@ impl Model {
         seeds: Option<&Bound<'py, PyAny>>,
         iterations: usize,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let t = matrix("targets", targets, self.task_dim, "positions in the model's length unit")?;
-        let s = seeds.map(|s| self.queries("seeds", s)).transpose()?;
+        // Per target: its command and the compensation's work rows (a few of the joints' size), a flag.
+        let answer = 8 * (4 * self.n_joints + self.task_dim) + 32;
+        let t = matrix("targets", targets, self.task_dim, "positions in the model's length unit", answer)?;
+        let s = seeds.map(|s| self.queries("seeds", s, 0)).transpose()?;
         if let Some(s) = &s {
             if s.rows != t.rows {
                 return Err(cbd_error(format!("targets has {} rows and seeds {}: one seed per target", t.rows, s.rows)));

@@ -153,11 +153,12 @@ pub fn y_columns(spec: &ColumnSpec) -> Vec<String> {
 /// the CSV import, they are the numbers given, bit for bit, whatever their units.
 pub fn arrays_csv(spec: &ColumnSpec, q: &Bound<'_, PyAny>, y: Option<&Bound<'_, PyAny>>) -> PyResult<String> {
     let joints = spec.joint_columns.join(", ");
-    let q = matrix("q", q, spec.joint_columns.len(), &format!("columns {joints}"))?;
+    // Each value's CSV text (shortest round-trip form: up to 24 characters and a separator).
+    let q = matrix("q", q, spec.joint_columns.len(), &format!("columns {joints}"), 26 * spec.joint_columns.len())?;
     let y_names = y_columns(spec);
     let y = match y {
         Some(y) => {
-            let y = matrix("y", y, y_names.len(), &format!("columns {}", y_names.join(", ")))?;
+            let y = matrix("y", y, y_names.len(), &format!("columns {}", y_names.join(", ")), 26 * y_names.len())?;
             if y.rows != q.rows {
                 return Err(cbd_error(format!("q has {} rows and y {}: one row of each per measured pose", q.rows, y.rows)));
             }

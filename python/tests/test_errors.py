@@ -94,6 +94,26 @@ def test_bad_queries_raise_cbd_errors(ur5_fit):
         assert words in str(e.value), str(e.value)
 
 
+def test_arrays_too_large_for_memory_raise_cbd_errors(ur5_fit, ur5_file):
+    # Issue 48 item 2 (issue 51 item 7): a broadcast view of 10^9 rows aborted the interpreter
+    # ("memory allocation of 48000000000 bytes failed"); each call checks before it copies.
+    model, _ = ur5_fit
+    huge_q = np.broadcast_to(np.zeros(6), (10**9, 6))
+    huge_t = np.broadcast_to(np.zeros(3), (10**9, 3))
+    for call, name in [
+        (lambda: model.evaluate(huge_q), "q"),
+        (lambda: model.evaluate(huge_q, jacobian=True), "q"),
+        (lambda: model.evaluate_pose(huge_q), "q"),
+        (lambda: model.compensate(huge_t), "targets"),
+        (lambda: cbd.fit(ur5_file, huge_q, huge_t), "q"),
+    ]:
+        with pytest.raises(cbd.CbdError) as e:
+            call()
+        message = str(e.value)
+        assert message.startswith(f"{name}: an array of shape (1000000000, ") and "this process may use" in message, message
+        assert "pass fewer rows at a time" in message, message
+
+
 def test_bad_commands_raise_cbd_errors(ur5_file, rr_dir):
     rr = cbd.ModelFile.load(rr_dir / "rr.toml")
     cases = [
