@@ -478,13 +478,14 @@ pub fn check_fit_on(host: &Host, rows: usize, task_dim: usize, remedy: &str) -> 
 /// The worker threads a computation whose matrices are checked later (the expansion, [`room_for`];
 /// the kernel form against [`kernel_form_budget`]) runs on within `available` bytes, its matrices
 /// at most `dim` rows and columns: as [`check_fit`] for no matrices. Refused when one worker alone
-/// does not fit, naming the memory limit to raise.
-pub fn check_workers(available: Option<f64>, dim: usize) -> Result<usize, MemoryError> {
-    check_workers_on(&Host::with_available(available), dim)
+/// does not fit: naming `remedy` (the caller's flag that lowers the size) when the multiply buffers
+/// of so large a problem are what does not fit, else the memory limit to raise.
+pub fn check_workers(available: Option<f64>, dim: usize, remedy: &str) -> Result<usize, MemoryError> {
+    check_workers_on(&Host::with_available(available), dim, remedy)
 }
 
 /// [`check_workers`] on a given machine and process.
-pub fn check_workers_on(host: &Host, dim: usize) -> Result<usize, MemoryError> {
+pub fn check_workers_on(host: &Host, dim: usize, remedy: &str) -> Result<usize, MemoryError> {
     let most = host.workers.max(1);
     let Some(available) = host.available else {
         record_need(fixed_fit_bytes(&host.caches, most, dim));
@@ -495,8 +496,13 @@ pub fn check_workers_on(host: &Host, dim: usize) -> Result<usize, MemoryError> {
         record_need(fixed_fit_bytes(caches, threads, dim));
         return Ok(threads);
     }
+    // A small problem's worker fits: this one's size is what does not.
+    let what = match fixed_fit_bytes(caches, 1, SMALL_DIM) <= available {
+        true => remedy,
+        false => "raise the memory limit",
+    };
     Err(MemoryError(format!(
-        "a fit needs about {} before its matrices ({} and the allocator's {}), more than the {} this process may use: raise the memory limit",
+        "a fit needs about {} before its matrices ({} and the allocator's {}), more than the {} this process may use: {what}",
         gigabytes(fixed_fit_bytes(caches, 1, dim)),
         workers_text(caches, 1, dim),
         gigabytes(ALLOCATOR_PAD),
@@ -505,8 +511,8 @@ pub fn check_workers_on(host: &Host, dim: usize) -> Result<usize, MemoryError> {
 }
 
 /// [`check_workers`] against what this process may use; the error names the file.
-pub fn check_workers_of(file: &std::path::Path, dim: usize) -> crate::Result<usize> {
-    check_workers(available_bytes(), dim).context(file.display())
+pub fn check_workers_of(file: &std::path::Path, dim: usize, remedy: &str) -> crate::Result<usize> {
+    check_workers(available_bytes(), dim, remedy).context(file.display())
 }
 
 /// Bytes the kernel form's (N·m)² matrices may take on `threads` workers: what this process may
@@ -595,7 +601,7 @@ mod tests {
             for workers in [1, 2] {
                 assert_eq!(check_fit_on(&host(caches, workers, Some(386e6)), 16, 2, "").map(|_| ()), Ok(()));
                 assert_eq!(check_fit_on(&host(caches, workers, Some(512e6)), 256, 3, "").map(|_| ()), Ok(()));
-                assert_eq!(check_workers_on(&host(caches, workers, Some(256e6)), 768), Ok(workers));
+                assert_eq!(check_workers_on(&host(caches, workers, Some(256e6)), 768, ""), Ok(workers));
             }
         }
     }
@@ -657,10 +663,20 @@ mod tests {
     fn the_workers_alone_are_checked() {
         for caches in [LAPTOP, SERVER] {
             let one = fixed_fit_bytes(&caches, 1, 4096);
-            assert_eq!(check_workers_on(&host(caches, 2, Some(one)), 4096), Ok(1));
-            assert_eq!(check_workers_on(&host(caches, 2, None), 4096), Ok(2));
-            let e = check_workers_on(&host(caches, 2, Some(0.5 * one)), 4096).unwrap_err().to_string();
+            assert_eq!(check_workers_on(&host(caches, 2, Some(one)), 4096, "lower --grid"), Ok(1));
+            assert_eq!(check_workers_on(&host(caches, 2, None), 4096, "lower --grid"), Ok(2));
+            let e = check_workers_on(&host(caches, 2, Some(0.5 * fixed_fit_bytes(&caches, 1, 16))), 4096, "lower --grid")
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("faer's matrix-multiply buffers") && e.contains("raise the memory limit"), "{e}");
+            // Issue 48: `demo --grid 3000` on a 480 MiB-L3 host was told to raise the limit; a problem
+            // whose own buffers do not fit, where a small one's would, names the flag.
+            let huge = 18_000_000;
+            let small = fixed_fit_bytes(&caches, 1, SMALL_DIM);
+            if fixed_fit_bytes(&caches, 1, huge) > 1.5 * small {
+                let e = check_workers_on(&host(caches, 2, Some(1.5 * small)), huge, "lower --grid").unwrap_err().to_string();
+                assert!(e.contains("lower --grid") && !e.contains("raise the memory limit"), "{e}");
+            }
         }
     }
 

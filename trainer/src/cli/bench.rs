@@ -175,7 +175,7 @@ fn check_size(n: usize, flag: &str) -> Result<usize> {
     if flag == "--sizes" {
         return memory::check_fit(n, 2, available, &format!("lower {flag}")).context(format!("{flag} {n}"));
     }
-    let threads = memory::check_workers(available, 2 * n).context(format!("{flag} {n}"))?;
+    let threads = memory::check_workers(available, 2 * n, &format!("lower {flag}")).context(format!("{flag} {n}"))?;
     let krr = KRR_MATRIX_COPIES * (n as f64).powi(2) * 8.0;
     match available {
         Some(a) if krr + memory::fixed_fit_bytes(&memory::CacheSizes::of_this_host(), threads, 2 * n) > a => {

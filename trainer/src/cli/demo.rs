@@ -75,28 +75,46 @@ fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, ava
     let rows = args.grid.checked_mul(args.grid).ok_or_else(|| MemoryError("too many rows".into())).context(&flag)?;
     let kernel = settings.solver.representation == Representation::Kernel
         || (settings.source == HyperparameterSource::PaperRr && settings.solver.representation == Representation::Auto);
+    // Kernel ridge's N² matrices and the test points first, where they are what does not fit: a
+    // grid that large is named by them, not by the multiply buffers that come with it.
+    if let Some(a) = available {
+        let fixed = crate::cli::memory::fixed_fit_bytes(&crate::cli::memory::CacheSizes::of_this_host(), 1, 2 * rows);
+        let gb = crate::cli::memory::gigabytes;
+        let krr = 2.0 * (rows as f64).powi(2) * 8.0;
+        if krr + fixed > a && krr >= fixed {
+            return Err(Error::from(MemoryError(format!(
+                "kernel ridge's {rows} × {rows} kernel matrix and its factor need about {}, more than the {} this process may use; lower --grid",
+                gb(krr + fixed),
+                gb(a)
+            )))
+            .context(flag));
+        }
+        let test = args.test_points as f64 * BYTES_PER_TEST_POINT;
+        if test + fixed > a && test >= fixed {
+            return Err(MemoryError(format!(
+                "--test-points {}: about {} to evaluate, more than the {} this process may use; lower --test-points",
+                args.test_points,
+                gb(test + fixed),
+                gb(a)
+            ))
+            .into());
+        }
+    }
     let threads = match kernel {
         true => crate::cli::memory::check_fit(rows, 2, available, "lower --grid").context(&flag)?,
-        false => crate::cli::memory::check_workers(available, 2 * rows).context(&flag)?,
+        false => crate::cli::memory::check_workers(available, 2 * rows, "lower --grid").context(&flag)?,
     };
     let Some(a) = available else { return Ok(threads) };
+    // With the workers found, both again (two workers hold more than one).
     let fixed = crate::cli::memory::fixed_fit_bytes(&crate::cli::memory::CacheSizes::of_this_host(), threads, 2 * rows);
     let gb = crate::cli::memory::gigabytes;
-    let krr = 2.0 * (rows as f64).powi(2) * 8.0;
-    if krr + fixed > a {
-        return Err(Error::from(MemoryError(format!(
-            "kernel ridge's {rows} × {rows} kernel matrix and its factor need about {}, more than the {} this process may use; lower --grid",
-            gb(krr + fixed),
-            gb(a)
-        )))
-        .context(flag));
-    }
-    let test = args.test_points as f64 * BYTES_PER_TEST_POINT;
-    if test + fixed > a {
+    let need = (2.0 * (rows as f64).powi(2) * 8.0).max(args.test_points as f64 * BYTES_PER_TEST_POINT) + fixed;
+    if need > a {
         return Err(MemoryError(format!(
-            "--test-points {}: about {} to evaluate, more than the {} this process may use; lower --test-points",
+            "--grid {} --test-points {}: about {} with {threads} worker(s), more than the {} this process may use; lower --grid or --test-points",
+            args.grid,
             args.test_points,
-            gb(test + fixed),
+            gb(need),
             gb(a)
         ))
         .into());

@@ -154,7 +154,7 @@ pub fn fit_measurements(
     let threads = if settings.solver.representation == crate::expansion::Representation::Kernel {
         crate::cli::memory::check_fit_of(&args.data, &data, "--max-rows N fits an evenly spaced subset of N rows")?
     } else {
-        crate::cli::memory::check_workers_of(&args.data, data.len() * data.task_dim)?
+        crate::cli::memory::check_workers_of(&args.data, data.len() * data.task_dim, "--max-rows N fits an evenly spaced subset of N rows")?
     };
     settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads, data.len() * data.task_dim);
     settings.geometry = if args.dh_first { crate::calibrate::Geometry::Calibrated } else { args.geometry };
