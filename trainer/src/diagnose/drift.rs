@@ -41,7 +41,7 @@ pub struct DriftOptions {
 
 impl Default for DriftOptions {
     fn default() -> Self {
-        DriftOptions { window: 1000, block: 200, min_poses: 40, threshold: DETECTION_THRESHOLD }
+        DriftOptions { window: 600, block: 600, min_poses: 40, threshold: DETECTION_THRESHOLD }
     }
 }
 
@@ -257,7 +257,8 @@ pub fn drift_test(
     let count = (size / options.block.max(8)).max(1);
     let bounds: Vec<(usize, usize)> = (0..count).map(|k| (k * size / count, (k + 1) * size / count - k * size / count)).collect();
     // One scale for every block: the residual's RMS over the window.
-    let rms = (r[..size * m].iter().map(|v| v * v).sum::<f64>() / (size * m) as f64).sqrt();
+    let means: Vec<f64> = (0..m).map(|c| (0..size).map(|i| r[i * m + c]).sum::<f64>() / size as f64).collect();
+    let rms = ((0..size * m).map(|k| (r[k] - means[k % m]).powi(2)).sum::<f64>() / (size * m) as f64).sqrt();
     let scale = if rms > 0.0 && rms.is_finite() { rms } else { 1.0 };
     let blocks: Vec<Window> = bounds.iter().map(|&(first, len)| window_of(&q, n, revolute, &r, m, first, len, scale)).collect();
     let longest = bounds.iter().map(|b| b.1).max().unwrap_or(size);
@@ -382,6 +383,22 @@ mod tests {
             println!(
                 "seed {seed}: planted Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4} ({ta:.1} s) | shuffled Δ {:.2} sd {:.4} L {:.2} | none (compliance) Δ {:.2} sd {:.4} L {:.2}",
                 a.log_likelihood_ratio, a.sd, a.length, a.noise_sd, a.joint_sd, b.log_likelihood_ratio, b.sd, b.length, c.log_likelihood_ratio, c.sd, c.length
+            );
+        }
+    }
+
+    /// The estimator alone: drift + noise along a walk, no fit before it.
+    #[test]
+    #[ignore]
+    fn probe_no_fit() {
+        for seed in 1..=6u64 {
+            let q = crate::simulate::six_joint::walk_configurations(600, 0.1, seed);
+            let mut r = row_drift(600, 3, 0.03, 5.0, seed);
+            crate::simulate::add_noise(&mut r, 0.02, seed + 100);
+            let d = drift_test(&q, 6, &[true; 6], &r, 3, 1, &DriftOptions::default()).unwrap();
+            println!(
+                "seed {seed}: Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4}",
+                d.log_likelihood_ratio, d.sd, d.length, d.noise_sd, d.joint_sd
             );
         }
     }
