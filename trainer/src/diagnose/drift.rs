@@ -12,6 +12,13 @@
 //!   Ornstein–Uhlenbeck (AR(1)) correlation `simulate::row_drift` plants, so `length` means the
 //!   same lag (rows over which the correlation falls by e) in simulation and estimation.
 //!
+//! The likelihood is the restricted one (REML, Patterson & Thompson 1971): the residual comes from a
+//! fit (the diagnosis' refined parameters, each coordinate's mean), and a fit takes away whatever
+//! of the drift its Jacobian's columns can mimic — on a walk the slow part of it, which shortened
+//! the estimated length by about a fifth. Only the residual's part orthogonal to those columns,
+//! which no value of the fitted parameters changes, is compared: the geometric group marginalised
+//! with a flat prior, as the geometry choice does with a broad one (`evidence::GeometricBasis`).
+//!
 //! Both are maximised with one width per joint; drift is reported when H1's log likelihood exceeds
 //! H0's by more than [`DriftOptions::threshold`] nats. The joint kernel is what tells drift from
 //! "consecutive poses are close in joint space, so their residuals correlate": on a walk the
@@ -19,9 +26,10 @@
 //! and only what follows the row index itself, not the joint distance, raises H1.
 //! Drift is a nuisance of the measurement: it never enters a model the runtime evaluates.
 
+use crate::data::Measurements;
 use crate::evidence::search::{minimise, Criterion};
 use faer::linalg::solvers::{DenseSolveCore, Solve};
-use faer::{Mat, Side};
+use faer::{Mat, MatRef, Side};
 use serde::Serialize;
 use std::cell::RefCell;
 
@@ -90,7 +98,7 @@ impl Drift {
 }
 
 /// The window's data in the prior's internal form: residual scaled to unit RMS, per-joint
-/// similarity terms c_d(i, j), row distances.
+/// similarity terms c_d(i, j), row distances, and what the fit before the test could absorb.
 struct Window {
     /// W × m, unit RMS.
     residual: Mat<f64>,
@@ -98,9 +106,15 @@ struct Window {
     similarity: Vec<Mat<f64>>,
     /// W × W: |i − j| in rows.
     distance: Mat<f64>,
+    /// An orthonormal basis U (W m × k) of what the residual cannot tell from a change of the
+    /// parameters fitted before the test (their Jacobian's columns) or of each coordinate's mean,
+    /// as its rows per coordinate: U_c (W × k) holds U's rows m·i + c. The likelihood is the
+    /// restricted one (REML): that of the residual's part orthogonal to U, which no fit of those
+    /// parameters can change, so the fit cannot take the slow part of a drift away from the test.
+    fitted: Vec<Mat<f64>>,
 }
 
-/// The two priors' negative log likelihoods over packed log parameters:
+/// The two priors' negative log restricted likelihoods over packed log parameters:
 /// H0 [ln b_1 … ln b_n, ln γ_q, ln σ], H1 [ln b_1 … ln b_n, ln γ_q, ln γ_t, ln L, ln σ]: the sum
 /// over independent blocks.
 struct Likelihood<'a> {
@@ -145,7 +159,11 @@ impl Block<'_> {
         (k, kq, kt)
     }
 
-    /// ½ Σ_c r_cᵀK⁻¹r_c + (m/2) ln|K| + (W m/2) ln 2π, and its gradient ½ Σ_ij (m K⁻¹ − ααᵀ)_ij ∂K_ij.
+    /// The negative log restricted likelihood of the residual r (W m, coordinate c's column r_c
+    /// with covariance K, coordinates independent) given the basis U:
+    /// ½ rᵀPr + (m/2) ln|K| + ½ ln|C| + ((W m − k)/2) ln 2π with C = Σ_c U_cᵀK⁻¹U_c and
+    /// P = K⁻¹ − K⁻¹U C⁻¹ UᵀK⁻¹ (per coordinate block), and its gradient ½ Σ_ij (Σ_c P_cc − ααᵀ)_ij ∂K_ij,
+    /// α_c = (P r)_c (Rasmussen & Williams §2.7 with a flat prior on the fitted directions).
     fn evaluate(&self, p: &[f64]) -> Option<(f64, Vec<f64>)> {
         let w = self.window;
         let (n, size, m) = (w.similarity.len(), w.residual.nrows(), w.residual.ncols());
@@ -153,15 +171,39 @@ impl Block<'_> {
         let llt = k.llt(Side::Lower).ok()?;
         let l = llt.L();
         let logdet = 2.0 * (0..size).map(|i| l[(i, i)].ln()).sum::<f64>();
-        let alpha = llt.solve(&w.residual);
+        let inverse = llt.inverse();
+        let mut alpha = &inverse * &w.residual;
+        // Σ_c P_cc = m K⁻¹ − Σ_c V_c C⁻¹ V_cᵀ with V_c = K⁻¹U_c.
+        let mut weight = Mat::from_fn(size, size, |i, j| m as f64 * inverse[(i, j)]);
+        let basis = w.fitted.first().map_or(0, |u| u.ncols());
+        let mut logdet_c = 0.0;
+        if basis > 0 {
+            let v: Vec<Mat<f64>> = w.fitted.iter().map(|u| &inverse * u).collect();
+            let mut c = Mat::<f64>::zeros(basis, basis);
+            let mut b = Mat::<f64>::zeros(basis, 1);
+            for (col, (u, v)) in w.fitted.iter().zip(&v).enumerate() {
+                c += u.transpose() * v;
+                b += v.transpose() * w.residual.get(.., col..col + 1);
+            }
+            let c_llt = c.llt(Side::Lower).ok()?;
+            logdet_c = 2.0 * (0..basis).map(|i| c_llt.L()[(i, i)].ln()).sum::<f64>();
+            let beta = c_llt.solve(&b);
+            let c_inverse = c_llt.inverse();
+            for (col, v) in v.iter().enumerate() {
+                let fitted = v * &beta;
+                for i in 0..size {
+                    alpha[(i, col)] -= fitted[(i, 0)];
+                }
+                weight -= v * &c_inverse * v.transpose();
+            }
+        }
+        weight -= &alpha * alpha.transpose();
         let quad: f64 = (0..m).map(|c| (0..size).map(|i| w.residual[(i, c)] * alpha[(i, c)]).sum::<f64>()).sum();
-        let value = 0.5 * quad + 0.5 * m as f64 * logdet + 0.5 * (size * m) as f64 * (2.0 * std::f64::consts::PI).ln();
+        let value =
+            0.5 * quad + 0.5 * m as f64 * logdet + 0.5 * logdet_c + 0.5 * (size * m - basis) as f64 * (2.0 * std::f64::consts::PI).ln();
         if !value.is_finite() {
             return None;
         }
-        let inverse = llt.inverse();
-        let weight =
-            Mat::from_fn(size, size, |i, j| m as f64 * inverse[(i, j)] - (0..m).map(|c| alpha[(i, c)] * alpha[(j, c)]).sum::<f64>());
         let trace = |f: &dyn Fn(usize, usize) -> f64| -> f64 {
             0.5 * (0..size).map(|j| (0..size).map(|i| weight[(i, j)] * f(i, j)).sum::<f64>()).sum::<f64>()
         };
@@ -196,60 +238,121 @@ impl Criterion for Likelihood<'_> {
     }
 }
 
-/// The residual's poses in file order: joints (row-major, n per pose) and the residual (m per pose,
-/// the mean over a pose's `points` points).
-fn pose_residuals(joints: &[f64], n: usize, residual: &[f64], m: usize, points: usize) -> (Vec<f64>, Vec<f64>) {
-    let points = points.max(1);
-    let poses = residual.len() / (m * points).max(1);
-    let q: Vec<f64> = (0..poses).flat_map(|k| joints[k * points * n..k * points * n + n].to_vec()).collect();
-    let r: Vec<f64> = (0..poses)
-        .flat_map(|k| (0..m).map(move |c| (0..points).map(|j| residual[(k * points + j) * m + c]).sum::<f64>() / points as f64))
-        .collect();
-    (q, r)
-}
+/// Directions of the fitted parameters kept in the basis: singular values of the unit-column
+/// Jacobian with σ² above this fraction of the largest (as the diagnosis' Gauss–Newton steps).
+const BASIS_TOLERANCE: f64 = 1e-12;
 
-/// The poses `first..first + size` as a block: their residual less its mean per coordinate, over
-/// `scale`.
-fn window_of(q: &[f64], n: usize, revolute: &[bool], r: &[f64], m: usize, first: usize, size: usize, scale: f64) -> Window {
-    let (q, r) = (&q[first * n..(first + size) * n], &r[first * m..(first + size) * m]);
-    let mut residual = Mat::from_fn(size, m, |i, c| r[i * m + c]);
-    for c in 0..m {
-        let mean = (0..size).map(|i| residual[(i, c)]).sum::<f64>() / size as f64;
-        for i in 0..size {
-            residual[(i, c)] = (residual[(i, c)] - mean) / scale;
-        }
-    }
-    let similarity = (0..n)
-        .map(|d| {
-            let at = |i: usize| q[i * n + d];
-            if revolute.get(d).copied().unwrap_or(true) {
-                Mat::from_fn(size, size, |i, j| (at(i) - at(j)).cos() - 1.0)
-            } else {
-                let mean = (0..size).map(at).sum::<f64>() / size as f64;
-                let spread = ((0..size).map(|i| (at(i) - mean).powi(2)).sum::<f64>() / size as f64).sqrt();
-                let spread = if spread > 0.0 { spread } else { 1.0 };
-                Mat::from_fn(size, size, |i, j| -0.5 * ((at(i) - at(j)) / spread).powi(2))
-            }
-        })
-        .collect();
-    let distance = Mat::from_fn(size, size, |i, j| (i as f64 - j as f64).abs());
-    Window { residual, similarity, distance }
-}
-
-/// The drift test on `residual` (m coordinates per row, `points` rows per pose, in file order) at
-/// `joints` (n per row); `None` with fewer than `options.min_poses` poses.
-pub fn drift_test(
-    joints: &[f64],
+/// The tested rows one pose each, in file order.
+struct Poses {
+    /// n per pose.
+    q: Vec<f64>,
     n: usize,
+    revolute: Vec<bool>,
+    /// m per pose: the mean over the pose's points.
+    r: Vec<f64>,
+    m: usize,
+    /// The fitted parameters' Jacobian, m rows per pose (the mean over its points): (poses · m) × p.
+    jacobian: Option<Mat<f64>>,
+}
+
+impl Poses {
+    /// `residual` (m per row, `points` rows per pose) and `fitted` ((rows · m) × p, rows m·i + c)
+    /// per pose; `None` when `fitted` does not have a row per residual entry.
+    fn new(data: &Measurements, revolute: &[bool], residual: &[f64], fitted: Option<MatRef<'_, f64>>) -> Option<Poses> {
+        let (n, m, points) = (data.n_joints, data.task_dim, data.points_per_pose.max(1));
+        let poses = (residual.len() / (m * points).max(1)).min(data.joints.len() / (n * points).max(1));
+        let q: Vec<f64> = (0..poses).flat_map(|k| data.joints[k * points * n..k * points * n + n].to_vec()).collect();
+        let r: Vec<f64> = (0..poses)
+            .flat_map(|k| (0..m).map(move |c| (0..points).map(|j| residual[(k * points + j) * m + c]).sum::<f64>() / points as f64))
+            .collect();
+        let jacobian = match fitted {
+            Some(g) if g.nrows() != residual.len() => return None,
+            Some(g) => Some(Mat::from_fn(poses * m, g.ncols(), |row, col| {
+                let (k, c) = (row / m, row % m);
+                (0..points).map(|j| g[((k * points + j) * m + c, col)]).sum::<f64>() / points as f64
+            })),
+            None => None,
+        };
+        Some(Poses { q, n, revolute: (0..n).map(|d| revolute.get(d).copied().unwrap_or(true)).collect(), r, m, jacobian })
+    }
+
+    fn count(&self) -> usize {
+        self.r.len() / self.m.max(1)
+    }
+
+    /// The poses `first..first + size` as a block: their residual less its mean per coordinate,
+    /// over `scale`; `None` when the basis cannot be factored (non-finite entries) or leaves no
+    /// residual degrees of freedom.
+    fn window(&self, first: usize, size: usize, scale: f64) -> Option<Window> {
+        let (n, m) = (self.n, self.m);
+        let (q, r) = (&self.q[first * n..(first + size) * n], &self.r[first * m..(first + size) * m]);
+        let mut residual = Mat::from_fn(size, m, |i, c| r[i * m + c]);
+        for c in 0..m {
+            let mean = (0..size).map(|i| residual[(i, c)]).sum::<f64>() / size as f64;
+            for i in 0..size {
+                residual[(i, c)] = (residual[(i, c)] - mean) / scale;
+            }
+        }
+        let similarity = (0..n)
+            .map(|d| {
+                let at = |i: usize| q[i * n + d];
+                if self.revolute[d] {
+                    Mat::from_fn(size, size, |i, j| (at(i) - at(j)).cos() - 1.0)
+                } else {
+                    let mean = (0..size).map(at).sum::<f64>() / size as f64;
+                    let spread = ((0..size).map(|i| (at(i) - mean).powi(2)).sum::<f64>() / size as f64).sqrt();
+                    let spread = if spread > 0.0 { spread } else { 1.0 };
+                    Mat::from_fn(size, size, |i, j| -0.5 * ((at(i) - at(j)) / spread).powi(2))
+                }
+            })
+            .collect();
+        let distance = Mat::from_fn(size, size, |i, j| (i as f64 - j as f64).abs());
+        let fitted = self.basis(first, size)?;
+        Some(Window { residual, similarity, distance, fitted })
+    }
+
+    /// The orthonormal basis of the block's fitted directions (the Jacobian's rows of these poses
+    /// and one mean per coordinate), split per coordinate.
+    fn basis(&self, first: usize, size: usize) -> Option<Vec<Mat<f64>>> {
+        let m = self.m;
+        let p = self.jacobian.as_ref().map_or(0, |g| g.ncols());
+        let column = |row: usize, col: usize| match &self.jacobian {
+            Some(g) if col < p => g[(first * m + row, col)],
+            _ => f64::from(u8::from(row % m == col - p)),
+        };
+        let norms: Vec<f64> = (0..p + m).map(|col| (0..size * m).map(|row| column(row, col).powi(2)).sum::<f64>().sqrt()).collect();
+        if size * m <= p + m || norms.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let a = Mat::from_fn(size * m, p + m, |row, col| if norms[col] > 0.0 { column(row, col) / norms[col] } else { 0.0 });
+        let svd = a.thin_svd().ok()?;
+        let s: Vec<f64> = (0..p + m).map(|k| svd.S()[k]).collect();
+        let largest = s.iter().fold(0.0f64, |a, v| a.max(*v));
+        let kept: Vec<usize> = (0..p + m).filter(|&k| s[k] > 0.0 && s[k] * s[k] > BASIS_TOLERANCE * largest * largest).collect();
+        let u = svd.U();
+        Some((0..m).map(|c| Mat::from_fn(size, kept.len(), |i, k| u[(i * m + c, kept[k])])).collect())
+    }
+}
+
+/// The drift test on `residual` (m coordinates per row of `data`, in file order) of a model fitted
+/// to these rows, `fitted` the Jacobian of its positions with respect to the fitted parameters
+/// ((rows · m) × p, row i coordinate c at m·i + c; `None`: nothing fitted but the mean). `None`
+/// with fewer than `options.min_poses` poses, a `fitted` of the wrong height, or nothing the
+/// likelihood can be evaluated at.
+pub fn drift_test(
+    data: &Measurements,
     revolute: &[bool],
     residual: &[f64],
-    m: usize,
-    points: usize,
+    fitted: Option<MatRef<'_, f64>>,
     options: &DriftOptions,
 ) -> Option<Drift> {
-    let (q, r) = pose_residuals(joints, n, residual, m, points);
-    let poses = r.len() / m.max(1);
-    if poses < options.min_poses.max(8) || n == 0 || m == 0 {
+    let (n, m) = (data.n_joints, data.task_dim);
+    if n == 0 || m == 0 {
+        return None;
+    }
+    let all = Poses::new(data, revolute, residual, fitted)?;
+    let poses = all.count();
+    if poses < options.min_poses.max(8) {
         return None;
     }
     let size = poses.min(options.window.max(8));
@@ -257,10 +360,11 @@ pub fn drift_test(
     let count = (size / options.block.max(8)).max(1);
     let bounds: Vec<(usize, usize)> = (0..count).map(|k| (k * size / count, (k + 1) * size / count - k * size / count)).collect();
     // One scale for every block: the residual's RMS over the window.
+    let r = &all.r;
     let means: Vec<f64> = (0..m).map(|c| (0..size).map(|i| r[i * m + c]).sum::<f64>() / size as f64).collect();
     let rms = ((0..size * m).map(|k| (r[k] - means[k % m]).powi(2)).sum::<f64>() / (size * m) as f64).sqrt();
     let scale = if rms > 0.0 && rms.is_finite() { rms } else { 1.0 };
-    let blocks: Vec<Window> = bounds.iter().map(|&(first, len)| window_of(&q, n, revolute, &r, m, first, len, scale)).collect();
+    let blocks: Vec<Window> = bounds.iter().map(|&(first, len)| all.window(first, len, scale)).collect::<Option<_>>()?;
     let longest = bounds.iter().map(|b| b.1).max().unwrap_or(size);
     let evaluations = RefCell::new(0usize);
     let ln = f64::ln;
@@ -332,20 +436,28 @@ mod tests {
     use super::*;
     use crate::simulate::{random_walk, row_drift};
 
-    fn small_window(with_drift: bool) -> (Window, Vec<f64>) {
+    /// 60 poses of a three-joint walk (two revolute, one prismatic) with drift and noise, and a
+    /// fitted basis of `fitted` random columns; the packed parameters of one prior.
+    fn small_window(with_drift: bool, fitted: usize) -> (Window, Vec<f64>) {
+        use rand::{Rng, SeedableRng};
         let n = 3;
         let q = random_walk(60, 0.2, &[(-3.0, 3.0), (-1.0, 1.0), (0.0, 2.0)], 4);
         let mut r = row_drift(60, 3, 1.0, 4.0, 5);
         crate::simulate::add_noise(&mut r, 0.5, 6);
-        let window = window_of(&q, n, &[true, true, false], &r, 3, 0, 60, 1.0);
+        let data = Measurements { n_joints: n, task_dim: 3, points_per_pose: 1, joints: q, positions: vec![0.0; r.len()] };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let g = Mat::from_fn(r.len(), fitted, |_, _| rng.gen_range(-1.0..1.0));
+        let poses = Poses::new(&data, &[true, true, false], &r, Some(g.as_ref())).unwrap();
+        let window = poses.window(0, 60, 1.0).unwrap();
         let p = if with_drift { vec![0.3, -1.0, 0.7, -0.2, -1.1, 1.2, -0.6] } else { vec![0.3, -1.0, 0.7, -0.2, -0.6] };
         (window, p)
     }
 
     /// The simulated six-joint arm (its DH, base and tool errors; no compliance) measured along a
     /// walk of `count` poses with steps of `step` rad, noise 0.02 mm and drift `sd` over `length`
-    /// rows, rows shuffled if `shuffle`; the drift test on the DH fit's residual.
-    fn six_walk(seed: u64, count: usize, step: f64, sd: f64, length: f64, shuffle: bool, compliance: bool) -> Drift {
+    /// rows, rows shuffled if `shuffle`; the drift test on the DH fit's residual, the DH parameters
+    /// marginalised if `marginalise`.
+    fn six_walk(seed: u64, count: usize, step: f64, sd: f64, length: f64, shuffle: bool, compliance: bool, marginalise: bool) -> Drift {
         use crate::simulate::effects::{EffectArm, InjectedEffect};
         use crate::simulate::six_joint::{walk_configurations, SixJointRobot};
         use rand::seq::SliceRandom;
@@ -368,18 +480,21 @@ mod tests {
         let fit = crate::parametric::calibrate_dh(&robot.nominal, &data, &crate::parametric::DhCalibrationOptions::default()).unwrap();
         let k = crate::nominal::positions(&fit.model, &data.joints, 3);
         let r: Vec<f64> = data.positions.iter().zip(&k).map(|(y, k)| y - k).collect();
-        drift_test(&data.joints, 6, &[true; 6], &r, 3, 1, &DriftOptions::default()).unwrap()
+        let cbd_protocol::NominalModel::DhChain(chain) = &fit.model else { unreachable!("a DH fit") };
+        let g = crate::parametric::geometric_jacobian(chain, &data.joints, 3);
+        drift_test(&data, &[true; 6], &r, marginalise.then_some(g.as_ref()), &DriftOptions::default()).unwrap()
     }
 
     #[test]
     #[ignore]
     fn probe_six_walk() {
+        let marginalise = std::env::var("PLAIN").is_err();
         for seed in 1..=std::env::var("SEEDS").ok().and_then(|s| s.parse().ok()).unwrap_or(5u64) {
             let t = std::time::Instant::now();
-            let a = six_walk(seed, 600, 0.1, 0.03, 5.0, false, false);
+            let a = six_walk(seed, 600, 0.1, 0.03, 5.0, false, false, marginalise);
             let ta = t.elapsed().as_secs_f64();
-            let b = six_walk(seed, 600, 0.1, 0.03, 5.0, true, false);
-            let c = six_walk(seed, 600, 0.1, 0.0, 5.0, false, true);
+            let b = six_walk(seed, 600, 0.1, 0.03, 5.0, true, false, marginalise);
+            let c = six_walk(seed, 600, 0.1, 0.0, 5.0, false, true, marginalise);
             println!(
                 "seed {seed}: planted Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4} ({ta:.1} s) | shuffled Δ {:.2} sd {:.4} L {:.2} | none (compliance) Δ {:.2} sd {:.4} L {:.2}",
                 a.log_likelihood_ratio, a.sd, a.length, a.noise_sd, a.joint_sd, b.log_likelihood_ratio, b.sd, b.length, c.log_likelihood_ratio, c.sd, c.length
@@ -395,7 +510,8 @@ mod tests {
             let q = crate::simulate::six_joint::walk_configurations(600, 0.1, seed);
             let mut r = row_drift(600, 3, 0.03, 5.0, seed);
             crate::simulate::add_noise(&mut r, 0.02, seed + 100);
-            let d = drift_test(&q, 6, &[true; 6], &r, 3, 1, &DriftOptions::default()).unwrap();
+            let data = Measurements { n_joints: 6, task_dim: 3, points_per_pose: 1, joints: q, positions: vec![0.0; r.len()] };
+            let d = drift_test(&data, &[true; 6], &r, None, &DriftOptions::default()).unwrap();
             println!(
                 "seed {seed}: Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4}",
                 d.log_likelihood_ratio, d.sd, d.length, d.noise_sd, d.joint_sd
@@ -403,30 +519,77 @@ mod tests {
         }
     }
 
-    /// The analytic gradient against central differences, with and without the row term.
+    /// The analytic gradient against central differences, with and without the row term, with
+    /// and without fitted columns.
     #[test]
     fn the_gradient_matches_central_differences() {
         for with_drift in [false, true] {
-            let (window, p) = small_window(with_drift);
-            let blocks = [window];
-            let criterion = Likelihood { blocks: &blocks, with_drift };
-            crate::evidence::search::assert_gradient_matches_central_differences(&criterion, &p, 1e-6);
+            for fitted in [0, 5] {
+                let (window, p) = small_window(with_drift, fitted);
+                let blocks = [window];
+                let criterion = Likelihood { blocks: &blocks, with_drift };
+                crate::evidence::search::assert_gradient_matches_central_differences(&criterion, &p, 1e-6);
+            }
         }
     }
 
-    /// The value against the kernel-ridge module's independent log marginal likelihood of the same
-    /// covariance (assembled here entry by entry).
+    /// The basis is orthonormal and spans the fitted columns and the means.
+    #[test]
+    fn the_basis_is_orthonormal_and_spans_the_fitted_columns() {
+        let (window, _) = small_window(true, 5);
+        let (size, m) = (window.residual.nrows(), window.residual.ncols());
+        let u = Mat::from_fn(size * m, window.fitted[0].ncols(), |row, k| window.fitted[row % m][(row / m, k)]);
+        assert_eq!(u.ncols(), 5 + m);
+        let gram = u.transpose() * &u;
+        for i in 0..u.ncols() {
+            for j in 0..u.ncols() {
+                assert!((gram[(i, j)] - f64::from(u8::from(i == j))).abs() < 1e-12, "UᵀU[{i},{j}] = {}", gram[(i, j)]);
+            }
+        }
+        // The same random columns as `small_window`'s, and the means: U Uᵀ leaves them unchanged.
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let g = Mat::from_fn(size * m, 5, |_, _| rng.gen_range(-1.0..1.0));
+        let means = Mat::from_fn(size * m, m, |row, c| f64::from(u8::from(row % m == c)));
+        for a in [g, means] {
+            let projected = &u * (u.transpose() * &a);
+            let worst = (0..a.nrows())
+                .flat_map(|i| (0..a.ncols()).map(move |k| (i, k)))
+                .map(|(i, k)| (projected[(i, k)] - a[(i, k)]).abs())
+                .fold(0.0, f64::max);
+            assert!(worst < 1e-12, "{worst}");
+        }
+    }
+
+    /// The value against an independent route: the ordinary log likelihood (the kernel-ridge
+    /// module's) of the residual's part orthogonal to the basis, Qᵀr ~ N(0, QᵀK Q) with Q an
+    /// orthonormal complement of U from an eigendecomposition of I − UUᵀ and K assembled entry by
+    /// entry over all W m coordinates — with and without fitted columns (then U spans the means).
     #[test]
     fn the_value_matches_an_independent_log_likelihood() {
-        let (window, p) = small_window(true);
-        let (value, _) = Block { window: &window, with_drift: true }.evaluate(&p).unwrap();
-        let size = window.residual.nrows();
-        let e = |k: usize| p[k].exp();
-        let k = Mat::from_fn(size, size, |i, j| {
-            let joint: f64 = (0..3).map(|d| e(d) * window.similarity[d][(i, j)]).sum();
-            e(3) * joint.exp() + e(4) * (-((i as f64) - (j as f64)).abs() / e(5)).exp() + if i == j { e(6) * e(6) } else { 0.0 }
-        });
-        let lml = crate::baselines::kernel_ridge::selection::log_marginal_likelihood(&k, &window.residual).unwrap();
-        assert!((value + lml).abs() < 1e-9 * lml.abs(), "{value} vs {}", -lml);
+        for fitted in [0, 5] {
+            let (window, p) = small_window(true, fitted);
+            let (value, _) = Block { window: &window, with_drift: true }.evaluate(&p).unwrap();
+            let (size, m) = (window.residual.nrows(), window.residual.ncols());
+            let e = |k: usize| p[k].exp();
+            let k = Mat::from_fn(size * m, size * m, |a, b| {
+                let (i, j) = (a / m, b / m);
+                if a % m != b % m {
+                    return 0.0;
+                }
+                let joint: f64 = (0..3).map(|d| e(d) * window.similarity[d][(i, j)]).sum();
+                e(3) * joint.exp() + e(4) * (-((i as f64) - (j as f64)).abs() / e(5)).exp() + if i == j { e(6) * e(6) } else { 0.0 }
+            });
+            let u = Mat::from_fn(size * m, window.fitted[0].ncols(), |row, k| window.fitted[row % m][(row / m, k)]);
+            let complement = Mat::<f64>::identity(size * m, size * m) - &u * u.transpose();
+            let evd = complement.self_adjoint_eigen(Side::Lower).unwrap();
+            let keep: Vec<usize> = (0..size * m).filter(|&i| evd.S()[i] > 0.5).collect();
+            assert_eq!(keep.len(), size * m - u.ncols());
+            let q = Mat::from_fn(size * m, keep.len(), |row, c| evd.U()[(row, keep[c])]);
+            let r = Mat::from_fn(size * m, 1, |row, _| window.residual[(row / m, row % m)]);
+            let (kq, rq) = (q.transpose() * &k * &q, q.transpose() * &r);
+            let lml = crate::baselines::kernel_ridge::selection::log_marginal_likelihood(&kq, &rq).unwrap();
+            assert!((value + lml).abs() < 1e-9 * lml.abs(), "{fitted} columns: {value} vs {}", -lml);
+        }
     }
 }

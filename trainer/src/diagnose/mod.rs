@@ -413,10 +413,12 @@ pub fn diagnose(
     let r1 = residual(&refined.model, &train);
     let structure_after = structure_tests(&refined.model, &train, &r1, &options.structure);
     let unexplained_structure = structure_after.iter().any(|t| t.significant);
-    // Drift: every row of the data in file order (the held-out split is a random subset).
+    // Drift: the first rows of the data in file order (the held-out split is a random subset),
+    // the refined parameters marginalised through their Jacobian there.
     let revolute: Vec<bool> = (0..model.n_joints()).map(|d| model.is_revolute(d)).collect();
-    let drift =
-        drift::drift_test(&data.joints, data.n_joints, &revolute, &residual(&refined.model, data), m, data.points_per_pose, &options.drift);
+    let tested = data.subset(&(0..data.len().min(options.drift.window.saturating_mul(data.points_per_pose.max(1)))).collect::<Vec<_>>());
+    let fitted = jacobian(&refined.model, &tested, &chosen_params);
+    let drift = drift::drift_test(&tested, &revolute, &residual(&refined.model, &tested), Some(fitted.as_ref()), &options.drift);
     // 7. Held-out table and the recommendation.
     let geometric_only = geometric_only_model(model, &found, &refined, &chosen_params, &start, &train, options)?;
     let (table, cbd_sigma) = held_out_table(given, model, &geometric_only, &refined.model, &train, &test, cbd)?;
