@@ -611,6 +611,54 @@ mod tests {
         }
     }
 
+    /// A fit before the test takes the slow part of a drift: here 8 slow cosines of the row index
+    /// per coordinate (periods of 75 rows and longer, what a geometric fit along a walk can mimic)
+    /// fitted by least squares and removed. Against the length the same test gives on the rows
+    /// before that fit, the ordinary likelihood of what is left calls the drift shorter; the
+    /// restricted one, given the cosines, does not.
+    #[test]
+    fn marginalising_the_fitted_columns_removes_the_length_bias() {
+        let (rows, m, k) = (300, 3, 8);
+        let (mut restricted, mut plain) = (Vec::new(), Vec::new());
+        for seed in 1..=4u64 {
+            let q = crate::simulate::six_joint::walk_configurations(rows, 0.1, seed);
+            let mut r = row_drift(rows, m, 1.0, 5.0, seed);
+            crate::simulate::add_noise(&mut r, 0.5, seed + 100);
+            let g = Mat::from_fn(rows * m, m * k, |row, col| {
+                let (i, c, f) = (row / m, row % m, col / m);
+                if col % m == c {
+                    (std::f64::consts::PI * (f + 1) as f64 * (i as f64 + 0.5) / rows as f64).cos()
+                } else {
+                    0.0
+                }
+            });
+            let rhs = Mat::from_fn(rows * m, 1, |i, _| r[i]);
+            let beta = (g.transpose() * &g).llt(Side::Lower).unwrap().solve(g.transpose() * &rhs);
+            let fit = &g * &beta;
+            let left: Vec<f64> = (0..rows * m).map(|i| r[i] - fit[(i, 0)]).collect();
+            let data = Measurements { n_joints: 6, task_dim: m, points_per_pose: 1, joints: q, positions: vec![0.0; rows * m] };
+            let options = DriftOptions { window: rows, block: rows, ..DriftOptions::default() };
+            let before = drift_test(&data, &[true; 6], &r, None, &options).unwrap().length;
+            restricted.push(drift_test(&data, &[true; 6], &left, Some(g.as_ref()), &options).unwrap().length / before);
+            plain.push(drift_test(&data, &[true; 6], &left, None, &options).unwrap().length / before);
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        assert!((mean(&restricted) - 1.0).abs() < 0.1, "over the length before the fit: restricted {restricted:?}, plain {plain:?}");
+        assert!(mean(&plain) < 0.8, "over the length before the fit: restricted {restricted:?}, plain {plain:?}");
+    }
+
+    /// A Jacobian without a row per residual entry: no test, no panic.
+    #[test]
+    fn a_fitted_jacobian_of_the_wrong_height_is_refused() {
+        let (window, _) = small_window(true, 0);
+        let data = Measurements { n_joints: 3, task_dim: 3, points_per_pose: 1, joints: vec![0.0; 180], positions: vec![0.0; 180] };
+        let r: Vec<f64> = (0..180).map(|i| window.residual[(i / 3, i % 3)]).collect();
+        let g = Mat::<f64>::zeros(179, 2);
+        assert!(drift_test(&data, &[true; 3], &r, Some(g.as_ref()), &DriftOptions::default()).is_none());
+        let g = Mat::from_fn(180, 2, |i, _| if i == 7 { f64::NAN } else { 1.0 });
+        assert!(drift_test(&data, &[true; 3], &r, Some(g.as_ref()), &DriftOptions::default()).is_none());
+    }
+
     /// The analytic gradient against central differences, with and without the row term, with
     /// and without fitted columns.
     #[test]
