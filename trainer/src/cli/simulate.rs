@@ -9,12 +9,18 @@ use std::path::PathBuf;
 pub struct SimulateArgs {
     /// Which robot: `rr` (the paper's planar arm; columns q1,q2 in rad, x,y) or `six` (a UR5-like
     /// arm with geometric errors and gravity joint compliance, noise 0.01 mm by default; columns
-    /// as in examples/ur5/ur5.toml: q1_deg…q6_deg, x_mm, y_mm, z_mm; `--sampling uniform` only).
+    /// as in examples/ur5/ur5.toml: q1_deg…q6_deg, x_mm, y_mm, z_mm; `--sampling uniform` or `walk`).
     #[arg(long, default_value = "rr")]
     pub robot: String,
-    /// `grid` (per-axis points given by --grid) or `uniform` (--count random configurations).
+    /// `grid` (per-axis points given by --grid; rr only), `uniform` (--count random configurations)
+    /// or `walk` (--count configurations along a random walk in joint space, in the order measured:
+    /// Gaussian steps of --step radians per joint, reflected at the joint range's ends).
     #[arg(long, default_value = "grid")]
     pub sampling: String,
+    /// With `--sampling walk`: the standard deviation of each joint's step between consecutive
+    /// rows, radians (a real arm's campaign: UR5 poses are 1–16° apart, about 0.05–0.15).
+    #[arg(long)]
+    pub step: Option<f64>,
     #[arg(long, default_value_t = 16)]
     pub grid: usize,
     #[arg(long, default_value_t = 3000)]
@@ -166,9 +172,10 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     if args.sampling == "grid" && args.grid < 2 {
         return Err(Error::InvalidInput(format!("--grid must be at least 2 points per joint, got {}", args.grid)));
     }
-    if args.sampling == "uniform" && args.count == 0 {
+    if (args.sampling == "uniform" || args.sampling == "walk") && args.count == 0 {
         return Err(Error::InvalidInput("--count must be at least 1".into()));
     }
+    walk_step(&args)?;
     check_simulation_memory(&args, crate::cli::memory::available_bytes())?;
     match args.robot.as_str() {
         "rr" if args.tool_points.is_some() || args.pose || args.tracker_frame.is_some() => {
@@ -181,7 +188,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let sampling = match args.sampling.as_str() {
         "grid" => Sampling::Grid { per_axis: args.grid },
         "uniform" => Sampling::Uniform { count: args.count, seed: args.seed },
-        other => return Err(Error::InvalidInput(format!("unknown sampling `{other}` (expected grid or uniform)"))),
+        "walk" => Sampling::Walk { count: args.count, step: walk_step(&args)?.unwrap_or(0.0), seed: args.seed },
+        other => return Err(Error::InvalidInput(format!("unknown sampling `{other}` (expected grid, uniform or walk)"))),
     };
     let joints = match read_poses(&args)? {
         Some(poses) => poses,
@@ -197,7 +205,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     } else {
         let lengths = real.lengths;
         let rigid = cbd_protocol::NominalModel::planar(&lengths).ok_or_else(|| Error::Internal("two links fit".into()))?;
-        effect_arm(rigid, &args.effects)?.measure(&joints, 0.0, 0)
+        // Noise comes below; the seed draws any drift.
+        effect_arm(rigid, &args.effects)?.measure(&joints, 0.0, args.seed)
     };
     add_noise(&mut data.positions, args.noise.unwrap_or(0.0), args.seed.wrapping_add(0x5eed));
     check_readable(&data)?;
@@ -213,8 +222,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
 
 fn simulate_six(args: &SimulateArgs) -> Result<()> {
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
-    if args.sampling != "uniform" && args.poses.is_none() {
-        return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform".into()));
+    if !matches!(args.sampling.as_str(), "uniform" | "walk") && args.poses.is_none() {
+        return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform or walk".into()));
     }
     let mut robot = SixJointRobot::ur5_like(1);
     if args.exact_geometry {
@@ -224,9 +233,10 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         robot.noise_std = noise;
     }
     let tracker = args.tracker_frame.as_deref().map(parse_tracker_frame).transpose()?;
-    let joints = match read_poses(args)? {
-        Some(poses) => poses,
-        None => random_configurations(args.count, args.seed),
+    let joints = match (read_poses(args)?, walk_step(args)?) {
+        (Some(poses), _) => poses,
+        (None, Some(step)) => crate::simulate::six_joint::walk_configurations(args.count, step, args.seed),
+        (None, None) => random_configurations(args.count, args.seed),
     };
     if let Some(points) = &args.tool_points {
         return simulate_six_points(args, &robot, &joints, &parse_tool_points(points)?, tracker.as_ref());
@@ -280,7 +290,8 @@ fn simulate_six_points(
             joints.chunks_exact(6).flat_map(|q| moved.true_position(q)).collect()
         } else {
             let rigid = cbd_protocol::NominalModel::DhChain(moved.real.clone());
-            effect_arm(rigid, &args.effects)?.measure(joints, 0.0, 0).positions
+            // Noise comes below; the seed draws any drift, the same at every point of a pose.
+            effect_arm(rigid, &args.effects)?.measure(joints, 0.0, args.seed).positions
         };
         per_point.push(truth);
     }
@@ -328,6 +339,20 @@ fn simulate_six_points(
     Ok(())
 }
 
+/// `--step` with `--sampling walk` (required there, a positive finite number of radians up to π);
+/// refused with any other sampling, where it would be ignored. `None` unless walking.
+fn walk_step(args: &SimulateArgs) -> Result<Option<f64>> {
+    match (args.sampling.as_str(), args.step) {
+        ("walk", None) => Err(Error::InvalidInput("--sampling walk needs --step (radians per joint between consecutive rows)".into())),
+        ("walk", Some(step)) if !(step > 0.0 && step <= std::f64::consts::PI) => {
+            Err(Error::InvalidInput(format!("--step must be a number of radians in (0, π], got {step:e}")))
+        }
+        ("walk", Some(step)) => Ok(Some(step)),
+        (other, Some(_)) => Err(Error::InvalidInput(format!("--step is for --sampling walk, not `{other}`"))),
+        (_, None) => Ok(None),
+    }
+}
+
 /// Refuses to write positions the importers would refuse to read back (beyond ±1e100: noise and
 /// effects that are each in range can still add up, a thermal drift over many rows), naming the row.
 fn check_readable(data: &crate::data::Measurements) -> Result<()> {
@@ -355,8 +380,8 @@ fn effect_arm(rigid: cbd_protocol::NominalModel, specs: &[String]) -> Result<cra
 /// Refuses a simulation whose rows cannot be held in `available` bytes (a `--grid 100000` of the
 /// RR arm is 10¹⁰ rows), naming the rows, the figure and the flag that sets them.
 fn check_simulation_memory(args: &SimulateArgs, available: Option<f64>) -> Result<()> {
-    if args.robot == "six" && args.sampling != "uniform" {
-        return Ok(()); // refused below: the six-joint arm is sampled uniformly only
+    if args.robot == "six" && !matches!(args.sampling.as_str(), "uniform" | "walk") {
+        return Ok(()); // refused below: the six-joint arm is sampled uniformly or by a walk only
     }
     let (joints, coordinates) = if args.robot == "six" { (6, 3) } else { (2, 2) };
     let (rows, flag) = if args.sampling == "grid" {
@@ -389,7 +414,9 @@ fn effect_help() -> String {
         "Inject an effect nobody declares (repeatable): `type:key=value,...` with joints/links 1-based, angles in radians, \
          lengths in the model's unit (rr: 1 = l1; six: mm), compliance in rad per (mass·length) under unit link masses and \
          unit gravity (−y for rr, −z for six). Library types: {}. Outside the library: bump:centre=q1;q2;...,width=,dx=,dy=,dz= \
-         | dead_zone:joint=,width= | thermal:dx=,dy=,dz= (drift per row). With any --effect the robot is its geometry (rr: \
+         | dead_zone:joint=,width= | thermal:dx=,dy=,dz= (drift per row) | drift:sd=,length= (a stationary random \
+         process over the rows, each coordinate an AR(1)/Ornstein–Uhlenbeck sequence: standard deviation sd in the model's \
+         unit, correlation exp(−|i − j|/length) between rows i and j; drawn from --seed). With any --effect the robot is its geometry (rr: \
          link lengths 1.09, 0.46; six: its DH, base and tool errors) plus these effects only: the built-in \
          bending/stretch/base offset (rr) and joint compliance (six) are left out",
         library.join(" | ")

@@ -4,8 +4,10 @@
 //! Stages (one file each): residual structure tests (`structure`, `f_test`) → library Jacobians
 //! (`library`, `kinematics`) → cross-validated forward selection (`selection`) → Gauss–Newton
 //! refinement with uncertainties (`refine`), dropping what is not significant or does not earn its
-//! place → held-out comparison and report (`report`).
+//! place → held-out comparison and report (`report`); beside them, whether what is left follows
+//! the order of measurement (`drift`).
 
+pub mod drift;
 pub mod error;
 pub mod f_test;
 pub mod kinematics;
@@ -43,6 +45,8 @@ pub struct DiagnoseOptions {
     /// Folds of the cross-validation that recommends CbD's base (nominal or nominal + effects);
     /// 0 skips it.
     pub recommendation_folds: usize,
+    /// The test for drift in measurement order.
+    pub drift: drift::DriftOptions,
 }
 
 impl Default for DiagnoseOptions {
@@ -55,6 +59,7 @@ impl Default for DiagnoseOptions {
             identifiability_tolerance: 1e-5,
             gauss_newton_iterations: 10,
             recommendation_folds: 3,
+            drift: drift::DriftOptions::default(),
         }
     }
 }
@@ -134,6 +139,9 @@ pub struct Diagnosis {
     pub model_start: NominalModel,
     /// With CbD: which base CbD should deform, by k-fold cross-validation on the training rows.
     pub recommendation: Option<Recommendation>,
+    /// Drift in measurement order: the residual of `model_after` on every row of the data in file
+    /// order (`None`: too few poses to test).
+    pub drift: Option<drift::Drift>,
 }
 
 /// The pipeline `diagnose` recommends: CbD on the nominal model or on nominal + effects, whichever
@@ -405,6 +413,12 @@ pub fn diagnose(
     let r1 = residual(&refined.model, &train);
     let structure_after = structure_tests(&refined.model, &train, &r1, &options.structure);
     let unexplained_structure = structure_after.iter().any(|t| t.significant);
+    // Drift: the first rows of the data in file order (the held-out split is a random subset),
+    // the refined parameters marginalised through their Jacobian there.
+    let revolute: Vec<bool> = (0..model.n_joints()).map(|d| model.is_revolute(d)).collect();
+    let tested = data.subset(&(0..data.len().min(options.drift.window.saturating_mul(data.points_per_pose.max(1)))).collect::<Vec<_>>());
+    let fitted = jacobian(&refined.model, &tested, &chosen_params);
+    let drift = drift::drift_test(&tested, &revolute, &residual(&refined.model, &tested), Some(fitted.as_ref()), &options.drift);
     // 7. Held-out table and the recommendation.
     let geometric_only = geometric_only_model(model, &found, &refined, &chosen_params, &start, &train, options)?;
     let (table, cbd_sigma) = held_out_table(given, model, &geometric_only, &refined.model, &train, &test, cbd)?;
@@ -439,6 +453,7 @@ pub fn diagnose(
         train,
         model_start: dh_form.clone(),
         recommendation,
+        drift,
     })
 }
 

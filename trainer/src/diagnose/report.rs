@@ -127,6 +127,7 @@ pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
         out += &format!("  {}; `=` at it (more data or effects will not help), `>` above it (structure left)\n", f.describe(unit));
     }
     out += &pose_table(d, unit);
+    out += &drift_text(d, unit);
     if let Some(rec) = &d.recommendation {
         let cv: Vec<String> = rec.cross_validation.iter().map(|(name, rms)| format!("{name} {rms:.4e}")).collect();
         out += &format!(
@@ -140,6 +141,30 @@ pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
         }
     }
     out
+}
+
+/// The drift test's lines: found or not, its size, length and share of the floor, and advice.
+fn drift_text(d: &Diagnosis, unit: &str) -> String {
+    let Some(x) = &d.drift else {
+        return "\ndrift in measurement order: not tested (too few poses)\n".into();
+    };
+    let test = format!(
+        "log-likelihood ratio {:.1} nats, threshold {:.0}; first {} poses in file order, {} blocks",
+        x.log_likelihood_ratio, x.threshold, x.poses, x.blocks
+    );
+    if x.detected {
+        format!(
+            "\ndrift in measurement order: found ({test})\n  sd {:.4e} {unit} per coordinate over {:.1} poses (correlation exp(−lag/length)); \
+             white noise {:.4e} {unit}; drift is {} of the noise floor's variance\n  => {}\n",
+            x.sd,
+            x.length,
+            x.noise_sd,
+            percent(x.share_of_floor),
+            x.advice()
+        )
+    } else {
+        format!("\ndrift in measurement order: none ({test})\n")
+    }
 }
 
 /// With several tool points per pose: each held-out row's mean error per tool point, of the tool
@@ -244,6 +269,15 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
                       "best_refused": d.selection.best_refused.map(|(g, cv)| json!({"group": d.group_names[g], "cv_rms": cv})), "cv_rms_before": d.selection.cv_rms_before, "cv_rms_after": d.selection.cv_rms_after()},
         "held_out": held,
         "noise_floor": d.noise_floor,
+        "drift": match &d.drift {
+            Some(x) => {
+                let mut v = serde_json::to_value(x).unwrap_or(Value::Null);
+                v["tested"] = json!(true);
+                v["advice"] = json!(x.advice());
+                v
+            }
+            None => json!({"detected": false, "sd": null, "length": null, "tested": false}),
+        },
         "recommendation": d.recommendation.as_ref().map(|r| json!({
             "best": r.best, "effects_hurt": r.effects_hurt, "folds": r.folds,
             "cross_validation": r.cross_validation.iter().map(|(n, e)| json!({"pipeline": n, "rms": e})).collect::<Vec<_>>(),

@@ -84,7 +84,7 @@ fn the_simulator_injects_it_and_the_effect_spec_names_it() {
     let e = parse_effect_of(&[STEP], "index_step:joint=3,step=0.01", 2).unwrap_err().to_string();
     assert!(e.contains("joint must be between 1 and 2"), "{e}");
     let e = parse_effect_of(&[STEP], "wobble:joint=1", 2).unwrap_err().to_string();
-    assert!(e.contains("unknown type `wobble` (index_step, bump, dead_zone, thermal)"), "{e}");
+    assert!(e.contains("unknown type `wobble` (index_step, bump, dead_zone, thermal, drift)"), "{e}");
 }
 
 #[test]

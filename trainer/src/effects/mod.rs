@@ -444,16 +444,20 @@ pub struct Spec {
     text: String,
     kv: BTreeMap<String, String>,
     n_joints: usize,
+    /// The keys a parser asked for ([`check_all_read`](Spec::check_all_read): any other is unknown).
+    read: std::cell::RefCell<std::collections::BTreeSet<String>>,
 }
 
 impl Spec {
     /// The spec's type and keys, for a chain of `n_joints` joints.
     pub fn parse(spec: &str, n_joints: usize) -> Result<(String, Spec), EffectSpecError> {
         let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
-        let mut out = Spec { text: spec.to_string(), kv: BTreeMap::new(), n_joints };
+        let mut out = Spec { text: spec.to_string(), kv: BTreeMap::new(), n_joints, read: Default::default() };
         for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
             let (k, v) = part.split_once('=').ok_or_else(|| out.bad(format!("`{}` is not key=value", crate::error::excerpt(part))))?;
-            out.kv.insert(k.trim().to_string(), v.trim().to_string());
+            if out.kv.insert(k.trim().to_string(), v.trim().to_string()).is_some() {
+                return Err(out.bad(format!("{}= is given twice", crate::error::excerpt(k.trim()))));
+            }
         }
         Ok((kind.to_string(), out))
     }
@@ -465,12 +469,26 @@ impl Spec {
 
     /// The raw text of key `k`.
     pub fn get(&self, k: &str) -> Option<&str> {
+        self.read.borrow_mut().insert(k.to_string());
         self.kv.get(k).map(String::as_str)
+    }
+
+    /// An error naming the first key no parser asked for (a misspelt or foreign key), and the
+    /// keys that were asked for.
+    pub fn check_all_read(&self) -> Result<(), EffectSpecError> {
+        let read = self.read.borrow();
+        match self.kv.keys().find(|k| !read.contains(*k)) {
+            Some(k) => {
+                let known: Vec<&str> = read.iter().map(String::as_str).collect();
+                Err(self.bad(format!("unknown key `{}` (this type takes {})", crate::error::excerpt(k), known.join(", "))))
+            }
+            None => Ok(()),
+        }
     }
 
     /// A finite number within the model file's bound, or `default` when absent.
     pub fn number(&self, k: &str, default: Option<f64>) -> Result<f64, EffectSpecError> {
-        match self.kv.get(k) {
+        match self.get(k) {
             Some(v) => {
                 let x = v.parse::<f64>().ok().filter(|x| x.is_finite());
                 let x = x.ok_or_else(|| self.bad(format!("{k}={} is not a finite number", crate::error::excerpt(v))))?;

@@ -29,6 +29,12 @@ pub enum InjectedEffect {
     /// Outside the library: every task coordinate drifts by `per_row` × row index (a warming
     /// machine measured in sequence; not a function of the configuration at all).
     ThermalDrift { per_row: [f64; 3] },
+    /// Outside the library: a stationary random process over the row sequence added to every
+    /// measured coordinate independently (`super::row_drift`: standard deviation `sd` in the
+    /// model's length unit, correlation exp(−|i − j| / `length`) between rows i and j). A nuisance
+    /// of the measurement (settling, warming, a tracker's own drift), not of the configuration:
+    /// [`EffectArm::measure`] adds it, [`EffectArm::position`] (one row, no sequence) does not.
+    Drift { sd: f64, length: f64 },
 }
 
 impl From<Effect> for InjectedEffect {
@@ -263,10 +269,36 @@ impl EffectArm {
         (0..self.rigid.task_dim()).map(|c| k.position[c] + b[c]).collect()
     }
 
-    /// Measurements at `joints` (row-major), with Gaussian noise of standard deviation `noise`.
+    /// The drift effects' sum at each of `rows` rows (row-major, 3 per row), drawn from `seed`
+    /// (each drift its own stream; all zero without one).
+    pub fn drift(&self, rows: usize, seed: u64) -> Vec<f64> {
+        let mut out = vec![0.0; 3 * rows];
+        let drifts = self.effects.iter().filter_map(|e| match *e {
+            InjectedEffect::Drift { sd, length } => Some((sd, length)),
+            _ => None,
+        });
+        for (k, (sd, length)) in drifts.enumerate() {
+            // A stream apart from the noise's (`add_noise` draws from `seed` itself).
+            let stream = seed ^ 0xd21f_7000_0000_0000u64.wrapping_add(k as u64);
+            for (o, d) in out.iter_mut().zip(super::row_drift(rows, 3, sd, length, stream)) {
+                *o += d;
+            }
+        }
+        out
+    }
+
+    /// Measurements at `joints` (row-major), with Gaussian noise of standard deviation `noise`
+    /// drawn from `seed` (and any drift from a stream of the same seed).
     pub fn measure(&self, joints: &[f64], noise: f64, seed: u64) -> crate::data::Measurements {
         let n = self.rigid.n_joints();
         let mut positions: Vec<f64> = joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i)).collect();
+        let m = self.rigid.task_dim();
+        let drift = self.drift(positions.len() / m.max(1), seed);
+        for (i, p) in positions.chunks_exact_mut(m).enumerate() {
+            for (c, v) in p.iter_mut().enumerate() {
+                *v += drift[3 * i + c];
+            }
+        }
         super::add_noise(&mut positions, noise, seed);
         crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), points_per_pose: 1, joints: joints.to_vec(), positions }
     }
@@ -278,6 +310,11 @@ impl EffectArm {
         let full = self.rigid.task_dim();
         let mut positions: Vec<f64> =
             joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i).into_iter().take(2).collect::<Vec<_>>()).collect();
+        let drift = self.drift(positions.len() / 2, seed);
+        for (i, p) in positions.chunks_exact_mut(2).enumerate() {
+            p[0] += drift[3 * i];
+            p[1] += drift[3 * i + 1];
+        }
         super::add_noise(&mut positions, noise, seed);
         debug_assert!(full >= 2);
         crate::data::Measurements { n_joints: n, task_dim: 2, points_per_pose: 1, joints: joints.to_vec(), positions }
@@ -304,7 +341,8 @@ impl SimulatedArm for EffectArm {
 /// (joints and links 1-based on the command line; angles in radians, lengths in model units).
 /// Types: encoder_scale (scale), transmission (harmonic, cos, sin), gravity_compliance
 /// (compliance), link_bending (link, compliance), bump (centre=a;b;..., width, dx, dy, dz),
-/// dead_zone (width), thermal (dx, dy, dz per row).
+/// dead_zone (width), thermal (dx, dy, dz per row), drift (sd, length in rows). Unknown and
+/// repeated keys are refused.
 pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
     parse_effect_of(KINDS, spec, n_joints)
 }
@@ -313,7 +351,14 @@ pub fn parse_effect(spec: &str, n_joints: usize) -> Result<InjectedEffect, Effec
 /// a model-file entry).
 pub fn parse_effect_of(kinds: &[Kind], spec: &str, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
     let (kind, s) = Spec::parse(spec, n_joints)?;
-    if let Some(effect) = kinds.iter().filter(|k| k.name() == kind).find_map(|k| k.parse_spec(&s)) {
+    let effect = parse_spec_of(kinds, &kind, &s, n_joints)?;
+    // Every key given must have been read: a misspelt key is not silently ignored.
+    s.check_all_read()?;
+    Ok(effect)
+}
+
+fn parse_spec_of(kinds: &[Kind], kind: &str, s: &Spec, n_joints: usize) -> Result<InjectedEffect, EffectSpecError> {
+    if let Some(effect) = kinds.iter().filter(|k| k.name() == kind).find_map(|k| k.parse_spec(s)) {
         return Ok(InjectedEffect::Library(effect?));
     }
     // A width is a distance: positive for a bump's, not negative for a dead zone's.
@@ -325,7 +370,7 @@ pub fn parse_effect_of(kinds: &[Kind], spec: &str, n_joints: usize) -> Result<In
             _ => Ok(w),
         }
     };
-    let effect = match kind.as_str() {
+    let effect = match kind {
         "bump" => {
             let centre: Result<Vec<f64>, EffectSpecError> = s
                 .get("centre")
@@ -351,9 +396,19 @@ pub fn parse_effect_of(kinds: &[Kind], spec: &str, n_joints: usize) -> Result<In
         "thermal" => {
             InjectedEffect::ThermalDrift { per_row: [s.number("dx", Some(0.0))?, s.number("dy", Some(0.0))?, s.number("dz", Some(0.0))?] }
         }
+        "drift" => {
+            let (sd, length) = (s.number("sd", None)?, s.number("length", None)?);
+            if sd < 0.0 {
+                return Err(s.bad(format!("sd = {} must not be negative", crate::error::number(sd))));
+            }
+            if length <= 0.0 {
+                return Err(s.bad(format!("length = {} must be positive (rows)", crate::error::number(length))));
+            }
+            InjectedEffect::Drift { sd, length }
+        }
         other => {
             let mut names: Vec<&str> = kinds.iter().filter(|k| !k.file_fields().is_empty()).map(|k| k.name()).collect();
-            names.extend(["bump", "dead_zone", "thermal"]);
+            names.extend(["bump", "dead_zone", "thermal", "drift"]);
             return Err(s.bad(format!("unknown type `{other}` ({})", names.join(", "))));
         }
     };

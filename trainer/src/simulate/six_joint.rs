@@ -118,10 +118,20 @@ impl SixJointRobot {
 /// `count` random configurations (radians, row-major) in a UR5-like working range:
 /// q1, q4, q5, q6 ∈ [−π, π], q2 ∈ [−π, 0] (upper arm above the base), q3 ∈ [−2.8, 2.8].
 pub fn random_configurations(count: usize, seed: u64) -> Vec<f64> {
-    use std::f64::consts::PI;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let ranges = [(-PI, PI), (-PI, 0.0), (-2.8, 2.8), (-PI, PI), (-PI, PI), (-PI, PI)];
-    (0..count).flat_map(|_| ranges.map(|(lo, hi)| rng.gen_range(lo..hi))).collect()
+    (0..count).flat_map(|_| WORKING_RANGE.map(|(lo, hi)| rng.gen_range(lo..hi))).collect()
+}
+
+/// The working range [`random_configurations`] samples (radians).
+pub const WORKING_RANGE: [(f64, f64); 6] = {
+    use std::f64::consts::PI;
+    [(-PI, PI), (-PI, 0.0), (-2.8, 2.8), (-PI, PI), (-PI, PI), (-PI, PI)]
+};
+
+/// `count` configurations along a random walk in the same working range (`super::random_walk`:
+/// Gaussian steps of standard deviation `step` radians per joint, reflected at the range's ends).
+pub fn walk_configurations(count: usize, step: f64, seed: u64) -> Vec<f64> {
+    super::random_walk(count, step, &WORKING_RANGE, seed)
 }
 
 #[cfg(test)]
