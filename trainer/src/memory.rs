@@ -262,16 +262,11 @@ pub fn room_for(bytes: f64, dim: usize) -> Result<(), MemoryError> {
 
 /// [`room_for`] on a given machine and process.
 pub fn room_for_on(host: &Host, bytes: f64, dim: usize) -> Result<(), MemoryError> {
-    let pending = 2.0 * host.workers.max(1) as f64 * gemm_workspace_bytes_for(&host.caches, dim);
-    // What is in use already (the mapped address space) plus this: the command's need so far.
-    let in_use = mapped_bytes();
-    let Some(available) = host.available else {
-        record_need(in_use + bytes + pending);
-        return Ok(());
-    };
-    let room = available - pending - SMALL_BLOCKS_MARGIN;
-    if bytes <= room {
-        record_need(in_use + bytes + pending);
+    let pending = pending_buffers(host, dim);
+    let room = host.available.map_or(f64::INFINITY, |available| available - pending - SMALL_BLOCKS_MARGIN);
+    if host.available.is_none() || bytes <= room {
+        // What is in use already (the mapped address space) plus this: the command's need so far.
+        record_need(mapped_bytes() + bytes + pending);
         Ok(())
     } else {
         Err(MemoryError(format!("needs about {}, more than the {} this process may use", gigabytes(bytes), gigabytes(room.max(0.0)))))
@@ -289,12 +284,11 @@ pub fn max_fit_rows(caches: &CacheSizes, available: f64, task_dim: usize, thread
     let fits = |rows: usize| fit_bytes(caches, rows, task_dim, threads) <= available;
     // The matrices grow as rows², the buffers at most linearly: the bound without buffers is an
     // upper one, and the count is found by bisection below it.
-    let upper = ((available / (FIT_MATRIX_COPIES * F64)).max(0.0).sqrt() / task_dim.max(1) as f64).floor() as usize + 1;
-    let (mut lo, mut hi) = (0usize, upper);
     if !fits(1) {
         return 0;
     }
-    lo = lo.max(1);
+    let upper = ((available / (FIT_MATRIX_COPIES * F64)).max(0.0).sqrt() / task_dim.max(1) as f64).floor() as usize + 1;
+    let (mut lo, mut hi) = (1, upper.max(2));
     while hi - lo > 1 {
         let mid = lo + (hi - lo) / 2;
         if fits(mid) {
@@ -440,22 +434,36 @@ pub fn needed_so_far() -> f64 {
 /// where the up-front check already covered them (the kernel form within its budget): the need
 /// [`needed_so_far`] reports, counted as [`room_for`] counts it.
 pub fn note_need(bytes: f64, dim: usize) {
-    let workers = crate::workers::current_workers().max(1) as f64;
-    record_need(mapped_bytes() + bytes + 2.0 * workers * gemm_workspace_bytes(dim));
+    let host = Host { workers: crate::workers::current_workers(), ..Host::with_available(None) };
+    record_need(mapped_bytes() + bytes + pending_buffers(&host, dim));
+}
+
+/// The multiply buffers `host`'s workers may allocate while matrices of at most `dim` rows and
+/// columns are computed: two each ([`worker_bytes`]).
+fn pending_buffers(host: &Host, dim: usize) -> f64 {
+    2.0 * host.workers.max(1) as f64 * gemm_workspace_bytes_for(&host.caches, dim)
+}
+
+/// The workers to run on: `host.workers` when `need(workers)` fits what is available, else one
+/// when `need(1)` does, the need let through recorded ([`needed_so_far`]); `Err(available)` when
+/// not even one worker fits.
+fn workers_within(host: &Host, need: impl Fn(usize) -> f64) -> Result<usize, f64> {
+    let most = host.workers.max(1);
+    let threads = match host.available {
+        None => most,
+        Some(available) => [most, 1].into_iter().find(|&t| need(t) <= available).ok_or(available)?,
+    };
+    record_need(need(threads));
+    Ok(threads)
 }
 
 /// [`check_fit`] on a given machine and process.
 pub fn check_fit_on(host: &Host, rows: usize, task_dim: usize, remedy: &str) -> Result<usize, MemoryError> {
-    let most = host.workers.max(1);
-    let Some(available) = host.available else {
-        record_need(fit_bytes(&host.caches, rows, task_dim, most));
-        return Ok(most);
-    };
     let caches = &host.caches;
-    if let Some(threads) = [most, 1].into_iter().find(|&t| fit_bytes(caches, rows, task_dim, t) <= available) {
-        record_need(fit_bytes(caches, rows, task_dim, threads));
-        return Ok(threads);
-    }
+    let available = match workers_within(host, |t| fit_bytes(caches, rows, task_dim, t)) {
+        Ok(threads) => return Ok(threads),
+        Err(available) => available,
+    };
     let dim = rows.saturating_mul(task_dim);
     let parts = format!(
         "{FIT_MATRIX_COPIES} matrices of ({rows}·{task_dim})² values, {} and the allocator's {}",
@@ -486,16 +494,11 @@ pub fn check_workers(available: Option<f64>, dim: usize, remedy: &str) -> Result
 
 /// [`check_workers`] on a given machine and process.
 pub fn check_workers_on(host: &Host, dim: usize, remedy: &str) -> Result<usize, MemoryError> {
-    let most = host.workers.max(1);
-    let Some(available) = host.available else {
-        record_need(fixed_fit_bytes(&host.caches, most, dim));
-        return Ok(most);
-    };
     let caches = &host.caches;
-    if let Some(threads) = [most, 1].into_iter().find(|&t| fixed_fit_bytes(caches, t, dim) <= available) {
-        record_need(fixed_fit_bytes(caches, threads, dim));
-        return Ok(threads);
-    }
+    let available = match workers_within(host, |t| fixed_fit_bytes(caches, t, dim)) {
+        Ok(threads) => return Ok(threads),
+        Err(available) => available,
+    };
     // A small problem's worker fits: this one's size is what does not.
     let what = match fixed_fit_bytes(caches, 1, SMALL_DIM) <= available {
         true => remedy,

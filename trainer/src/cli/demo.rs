@@ -70,17 +70,20 @@ const BYTES_PER_TEST_POINT: f64 = 16.0 * 8.0;
 /// fits check their workers here and the kernel form against the budget in the solver, as `cbd fit`.
 fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, available: Option<f64>) -> Result<usize> {
     use crate::calibrate::HyperparameterSource;
+    use crate::cli::memory::{fixed_fit_bytes, gigabytes as gb, CacheSizes};
     use crate::expansion::Representation;
     let flag = format!("--grid {}", args.grid);
     let rows = args.grid.checked_mul(args.grid).ok_or_else(|| MemoryError("too many rows".into())).context(&flag)?;
     let kernel = settings.solver.representation == Representation::Kernel
         || (settings.source == HyperparameterSource::PaperRr && settings.solver.representation == Representation::Auto);
-    // Kernel ridge's N² matrices and the test points first, where they are what does not fit: a
-    // grid that large is named by them, not by the multiply buffers that come with it.
+    // Kernel ridge's N² matrix and its factor, and the test points at their bytes each.
+    let krr = 2.0 * (rows as f64).powi(2) * 8.0;
+    let test = args.test_points as f64 * BYTES_PER_TEST_POINT;
+    let caches = CacheSizes::of_this_host();
+    // Those first, where they are what does not fit: a grid that large is named by them, not by
+    // the multiply buffers that come with it.
     if let Some(a) = available {
-        let fixed = crate::cli::memory::fixed_fit_bytes(&crate::cli::memory::CacheSizes::of_this_host(), 1, 2 * rows);
-        let gb = crate::cli::memory::gigabytes;
-        let krr = 2.0 * (rows as f64).powi(2) * 8.0;
+        let fixed = fixed_fit_bytes(&caches, 1, 2 * rows);
         if krr + fixed > a && krr >= fixed {
             return Err(Error::from(MemoryError(format!(
                 "kernel ridge's {rows} × {rows} kernel matrix and its factor need about {}, more than the {} this process may use; lower --grid",
@@ -89,7 +92,6 @@ fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, ava
             )))
             .context(flag));
         }
-        let test = args.test_points as f64 * BYTES_PER_TEST_POINT;
         if test + fixed > a && test >= fixed {
             return Err(MemoryError(format!(
                 "--test-points {}: about {} to evaluate, more than the {} this process may use; lower --test-points",
@@ -106,9 +108,7 @@ fn check_demo_memory(args: &DemoArgs, settings: &crate::calibrate::Settings, ava
     };
     let Some(a) = available else { return Ok(threads) };
     // With the workers found, both again (two workers hold more than one).
-    let fixed = crate::cli::memory::fixed_fit_bytes(&crate::cli::memory::CacheSizes::of_this_host(), threads, 2 * rows);
-    let gb = crate::cli::memory::gigabytes;
-    let need = (2.0 * (rows as f64).powi(2) * 8.0).max(args.test_points as f64 * BYTES_PER_TEST_POINT) + fixed;
+    let need = krr.max(test) + fixed_fit_bytes(&caches, threads, 2 * rows);
     if need > a {
         return Err(MemoryError(format!(
             "--grid {} --test-points {}: about {} with {threads} worker(s), more than the {} this process may use; lower --grid or --test-points",

@@ -175,20 +175,20 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     if (args.sampling == "uniform" || args.sampling == "walk") && args.count == 0 {
         return Err(Error::InvalidInput("--count must be at least 1".into()));
     }
-    walk_step(&args)?;
+    let step = walk_step(&args)?;
     check_simulation_memory(&args, crate::cli::memory::available_bytes())?;
     match args.robot.as_str() {
         "rr" if args.tool_points.is_some() || args.pose || args.tracker_frame.is_some() => {
             return Err(Error::InvalidInput("--tool-points, --pose and --tracker-frame are for the six-joint robot (--robot six)".into()))
         }
         "rr" => {}
-        "six" => return simulate_six(&args),
+        "six" => return simulate_six(&args, step),
         other => return Err(Error::InvalidInput(format!("unknown robot `{other}` (expected rr or six)"))),
     }
     let sampling = match args.sampling.as_str() {
         "grid" => Sampling::Grid { per_axis: args.grid },
         "uniform" => Sampling::Uniform { count: args.count, seed: args.seed },
-        "walk" => Sampling::Walk { count: args.count, step: walk_step(&args)?.unwrap_or(0.0), seed: args.seed },
+        "walk" => Sampling::Walk { count: args.count, step: step.unwrap_or(0.0), seed: args.seed },
         other => return Err(Error::InvalidInput(format!("unknown sampling `{other}` (expected grid, uniform or walk)"))),
     };
     let joints = match read_poses(&args)? {
@@ -220,7 +220,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     Ok(())
 }
 
-fn simulate_six(args: &SimulateArgs) -> Result<()> {
+/// The six-joint robot's rows; `step`: the walk's ([`walk_step`]), `None` unless walking.
+fn simulate_six(args: &SimulateArgs, step: Option<f64>) -> Result<()> {
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
     if !matches!(args.sampling.as_str(), "uniform" | "walk") && args.poses.is_none() {
         return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform or walk".into()));
@@ -233,7 +234,7 @@ fn simulate_six(args: &SimulateArgs) -> Result<()> {
         robot.noise_std = noise;
     }
     let tracker = args.tracker_frame.as_deref().map(parse_tracker_frame).transpose()?;
-    let joints = match (read_poses(args)?, walk_step(args)?) {
+    let joints = match (read_poses(args)?, step) {
         (Some(poses), _) => poses,
         (None, Some(step)) => crate::simulate::six_joint::walk_configurations(args.count, step, args.seed),
         (None, None) => random_configurations(args.count, args.seed),

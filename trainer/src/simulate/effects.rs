@@ -269,10 +269,10 @@ impl EffectArm {
         (0..self.rigid.task_dim()).map(|c| k.position[c] + b[c]).collect()
     }
 
-    /// The drift effects' sum at each of `rows` rows (row-major, 3 per row), drawn from `seed`
-    /// (each drift its own stream; all zero without one).
-    pub fn drift(&self, rows: usize, seed: u64) -> Vec<f64> {
-        let mut out = vec![0.0; 3 * rows];
+    /// Adds the drift effects to `positions` (row-major, `m` ≤ 3 coordinates a row: the first `m`
+    /// of each row's three drift coordinates), drawn from `seed` (each drift its own stream).
+    fn add_drift(&self, positions: &mut [f64], m: usize, seed: u64) {
+        let rows = positions.len() / m.max(1);
         let drifts = self.effects.iter().filter_map(|e| match *e {
             InjectedEffect::Drift { sd, length } => Some((sd, length)),
             _ => None,
@@ -280,11 +280,13 @@ impl EffectArm {
         for (k, (sd, length)) in drifts.enumerate() {
             // A stream apart from the noise's (`add_noise` draws from `seed` itself).
             let stream = seed ^ 0xd21f_7000_0000_0000u64.wrapping_add(k as u64);
-            for (o, d) in out.iter_mut().zip(super::row_drift(rows, 3, sd, length, stream)) {
-                *o += d;
+            let drift = super::row_drift(rows, 3, sd, length, stream);
+            for (p, d) in positions.chunks_exact_mut(m.max(1)).zip(drift.chunks_exact(3)) {
+                for (v, x) in p.iter_mut().zip(d) {
+                    *v += x;
+                }
             }
         }
-        out
     }
 
     /// Measurements at `joints` (row-major), with Gaussian noise of standard deviation `noise`
@@ -292,13 +294,7 @@ impl EffectArm {
     pub fn measure(&self, joints: &[f64], noise: f64, seed: u64) -> crate::data::Measurements {
         let n = self.rigid.n_joints();
         let mut positions: Vec<f64> = joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i)).collect();
-        let m = self.rigid.task_dim();
-        let drift = self.drift(positions.len() / m.max(1), seed);
-        for (i, p) in positions.chunks_exact_mut(m).enumerate() {
-            for (c, v) in p.iter_mut().enumerate() {
-                *v += drift[3 * i + c];
-            }
-        }
+        self.add_drift(&mut positions, self.rigid.task_dim(), seed);
         super::add_noise(&mut positions, noise, seed);
         crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), points_per_pose: 1, joints: joints.to_vec(), positions }
     }
@@ -310,11 +306,7 @@ impl EffectArm {
         let full = self.rigid.task_dim();
         let mut positions: Vec<f64> =
             joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i).into_iter().take(2).collect::<Vec<_>>()).collect();
-        let drift = self.drift(positions.len() / 2, seed);
-        for (i, p) in positions.chunks_exact_mut(2).enumerate() {
-            p[0] += drift[3 * i];
-            p[1] += drift[3 * i + 1];
-        }
+        self.add_drift(&mut positions, 2, seed);
         super::add_noise(&mut positions, noise, seed);
         debug_assert!(full >= 2);
         crate::data::Measurements { n_joints: n, task_dim: 2, points_per_pose: 1, joints: joints.to_vec(), positions }

@@ -73,11 +73,17 @@ fn reflect(x: f64, lo: f64, hi: f64) -> f64 {
     lo + if t > width { period - t } else { t }
 }
 
-/// One standard normal draw (Box–Muller, as [`add_noise`]).
+/// One standard normal draw ([`normal`] of standard deviation 1).
 fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
+    normal(rng, 1.0)
+}
+
+/// One normal draw of standard deviation `std` (Box–Muller; deterministic for the generator's
+/// seed). `std` multiplies the radius first, as the noise always has (the same bits).
+fn normal(rng: &mut ChaCha8Rng, std: f64) -> f64 {
     let u1: f64 = rng.gen_range(f64::EPSILON..1.0);
     let u2: f64 = rng.gen();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    std * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
 /// A stationary Gaussian process over the row sequence, one value per row and coordinate
@@ -110,10 +116,7 @@ pub fn add_noise(values: &mut [f64], std: f64, seed: u64) {
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     for v in values {
-        // Box–Muller; deterministic for a seed.
-        let u1: f64 = rng.gen_range(f64::EPSILON..1.0);
-        let u2: f64 = rng.gen();
-        *v += std * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos();
+        *v += normal(&mut rng, std);
     }
 }
 
