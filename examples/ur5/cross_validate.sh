@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Five-fold cross-validation of every method of `cbd compare` on the real UR5 measurements
-# (train.csv and test.csv merged, 1020 rows; fold k holds out the rows whose index mod 5 is k),
-# and whether what `cbd fit` writes by default (the row `compare` marks with *) is within one
+# (train.csv and test.csv merged, 1020 rows; fold k holds out the rows whose index mod 5 is k, or
+# with FOLDS=blocked the k-th contiguous fifth of the rows in measurement order: no held-out pose
+# then has a training neighbour in time, whose drift it shares — issue 49), and whether what `cbd fit` writes by default (the row `compare` marks with *) is within one
 # standard error of the best other method's mean (issue 38).
 #
-#   bash examples/ur5/cross_validate.sh [CBD] [OUT_DIR]
+#   [FOLDS=interleaved|blocked] bash examples/ur5/cross_validate.sh [CBD] [OUT_DIR]
 #
 # CBD defaults to target/release/cbd; OUT_DIR (default target/ur5-cv) gets each fold's files and
 # compare JSON and summary.json. Exit status 0 when the default is within one standard error.
@@ -13,22 +14,26 @@ here="$(cd "$(dirname "$0")" && pwd)"
 cbd="${1:-$here/../../target/release/cbd}"
 out="${2:-$here/../../target/ur5-cv}"
 mkdir -p "$out"
-python3 - "$here/train.csv" "$here/test.csv" "$out" <<'PY'
+folds="${FOLDS:-interleaved}"
+case "$folds" in interleaved|blocked) ;; *) echo "FOLDS must be interleaved or blocked, not '$folds'" >&2; exit 2 ;; esac
+python3 - "$here/train.csv" "$here/test.csv" "$out" "$folds" <<'PY'
 import sys
-train, test, out = sys.argv[1:4]
+train, test, out, folds = sys.argv[1:5]
 rows, header = [], None
 for path in (train, test):
     with open(path) as f:
         lines = f.read().splitlines()
     header = header or lines[0]
     rows += [l for l in lines[1:] if l.strip()]
+def held_out(i, k):
+    return i % 5 == k if folds == "interleaved" else i * 5 // len(rows) == k
 for k in range(5):
-    held = [r for i, r in enumerate(rows) if i % 5 == k]
-    kept = [r for i, r in enumerate(rows) if i % 5 != k]
+    held = [r for i, r in enumerate(rows) if held_out(i, k)]
+    kept = [r for i, r in enumerate(rows) if not held_out(i, k)]
     for name, part in (("train", kept), ("test", held)):
         with open(f"{out}/fold{k}-{name}.csv", "w") as f:
             f.write("\n".join([header] + part) + "\n")
-print(f"{len(rows)} rows in 5 folds", file=sys.stderr)
+print(f"{len(rows)} rows in 5 {folds} folds", file=sys.stderr)
 PY
 for k in 0 1 2 3 4; do
     echo "fold $k" >&2
