@@ -4,16 +4,19 @@ use crate::error::{DecodeError, EncodeError, ModelError};
 use crate::expansion::FieldExpansion;
 use crate::format::*;
 use crate::limits::{MAX_JOINTS, MAX_JOINTS_ANY_BUILD};
-use crate::model::{Model, NominalModel};
+use crate::model::{ConfigurationKernel, Model, NominalModel};
 use crate::tool_point_encoding;
 
 pub(crate) const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
-/// The format [`encode`] writes for `model`: 7 when it carries a noise σ, else 6 when it names tool
-/// points, else 5 when it has an expansion, else 4 (so a model of an older format keeps its bytes).
+/// The format [`encode`] writes for `model`: 8 when it has a configuration kernel, else 7 when it
+/// carries a noise σ, else 6 when it names tool points, else 5 when it has an expansion, else 4 (so
+/// a model of an older format keeps its bytes).
 pub fn format_for(model: &Model<'_>) -> u16 {
-    if model.noise_sigma.is_some() {
+    if model.configuration_kernel.is_some() {
         FORMAT_VERSION
+    } else if model.noise_sigma.is_some() {
+        FORMAT_WITH_NOISE_SIGMA
     } else if !model.nominal.tool_points().is_empty() {
         FORMAT_WITH_TOOL_POINTS
     } else if model.expansion.is_some() {
@@ -47,10 +50,16 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += tool_point_encoding::write(model.nominal.tool_points(), tail).ok_or(EncodeError::BufferTooSmall)?;
         }
-        if let (true, Some(sigma)) = (version >= FORMAT_VERSION, model.noise_sigma) {
+        if version >= FORMAT_WITH_NOISE_SIGMA {
+            // Validated: a format-8 model carries σ (its layout has the slot).
+            let sigma = model.noise_sigma.ok_or(EncodeError::Invalid(ModelError::OutOfRange { field: "noise_sigma (a configuration kernel needs it)" }))?;
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             *tail.first_chunk_mut::<8>().ok_or(EncodeError::BufferTooSmall)? = sigma.to_le_bytes();
             written += 8;
+        }
+        if version >= FORMAT_VERSION {
+            let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
+            written += postcard::to_slice(&model.configuration_kernel, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
         }
         written
     };
@@ -134,10 +143,18 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     } else {
         rest
     };
-    let rest = if version >= FORMAT_VERSION {
+    let rest = if version >= FORMAT_WITH_NOISE_SIGMA {
         // Format 7: the noise σ follows.
         let (sigma, rest) = rest.split_first_chunk::<8>().ok_or(DecodeError::Payload)?;
         model.noise_sigma = Some(f64::from_le_bytes(*sigma));
+        rest
+    } else {
+        rest
+    };
+    let rest = if version >= FORMAT_VERSION {
+        // Format 8: the configuration kernel follows (`None` allowed, absence not).
+        let (kernel, rest): (Option<ConfigurationKernel>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
+        model.configuration_kernel = kernel;
         rest
     } else {
         rest

@@ -3,6 +3,8 @@
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
+/// Format 8 appends the configuration-dependent task field's kernel ([`Model::configuration_kernel`],
+/// an `Option` in postcard) after the format-7 σ; [`encode`] writes it only for a model that has one.
 /// Format 7 appends the noise σ the calibration assumed ([`Model::noise_sigma`]) after the format-6
 /// payload; [`encode`] writes it only for a model that carries one.
 /// Format 6 appends the DH chain's tool points ([`DhChain::tool_points`]) after the format-5
@@ -11,7 +13,9 @@ pub const MAGIC: [u8; 4] = *b"CBDM";
 /// format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
 /// the same layout without it and load unchanged. [`encode`] writes format 4 when a model has no
 /// expansion (byte-identical to the encoders before format 5), format 5 when it has one.
-pub const FORMAT_VERSION: u16 = 7;
+pub const FORMAT_VERSION: u16 = 8;
+/// The format of a model with a noise σ and without a configuration kernel.
+pub const FORMAT_WITH_NOISE_SIGMA: u16 = 7;
 /// The format of a model with tool points and without a noise σ.
 pub const FORMAT_WITH_TOOL_POINTS: u16 = 6;
 /// The format of a model with an expansion and without tool points.

@@ -47,6 +47,12 @@ pub struct Model<'a> {
     /// format-6 tool points, so it is skipped here.
     #[serde(skip)]
     pub noise_sigma: Option<f64>,
+    /// K_C, the configuration-dependent task field's kernel (format 8, docs/DESIGN.md §16): the task
+    /// field gains γ_C K_Q(q, q_j) K_X(y, y_j) P_j, a velocity of task space that depends on the
+    /// query's configuration q (a flow on Q × X that keeps q fixed). `None`: the paper's two fields.
+    /// Encoded after the format-7 σ, so it is skipped here.
+    #[serde(skip)]
+    pub configuration_kernel: Option<ConfigurationKernel>,
 }
 
 impl Model<'_> {
@@ -239,6 +245,20 @@ pub enum JointKernelAxis {
 pub struct TaskKernel {
     /// a > 0, internal units.
     pub width: f64,
+}
+
+/// K_C((q, y), (q', y')) = γ_C exp(Σ_d f_d(q_d − q'_d)) · exp(−|y − y'|² / (2 a_C²)): the kernel of
+/// the task field whose velocity depends on the configuration (format 8). Its joint factor has its
+/// own axes (f_d as [`JointKernelAxis`]), its task factor its own width, or none (`task_width`
+/// `None`: constant in y, the field a translation of task space that depends on q).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConfigurationKernel {
+    /// γ_C > 0, relative to K_W's unit amplitude (normalised as the joint kernel's γ).
+    pub gamma: f64,
+    /// f_d, one per joint (periodic on revolute joints, Gaussian on prismatic ones).
+    pub axes: HVec<JointKernelAxis, MAX_JOINTS>,
+    /// a_C > 0, internal units; `None`: the factor is 1 (flat in task space).
+    pub task_width: Option<f64>,
 }
 
 /// The explicit Runge–Kutta method of the fixed-step integration.

@@ -21,6 +21,7 @@ pub(crate) fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a>
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     }
 }
 
@@ -387,5 +388,73 @@ fn the_joint_count_is_read_where_postcard_writes_it() {
         assert_eq!(payload[..2], leading);
         let count = if leading[0] == 0 { payload[1] } else { payload[2] };
         assert_eq!(usize::from(count), model.n_joints());
+    }
+}
+
+fn encode_to_vec(model: &Model<'_>) -> Result<Vec<u8>, EncodeError> {
+    let mut buf = [0u8; 2048];
+    let len = encode(model, &mut buf)?;
+    Ok(buf[..len].to_vec())
+}
+
+fn with_configuration_kernel<'a>(p: &'a [u8], m: &'a [u8], task_width: Option<f64>) -> Model<'a> {
+    let mut model = sample_model(p, m);
+    model.integrator = Integrator { method: IntegratorMethod::Euler, steps: 1 };
+    model.momentum_law = MomentumLaw::Hamiltonian;
+    model.noise_sigma = Some(2e-3);
+    model.configuration_kernel = Some(ConfigurationKernel {
+        gamma: 0.25,
+        axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 40.0 }, JointKernelAxis::Periodic { b: 0.5 }]).unwrap(),
+        task_width,
+    });
+    model
+}
+
+#[test]
+fn format_8_round_trips_the_configuration_kernel_and_older_models_keep_their_format() {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
+    for width in [None, Some(3.5)] {
+        let model = with_configuration_kernel(&p, &m, width);
+        assert_eq!(format_for(&model), 8);
+        let blob = encode_to_vec(&model).unwrap();
+        assert_eq!(u16::from_le_bytes([blob[4], blob[5]]), 8);
+        assert_eq!(decode(&blob).unwrap(), model);
+    }
+    // The same model without the kernel is a format-7 blob, byte for byte the format-8 one's prefix
+    // up to σ (the kernel is appended, nothing before it moves).
+    let mut plain = with_configuration_kernel(&p, &m, None);
+    plain.configuration_kernel = None;
+    assert_eq!(format_for(&plain), 7);
+    let old = encode_to_vec(&plain).unwrap();
+    let new = encode_to_vec(&with_configuration_kernel(&p, &m, None)).unwrap();
+    assert_eq!(old[10..old.len() - 4], new[10..old.len() - 4]);
+}
+
+#[test]
+fn an_invalid_configuration_kernel_is_named() {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
+    let cases: [(&str, fn(&mut Model<'_>)); 8] = [
+        ("configuration_kernel.gamma", |m| m.configuration_kernel.as_mut().unwrap().gamma = 0.0),
+        ("configuration_kernel.gamma", |m| m.configuration_kernel.as_mut().unwrap().gamma = f64::NAN),
+        ("configuration_kernel.axes", |m| {
+            m.configuration_kernel.as_mut().unwrap().axes.pop();
+        }),
+        ("configuration_kernel.axes.b", |m| m.configuration_kernel.as_mut().unwrap().axes[1] = JointKernelAxis::Periodic { b: -1.0 }),
+        ("configuration_kernel.task_width", |m| m.configuration_kernel.as_mut().unwrap().task_width = Some(f64::INFINITY)),
+        ("configuration_kernel (needs the integrator Euler × 1)", |m| m.integrator.steps = 2),
+        ("configuration_kernel (needs the integrator Euler × 1)", |m| m.integrator.method = IntegratorMethod::Heun),
+        ("configuration_kernel (without noise_sigma)", |m| m.noise_sigma = None),
+    ];
+    for (field, spoil) in cases {
+        let mut model = with_configuration_kernel(&p, &m, Some(1.0));
+        spoil(&mut model);
+        let err = encode_to_vec(&model).expect_err(field);
+        let named = match err {
+            EncodeError::Invalid(ModelError::NonFinite { field: f, .. } | ModelError::OutOfRange { field: f } | ModelError::OutOfRangeAt { field: f, .. } | ModelError::Dimension { field: f, .. }) => f,
+            other => panic!("{field}: {other:?}"),
+        };
+        assert_eq!(named, field);
     }
 }

@@ -23,6 +23,7 @@ fn ur5_model<'a>(tool_points: &[[f64; 3]], points: &'a [u8], momenta: &'a [u8]) 
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     }
 }
 

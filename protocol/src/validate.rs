@@ -223,6 +223,45 @@ impl Model<'_> {
         if let Some(e) = &self.expansion {
             e.validate(self)?;
         }
+        if let Some(c) = &self.configuration_kernel {
+            c.validate(self)?;
+        }
+        Ok(())
+    }
+}
+
+impl ConfigurationKernel {
+    /// Checks the kernel against its model (whose other fields are valid): γ_C and the widths
+    /// positive and finite, one axis per joint of the joint kernel's kind; and what the runtime
+    /// evaluates it with: the kernel form (no expansion) and the linear scheme, Euler × 1 (where the
+    /// control points do not move, so the field needs no pair table of the control points), with
+    /// the noise σ its format's layout holds.
+    pub fn validate(&self, model: &Model<'_>) -> Result<(), ModelError> {
+        positive("configuration_kernel.gamma", self.gamma)?;
+        dimension("configuration_kernel.axes", model.n_joints(), self.axes.len())?;
+        for (d, axis) in self.axes.iter().enumerate() {
+            match *axis {
+                JointKernelAxis::Periodic { b } => {
+                    positive("configuration_kernel.axes.b", b)?;
+                    if !model.nominal.is_revolute(d) {
+                        return Err(ModelError::OutOfRangeAt { field: "configuration_kernel.axes (periodic on a prismatic joint)", index: d });
+                    }
+                }
+                JointKernelAxis::Gaussian { width } => positive("configuration_kernel.axes.width", width)?,
+            }
+        }
+        if let Some(width) = self.task_width {
+            positive("configuration_kernel.task_width", width)?;
+        }
+        if model.integrator.method != IntegratorMethod::Euler || model.integrator.steps != 1 {
+            return Err(ModelError::OutOfRange { field: "configuration_kernel (needs the integrator Euler × 1)" });
+        }
+        if model.expansion.is_some() {
+            return Err(ModelError::OutOfRange { field: "configuration_kernel (with an expansion)" });
+        }
+        if model.noise_sigma.is_none() {
+            return Err(ModelError::OutOfRange { field: "configuration_kernel (without noise_sigma)" });
+        }
         Ok(())
     }
 }

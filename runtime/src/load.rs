@@ -78,6 +78,11 @@ pub(crate) fn load<'a>(blob: &'a [u8], storage: &'a mut [Real]) -> Result<Calibr
 /// As [`load`], for a model already decoded.
 pub(crate) fn from_model<'a>(model: Model<'a>, storage: &'a mut [Real]) -> Result<Calibrator<'a>, Error> {
     model.validate().map_err(|e| Error::Blob(cbd_protocol::DecodeError::Invalid(e)))?;
+    if model.configuration_kernel.is_some() {
+        // Refused, never ignored: evaluating without the term would be a silently wrong model.
+        let field = "configuration_kernel (not evaluated by this runtime yet)";
+        return Err(Error::Blob(cbd_protocol::DecodeError::Invalid(cbd_protocol::ModelError::OutOfRange { field })));
+    }
     let dims = Dims { n: model.n_joints(), m: model.task_dim() };
     let n_points = model.n_points as usize;
     let needed = storage_len_for(&model);

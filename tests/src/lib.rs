@@ -24,6 +24,7 @@ pub fn reference_blob() -> Vec<u8> {
         momenta: F64Slice::from_le_bytes(&p),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     };
     encode_to_vec(&model).expect("the reference model encodes")
 }
@@ -66,6 +67,7 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     };
     encode_to_vec(&model).expect("the test model encodes")
 }

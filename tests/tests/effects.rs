@@ -373,6 +373,7 @@ fn blobs_with_out_of_range_effects_are_rejected() {
         momenta: F64Slice::from_le_bytes(&momenta),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     };
     let expected = ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 };
     assert_eq!(encode_to_vec(&model), Err(EncodeError::Invalid(expected)));
@@ -431,6 +432,7 @@ fn random_effects_never_panic_in_the_calibrator() {
             momenta: F64Slice::from_le_bytes(&mb),
             expansion: None,
             noise_sigma: None,
+            configuration_kernel: None,
         };
         let mut storage = vec![0.0; 20_000];
         match encode_to_vec(&model) {

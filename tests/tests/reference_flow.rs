@@ -38,6 +38,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, method: Inte
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     }
 }
 

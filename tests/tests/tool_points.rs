@@ -48,6 +48,7 @@ fn model<'a>(nominal: NominalModel, points: &'a [u8], momenta: &'a [u8], integra
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     }
 }
 

@@ -24,6 +24,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: 
         momenta: F64Slice::from_le_bytes(momenta),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     }
 }
 
@@ -164,6 +165,7 @@ pub fn six_tool_points_blob() -> Vec<u8> {
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     };
     encode_to_vec(&model).expect("encode the tool-points blob")
 }
@@ -192,6 +194,7 @@ fn dh_chain_blob(chain: DhChain, task_offset: [f64; 3], task_scale: f64, integra
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
         noise_sigma: None,
+        configuration_kernel: None,
     };
     encode_to_vec(&model).expect("encode a DH-chain blob")
 }

@@ -98,6 +98,7 @@ mod tests {
             momenta: F64Slice::from_le_bytes(momenta),
             expansion: None,
             noise_sigma: None,
+            configuration_kernel: None,
         }
     }
 
