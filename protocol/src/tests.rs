@@ -435,7 +435,10 @@ fn format_8_round_trips_the_configuration_kernel_and_older_models_keep_their_for
 fn an_invalid_configuration_kernel_is_named() {
     let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
     let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
-    let cases: [(&str, fn(&mut Model<'_>)); 8] = [
+    let cases: [(&str, fn(&mut Model<'_>)); 9] = [
+        ("configuration_kernel.axes (not the joint kernel's form)", |m| {
+            m.configuration_kernel.as_mut().unwrap().axes[0] = JointKernelAxis::Gaussian { width: 1.0 }
+        }),
         ("configuration_kernel.gamma", |m| m.configuration_kernel.as_mut().unwrap().gamma = 0.0),
         ("configuration_kernel.gamma", |m| m.configuration_kernel.as_mut().unwrap().gamma = f64::NAN),
         ("configuration_kernel.axes", |m| {

@@ -249,6 +249,16 @@ impl ConfigurationKernel {
                 }
                 JointKernelAxis::Gaussian { width } => positive("configuration_kernel.axes.width", width)?,
             }
+            // The same form as the joint kernel's axis: both read one table of the control points'
+            // kernel features ((cos, sin) or (x, 0) per joint, independent of the widths).
+            let same_form = matches!(
+                (axis, model.joint_kernel.axes.get(d)),
+                (JointKernelAxis::Periodic { .. }, Some(JointKernelAxis::Periodic { .. }))
+                    | (JointKernelAxis::Gaussian { .. }, Some(JointKernelAxis::Gaussian { .. }))
+            );
+            if !same_form {
+                return Err(ModelError::OutOfRangeAt { field: "configuration_kernel.axes (not the joint kernel's form)", index: d });
+            }
         }
         if let Some(width) = self.task_width {
             positive("configuration_kernel.task_width", width)?;
