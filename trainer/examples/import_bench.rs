@@ -30,6 +30,7 @@ fn ur5_spec() -> ColumnSpec {
         planar_frame: None,
         tool_points: Vec::new(),
         orientation_columns: None,
+        order: cbd_trainer::data::RowOrder::Measured,
         range_hint: cbd_trainer::data::csv_import::RANGE_FROM_MODEL_FILE,
     }
 }

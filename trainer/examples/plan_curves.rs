@@ -75,7 +75,14 @@ impl Arm {
         let (n, m) = (self.nominal.n_joints(), self.nominal.task_dim());
         let mut positions: Vec<f64> = joints.chunks_exact(n).flat_map(|q| (self.truth)(q)).collect();
         add_noise(&mut positions, self.noise, seed);
-        Measurements { n_joints: n, task_dim: m, joints: joints.to_vec(), positions, points_per_pose: 1 }
+        Measurements {
+            n_joints: n,
+            task_dim: m,
+            joints: joints.to_vec(),
+            positions,
+            points_per_pose: 1,
+            order: cbd_trainer::data::RowOrder::Measured,
+        }
     }
 
     /// RMS error against the truth at `test` of what `cbd fit` writes (Euler × 1) fitted on `data`:
@@ -205,6 +212,7 @@ fn run(arm: &Arm, seed: u64) -> Vec<Row> {
             joints: random_data.joints[..k * n].to_vec(),
             positions: random_data.positions[..k * random_data.task_dim].to_vec(),
             points_per_pose: 1,
+            order: cbd_trainer::data::RowOrder::Measured,
         };
         let r = arm.reached(&rd, &test);
         eprintln!(

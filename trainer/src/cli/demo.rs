@@ -148,7 +148,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // N² matrices, the test points at their bytes each.
     let threads = check_demo_memory(&args, &settings, crate::cli::memory::available_bytes())?;
     settings.solver.memory_budget = crate::cli::memory::kernel_form_budget(threads, 2 * args.grid * args.grid);
-    let train = real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2));
+    // A grid: its rows carry no time order (held out interleaved).
+    let train = crate::data::Measurements {
+        order: crate::data::RowOrder::Unordered,
+        ..real.measure(&configurations(Sampling::Grid { per_axis: args.grid }, 2))
+    };
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
     settings.solver.threads = threads;
     let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings))?;

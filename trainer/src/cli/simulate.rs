@@ -143,6 +143,7 @@ fn poses_spec(robot: &str) -> crate::data::csv_import::ColumnSpec {
         planar_frame: None,
         tool_points: Vec::new(),
         orientation_columns: None,
+        order: crate::data::RowOrder::Measured,
         range_hint: "the simulated robot's joints are read within one turn each way",
     }
 }

@@ -45,6 +45,8 @@ pub struct ColumnSpec {
     /// A measured pose's orientation: `position_columns` is then the tool origin and the rows are
     /// the points y_j = p + R p_j.
     pub orientation_columns: Option<OrientationColumns>,
+    /// Whether the file's rows are in measurement order ([`super::RowOrder`]; `[measurements] order`).
+    pub order: super::RowOrder,
     /// How the joints' range can be changed, for a joint value outside it: a model file's
     /// [`RANGE_FROM_MODEL_FILE`], or what applies where there is none.
     pub range_hint: &'static str,

@@ -109,7 +109,7 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
     let (n, columns) = (spec.joint_columns.len(), spec.position_columns.len());
     // Task coordinates per data row: a pose's origin has 3, a point's columns come in turn.
     let m = if spec.orientation_columns.is_some() { columns } else { columns / points };
-    let mut data = Measurements::with_points(n, m, points);
+    let mut data = Measurements { order: spec.order, ..Measurements::with_points(n, m, points) };
     let mut point_values = vec![0.0; m * points];
     let mut lines = Vec::new();
     // Joint configuration bits → row index of its first occurrence.
@@ -501,6 +501,7 @@ mod tests {
             planar_frame: None,
             tool_points: Vec::new(),
             orientation_columns: None,
+            order: crate::data::RowOrder::Measured,
             range_hint: RANGE_FROM_MODEL_FILE,
         }
     }

@@ -42,6 +42,8 @@
 //!                             # is an error (default: ±1 turn for revolute joints, none for prismatic)
 //! repeat_tolerance = 0.5      # rows with equal joints whose positions differ by more are an error
 //!                             # (length_unit above; default 1e-3 of the positions' bounding-box diagonal)
+//! order = "measured"          # the rows are in measurement order (default): held-out rows are
+//!                             # contiguous blocks; "unordered" (a grid, a shuffled file): interleaved
 //!
 //! [measurements.joint_map]    # optional: controller joint values (columns) → model joints,
 //! sign = { q3 = -1 }          # q_i = sign_i · scale_i · Σ_j coupling_ij c_j + offset_i in the
@@ -141,6 +143,8 @@ pub struct MeasurementSection {
     pub repeat_tolerance: Option<f64>,
     /// `[measurements.joint_map]`: controller joint values → model joints (`data::joint_map`).
     pub joint_map: Option<RawJointMap>,
+    /// "measured" (default: the rows are a time sequence) or "unordered" ([`crate::data::RowOrder`]).
+    pub order: Option<crate::data::RowOrder>,
 }
 
 impl ModelFile {
@@ -212,6 +216,7 @@ impl ModelFile {
             angle_unit,
             length_unit,
             min_rows: section.min_rows.unwrap_or(1),
+            order: section.order.unwrap_or_default(),
             joint_limits,
             repeat_tolerance,
             joint_map,
@@ -238,6 +243,7 @@ impl ModelFile {
             joint_map: None,
             planar_frame: self.planar_frame.clone(),
             tool_points: Vec::new(),
+            order: crate::data::RowOrder::Measured,
             orientation_columns: None,
             range_hint: super::csv_import::RANGE_FROM_MODEL_FILE,
         }
@@ -452,6 +458,16 @@ length_unit = "mm"
         for c in 0..3 {
             assert!((k.position[c] - want[c]).abs() < 1e-12, "{:?}", k.position);
         }
+    }
+
+    #[test]
+    fn rows_are_in_measurement_order_unless_declared_unordered() {
+        let spec = |text: &str| parse_model_file(text, Path::new("small.toml")).map(|m| m.column_spec().unwrap().order);
+        assert_eq!(spec(SMALL).unwrap(), crate::data::RowOrder::Measured);
+        let unordered = SMALL.replace("length_unit = \"mm\"", "length_unit = \"mm\"\norder = \"unordered\"");
+        assert_eq!(spec(&unordered).unwrap(), crate::data::RowOrder::Unordered);
+        let e = spec(&SMALL.replace("length_unit = \"mm\"", "length_unit = \"mm\"\norder = \"sorted\"")).unwrap_err().to_string();
+        assert!(e.contains("small.toml") && e.contains("sorted") && e.contains("unordered"), "{e}");
     }
 
     #[test]

@@ -536,7 +536,14 @@ mod tests {
         let q = random_walk(60, 0.2, &[(-3.0, 3.0), (-1.0, 1.0), (0.0, 2.0)], 4);
         let mut r = row_drift(60, 3, 1.0, 4.0, 5);
         crate::simulate::add_noise(&mut r, 0.5, 6);
-        let data = Measurements { n_joints: n, task_dim: 3, points_per_pose: 1, joints: q, positions: vec![0.0; r.len()] };
+        let data = Measurements {
+            n_joints: n,
+            task_dim: 3,
+            points_per_pose: 1,
+            joints: q,
+            positions: vec![0.0; r.len()],
+            order: crate::data::RowOrder::Measured,
+        };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let g = Mat::from_fn(r.len(), fitted, |_, _| rng.gen_range(-1.0..1.0));
         let poses = Poses::new(&data, &[true, true, false], &r, Some(g.as_ref())).unwrap();
@@ -602,7 +609,14 @@ mod tests {
             let q = crate::simulate::six_joint::walk_configurations(600, 0.1, seed);
             let mut r = row_drift(600, 3, 0.03, 5.0, seed);
             crate::simulate::add_noise(&mut r, 0.02, seed + 100);
-            let data = Measurements { n_joints: 6, task_dim: 3, points_per_pose: 1, joints: q, positions: vec![0.0; r.len()] };
+            let data = Measurements {
+                n_joints: 6,
+                task_dim: 3,
+                points_per_pose: 1,
+                joints: q,
+                positions: vec![0.0; r.len()],
+                order: crate::data::RowOrder::Measured,
+            };
             let d = drift_test(&data, &[true; 6], &r, None, &DriftOptions::default()).unwrap();
             println!(
                 "seed {seed}: Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4}",
@@ -636,7 +650,14 @@ mod tests {
             let beta = (g.transpose() * &g).llt(Side::Lower).unwrap().solve(g.transpose() * &rhs);
             let fit = &g * &beta;
             let left: Vec<f64> = (0..rows * m).map(|i| r[i] - fit[(i, 0)]).collect();
-            let data = Measurements { n_joints: 6, task_dim: m, points_per_pose: 1, joints: q, positions: vec![0.0; rows * m] };
+            let data = Measurements {
+                n_joints: 6,
+                task_dim: m,
+                points_per_pose: 1,
+                joints: q,
+                positions: vec![0.0; rows * m],
+                order: crate::data::RowOrder::Measured,
+            };
             let options = DriftOptions { window: rows, block: rows, ..DriftOptions::default() };
             let before = drift_test(&data, &[true; 6], &r, None, &options).unwrap().length;
             restricted.push(drift_test(&data, &[true; 6], &left, Some(g.as_ref()), &options).unwrap().length / before);
@@ -651,7 +672,14 @@ mod tests {
     #[test]
     fn a_fitted_jacobian_of_the_wrong_height_is_refused() {
         let (window, _) = small_window(true, 0);
-        let data = Measurements { n_joints: 3, task_dim: 3, points_per_pose: 1, joints: vec![0.0; 180], positions: vec![0.0; 180] };
+        let data = Measurements {
+            n_joints: 3,
+            task_dim: 3,
+            points_per_pose: 1,
+            joints: vec![0.0; 180],
+            positions: vec![0.0; 180],
+            order: crate::data::RowOrder::Measured,
+        };
         let r: Vec<f64> = (0..180).map(|i| window.residual[(i / 3, i % 3)]).collect();
         let g = Mat::<f64>::zeros(179, 2);
         assert!(drift_test(&data, &[true; 3], &r, Some(g.as_ref()), &DriftOptions::default()).is_none());

@@ -262,19 +262,33 @@ fn shape_outside_library(
     })
 }
 
-/// Splits `data` into (fit, held-out) rows by a seeded permutation.
+/// Splits `data` into (fit, held-out) rows: unordered rows by a seeded permutation; measured rows
+/// ([`crate::data::RowOrder`]) as one contiguous block of poses placed by the seed, the poses within
+/// the gap of it in neither set (a held-out pose with training neighbours in time flatters every model).
 pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurements, Measurements) {
     use rand::seq::SliceRandom;
-    use rand::SeedableRng;
+    use rand::{Rng, SeedableRng};
     // By whole poses (a pose's tool points stay together).
     let poses = data.pose_count();
-    let mut order: Vec<usize> = (0..poses).collect();
-    order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
     let held = ((poses as f64 * fraction).round() as usize).clamp(1, poses.saturating_sub(2).max(1));
-    let (test, train) = order.split_at(held);
-    let (mut train, mut test) = (train.to_vec(), test.to_vec());
-    train.sort_unstable();
-    test.sort_unstable();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (train, test): (Vec<usize>, Vec<usize>) = match data.order {
+        crate::data::RowOrder::Unordered => {
+            let mut order: Vec<usize> = (0..poses).collect();
+            order.shuffle(&mut rng);
+            let (test, train) = order.split_at(held);
+            let (mut train, mut test) = (train.to_vec(), test.to_vec());
+            train.sort_unstable();
+            test.sort_unstable();
+            (train, test)
+        }
+        crate::data::RowOrder::Measured => {
+            let start = rng.gen_range(0..=poses - held);
+            let gap = crate::data::ORDER_GAP_POSES.min(held / 4);
+            let out = start.saturating_sub(gap)..(start + held + gap).min(poses);
+            ((0..poses).filter(|k| !out.contains(k)).collect(), (start..start + held).collect())
+        }
+    };
     (data.subset(&data.pose_rows(&train)), data.subset(&data.pose_rows(&test)))
 }
 
@@ -368,7 +382,7 @@ pub fn diagnose(
     let jac = jacobian(model, &train, &params);
     let group_cols = usable_columns(&groups, &offsets, &jac, options.identifiability_tolerance);
     // 4. Selection, judged out of sample.
-    let problem = LinearProblem::new(&jac, &r0, m, train.points_per_pose, options.selection.folds, options.selection.seed);
+    let problem = LinearProblem::new(&jac, &r0, m, train.points_per_pose, train.order, options.selection.folds, options.selection.seed);
     let selection = forward_select(&problem, &group_cols, &options.selection);
     // 5. Refinement on the nonlinear model; then every effect must be significant and earn its
     // place, or it is dropped (the weakest first) and the rest refined again.

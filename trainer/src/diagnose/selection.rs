@@ -13,6 +13,8 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::data::RowOrder;
+
 /// Settings of the selection.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SelectionOptions {
@@ -85,26 +87,48 @@ impl LinearProblem {
     }
 
     /// `a`: (rows·m) × P Jacobian, `r`: residual y − k (rows·m), pose-major rows of
-    /// `points_per_pose` tool points each; whole poses assigned to `folds` folds by a permutation
-    /// drawn from `seed` (a pose's points are never split between fitting and judging).
-    pub fn new(a: &Mat<f64>, r: &[f64], task_dim: usize, points_per_pose: usize, folds: usize, seed: u64) -> LinearProblem {
+    /// `points_per_pose` tool points each; whole poses assigned to `folds` folds (a pose's points are
+    /// never split between fitting and judging): unordered rows by a permutation drawn from `seed`,
+    /// measured rows ([`RowOrder`]) as contiguous blocks, the poses within the gap of a held-out
+    /// block left out of its training rows ([`crate::data::blocked_fold`]).
+    pub fn new(
+        a: &Mat<f64>,
+        r: &[f64],
+        task_dim: usize,
+        points_per_pose: usize,
+        order: RowOrder,
+        folds: usize,
+        seed: u64,
+    ) -> LinearProblem {
         let rows = r.len() / task_dim;
         let per_pose = points_per_pose.max(1);
         let poses = rows.div_ceil(per_pose);
         let scale: Vec<f64> = (0..a.ncols()).map(|k| column_norm(a.as_ref(), k).max(f64::MIN_POSITIVE)).collect();
         let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, k| a[(i, k)] / scale[k]);
-        let mut order: Vec<usize> = (0..poses).collect();
-        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
         let folds = folds.clamp(2, poses.max(2));
-        let mut fold_of = vec![0; poses];
-        for (pos, &k) in order.iter().enumerate() {
-            fold_of[k] = pos % folds;
-        }
-        let fold_of_obs = |o: usize| fold_of[o / task_dim / per_pose];
+        // Per fold: which poses are held out, which train.
+        let (held_of, train_of): (Vec<Vec<bool>>, Vec<Vec<bool>>) = match order {
+            RowOrder::Unordered => {
+                let mut permutation: Vec<usize> = (0..poses).collect();
+                permutation.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+                let mut fold_of = vec![0; poses];
+                for (pos, &k) in permutation.iter().enumerate() {
+                    fold_of[k] = pos % folds;
+                }
+                (0..folds).map(|f| (fold_of.iter().map(|&g| g == f).collect(), fold_of.iter().map(|&g| g != f).collect())).unzip()
+            }
+            RowOrder::Measured => (0..folds)
+                .map(|f| {
+                    let (held, out) = crate::data::blocked_fold(poses, folds, f);
+                    ((0..poses).map(|k| held.contains(&k)).collect(), (0..poses).map(|k| !out.contains(&k)).collect())
+                })
+                .unzip(),
+        };
+        let pose_of = |o: usize| o / task_dim / per_pose;
         let fold_problems = (0..folds)
             .map(|f| {
-                let held: Vec<usize> = (0..r.len()).filter(|&o| fold_of_obs(o) == f).collect();
-                let train: Vec<usize> = (0..r.len()).filter(|&o| fold_of_obs(o) != f).collect();
+                let held: Vec<usize> = (0..r.len()).filter(|&o| held_of[f][pose_of(o)]).collect();
+                let train: Vec<usize> = (0..r.len()).filter(|&o| train_of[f][pose_of(o)]).collect();
                 (held, compress(&scaled, r, &train))
             })
             .collect();
@@ -208,7 +232,7 @@ mod tests {
         use rand::Rng;
         let a = Mat::from_fn(rows, 4, |_, _| rng.gen_range(-1.0..1.0));
         let r: Vec<f64> = (0..rows).map(|i| 0.7 * a[(i, 2)] + 0.01 * rng.gen_range(-1.0..1.0)).collect();
-        let problem = LinearProblem::new(&a, &r, 1, 1, 5, 1);
+        let problem = LinearProblem::new(&a, &r, 1, 1, RowOrder::Unordered, 5, 1);
         let groups = vec![vec![0], vec![1], vec![2], vec![3]];
         let s = forward_select(&problem, &groups, &SelectionOptions::default());
         assert_eq!(s.selected, vec![2]);
@@ -224,18 +248,34 @@ mod tests {
         let obs = poses * points * m;
         let a = Mat::from_fn(obs, 2, |i, k| ((i * 7 + k * 3) % 11) as f64 - 5.0);
         let r: Vec<f64> = (0..obs).map(|i| (i % 5) as f64).collect();
-        let problem = LinearProblem::new(&a, &r, m, points, 4, 9);
-        let mut seen = vec![0usize; poses];
-        for (held, _) in &problem.folds {
-            let mut count = vec![0usize; poses];
-            for &o in held {
-                count[o / (points * m)] += 1;
+        for order in [RowOrder::Unordered, RowOrder::Measured] {
+            let problem = LinearProblem::new(&a, &r, m, points, order, 4, 9);
+            let mut seen = vec![0usize; poses];
+            for (held, _) in &problem.folds {
+                let mut count = vec![0usize; poses];
+                for &o in held {
+                    count[o / (points * m)] += 1;
+                }
+                for (k, c) in count.iter().enumerate() {
+                    assert!(*c == 0 || *c == points * m, "pose {k} split: {c} of {} observations held", points * m);
+                    seen[k] += c;
+                }
             }
-            for (k, c) in count.iter().enumerate() {
-                assert!(*c == 0 || *c == points * m, "pose {k} split: {c} of {} observations held", points * m);
-                seen[k] += c;
-            }
+            assert!(seen.iter().all(|&c| c == points * m), "every pose held out exactly once: {seen:?}");
         }
-        assert!(seen.iter().all(|&c| c == points * m), "every pose held out exactly once: {seen:?}");
+    }
+
+    #[test]
+    fn measured_rows_are_held_out_in_blocks_without_their_neighbours_in_training() {
+        // 40 poses, 4 folds: fold 1 holds poses 10..20 out; 2 poses each side (a quarter of the
+        // block) train in no fold that holds it out. A column whose training rows would include
+        // a held-out pose's neighbours shows it in the compressed system's row count.
+        let obs = 40;
+        let a = Mat::from_fn(obs, 1, |i, _| 1.0 + i as f64);
+        let r: Vec<f64> = (0..obs).map(|i| i as f64).collect();
+        let problem = LinearProblem::new(&a, &r, 1, 1, RowOrder::Measured, 4, 9);
+        assert_eq!(problem.folds[1].0, (10..20).collect::<Vec<_>>());
+        let (blocked, gap) = crate::data::blocked_fold(40, 4, 1);
+        assert_eq!((blocked, gap), (10..20, 8..22));
     }
 }

@@ -96,6 +96,7 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
         points_per_pose: data.points_per_pose,
         joints: data.joints.clone(),
         positions: predicted.clone(),
+        order: data.order,
     });
     let x = |i: usize, d: usize| norm.position_to_internal(d, predicted[m * i + d]);
     let mut monomials: Vec<Box<dyn Fn(usize) -> f64>> = Vec::new();

@@ -142,7 +142,7 @@ fn the_library_offers_and_finds_it() {
     assert!(!group_cols[2].is_empty(), "the step's column is independent of the geometric ones");
     let residual = super::residual(&model, &data);
     let options = SelectionOptions::default();
-    let problem = LinearProblem::new(&jac, &residual, 2, 1, options.folds, options.seed);
+    let problem = LinearProblem::new(&jac, &residual, 2, 1, data.order, options.folds, options.seed);
     let selection = forward_select(&problem, &group_cols, &options);
     assert!(selection.selected.contains(&2) && !selection.selected.contains(&1), "{selection:?}");
     let (values, _) = problem.fit(&group_cols[2]);

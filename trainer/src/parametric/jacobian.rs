@@ -99,6 +99,7 @@ pub fn geometric_jacobian(chain: &DhChain, joints: &[f64], m: usize) -> Mat<f64>
         points_per_pose: 1,
         joints: joints[..count * n].to_vec(),
         positions: vec![0.0; count * m],
+        order: crate::data::RowOrder::Measured,
     };
     let np = crate::nominal::dh_parameters::parameter_count_for(chain);
     let mut jac = Mat::zeros(m * count, np);

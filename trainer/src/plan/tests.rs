@@ -108,8 +108,14 @@ fn unbounded_joint_is_refused() {
 #[test]
 fn exactly_fitted_data_give_hyperparameters_not_a_panic() {
     let rr = crate::simulate::rr::nominal();
-    let data =
-        Measurements { n_joints: 2, task_dim: 2, joints: [0.1, 0.2].repeat(50), positions: [1.3, 0.4].repeat(50), points_per_pose: 1 };
+    let data = Measurements {
+        n_joints: 2,
+        task_dim: 2,
+        joints: [0.1, 0.2].repeat(50),
+        positions: [1.3, 0.4].repeat(50),
+        points_per_pose: 1,
+        order: crate::data::RowOrder::Measured,
+    };
     let (h, _) = prior::from_measurements(&rr, &data).expect("hyperparameters");
     assert!(h.sigma.is_finite() && h.sigma >= 0.0, "{h:?}");
 }
@@ -133,7 +139,14 @@ fn several_tool_points_are_refused() {
     };
     assert_eq!(plan(&input, &PlanOptions::default()).unwrap_err(), PlanError::ToolPoints { points: 3 });
     let (six, _) = ur5_limits();
-    let data = Measurements { n_joints: 6, task_dim: 3, joints: vec![0.1; 12], positions: vec![0.0; 18], points_per_pose: 3 };
+    let data = Measurements {
+        n_joints: 6,
+        task_dim: 3,
+        joints: vec![0.1; 12],
+        positions: vec![0.0; 18],
+        points_per_pose: 3,
+        order: crate::data::RowOrder::Measured,
+    };
     let input = PlanInput {
         nominal: &six,
         limits: &limits,

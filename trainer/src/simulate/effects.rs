@@ -296,7 +296,14 @@ impl EffectArm {
         let mut positions: Vec<f64> = joints.chunks_exact(n).enumerate().flat_map(|(i, q)| self.position(q, i)).collect();
         self.add_drift(&mut positions, self.rigid.task_dim(), seed);
         super::add_noise(&mut positions, noise, seed);
-        crate::data::Measurements { n_joints: n, task_dim: self.rigid.task_dim(), points_per_pose: 1, joints: joints.to_vec(), positions }
+        crate::data::Measurements {
+            n_joints: n,
+            task_dim: self.rigid.task_dim(),
+            points_per_pose: 1,
+            joints: joints.to_vec(),
+            positions,
+            order: crate::data::RowOrder::Measured,
+        }
     }
 
     /// [`measure`](Self::measure) in the plane: the first two coordinates, for a planar arm whose
@@ -309,7 +316,14 @@ impl EffectArm {
         self.add_drift(&mut positions, 2, seed);
         super::add_noise(&mut positions, noise, seed);
         debug_assert!(full >= 2);
-        crate::data::Measurements { n_joints: n, task_dim: 2, points_per_pose: 1, joints: joints.to_vec(), positions }
+        crate::data::Measurements {
+            n_joints: n,
+            task_dim: 2,
+            points_per_pose: 1,
+            joints: joints.to_vec(),
+            positions,
+            order: crate::data::RowOrder::Measured,
+        }
     }
 }
 

@@ -111,7 +111,14 @@ impl SixJointRobot {
     pub fn measure(&self, joints: &[f64], noise_seed: u64) -> Measurements {
         let mut positions: Vec<f64> = joints.chunks_exact(6).flat_map(|q| self.true_position(q)).collect();
         add_noise(&mut positions, self.noise_std, noise_seed);
-        Measurements { n_joints: 6, task_dim: 3, points_per_pose: 1, joints: joints.to_vec(), positions }
+        Measurements {
+            n_joints: 6,
+            task_dim: 3,
+            points_per_pose: 1,
+            joints: joints.to_vec(),
+            positions,
+            order: crate::data::RowOrder::Measured,
+        }
     }
 }
 

@@ -119,6 +119,9 @@ pub fn write_model_file(m: &ModelFile, header: &str) -> String {
         if let Some(t) = s.repeat_tolerance {
             let _ = writeln!(out, "repeat_tolerance = {}", f(t));
         }
+        if let Some(order) = s.order {
+            let _ = writeln!(out, "order = \"{}\"", order.name());
+        }
         if let Some(map) = &s.joint_map {
             out += "\n[measurements.joint_map]\n";
             for (key, table) in [("sign", &map.sign), ("scale", &map.scale), ("offset", &map.offset)] {
