@@ -7,9 +7,10 @@
 #![allow(clippy::needless_range_loop)]
 
 extern crate std;
+use crate::evaluate::Evaluation;
+use crate::load::Calibrator;
 use crate::load::{from_model, storage_len_for};
 use crate::real::Real;
-use crate::{Calibrator, Evaluation};
 use cbd_protocol::*;
 use heapless::Vec as HVec;
 use std::vec;
@@ -301,5 +302,5 @@ fn a_blob_with_the_term_loads_and_evaluates_as_its_model() {
     }
     // One value short is refused, not overrun.
     let mut short = vec![0.0 as Real; needed - 1];
-    assert!(matches!(Calibrator::load(&blob[..len], &mut short), Err(crate::Error::StorageTooSmall { .. })));
+    assert!(matches!(Calibrator::load(&blob[..len], &mut short), Err(crate::error::Error::StorageTooSmall { .. })));
 }

@@ -40,7 +40,7 @@ pub fn write_configuration_rows<S: Shape>(
         return;
     }
     let (mut pairs, _) = features.as_chunks::<FEATURES_PER_JOINT>();
-    for r in rows.chunks_exact_mut(configuration_row_len(n)) {
+    for r in rows.chunks_exact_mut(configuration_row_len(n).max(1)) {
         let Some((fxj, rest)) = pairs.split_at_checked(n) else { break };
         pairs = rest;
         let (mut first, mut second) = ([0.0; NJ], [0.0; NJ]);
@@ -86,9 +86,9 @@ pub fn configuration_task_field<S: Shape, const EXPLICIT: bool>(
     if sample_len == 0 || n == 0 {
         return (f, dxi);
     }
-    let mut row_iter = rows.chunks_exact(configuration_row_len(n));
+    let mut row_iter = rows.chunks_exact(configuration_row_len(n).max(1));
     // f.dw accumulates Σ (K/a² + g/a_C²) P[a] e[b], negated after the loop.
-    for s in samples.chunks_exact(sample_len) {
+    for s in samples.chunks_exact(sample_len.max(1)) {
         let Some(row) = row_iter.next() else { break };
         let Some((c, grad_c)) = row.split_first() else { break };
         let mut e = [0.0; MT];
@@ -149,5 +149,104 @@ impl StageFields for ConfigurationForm<'_> {
     #[inline(always)]
     fn task_explicit<S: Shape, const DERIVATIVE: bool>(&self, shape: S, samples: &[Real], k: &[Real]) -> (TaskField, ExplicitDerivative) {
         configuration_task_field::<_, DERIVATIVE>(shape, &self.task_kernel, self.task_width, k, samples, self.rows)
+    }
+}
+
+#[cfg(all(test, not(feature = "f32")))]
+mod tests {
+    use super::*;
+    use crate::flow::{task_field, Dims, Fixed};
+    use crate::kernel::{axes_features, write_features};
+    use cbd_protocol::{JointKernel, JointKernelAxis};
+    use heapless::Vec as HVec;
+
+    const N: usize = 7;
+    const DIMS: Dims = Dims { n: 3, m: 3 };
+
+    fn kernel(task_width: Option<f64>) -> ConfigurationKernel {
+        let axes = [JointKernelAxis::Periodic { b: 1.2 }, JointKernelAxis::Gaussian { width: 0.8 }, JointKernelAxis::Periodic { b: 0.5 }];
+        ConfigurationKernel { gamma: 0.6, axes: HVec::from_slice(&axes).unwrap(), task_width }
+    }
+
+    /// Samples (k, P, u) and configurations of N control points from a fixed sequence.
+    fn data() -> ([f64; N * 9], [f64; N * 3]) {
+        let mut s = 0x0c0f_fee5u32;
+        let mut next = || {
+            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (s >> 8) as f64 / 16_777_216.0 - 0.5
+        };
+        (core::array::from_fn(|_| next()), core::array::from_fn(|_| 4.0 * next()))
+    }
+
+    fn field(c: &ConfigurationKernel, xi: &[f64; 3], k: &[f64; 3], explicit: bool) -> (TaskField, ExplicitDerivative) {
+        let (samples, points) = data();
+        let mut features = [0.0; N * 3 * FEATURES_PER_JOINT];
+        let joint = JointKernel { gamma: 1.0, axes: c.axes.clone() };
+        write_features(&joint, 3, &points, &mut features);
+        let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
+        axes_features(&c.axes, xi, &mut fq);
+        let mut rows = [0.0; N * 4];
+        write_configuration_rows(Fixed::<3, 3>, c, &fq, &features, &mut rows);
+        let task = TaskKernel { width: 0.7 };
+        if explicit {
+            configuration_task_field::<_, true>(DIMS, &task, c.task_width, k, &samples, &rows)
+        } else {
+            configuration_task_field::<_, false>(DIMS, &task, c.task_width, k, &samples, &rows)
+        }
+    }
+
+    #[test]
+    fn dw_and_the_explicit_derivative_match_finite_differences() {
+        let (xi, k) = ([0.4, -0.3, 2.0], [0.1, -0.2, 0.15]);
+        let h = 1e-6;
+        for width in [None, Some(0.9)] {
+            let c = kernel(width);
+            let (tf, dxi) = field(&c, &xi, &k, true);
+            // Without the explicit derivative: the same field, bit for bit.
+            let (plain, _) = field(&c, &xi, &k, false);
+            assert_eq!(tf.w.map(f64::to_bits), plain.w.map(f64::to_bits));
+            for b in 0..3 {
+                let (mut kp, mut km, mut xp, mut xm) = (k, k, xi, xi);
+                kp[b] += h;
+                km[b] -= h;
+                xp[b] += h;
+                xm[b] -= h;
+                let (fk_p, fk_m) = (field(&c, &xi, &kp, false).0, field(&c, &xi, &km, false).0);
+                let (fx_p, fx_m) = (field(&c, &xp, &k, false).0, field(&c, &xm, &k, false).0);
+                for a in 0..3 {
+                    let fd = (fk_p.w[a] - fk_m.w[a]) / (2.0 * h);
+                    assert!((fd - tf.dw[a][b]).abs() < 1e-8, "width {width:?} Dw[{a}][{b}]: {fd} vs {}", tf.dw[a][b]);
+                    let fd = (fx_p.w[a] - fx_m.w[a]) / (2.0 * h);
+                    assert!((fd - dxi[a][b]).abs() < 1e-8, "width {width:?} ∂_ξ w[{a}][{b}]: {fd} vs {}", dxi[a][b]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_field_is_k_w_plus_the_direct_sum_of_the_term() {
+        let (xi, k) = ([0.4, -0.3, 2.0], [0.1, -0.2, 0.15]);
+        let (samples, points) = data();
+        for width in [None, Some(0.9)] {
+            let c = kernel(width);
+            let (tf, _) = field(&c, &xi, &k, false);
+            let plain = task_field(DIMS, &TaskKernel { width: 0.7 }, &k, &samples);
+            for a in 0..3 {
+                let mut term = 0.0;
+                for j in 0..N {
+                    let q = &points[j * 3..j * 3 + 3];
+                    let cj = 0.6
+                        * libm::exp(
+                            1.2 * (libm::cos(xi[0] - q[0]) - 1.0) - (xi[1] - q[1]) * (xi[1] - q[1]) / (2.0 * 0.64)
+                                + 0.5 * (libm::cos(xi[2] - q[2]) - 1.0),
+                        );
+                    let s = &samples[j * 9..j * 9 + 9];
+                    let r2: f64 = (0..3).map(|i| (k[i] - s[i]) * (k[i] - s[i])).sum();
+                    let kx = width.map_or(1.0, |w| libm::exp(-r2 / (2.0 * w * w)));
+                    term += cj * kx * s[3 + a];
+                }
+                assert!((tf.w[a] - plain.w[a] - term).abs() < 1e-14, "width {width:?} w[{a}]: {} vs {}", tf.w[a] - plain.w[a], term);
+            }
+        }
     }
 }
