@@ -44,12 +44,14 @@ scheme_of() {
         rr-ws) echo "Euler × 1, expansion 113 + 28 (format 5)" ;;
         six-ws) echo "Heun × 2, expansion 85 + 35 (format 5)" ;;
         chain10) echo "Heun × 2" ;;
+        six-e1) echo "Euler × 1" ;;
+        six-c) echo "Euler × 1, configuration term (format 8)" ;;
         *) echo "Euler × 2" ;;
     esac
 }
 
 rows=()
-for name in rr64 demo rr1024 rr six six-effects rr-ws six-ws chain10; do
+for name in rr64 demo rr1024 rr six six-effects rr-ws six-ws chain10 six-e1 six-c; do
     read -r n_points n_joints task_dim storage blob_bytes < <("$HOST" info "$OUT/blobs/$name.blob")
     for variant in dp sp f32; do
         # dp runs on the M7 only; sp (f64 in software) and f32 on the M4: QEMU counts the same

@@ -137,7 +137,8 @@ summary=()
 # (format 5, docs/DESIGN.md §11): the runtime evaluates the expansion instead of the kernel form.
 # chain10 (10 joints, the longest chain the firmware check holds) and six-points (three tool points,
 # format 6: every query also prints the tool frame and its Jacobian, `qp` lines) run like six-effects.
-for name in rr rr256 six six-effects rr-ws six-ws chain10 six-points; do
+# six-c holds the configuration-dependent task field (format 8, docs/DESIGN.md §16, Euler × 1).
+for name in rr rr256 six six-effects rr-ws six-ws chain10 six-points six-c; do
     variants="sp dp f32"
     case "$name" in six-effects | chain10 | six-points) variants="sp dp" ;; esac
     "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
@@ -220,4 +221,4 @@ if [ "$failures" -ne 0 ]; then
     echo "firmware check: $failures failed"
     exit 1
 fi
-echo "firmware check: passed (M4 and M7, software and hardware f64 and f32, RR (Heun × 5 and Euler × 2) and 6-joint blobs, 6-joint with physical effects, RR and 6-joint expansions (format 5), 10-joint chain, 6-joint with three tool points and its tool frame (format 6))"
+echo "firmware check: passed (M4 and M7, software and hardware f64 and f32, RR (Heun × 5 and Euler × 2) and 6-joint blobs, 6-joint with physical effects, RR and 6-joint expansions (format 5), 10-joint chain, 6-joint with three tool points and its tool frame (format 6), 6-joint with the configuration-dependent task field (format 8))"

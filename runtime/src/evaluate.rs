@@ -4,6 +4,7 @@
 
 use crate::error::Error;
 use crate::expansion::fields::ExpansionForm;
+use crate::flow::configuration_field::{configuration_row_len, write_configuration_rows, ConfigurationForm};
 use crate::flow::query_derivatives::{
     kernel_row_len, query_rates, query_tangent_len, write_kernel_rows, write_nominal_hessian, KernelForm,
 };
@@ -118,6 +119,32 @@ fn integrate_expansion<S: Shape>(
     })
 }
 
+/// The query's integration with the configuration term (docs/DESIGN.md §16): the kernel form's
+/// loop over its one stage (Euler × 1, validated; `samples` the initial state's), the task field
+/// with the term from the query's configuration rows. Out of line: the kernel form's code stays
+/// as it was.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn integrate_configuration<S: Shape>(
+    shape: S,
+    integrator: cbd_protocol::Integrator,
+    task_kernel: TaskKernel,
+    task_width: Option<f64>,
+    samples: &[Real],
+    rows: &[Real],
+    configuration_rows: &[Real],
+    y: &mut [Real],
+    scratch: &mut [Real],
+) -> Result<(), Error> {
+    if integrator.stage_count() != 1 {
+        return Err(Error::Internal);
+    }
+    let form = ConfigurationForm { task_kernel, task_width, rows: configuration_rows };
+    crate::integrate::integrate_checked(integrator.method, integrator.steps, y, scratch, Error::Internal, |_, s, out| {
+        query_rates(shape, &form, samples, rows, s, out, true).ok_or(Error::Internal)
+    })
+}
+
 /// eq. (20): the calibrated position k1(ξ) and the paper's transported J(1); with
 /// `exact_jacobian`, also the exact Jacobian Dk1(ξ) of the discrete flow (otherwise the
 /// Jacobian reported is J(1)). The position's arithmetic is the same either way.
@@ -166,8 +193,17 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
     // possible state per query).
     let n_rows = cal.model.expansion.as_ref().map_or(n_points, |e| e.n_joint_features as usize);
     let (rows, rest) = cal.work.split_at_mut_checked(n_rows * kernel_row_len(n)).ok_or(Error::Internal)?;
+    // With the configuration term (§16): c_j(ξ) and ∇c_j, also once per query (none without it).
+    let configuration = cal.model.configuration_kernel.as_ref();
+    let configuration_len = configuration.map_or(0, |_| n_points * configuration_row_len(n));
+    let (configuration_rows, rest) = rest.split_at_mut_checked(configuration_len).ok_or(Error::Internal)?;
     let mut fq = [[0.0; FEATURES_PER_JOINT]; NJ];
     joint_features(&cal.model.joint_kernel, q, &mut fq);
+    if let Some(c) = configuration {
+        // The configuration kernel's axes have the joint kernel's form: the same features.
+        write_configuration_rows(shape, c, &fq, cal.features, configuration_rows);
+    }
+    let configuration_rows: &[Real] = configuration_rows;
     // The rows' second derivatives feed only the δJ rates of the stages before the last
     // ([`query_rates`]): with one stage (Euler × 1) nothing reads them.
     let row_hessians = exact_jacobian && cal.model.integrator.stage_count() > 1;
@@ -229,6 +265,11 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
     let task_kernel = cal.model.task_kernel;
     // One integration per form, each with its stage data resolved in its closure.
     match &cal.model.expansion {
+        None if configuration.is_some() => {
+            let task_width = configuration.and_then(|c| c.task_width);
+            let samples = cal.trajectory.get(..n_points * dims.sample_len()).ok_or(Error::Internal)?;
+            integrate_configuration(shape, integrator, task_kernel, task_width, samples, rows, configuration_rows, y, scratch)?;
+        }
         None => {
             let (trajectory, block): (&[Real], usize) = (cal.trajectory, n_points * dims.sample_len());
             let form = KernelForm { task_kernel };
@@ -280,3 +321,6 @@ fn evaluate_shaped<S: Shape, const EXACT_JACOBIAN: bool>(
         Err(Error::NonFiniteResult)
     }
 }
+
+#[cfg(test)]
+mod configuration_tests;

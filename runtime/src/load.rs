@@ -4,6 +4,7 @@
 //! `compensate`, `compensate_pose`); [`Calibrator`]'s methods (calibrator.rs) wrap them.
 
 use crate::error::Error;
+use crate::flow::configuration_field::configuration_row_len;
 use crate::flow::control_points::{initial_state, integrate_control_points_with_features};
 use crate::flow::{Dims, FlowParams};
 use crate::integrate::scratch_len;
@@ -22,7 +23,9 @@ pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, inte
     features_len(n_points, n_joints) + trajectory + if load > query { load } else { query }
 }
 
-/// [`Real`] values of storage `model` needs: for the kernel form [`storage_len`]; for a model with an
+/// [`Real`] values of storage `model` needs: for the kernel form [`storage_len`] (with the
+/// configuration term, format 8, docs/DESIGN.md §16, plus the query's configuration rows
+/// `N × (1 + n)`); for a model with an
 /// expansion (format 5, docs/DESIGN.md §11) the configurations' kernel features (`N × n × 2`, for
 /// [`crate::Evaluation::support`]), the stage weights rounded once to [`Real`]
 /// (`stages × (r_V n + r_W m)`), the query's joint-basis rows (`r_V × (1 + n + n²)`) and the query's
@@ -30,7 +33,11 @@ pub const fn storage_len(n_points: usize, n_joints: usize, task_dim: usize, inte
 pub fn storage_len_for(model: &Model<'_>) -> usize {
     let (n_points, n, m) = (model.n_points as usize, model.n_joints(), model.task_dim());
     match &model.expansion {
-        None => storage_len(n_points, n, m, model.integrator),
+        // With the configuration term (§16), the query's c_j and ∇c_j beside its kernel rows.
+        None => {
+            let configuration = model.configuration_kernel.as_ref().map_or(0, |_| n_points * configuration_row_len(n));
+            storage_len(n_points, n, m, model.integrator) + configuration
+        }
         Some(e) => {
             let dims = Dims { n, m };
             let weights = model.integrator.stage_count() * e.stage_len(n, m);
@@ -78,11 +85,6 @@ pub(crate) fn load<'a>(blob: &'a [u8], storage: &'a mut [Real]) -> Result<Calibr
 /// As [`load`], for a model already decoded.
 pub(crate) fn from_model<'a>(model: Model<'a>, storage: &'a mut [Real]) -> Result<Calibrator<'a>, Error> {
     model.validate().map_err(|e| Error::Blob(cbd_protocol::DecodeError::Invalid(e)))?;
-    if model.configuration_kernel.is_some() {
-        // Refused, never ignored: evaluating without the term would be a silently wrong model.
-        let field = "configuration_kernel (not evaluated by this runtime yet)";
-        return Err(Error::Blob(cbd_protocol::DecodeError::Invalid(cbd_protocol::ModelError::OutOfRange { field })));
-    }
     let dims = Dims { n: model.n_joints(), m: model.task_dim() };
     let n_points = model.n_points as usize;
     let needed = storage_len_for(&model);

@@ -5,8 +5,9 @@
 //!
 //! Every evaluated position is k0 plus a sum of terms; rounding moves it by at most a few unit
 //! roundoffs of the largest magnitudes summed, R + T: R the nominal positions' radius, T a bound on
-//! Σ |term| — for the kernel form Σ_j |P_j| (1 + |γ| J²) (K_W ≤ 1, |K_V| ≤ |γ|, |Dk0| ≤ J), for the
-//! expansion the stages' Σ_f |c_f| J + Σ_g |d_g| (|φ_f| ≤ 1, |ψ_g| ≤ 1) times their step.
+//! Σ |term| — for the kernel form Σ_j |P_j| (1 + |γ| J²) (K_W ≤ 1, |K_V| ≤ |γ|, |Dk0| ≤ J; with the
+//! configuration term, docs/DESIGN.md §16, + γ_C: c_j K_X ≤ γ_C), for the expansion the stages'
+//! Σ_f |c_f| J + Σ_g |d_g| (|φ_f| ≤ 1, |ψ_g| ≤ 1) times their step.
 //! Internal units throughout, scaled by the task scale at the end.
 
 use crate::kinematics::{forward_kinematics, with_tool_point};
@@ -40,7 +41,12 @@ pub fn evaluation_precision(model: &Model<'_>) -> f64 {
     let terms = match &model.expansion {
         None => {
             let gamma = libm::fabs(model.joint_kernel.gamma);
-            model.momenta.iter().map(libm::fabs).sum::<f64>() * (1.0 + gamma * jac_max * jac_max)
+            let sum = model.momenta.iter().map(libm::fabs).sum::<f64>();
+            match &model.configuration_kernel {
+                None => sum * (1.0 + gamma * jac_max * jac_max),
+                // The configuration term's c_j K_X ≤ γ_C (§16).
+                Some(c) => sum * (1.0 + gamma * jac_max * jac_max + c.gamma),
+            }
         }
         Some(e) => {
             let stages = model.integrator.stage_count().max(1);

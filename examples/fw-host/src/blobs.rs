@@ -97,7 +97,28 @@ pub fn six_effects_blob() -> Vec<u8> {
 fn six_joint_blob_with(effects: Effects) -> Vec<u8> {
     let chain = DhChain { effects, ..cbd_protocol::ur5::chain() };
     let integrator = Integrator { method: IntegratorMethod::Heun, steps: 5 };
-    dh_chain_blob(chain, [0.0, 0.0, 400.0], 500.0, integrator, 0x0005_5e1f)
+    dh_chain_blob(chain, [0.0, 0.0, 400.0], 500.0, integrator, 0x0005_5e1f, None)
+}
+
+/// The scheme of the configuration-dependent task field (format 8, docs/DESIGN.md §16): Euler × 1.
+const CONFIGURATION_SCHEME: Integrator = Integrator { method: IntegratorMethod::Euler, steps: 1 };
+
+/// The 6-joint model ([`six_joint_blob`]'s chain, points and momenta) with the configuration-dependent
+/// task field (format 8, docs/DESIGN.md §16): γ_C = 0.5, b = 2 on every axis, task width 0.5
+/// (internal units), Euler × 1, noise σ 0.05 mm.
+pub fn six_configuration_blob() -> Vec<u8> {
+    let kernel = ConfigurationKernel {
+        gamma: 0.5,
+        axes: heapless::Vec::from_slice(&[JointKernelAxis::Periodic { b: 2.0 }; 6]).expect("6 axes"),
+        task_width: Some(0.5),
+    };
+    dh_chain_blob(cbd_protocol::ur5::chain(), [0.0, 0.0, 400.0], 500.0, CONFIGURATION_SCHEME, 0x0005_5e1f, Some(kernel))
+}
+
+/// [`six_configuration_blob`] without the term (same chain, points, momenta and scheme): its cost's
+/// reference.
+pub fn six_euler1_blob() -> Vec<u8> {
+    dh_chain_blob(cbd_protocol::ur5::chain(), [0.0, 0.0, 400.0], 500.0, CONFIGURATION_SCHEME, 0x0005_5e1f, None)
 }
 
 /// examples/chain10/chain10.toml's table (mm; a torso carrying a seven-joint arm), 64 random
@@ -129,7 +150,7 @@ pub fn chain10_blob() -> Vec<u8> {
         tool_points: heapless::Vec::new(),
     };
     let integrator = Integrator { method: IntegratorMethod::Heun, steps: 2 };
-    dh_chain_blob(chain, [0.0, 0.0, 600.0], 800.0, integrator, 0x000c_4a10)
+    dh_chain_blob(chain, [0.0, 0.0, 600.0], 800.0, integrator, 0x000c_4a10, None)
 }
 
 /// The UR5 (mm) with three tool points 100 mm apart (format 6, issue 26 item 1): 21 poses, each
@@ -171,8 +192,16 @@ pub fn six_tool_points_blob() -> Vec<u8> {
 }
 
 /// A kernel-form blob on `chain`: 64 configurations uniform on the torus, momenta ~1e-3, periodic
-/// joint kernel (b = 1 on every axis), the trainer's default momentum law.
-fn dh_chain_blob(chain: DhChain, task_offset: [f64; 3], task_scale: f64, integrator: Integrator, seed: u32) -> Vec<u8> {
+/// joint kernel (b = 1 on every axis), the trainer's default momentum law; with `configuration`
+/// also the configuration-dependent task field and the noise σ (0.05 mm) its format needs.
+fn dh_chain_blob(
+    chain: DhChain,
+    task_offset: [f64; 3],
+    task_scale: f64,
+    integrator: Integrator,
+    seed: u32,
+    configuration: Option<ConfigurationKernel>,
+) -> Vec<u8> {
     const N: usize = 64;
     let n = chain.joints.len();
     let mut rng = Lcg(seed);
@@ -193,8 +222,8 @@ fn dh_chain_blob(chain: DhChain, task_offset: [f64; 3], task_scale: f64, integra
         points: F64Slice::from_le_bytes(&pb),
         momenta: F64Slice::from_le_bytes(&mb),
         expansion: None,
-        noise_sigma: None,
-        configuration_kernel: None,
+        noise_sigma: configuration.as_ref().map(|_| 0.05),
+        configuration_kernel: configuration,
     };
     encode_to_vec(&model).expect("encode a DH-chain blob")
 }

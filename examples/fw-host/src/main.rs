@@ -3,7 +3,9 @@
 //! ```text
 //! cbd-fw-host make-blobs OUT_DIR   # rr.blob, six.blob, six-effects.blob (Heun × 5), rr64/rr256/rr1024.blob (Euler × 2),
 //!                                  # rr-ws.blob (Euler × 1), six-ws.blob (Heun × 2): the fields in the kernels' own basis (format 5),
-//!                                  # chain10.blob (10 joints, Heun × 2), six-points.blob (3 tool points, format 6)
+//!                                  # chain10.blob (10 joints, Heun × 2), six-points.blob (3 tool points, format 6),
+//!                                  # six-c.blob (the configuration-dependent task field, format 8, Euler × 1) and
+//!                                  # six-e1.blob (the same model without it)
 //! cbd-fw-host eval BLOB            # the result lines the firmware prints, from the host runtime
 //! cbd-fw-host eval --transported BLOB  # the same with evaluate_transported (firmware feature `transported`)
 //! cbd-fw-host info BLOB            # n_points n_joints task_dim storage_len_for blob_bytes
@@ -22,8 +24,8 @@ mod blobs;
 #[path = "../../firmware/src/shared.rs"]
 mod shared;
 use blobs::{
-    chain10_blob, rr_grid_blob, rr_reference_blob, rr_ws_blob, six_effects_blob, six_joint_blob, six_tool_points_blob, six_ws_blob,
-    DEMO_SCHEME,
+    chain10_blob, rr_grid_blob, rr_reference_blob, rr_ws_blob, six_configuration_blob, six_effects_blob, six_euler1_blob, six_joint_blob,
+    six_tool_points_blob, six_ws_blob, DEMO_SCHEME,
 };
 
 fn make_blobs(out_dir: &Path) -> Result<(), String> {
@@ -39,6 +41,8 @@ fn make_blobs(out_dir: &Path) -> Result<(), String> {
         ("six-ws.blob", six_ws_blob()),
         ("chain10.blob", chain10_blob()),
         ("six-points.blob", six_tool_points_blob()),
+        ("six-c.blob", six_configuration_blob()),
+        ("six-e1.blob", six_euler1_blob()),
     ] {
         let path = out_dir.join(name);
         std::fs::write(&path, &blob).map_err(|e| format!("{}: {e}", path.display()))?;

@@ -8,6 +8,7 @@
 //! - control-point state, per point: `k (m) | J (m×n) | P (m)`, [`Dims::state_len`] values;
 //! - trajectory sample, per point and stage: `k (m) | P (m) | u = Jᵀ P (n)`, [`Dims::sample_len`].
 
+pub mod configuration_field;
 pub mod control_points;
 pub mod inverse;
 pub mod query_derivatives;

@@ -11,7 +11,9 @@
 //! ```
 //!
 //! and Dk1(ξ)[:, d] = δk_d(1) exactly for the discrete flow (the tangent of a fixed-step explicit
-//! scheme is the same scheme applied to the tangent system).
+//! scheme is the same scheme applied to the tangent system). With the configuration term (format 8,
+//! docs/DESIGN.md §16) w depends on ξ explicitly: δk' gains ∂_d w and Dw includes the term's
+//! k-derivative ([`crate::flow::configuration_field`]; Euler × 1 only, whose one stage reads no D²w).
 
 use crate::flow::{position_rates_shaped, task_field_sums, Dims, JointField, Shape, TaskField, TaskHessian};
 use crate::kernel::{joint_kernel_parts_n, FEATURES_PER_JOINT};
@@ -250,6 +252,9 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
     let (k, jac) = unpack(shape, primal);
     let (dk, djac) = out_primal.split_at_mut_checked(m)?;
     let s_jac = primal.get(m..)?;
+    if F::EXPLICIT {
+        return explicit_rates(shape, form, stage, rows, &k, &jac, s_jac, tangents, dk, djac, out_tangents, last);
+    }
     if tangents.is_empty() || last {
         let (tf, _) = form.task::<_, false>(shape, stage, &k);
         let (jf, _) = form.joint::<_, false>(shape, stage, rows);
@@ -267,6 +272,45 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
         if let Some(ddv_d) = ddv.get(d) {
             query_tangent_jacobian_rate(shape, &jac, &tf, &t, &jf, ddv_d, t_k, t_jac, o_jac);
         }
+    })
+}
+
+/// [`query_rates`] for a task field with an explicit ξ-dependence (the configuration term,
+/// docs/DESIGN.md §16): the primal rates with w and Dw including the term, and each direction's
+/// δk' = Dw δk − δJ v − J ∂_d v + ∂_d w. Only the last stage (its δJ rates zeros, as there): the
+/// term's second derivatives are not computed, and the validated scheme, Euler × 1, has no other
+/// stage (`None` for one, never a silently wrong δJ).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn explicit_rates<S: Shape, F: StageFields>(
+    shape: S,
+    form: &F,
+    stage: &[Real],
+    rows: &[Real],
+    k: &[Real; MT],
+    jac: &[[Real; NJ]; MT],
+    s_jac: &[Real],
+    tangents: &[Real],
+    dk: &mut [Real],
+    djac: &mut [Real],
+    out_tangents: &mut [Real],
+    last: bool,
+) -> Option<()> {
+    if !last {
+        return None;
+    }
+    let (tf, dxi) =
+        if tangents.is_empty() { form.task_explicit::<_, false>(shape, stage, k) } else { form.task_explicit::<_, true>(shape, stage, k) };
+    let (jf, _) = form.joint::<_, false>(shape, stage, rows);
+    position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
+    let m = shape.m();
+    for_each_direction(shape, tangents, out_tangents, |d, t_k, t_jac, o_k, o_jac| {
+        query_tangent_position_rate(shape, d, jac, &tf, &jf, t_k, t_jac, o_k);
+        // + ∂_d w
+        for (o, dxi_a) in o_k.iter_mut().zip(dxi.iter()).take(m) {
+            *o += dxi_a.get(d).copied().unwrap_or(0.0);
+        }
+        o_jac.fill(0.0);
     })
 }
 

@@ -5,12 +5,16 @@
 
 use crate::flow::{JointField, Shape, TaskField, TaskHessian};
 use crate::real::Real;
-use cbd_protocol::MAX_JOINTS as NJ;
+use cbd_protocol::{MAX_JOINTS as NJ, MAX_TASK_DIM as MT};
 
 /// Values per point of the query's kernel cache: K_V, its gradient (n) and Hessian (n × n).
 pub const fn kernel_row_len(n: usize) -> usize {
     1 + n + n * n
 }
+
+/// ∂w/∂ξ at the query's k, `[a][d] = ∂w_a/∂ξ_d`: the task field's explicit dependence on the query
+/// configuration (the configuration term, docs/DESIGN.md §16; zero for the paper's two fields).
+pub type ExplicitDerivative = [[Real; NJ]; MT];
 
 /// `∂_d Dv(ξ)[f][e] = Σ_j u_j[f] ∂_e ∂_d K_V(ξ, x_j)`, indexed `[d][f][e]`.
 pub type JointHessian = [[[Real; NJ]; NJ]; NJ];
@@ -71,8 +75,17 @@ pub(crate) fn joint_sums<S: Shape, const HESSIAN: bool>(
 /// integration's closure as before the expansion (measured: arrangements that moved that work
 /// changed the optimiser's inlining and cost the M4's f32 RR Heun × 5 evaluate up to 27 %).
 pub(crate) trait StageFields {
+    /// Whether the task field depends on ξ explicitly (the configuration term, §16): then the
+    /// query's rates take it from [`StageFields::task_explicit`], with ∂_ξ w in the tangents.
+    const EXPLICIT: bool = false;
     /// w, Dw and (HESSIAN) Σ d ∂²ψ (or Σ P ∂²K_W) at the query's current k.
     fn task<S: Shape, const HESSIAN: bool>(&self, shape: S, stage: &[Real], k: &[Real]) -> (TaskField, TaskHessian);
     /// v, Dv and (HESSIAN) ∂_d Dv at ξ.
     fn joint<S: Shape, const HESSIAN: bool>(&self, shape: S, stage: &[Real], rows: &[Real]) -> (JointField, JointHessian);
+    /// w, Dw and (DERIVATIVE) ∂_ξ w at the query's current k (no second derivatives); zeros for ∂_ξ w
+    /// of a field without explicit ξ-dependence.
+    #[inline(always)]
+    fn task_explicit<S: Shape, const DERIVATIVE: bool>(&self, shape: S, stage: &[Real], k: &[Real]) -> (TaskField, ExplicitDerivative) {
+        (self.task::<_, false>(shape, stage, k).0, [[0.0; NJ]; MT])
+    }
 }
