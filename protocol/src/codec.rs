@@ -4,7 +4,7 @@ use crate::error::{DecodeError, EncodeError, ModelError};
 use crate::expansion::FieldExpansion;
 use crate::format::*;
 use crate::limits::{MAX_JOINTS, MAX_JOINTS_ANY_BUILD};
-use crate::model::{ConfigurationKernel, Model, NominalModel};
+use crate::model::{ConfigurationKernel, Model, NominalModel, RowDrift};
 use crate::tool_point_encoding;
 
 pub(crate) const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
@@ -13,7 +13,7 @@ pub(crate) const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HD
 /// carries a noise σ, else 6 when it names tool points, else 5 when it has an expansion, else 4 (so
 /// a model of an older format keeps its bytes).
 pub fn format_for(model: &Model<'_>) -> u16 {
-    if model.configuration_kernel.is_some() {
+    if model.configuration_kernel.is_some() || model.drift.is_some() {
         FORMAT_VERSION
     } else if model.noise_sigma.is_some() {
         FORMAT_WITH_NOISE_SIGMA
@@ -52,7 +52,8 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
         }
         if version >= FORMAT_WITH_NOISE_SIGMA {
             // Validated: a format-8 model carries σ (its layout has the slot).
-            let sigma = model.noise_sigma.ok_or(EncodeError::Invalid(ModelError::OutOfRange { field: "noise_sigma (a configuration kernel needs it)" }))?;
+            let sigma =
+                model.noise_sigma.ok_or(EncodeError::Invalid(ModelError::OutOfRange { field: "noise_sigma (format 8 needs it)" }))?;
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             *tail.first_chunk_mut::<8>().ok_or(EncodeError::BufferTooSmall)? = sigma.to_le_bytes();
             written += 8;
@@ -60,6 +61,8 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
         if version >= FORMAT_VERSION {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += postcard::to_slice(&model.configuration_kernel, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
+            let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
+            written += postcard::to_slice(&model.drift, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
         }
         written
     };
@@ -155,6 +158,9 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
         // Format 8: the configuration kernel follows (`None` allowed, absence not).
         let (kernel, rest): (Option<ConfigurationKernel>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
         model.configuration_kernel = kernel;
+        // Then the drift (`None` allowed, absence not).
+        let (drift, rest): (Option<RowDrift>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
+        model.drift = drift;
         rest
     } else {
         rest

@@ -3,8 +3,9 @@
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
-/// Format 8 appends the configuration-dependent task field's kernel ([`Model::configuration_kernel`],
-/// an `Option` in postcard) after the format-7 σ; [`encode`] writes it only for a model that has one.
+/// Format 8 appends the configuration-dependent task field's kernel ([`Model::configuration_kernel`])
+/// and the drift in measurement order ([`Model::drift`]), each an `Option` in postcard, after the
+/// format-7 σ; [`encode`] writes it only for a model that has either.
 /// Format 7 appends the noise σ the calibration assumed ([`Model::noise_sigma`]) after the format-6
 /// payload; [`encode`] writes it only for a model that carries one.
 /// Format 6 appends the DH chain's tool points ([`DhChain::tool_points`]) after the format-5

@@ -53,6 +53,21 @@ pub struct Model<'a> {
     /// Encoded after the format-7 σ, so it is skipped here.
     #[serde(skip)]
     pub configuration_kernel: Option<ConfigurationKernel>,
+    /// The drift in measurement order the calibration's rows carried (format 8, issue 49 item 2),
+    /// beside σ: what a perfect model's error on rows measured at another time is set against (the
+    /// noise floor, `cbd check`). Not used to evaluate. Encoded after the configuration kernel.
+    #[serde(skip)]
+    pub drift: Option<RowDrift>,
+}
+
+/// A stationary process over the rows in measurement order, correlation exp(−lag / length):
+/// part of the calibration's residual that followed the time of measurement, not the pose.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RowDrift {
+    /// Standard deviation per coordinate, the nominal model's length unit (≥ 0).
+    pub sd: f64,
+    /// Correlation length in poses (> 0).
+    pub length: f64,
 }
 
 impl Model<'_> {

@@ -22,6 +22,7 @@ pub(crate) fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a>
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     }
 }
 
@@ -455,9 +456,48 @@ fn an_invalid_configuration_kernel_is_named() {
         spoil(&mut model);
         let err = encode_to_vec(&model).expect_err(field);
         let named = match err {
-            EncodeError::Invalid(ModelError::NonFinite { field: f, .. } | ModelError::OutOfRange { field: f } | ModelError::OutOfRangeAt { field: f, .. } | ModelError::Dimension { field: f, .. }) => f,
+            EncodeError::Invalid(
+                ModelError::NonFinite { field: f, .. }
+                | ModelError::OutOfRange { field: f }
+                | ModelError::OutOfRangeAt { field: f, .. }
+                | ModelError::Dimension { field: f, .. },
+            ) => f,
             other => panic!("{field}: {other:?}"),
         };
         assert_eq!(named, field);
     }
+}
+
+#[test]
+fn format_8_carries_the_drift_beside_sigma_and_refuses_a_bad_one_by_name() {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
+    let mut model = sample_model(&p, &m);
+    model.noise_sigma = Some(0.03);
+    model.drift = Some(RowDrift { sd: 0.043, length: 8.4 });
+    assert_eq!(format_for(&model), 8);
+    let blob = encode_to_vec(&model).unwrap();
+    assert_eq!(decode(&blob).unwrap(), model);
+    // With the configuration kernel too (Euler × 1): both options round-trip.
+    let mut both = with_configuration_kernel(&p, &m, Some(2.0));
+    both.drift = Some(RowDrift { sd: 0.0, length: 1.0 });
+    assert_eq!(decode(&encode_to_vec(&both).unwrap()).unwrap(), both);
+    let cases: [(&str, RowDrift); 4] = [
+        ("drift.sd", RowDrift { sd: -1e-3, length: 5.0 }),
+        ("drift.sd", RowDrift { sd: f64::NAN, length: 5.0 }),
+        ("drift.length", RowDrift { sd: 0.01, length: 0.0 }),
+        ("drift.length", RowDrift { sd: 0.01, length: f64::INFINITY }),
+    ];
+    for (field, drift) in cases {
+        let mut bad = model.clone();
+        bad.drift = Some(drift);
+        let named = match encode_to_vec(&bad).expect_err(field) {
+            EncodeError::Invalid(ModelError::NonFinite { field: f, .. } | ModelError::OutOfRange { field: f }) => f,
+            other => panic!("{field}: {other:?}"),
+        };
+        assert_eq!(named, field);
+    }
+    let mut no_sigma = model.clone();
+    no_sigma.noise_sigma = None;
+    assert!(matches!(encode_to_vec(&no_sigma), Err(EncodeError::Invalid(ModelError::OutOfRange { field: "drift (without noise_sigma)" }))));
 }

@@ -24,6 +24,7 @@ fn ur5_model<'a>(tool_points: &[[f64; 3]], points: &'a [u8], momenta: &'a [u8]) 
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     }
 }
 

@@ -226,6 +226,16 @@ impl Model<'_> {
         if let Some(c) = &self.configuration_kernel {
             c.validate(self)?;
         }
+        if let Some(d) = &self.drift {
+            finite("drift.sd", [d.sd])?;
+            if d.sd < 0.0 {
+                return Err(ModelError::OutOfRange { field: "drift.sd" });
+            }
+            positive("drift.length", d.length)?;
+            if self.noise_sigma.is_none() {
+                return Err(ModelError::OutOfRange { field: "drift (without noise_sigma)" });
+            }
+        }
         Ok(())
     }
 }
@@ -244,7 +254,10 @@ impl ConfigurationKernel {
                 JointKernelAxis::Periodic { b } => {
                     positive("configuration_kernel.axes.b", b)?;
                     if !model.nominal.is_revolute(d) {
-                        return Err(ModelError::OutOfRangeAt { field: "configuration_kernel.axes (periodic on a prismatic joint)", index: d });
+                        return Err(ModelError::OutOfRangeAt {
+                            field: "configuration_kernel.axes (periodic on a prismatic joint)",
+                            index: d,
+                        });
                     }
                 }
                 JointKernelAxis::Gaussian { width } => positive("configuration_kernel.axes.width", width)?,

@@ -25,6 +25,7 @@ pub fn reference_blob() -> Vec<u8> {
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     };
     encode_to_vec(&model).expect("the reference model encodes")
 }
@@ -68,6 +69,7 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     };
     encode_to_vec(&model).expect("the test model encodes")
 }

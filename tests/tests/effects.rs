@@ -374,6 +374,7 @@ fn blobs_with_out_of_range_effects_are_rejected() {
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     };
     let expected = ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 };
     assert_eq!(encode_to_vec(&model), Err(EncodeError::Invalid(expected)));
@@ -433,6 +434,7 @@ fn random_effects_never_panic_in_the_calibrator() {
             expansion: None,
             noise_sigma: None,
             configuration_kernel: None,
+            drift: None,
         };
         let mut storage = vec![0.0; 20_000];
         match encode_to_vec(&model) {

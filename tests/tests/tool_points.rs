@@ -49,6 +49,7 @@ fn model<'a>(nominal: NominalModel, points: &'a [u8], momenta: &'a [u8], integra
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     }
 }
 

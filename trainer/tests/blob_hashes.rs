@@ -88,9 +88,11 @@ fn cbd_blob(name: &str, args: &[&str]) -> Vec<u8> {
 fn assert_kernel_form(blob: &[u8], len: usize, sha: &str, format_3: &str) {
     let mut model = cbd_protocol::decode(blob).unwrap();
     assert!(model.expansion.is_some());
-    // The kernel form: the model without its expansion (format 5) and its noise σ (format 7).
+    // The kernel form: the model without its expansion (format 5), its noise σ (format 7) and its
+    // drift (format 8).
     model.expansion = None;
     model.noise_sigma = None;
+    model.drift = None;
     let kernel_form = cbd_protocol::encode_to_vec(&model).unwrap();
     assert_eq!((kernel_form.len(), sha256_hex(&kernel_form).as_str()), (len, sha));
     assert_eq!(sha256_hex(&as_format_3(&kernel_form)), format_3, "payload changed");
@@ -134,7 +136,9 @@ fn ur5_example_blob_is_unchanged() {
     // Issue 38: `--geometry nominal` is what `cbd fit` did by default before (pinned unchanged).
     // Issue 38: plus its noise σ (format 7; 142269 bytes, 187d2b53… before).
     // Issue 48: gemm's kernels instead of private-gemm-x86's (c76a4cce…, f39495e9…, 879b3d13… before).
-    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (142278, "0b5ee541932389a08c3fae0452fd1619b5755be48b6b11532397e6fe364db8ed"));
+    // Issue 49 item 2: plus the drift its rows carry, recorded beside σ (format 8; 142278 bytes,
+    // 0b5ee541… before); the kernel form below is unchanged.
+    assert_eq!((blob.len(), sha256_hex(&blob).as_str()), (142296, "d150643571b340dceadf11fb0ac069d6291f9480b805f5754a80a6906e7f4118"));
     assert_kernel_form(
         &blob,
         72555,
@@ -144,9 +148,18 @@ fn ur5_example_blob_is_unchanged() {
     // The default since issue 38: CbD's evidence chooses the calibrated geometry on these rows (log
     // evidence 1596.97 against 1494.84; 1626.30 before issue 48's kernels — the calibrated side's
     // search lands in another basin under changes of rounding, see docs/DESIGN.md), the blob carries
-    // the DH-calibrated chain and its kernel form (ee0784ae… before).
+    // the DH-calibrated chain and its kernel form (ee0784ae… before). Issue 49 item 2: plus the drift
+    // (format 8; 72565 bytes, fa2b4b76… before).
     let default = cbd_blob("ur5-default", &["fit", "--quiet", "--model", &model, "--data", &data]);
-    assert_eq!((default.len(), sha256_hex(&default).as_str()), (72565, "fa2b4b762cb35608fc7ca9cf6eb69fd8eadec8d93ec46d948dd0aace26185190"));
+    assert_eq!((default.len(), sha256_hex(&default).as_str()), (72583, "c48d7bcd6889f0463af1e7b15ec9f14b4b67a653de20c0b9c96640212db616e5"));
+    // Without the drift it is that blob, byte for byte.
+    let mut without = cbd_protocol::decode(&default).unwrap();
+    assert!(without.drift.is_some_and(|d| d.sd > 0.02 && d.length > 2.0));
+    without.drift = None;
+    assert_eq!(
+        sha256_hex(&cbd_protocol::encode_to_vec(&without).unwrap()),
+        "fa2b4b762cb35608fc7ca9cf6eb69fd8eadec8d93ec46d948dd0aace26185190"
+    );
 }
 
 #[test]

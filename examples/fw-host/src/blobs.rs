@@ -25,6 +25,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: 
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     }
 }
 
@@ -187,6 +188,7 @@ pub fn six_tool_points_blob() -> Vec<u8> {
         expansion: None,
         noise_sigma: None,
         configuration_kernel: None,
+        drift: None,
     };
     encode_to_vec(&model).expect("encode the tool-points blob")
 }
@@ -224,6 +226,7 @@ fn dh_chain_blob(
         expansion: None,
         noise_sigma: configuration.as_ref().map(|_| 0.05),
         configuration_kernel: configuration,
+        drift: None,
     };
     encode_to_vec(&model).expect("encode a DH-chain blob")
 }

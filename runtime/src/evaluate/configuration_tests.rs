@@ -115,6 +115,7 @@ impl Case {
                 axes: HVec::from_slice(&self.configuration_axes).unwrap(),
                 task_width,
             }),
+            drift: None,
         }
     }
 

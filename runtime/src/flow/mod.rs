@@ -422,7 +422,10 @@ mod tests {
 
     #[test]
     #[allow(clippy::needless_range_loop)]
-    #[cfg_attr(feature = "f32", ignore = "central differences at h = 1e-6 and 1e-8 tolerances are f64's (the f32 build's accuracy: the firmware's f32 rows)")]
+    #[cfg_attr(
+        feature = "f32",
+        ignore = "central differences at h = 1e-6 and 1e-8 tolerances are f64's (the f32 build's accuracy: the firmware's f32 rows)"
+    )]
     fn task_field_hessian_matches_finite_differences_of_dw() {
         let dims = Dims { n: 2, m: 3 };
         let (s, len) = samples(dims, 9);

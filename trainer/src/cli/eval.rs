@@ -105,6 +105,23 @@ pub fn run(args: EvalArgs) -> Result<()> {
         (Some(f), Some(v)) => outln!("{}; calibrated: {}", f.describe(spec.model_length_unit.name()), v.describe()),
         _ => outln!("noise floor: unknown ({} records no noise σ: a blob of format 6 or older)", args.blob.display()),
     }
+    // The drift the calibration's rows carried (format 8): not in σ, but in the error of rows
+    // measured at another time, as these may be.
+    let drift = cal.model().drift.zip(cal.model().noise_sigma).map(|(d, sigma)| {
+        let with = NoiseFloor::new((sigma * sigma + d.sd * d.sd).sqrt(), m, "σ and the calibration's drift, recorded in the blob");
+        (d, with)
+    });
+    if let Some((d, with)) = &drift {
+        let unit = spec.model_length_unit.name();
+        outln!(
+            "the calibration's rows drifted in measurement order (sd {:.3e} {unit} over {:.1} poses, not in σ): rows measured at \
+             another time carry it, a perfect model's mean error {:.4e} {unit} with it; calibrated: {:.2} × that",
+            d.sd,
+            d.length,
+            with.mean_error,
+            after.mean / with.mean_error
+        );
+    }
     use crate::evaluation::pose_errors::PoseErrors;
     let poses = [("nominal", &nominal_pred), ("calibrated", &predicted)]
         .map(|(name, p)| (name, PoseErrors::of(&tool_points, p, &data.positions, m)));
@@ -125,6 +142,10 @@ pub fn run(args: EvalArgs) -> Result<()> {
         let mut v = serde_json::json!({"rows": data.len(), "extrapolating": far, "nominal": before, "calibrated": after});
         if let Some(f) = &floor {
             v["noise_floor"] = serde_json::json!({"floor": f, "nominal": verdict(&before), "calibrated": verdict(&after)});
+        }
+        if let Some((d, with)) = &drift {
+            v["drift"] =
+                serde_json::json!({"sd": d.sd, "length": d.length, "floor": with, "calibrated": with.verdict(after.mean, data.len())});
         }
         if poses[0].1.is_some() {
             v["pose"] = serde_json::json!({"nominal": pose_json(0), "calibrated": pose_json(1)});

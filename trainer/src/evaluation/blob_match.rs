@@ -99,6 +99,7 @@ mod tests {
             expansion: None,
             noise_sigma: None,
             configuration_kernel: None,
+            drift: None,
         }
     }
 

@@ -40,6 +40,7 @@ pub(super) fn encode_checked(
         }),
         noise_sigma: opts.noise_sigma,
         configuration_kernel: None,
+        drift: None,
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(FitError::Encode)?;
     // Never hand out a blob the runtime does not reproduce.
