@@ -52,6 +52,7 @@ pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
         task_width: cbd_protocol::paper_rr::TASK_WIDTH,
         task_gamma: 1.0,
         sigma: 1e-6,
+        configuration: None,
     }
 }
 

@@ -42,6 +42,9 @@ pub struct CbdOptions {
     /// The noise σ per coordinate in the data's unit the blob records (format 7; the pipeline sets
     /// it, `calibrate::options_for`); `None`: not recorded.
     pub noise_sigma: Option<f64>,
+    /// The configuration-dependent task term (docs/DESIGN.md §16, γ_C normalised like the joint
+    /// kernel's γ); the fit is then Euler × 1's closed form in the kernel form only.
+    pub configuration_kernel: Option<cbd_protocol::ConfigurationKernel>,
 }
 
 /// How a fit runs, besides its model: one struct that the pipeline's `Settings` (what a user sets,
@@ -95,7 +98,7 @@ impl CbdOptions {
     /// solver's defaults ([`SolverSettings::default`]) but the fields as momenta (the pipeline,
     /// `calibrate::options_for`, sets the user's representation).
     pub fn new(hyperparameters: FlowHyperparameters, integrator: Integrator, normalisation: Normalisation) -> Self {
-        let FlowHyperparameters { joint_kernel, task_kernel, sigma } = hyperparameters;
+        let FlowHyperparameters { joint_kernel, task_kernel, sigma, configuration_kernel } = hyperparameters;
         CbdOptions {
             joint_kernel,
             task_kernel,
@@ -104,6 +107,7 @@ impl CbdOptions {
             normalisation,
             solver: SolverSettings { representation: crate::expansion::Representation::Kernel, ..SolverSettings::default() },
             noise_sigma: None,
+            configuration_kernel,
         }
     }
 
@@ -117,6 +121,7 @@ impl CbdOptions {
             joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
             task_kernel: cbd_protocol::paper_rr::task_kernel(),
             sigma: 1e-6,
+            configuration_kernel: None,
         };
         CbdOptions::new(hyperparameters, integrator, Normalisation::IDENTITY)
     }
