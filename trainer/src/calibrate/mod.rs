@@ -11,12 +11,13 @@
 //!
 //! Every length a user gives or reads here is in the data's unit.
 
+pub mod configuration;
 pub mod geometry;
 pub mod scheme;
 pub mod settings;
 
 pub use geometry::{Geometry, GeometryChoice};
-pub use settings::{HyperparameterSource, Overrides, Settings};
+pub use settings::{ConfigurationField, HyperparameterSource, Overrides, Settings};
 
 use crate::data::Measurements;
 use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_with_geometry, CbdHyperparameters, Evidence, GeometricBasis};
@@ -36,6 +37,8 @@ pub struct Calibration {
     pub evidence: Option<Evidence>,
     /// Nominal or calibrated geometry, and what decided it.
     pub geometry: GeometryChoice,
+    /// The configuration field's comparison, when its search ran (docs/DESIGN.md §16).
+    pub configuration: Option<crate::evidence::ConfigurationEvidence>,
     pub scheme: scheme::SchemeChoice,
     pub options: CbdOptions,
     pub fit: CbdFit,
@@ -64,6 +67,8 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
         (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
         (_, r) => r,
     };
+    // The configuration field is evaluated in the kernel form only (blob format 8).
+    let representation = if h.configuration.is_some() { crate::expansion::Representation::Kernel } else { representation };
     opts.solver = SolverSettings { representation, ..settings.solver };
     // Recorded in the blob (format 7): what `cbd eval` sets a table's noise floor by.
     opts.noise_sigma = Some(h.sigma);
@@ -120,14 +125,47 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     let norm = normalisation(data, settings);
     let (chosen, geometry) = geometry::choose_geometry(nominal, data, &norm, settings)?;
     let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
-    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
-    let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
-    let fit = fit_cbd(&base, data, &options)?;
+    // The geometry is decided with the plain prior; the configuration field is then searched on the
+    // chosen base's residual (the final hypothesis' rows) and kept by its own comparison.
+    let configuration = configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some())?;
+    let with_term = configuration.as_ref().filter(|c| c.chosen || settings.configuration == ConfigurationField::On);
+    let mut early_warnings = Vec::new();
+    let (hyperparameters, scheme, options, fit) = match with_term {
+        Some(c) => {
+            let h = settings.overrides.apply(&base, c.with_term.clone());
+            match configuration::fit(&base, data, &h, &norm, settings) {
+                Ok((scheme, options, fit)) => (h, scheme, options, fit),
+                // Until the runtime evaluates the term (branch cfg-runtime) `auto` keeps the plain model.
+                Err(e) if settings.configuration == ConfigurationField::Auto && configuration::runtime_refuses(&e) => {
+                    early_warnings.push(format!("the configuration field was chosen by evidence but this runtime does not evaluate it yet ({e}): the model is fitted without it"));
+                    plain_fit(&base, data, &hyperparameters, &norm, settings)?
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        None => plain_fit(&base, data, &hyperparameters, &norm, settings)?,
+    };
     let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.solver.max_iterations);
+    warnings.splice(0..0, early_warnings);
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
     }
-    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, scheme, options, fit, warnings })
+    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, configuration, scheme, options, fit, warnings })
+}
+
+/// The model without the configuration field: the scheme by cross-validation, then the fit.
+fn plain_fit(
+    base: &NominalModel,
+    data: &Measurements,
+    h: &CbdHyperparameters,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> crate::Result<(CbdHyperparameters, scheme::SchemeChoice, CbdOptions, CbdFit)> {
+    let h = CbdHyperparameters { configuration: None, ..h.clone() };
+    let scheme = scheme::choose_scheme(base, data, &h, norm, settings)?;
+    let options = options_for(&h, norm, scheme.integrator, settings);
+    let fit = fit_cbd(base, data, &options)?;
+    Ok((h, scheme, options, fit))
 }
 
 /// The warning for a DH fit that stopped at its iteration limit.
@@ -200,6 +238,7 @@ impl Calibration {
             "hyperparameters": self.hyperparameters,
             "evidence": self.evidence,
             "geometry": self.geometry,
+            "configuration_field": self.configuration,
             "scheme": self.scheme.to_json(),
             "dh_first": self.dh.is_some(),
             "fit": self.fit.report,
@@ -218,8 +257,20 @@ pub fn describe(h: &CbdHyperparameters) -> String {
             format!("{}={p}", form.label())
         })
         .collect();
+    let configuration = match &h.configuration {
+        Some(c) => {
+            let axes: Vec<String> = c
+                .joint_axes
+                .iter()
+                .map(|a| format!("{}={}", crate::axis_forms::form_of(a).label(), crate::axis_forms::form_and_parameter(a).1))
+                .collect();
+            let width = c.task_width.map_or("flat".to_string(), |a| a.to_string());
+            format!("; configuration field [{}] task width {width} gamma {}", axes.join(" "), c.gamma)
+        }
+        None => String::new(),
+    };
     format!(
-        "joint kernel [{}] gamma {}; task kernel width {} gamma {}; sigma {}",
+        "joint kernel [{}] gamma {}; task kernel width {} gamma {}; sigma {}{configuration}",
         axes.join(" "),
         h.joint_gamma,
         h.task_width,
