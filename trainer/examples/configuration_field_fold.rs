@@ -4,7 +4,7 @@
 //! in closed form and evaluated by the trainer's own kernels: the runtime does not evaluate the term
 //! before branch cfg-runtime lands), with both log evidences and the decision.
 //!
-//!     cargo run --release -p cbd-trainer --example configuration_field_fold -- MODEL.toml TRAIN.csv TEST.csv
+//!     cargo run --release -p cbd-trainer --example configuration_field_fold -- MODEL.toml|- TRAIN.csv TEST.csv
 
 use cbd_protocol::{Integrator, IntegratorMethod};
 use cbd_trainer::calibrate::{calibrate, normalisation, options_for, Settings};
@@ -21,14 +21,15 @@ fn mean_error(predicted: &[f64], data: &Measurements) -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let [_, model, train, test] = &args[..] else { panic!("usage: configuration_field_fold MODEL.toml TRAIN.csv TEST.csv") };
-    let file = cbd_trainer::data::model_file::load_model_file(model).unwrap_or_else(|e| panic!("{e}"));
-    let spec = file.column_spec().unwrap_or_else(|e| panic!("{e}"));
+    // `-`: the paper's RR arm (CSV q1, q2, x, y), as `cbd` without --model.
+    let model_args = cbd_trainer::cli::ModelArgs { model: (model != "-").then(|| model.into()) };
+    let (nominal, spec) = cbd_trainer::cli::load_nominal(&model_args).unwrap_or_else(|e| panic!("{e}"));
     let train = read_measurements(train, &spec).unwrap_or_else(|e| panic!("{e}")).measurements;
     let test = read_measurements(test, &spec).unwrap_or_else(|e| panic!("{e}")).measurements;
     let mut settings = Settings::default();
     settings.solver.verbose = false;
     let t0 = std::time::Instant::now();
-    let c = calibrate(&file.nominal, &train, &settings).unwrap_or_else(|e| panic!("{e}"));
+    let c = calibrate(&nominal, &train, &settings).unwrap_or_else(|e| panic!("{e}"));
     let seconds = t0.elapsed().as_secs_f64();
     let plain = cbd_trainer::predict::evaluate_blob(&c.fit.blob, &test.joints).unwrap_or_else(|e| panic!("{e}"));
     let plain_error = mean_error(&plain, &test);
@@ -40,7 +41,7 @@ fn main() {
     let with = cbd_trainer::solver::predict_with_configuration(&c.base, &opts, &train.joints, &momenta, &test.joints).unwrap();
     let fit_seconds = t1.elapsed().as_secs_f64();
     println!(
-        "plain {plain_error:.4} | with term {:.4} | chosen {} | lml {:.1} → {:.1} (margin {:.1}) | pipeline {seconds:.1} s (term search {:.1} s), term fit+predict {fit_seconds:.1} s | {}",
+        "plain {plain_error:.4e} | with term {:.4e} | chosen {} | lml {:.1} → {:.1} (margin {:.1}) | pipeline {seconds:.1} s (term search {:.1} s), term fit+predict {fit_seconds:.1} s | {}",
         mean_error(&with, &test),
         f.chosen,
         f.plain_log_evidence,

@@ -169,3 +169,74 @@ pub(super) fn fit(
         },
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::six_joint::{random_configurations, SixJointRobot};
+    use cbd_protocol::{Integrator, JointKernelAxis, MomentumLaw, Normalisation};
+
+    fn six_joint_options(norm: &Normalisation) -> CbdOptions {
+        let axes = [0.3, 1.1, 0.7, 2.0, 0.05, 0.4].map(|b| JointKernelAxis::Periodic { b });
+        let mut opts = CbdOptions::new(
+            crate::solver::FlowHyperparameters {
+                joint_kernel: cbd_protocol::JointKernel { gamma: 1e-3, axes: heapless::Vec::from_slice(&axes).unwrap() },
+                task_kernel: cbd_protocol::TaskKernel { width: 0.8 },
+                sigma: 0.05,
+                configuration_kernel: Some(ConfigurationKernel {
+                    gamma: 0.4,
+                    axes: heapless::Vec::from_slice(&[2.0, 0.5, 0.5, 0.1, 0.1, 0.1].map(|b| JointKernelAxis::Periodic { b })).unwrap(),
+                    task_width: Some(1.5),
+                }),
+            },
+            Integrator { method: IntegratorMethod::Euler, steps: 1 },
+            norm.clone(),
+        );
+        opts.solver.law = MomentumLaw::Hamiltonian;
+        // The format records σ with the term (validate.rs).
+        opts.noise_sigma = Some(0.05);
+        opts
+    }
+
+    /// The trainer's prediction with the term at the training points is the closed form's k1, and
+    /// the runtime evaluating the written blob reproduces it (within the fit's own 1e-12 check) —
+    /// or, before the runtime evaluates the term (branch cfg-runtime), refuses the blob by name.
+    #[test]
+    fn the_runtime_reproduces_the_trainers_predictions_with_the_term() {
+        let robot = SixJointRobot::ur5_like(3);
+        let data = robot.measure(&random_configurations(40, 4), 5);
+        let norm = crate::evidence::normalisation_of(&data);
+        let opts = six_joint_options(&norm);
+        let momenta = solve_with_configuration(&robot.nominal, &data, &opts).unwrap();
+        let predicted = predict_with_configuration(&robot.nominal, &opts, &data.joints, &momenta, &data.joints).unwrap();
+        match crate::solver::fit_cbd(&robot.nominal, &data, &opts) {
+            Ok(fit) => {
+                let worst = fit.train_predictions.iter().zip(&predicted).fold(0.0f64, |w, (a, b)| w.max((a - b).abs()));
+                assert!(worst < 1e-9, "trainer's prediction vs the fit's: {worst:e}");
+                assert!(fit.report.max_runtime_trainer_diff <= 1e-12);
+            }
+            Err(FitError::RuntimeMismatch(why)) => {
+                assert!(why.contains("configuration_kernel (not evaluated by this runtime yet)"), "{why}")
+            }
+            Err(e) => panic!("{e}"),
+        }
+        // The closed form's k1 at the training points is the prediction there.
+        let (cp, target) = super::super::control_points_and_target(&robot.nominal, &data, &opts);
+        let (_, _, k1) = closed_form(&cp, opts.configuration_kernel.as_ref().unwrap(), opts.sigma, &target).unwrap();
+        for (i, v) in k1.iter().enumerate() {
+            let user = norm.position_to_user(i % 3, *v);
+            assert!((user - predicted[i]).abs() <= 1e-9 * user.abs().max(1.0), "row {}: {user} vs {}", i / 3, predicted[i]);
+        }
+    }
+
+    /// Schemes and laws the format does not evaluate the term with are refused by name.
+    #[test]
+    fn other_schemes_are_refused_by_name() {
+        let mut opts = six_joint_options(&Normalisation::IDENTITY);
+        opts.integrator.steps = 2;
+        assert!(unsupported(&opts).unwrap().starts_with("configuration_kernel: "));
+        opts.integrator.steps = 1;
+        opts.solver.law = MomentumLaw::WithDivergence;
+        assert!(unsupported(&opts).unwrap().starts_with("configuration_kernel: "));
+    }
+}
