@@ -19,8 +19,13 @@ pub fn choose(
     plain: &CbdHyperparameters,
     searched: bool,
 ) -> crate::Result<Option<ConfigurationEvidence>> {
+    // A scheme given other than Euler × 1 leaves `auto` without the term (the format evaluates it with
+    // Euler × 1 only); `on` refuses it.
+    let other_scheme = settings.integrator.is_some_and(|m| m != IntegratorMethod::Euler) || settings.steps.is_some_and(|s| s != 1);
     match (settings.configuration, searched) {
         (ConfigurationField::Off, _) | (ConfigurationField::Auto, false) => Ok(None),
+        (ConfigurationField::Auto, true) if other_scheme => Ok(None),
+        (ConfigurationField::On, true) if other_scheme => Err(scheme_refused()),
         (ConfigurationField::On, false) => Err(crate::Error::InvalidInput(
             "--configuration-field on: the field's hyperparameters come from CbD's evidence, which does not run here (the paper's values, or every value given)".into(),
         )),
@@ -38,9 +43,7 @@ pub fn fit(
 ) -> crate::Result<(SchemeChoice, CbdOptions, CbdFit)> {
     let integrator = Integrator { method: IntegratorMethod::Euler, steps: 1 };
     if settings.integrator.is_some_and(|m| m != IntegratorMethod::Euler) || settings.steps.is_some_and(|s| s != 1) {
-        return Err(crate::Error::InvalidInput(
-            "--configuration-field: the configuration field is evaluated with Euler × 1 only (blob format 8); drop --integrator/--steps or use --configuration-field off".into(),
-        ));
+        return Err(scheme_refused());
     }
     let scheme = SchemeChoice {
         integrator,
@@ -50,6 +53,13 @@ pub fn fit(
     let options = options_for(h, norm, integrator, settings);
     let fit = fit_cbd(base, data, &options)?;
     Ok((scheme, options, fit))
+}
+
+/// `--configuration-field on` with a scheme the format does not evaluate the term with.
+fn scheme_refused() -> crate::Error {
+    crate::Error::InvalidInput(
+        "--configuration-field on: the configuration field is evaluated with Euler × 1 only (blob format 8); drop --integrator/--steps or use --configuration-field auto|off".into(),
+    )
 }
 
 /// Whether `e` is the runtime refusing the configuration field by name (before it evaluates it).
