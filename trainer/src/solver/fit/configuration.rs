@@ -26,6 +26,9 @@ pub(super) fn unsupported(opts: &CbdOptions) -> Option<String> {
     None
 }
 
+/// K_lin with the term, P0 and k1 (internal units).
+type ClosedForm = (Mat<f64>, Vec<f64>, Vec<f64>);
+
 /// P0 = (K_lin + σ² I)⁻¹ (y − k0) and k1 = k0 + K_lin P0 at the control points (internal units), with
 /// the term's K_lin.
 pub(super) fn closed_form(
@@ -33,7 +36,7 @@ pub(super) fn closed_form(
     configuration: &ConfigurationKernel,
     sigma: f64,
     target: &[f64],
-) -> Result<(Mat<f64>, Vec<f64>, Vec<f64>), FitError> {
+) -> Result<ClosedForm, FitError> {
     let (m, count) = (cp.dims.m, cp.len());
     let k = k_lin_with_configuration(cp, configuration);
     let len = cp.dims.state_len();
