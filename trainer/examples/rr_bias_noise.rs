@@ -48,7 +48,7 @@ fn cbd_at(
     tol_factor: f64,
 ) -> Option<Cbd> {
     let norm = cbd_trainer::evidence::normalisation_of(noisy);
-    let cbd_trainer::solver::FlowHyperparameters { joint_kernel: jk, task_kernel: tk, sigma } = h.to_internal(&norm);
+    let cbd_trainer::solver::FlowHyperparameters { joint_kernel: jk, task_kernel: tk, sigma, .. } = h.to_internal(&norm);
     let integ = Integrator { method: IntegratorMethod::Euler, steps: 1 };
     let cp = ControlPoints::new(nominal, &norm, noisy.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
     let (m, n) = (2, 2);

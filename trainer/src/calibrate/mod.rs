@@ -11,12 +11,13 @@
 //!
 //! Every length a user gives or reads here is in the data's unit.
 
+pub mod configuration;
 pub mod geometry;
 pub mod scheme;
 pub mod settings;
 
 pub use geometry::{Geometry, GeometryChoice};
-pub use settings::{HyperparameterSource, Overrides, Settings};
+pub use settings::{ConfigurationField, HyperparameterSource, Overrides, Settings};
 
 use crate::data::Measurements;
 use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_with_geometry, CbdHyperparameters, Evidence, GeometricBasis};
@@ -36,6 +37,8 @@ pub struct Calibration {
     pub evidence: Option<Evidence>,
     /// Nominal or calibrated geometry, and what decided it.
     pub geometry: GeometryChoice,
+    /// The configuration field's comparison, when its search ran (docs/DESIGN.md §16).
+    pub configuration: Option<crate::evidence::ConfigurationEvidence>,
     pub scheme: scheme::SchemeChoice,
     pub options: CbdOptions,
     pub fit: CbdFit,
@@ -52,6 +55,7 @@ pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
         task_width: cbd_protocol::paper_rr::TASK_WIDTH,
         task_gamma: 1.0,
         sigma: 1e-6,
+        configuration: None,
     }
 }
 
@@ -63,6 +67,8 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
         (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
         (_, r) => r,
     };
+    // The configuration field is evaluated in the kernel form only (blob format 8).
+    let representation = if h.configuration.is_some() { crate::expansion::Representation::Kernel } else { representation };
     opts.solver = SolverSettings { representation, ..settings.solver };
     // Recorded in the blob (format 7): what `cbd eval` sets a table's noise floor by.
     opts.noise_sigma = Some(h.sigma);
@@ -119,14 +125,62 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     let norm = normalisation(data, settings);
     let (chosen, geometry) = geometry::choose_geometry(nominal, data, &norm, settings)?;
     let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
-    let scheme = scheme::choose_scheme(&base, data, &hyperparameters, &norm, settings)?;
-    let options = options_for(&hyperparameters, &norm, scheme.integrator, settings);
-    let fit = fit_cbd(&base, data, &options)?;
+    // The geometry is decided with the plain prior; the configuration field is then searched on the
+    // chosen base's residual (the final hypothesis' rows) and kept by its own comparison.
+    let mut configuration = configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some())?;
+    let with_term = configuration.clone().filter(|c| c.chosen || settings.configuration == ConfigurationField::On);
+    let mut early_warnings = Vec::new();
+    let (hyperparameters, scheme, options, fit) = match with_term {
+        Some(c) if settings.configuration == ConfigurationField::Auto => {
+            // The term has no expansion in format 8: where the plain model's fields are written in
+            // the kernels' own basis (their kernel form cancels, so f32 controllers would lose every
+            // digit: the RR demo's 1 : 3e10), `auto` keeps the plain model and says why.
+            let plain = plain_fit(&base, data, &hyperparameters, &norm, settings)?;
+            if configuration::needs_expansion(&plain.3) {
+                if let Some(c) = configuration.as_mut() {
+                    c.not_used = Some("the plain model's fields need the kernels' own basis, which the field lacks".into());
+                }
+                early_warnings.push(format!(
+                    "the configuration field was chosen by evidence (+{:.1} nats) but is not used: the plain model's fields are \
+                     written in the kernels' own basis (their kernel form cancels), and the field has no such form yet; \
+                     --configuration-field on fits it in the kernel form",
+                    c.with_term_log_evidence - c.plain_log_evidence
+                ));
+                plain
+            } else {
+                let h = settings.overrides.apply(&base, c.with_term.clone());
+                let (scheme, options, fit) = configuration::fit(&base, data, &h, &norm, settings)?;
+                (h, scheme, options, fit)
+            }
+        }
+        Some(c) => {
+            let h = settings.overrides.apply(&base, c.with_term.clone());
+            let (scheme, options, fit) = configuration::fit(&base, data, &h, &norm, settings)?;
+            (h, scheme, options, fit)
+        }
+        None => plain_fit(&base, data, &hyperparameters, &norm, settings)?,
+    };
     let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.solver.max_iterations);
+    warnings.splice(0..0, early_warnings);
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
     }
-    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, scheme, options, fit, warnings })
+    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, configuration, scheme, options, fit, warnings })
+}
+
+/// The model without the configuration field: the scheme by cross-validation, then the fit.
+fn plain_fit(
+    base: &NominalModel,
+    data: &Measurements,
+    h: &CbdHyperparameters,
+    norm: &Normalisation,
+    settings: &Settings,
+) -> crate::Result<(CbdHyperparameters, scheme::SchemeChoice, CbdOptions, CbdFit)> {
+    let h = CbdHyperparameters { configuration: None, ..h.clone() };
+    let scheme = scheme::choose_scheme(base, data, &h, norm, settings)?;
+    let options = options_for(&h, norm, scheme.integrator, settings);
+    let fit = fit_cbd(base, data, &options)?;
+    Ok((h, scheme, options, fit))
 }
 
 /// The warning for a DH fit that stopped at its iteration limit.
@@ -199,6 +253,7 @@ impl Calibration {
             "hyperparameters": self.hyperparameters,
             "evidence": self.evidence,
             "geometry": self.geometry,
+            "configuration_field": self.configuration,
             "scheme": self.scheme.to_json(),
             "dh_first": self.dh.is_some(),
             "fit": self.fit.report,
@@ -217,8 +272,20 @@ pub fn describe(h: &CbdHyperparameters) -> String {
             format!("{}={p}", form.label())
         })
         .collect();
+    let configuration = match &h.configuration {
+        Some(c) => {
+            let axes: Vec<String> = c
+                .joint_axes
+                .iter()
+                .map(|a| format!("{}={}", crate::axis_forms::form_of(a).label(), crate::axis_forms::form_and_parameter(a).1))
+                .collect();
+            let width = c.task_width.map_or("flat".to_string(), |a| a.to_string());
+            format!("; configuration field [{}] task width {width} gamma {}", axes.join(" "), c.gamma)
+        }
+        None => String::new(),
+    };
     format!(
-        "joint kernel [{}] gamma {}; task kernel width {} gamma {}; sigma {}",
+        "joint kernel [{}] gamma {}; task kernel width {} gamma {}; sigma {}{configuration}",
         axes.join(" "),
         h.joint_gamma,
         h.task_width,

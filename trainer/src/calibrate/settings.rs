@@ -63,6 +63,18 @@ impl Overrides {
     }
 }
 
+/// Whether the model has the configuration-dependent task field (docs/DESIGN.md §16).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ConfigurationField {
+    /// Decided by CbD's evidence: kept when it gains more than ½ ln(N m) nats per added hyperparameter.
+    Auto,
+    /// CbD's two fields only.
+    Off,
+    /// Always (its hyperparameters by evidence; Euler × 1, kernel form).
+    On,
+}
+
 /// Everything besides the data that defines a calibration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
@@ -77,6 +89,8 @@ pub struct Settings {
     /// Deform the nominal chain, or calibrate its geometric group (DH parameters, base, tool) first
     /// and deform that; `Auto` (the default): whichever CbD's evidence scores higher.
     pub geometry: super::Geometry,
+    /// The configuration-dependent task field: by evidence (`Auto`, the default), off or on.
+    pub configuration: ConfigurationField,
     /// How the fit runs (law, iterations, method, threads, representation, memory budget,
     /// verbosity): the fit's own options take it whole (`options_for`), but for the paper's
     /// reproduction, which keeps the momenta when the representation is `Auto`.
@@ -101,6 +115,7 @@ impl Default for Settings {
             steps: None,
             scheme_folds: 4,
             geometry: super::Geometry::Auto,
+            configuration: ConfigurationField::Auto,
             solver: SolverSettings::default(),
         }
     }

@@ -19,6 +19,12 @@ pub struct ModelArgs {
 /// replaces that one hyperparameter of the search's result.
 #[derive(Debug, Clone, clap::Args)]
 pub struct SolverArgs {
+    /// The configuration-dependent task field γ_C exp(Σ_d c_d (cos(q_d − q'_d) − 1)) exp(−|x − x'|²/2a_C²) I
+    /// beside CbD's two fields (docs/DESIGN.md §16): auto keeps it when CbD's evidence gains more than
+    /// ½ ln(N m) nats per added hyperparameter, searched after the geometry choice; on always adds it,
+    /// off never. With it the blob is Euler × 1 in the kernel form (no scheme choice, no expansion).
+    #[arg(long, value_enum, default_value_t = crate::calibrate::ConfigurationField::Auto)]
+    pub configuration_field: crate::calibrate::ConfigurationField,
     /// Measurement noise σ per coordinate, in the data's length unit.
     #[arg(long)]
     pub sigma: Option<f64>,
@@ -118,6 +124,7 @@ impl SolverArgs {
             s.integrator = Some(parse_integrator(method)?);
         }
         s.steps = self.steps;
+        s.configuration = self.configuration_field;
         s.solver.max_iterations = self.max_iterations;
         if let Some(solver) = &self.solver {
             s.solver.method = parse_solver(solver)?;
@@ -148,6 +155,9 @@ pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
     }
     if !quiet {
         errln!("{}", c.geometry.describe());
+        if let Some(f) = &c.configuration {
+            errln!("{}", f.describe());
+        }
         match &c.evidence {
             Some(e) => errln!(
                 "hyperparameters (CbD evidence {:.2} on {} rows, {} evaluations, {:.2} s): {}",
@@ -189,6 +199,18 @@ pub fn cbd_fitter(
         if let Some(e) = &calibration.evidence {
             note += &format!("; evidence {:.2} on {} rows ({:.2} s)", e.log_evidence, e.rows_used, e.seconds);
         }
+        // Which member of the prior family the row used (docs/DESIGN.md §16).
+        let member = if calibration.hyperparameters.configuration.is_some() { "with the configuration field" } else { "CbD's two fields" };
+        note += &match &calibration.configuration {
+            Some(f) => format!(
+                "; prior: {member} (configuration field {} by evidence: {:.1} → {:.1}, margin {:.1})",
+                if f.chosen { "chosen" } else { "not chosen" },
+                f.plain_log_evidence,
+                f.with_term_log_evidence,
+                f.margin
+            ),
+            None => format!("; prior: {member}"),
+        };
         note += &format!("; {} ({})", calibration.scheme.label(), calibration.scheme.chosen_by);
         for w in &calibration.warnings {
             note += &format!("; warning: {w}");

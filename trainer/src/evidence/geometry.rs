@@ -94,7 +94,8 @@ mod tests {
         let group = linearised_group(&nominal, &fit.stats, &data).unwrap();
         let basis = GeometricBasis::new(&group, &data, &norm);
         assert!(basis.p > 20, "{} parameters", basis.p);
-        let theta = Theta { log_widths: vec![0.3f64.ln(); 6], log_gamma_v: -9.0, log_a: 0.5, log_gamma_w: -12.0, log_sigma: -9.0 };
+        let theta =
+            Theta { log_widths: vec![0.3f64.ln(); 6], log_gamma_v: -9.0, log_a: 0.5, log_gamma_w: -12.0, log_sigma: -9.0, config: None };
         let with = PairTable::new(&fit.model, &data, &norm).with_geometry(&basis);
         let mut plain = PairTable::new(&fit.model, &data, &norm);
         for (r, s) in plain.residual.iter_mut().zip(&basis.shift) {
@@ -102,7 +103,7 @@ mod tests {
         }
         let (nlml_with, _) = with.nlml_and_gradient(&theta.pack()).unwrap();
         let (nlml_plain, _) = plain.nlml_and_gradient(&theta.pack()).unwrap();
-        let (k, _, _) = plain.covariance(&theta);
+        let (k, _, _, _) = plain.covariance(&theta);
         let llt = k.llt(faer::Side::Lower).unwrap();
         let g = basis.matrix();
         let k_inv_g = llt.solve(&g);

@@ -8,7 +8,7 @@
 use super::table::Theta;
 use crate::axis_forms::{axes_at, AxisForm};
 use crate::solver::fit::FlowHyperparameters;
-use cbd_protocol::{JointKernel, JointKernelAxis, Normalisation, TaskKernel};
+use cbd_protocol::{ConfigurationKernel, JointKernel, JointKernelAxis, Normalisation, TaskKernel};
 
 /// CbD's hyperparameters in the data's units (what `--sigma`, `--task-width`, … mean everywhere).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -24,6 +24,19 @@ pub struct CbdHyperparameters {
     pub task_gamma: f64,
     /// σ: measurement noise per coordinate, data length unit.
     pub sigma: f64,
+    /// The configuration-dependent task term (docs/DESIGN.md §16), when the model has it.
+    pub configuration: Option<ConfigurationHyperparameters>,
+}
+
+/// The configuration term γ_C K̃_Q(q, q') K̃_X(k0, k0') I in the data's units.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ConfigurationHyperparameters {
+    /// K̃_Q's axes, one per joint, in the joint kernel's forms (periodic c_d, Gaussian width).
+    pub joint_axes: Vec<JointKernelAxis>,
+    /// a_C, data length unit; `None`: flat (K̃_X = 1, its width at the search's upper bound).
+    pub task_width: Option<f64>,
+    /// γ_C, data length unit squared.
+    pub gamma: f64,
 }
 
 impl CbdHyperparameters {
@@ -39,6 +52,12 @@ impl CbdHyperparameters {
             task_kernel: TaskKernel { width: norm.length_to_internal(self.task_width) },
             // The normalisation cancels in σ / √γ_W: taken in the data's units, as every blob has been.
             sigma: self.sigma / self.task_gamma.sqrt(),
+            // γ_C / γ_W like the joint kernel's γ (both in the data's units: the scale cancels).
+            configuration_kernel: self.configuration.as_ref().map(|c| ConfigurationKernel {
+                gamma: c.gamma / self.task_gamma,
+                axes: heapless::Vec::from_slice(&c.joint_axes).expect("at most MAX_JOINTS axes"),
+                task_width: c.task_width.map(|a| norm.length_to_internal(a)),
+            }),
         }
     }
 }
@@ -54,6 +73,28 @@ impl Theta {
             task_width: norm.length_to_user(self.log_a.exp()),
             task_gamma: norm.variance_to_user(self.log_gamma_w.exp()),
             sigma: norm.length_to_user(self.log_sigma.exp()),
+            configuration: self.config.as_ref().map(|c| ConfigurationHyperparameters {
+                joint_axes: axes_at(forms, &c.log_widths),
+                task_width: Some(norm.length_to_user(c.log_a.exp())),
+                gamma: norm.variance_to_user(c.log_gamma.exp()),
+            }),
+        }
+    }
+
+    /// User → θ: the inverse of [`Theta::to_user`] (a flat configuration task factor at `flat_log_a`).
+    pub(super) fn from_user(h: &CbdHyperparameters, norm: &Normalisation, flat_log_a: f64) -> Theta {
+        let log_params = |axes: &[JointKernelAxis]| axes.iter().map(|a| crate::axis_forms::form_and_parameter(a).1.ln()).collect();
+        Theta {
+            log_widths: log_params(&h.joint_axes),
+            log_gamma_v: h.joint_gamma.ln(),
+            log_a: norm.length_to_internal(h.task_width).ln(),
+            log_gamma_w: norm.variance_to_internal(h.task_gamma).ln(),
+            log_sigma: norm.length_to_internal(h.sigma).ln(),
+            config: h.configuration.as_ref().map(|c| super::table::ConfigTheta {
+                log_widths: log_params(&c.joint_axes),
+                log_a: c.task_width.map_or(flat_log_a, |a| norm.length_to_internal(a).ln()),
+                log_gamma: norm.variance_to_internal(c.gamma).ln(),
+            }),
         }
     }
 }
@@ -66,7 +107,14 @@ mod tests {
     #[test]
     fn the_conversions_meet_in_normalised_units() {
         let norm = Normalisation { task_offset: [3.0, -1.0, 0.5], task_scale: 250.0 };
-        let theta = Theta { log_widths: vec![0.3f64.ln(), 2.0f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -5.0 };
+        let theta = Theta {
+            log_widths: vec![0.3f64.ln(), 2.0f64.ln()],
+            log_gamma_v: -3.0,
+            log_a: 0.2,
+            log_gamma_w: -4.0,
+            log_sigma: -5.0,
+            config: None,
+        };
         let user = theta.to_user(&[&crate::axis_forms::Periodic, &crate::axis_forms::Gaussian], &norm);
         assert_eq!(
             user.joint_axes,

@@ -15,6 +15,7 @@
 //! gradient, from several starts, inside bounds (a quadratic wall outside the box, then clamped).
 //! Only the rows given are used: pass training rows, never test rows.
 
+mod configuration;
 mod defaults;
 mod geometry;
 mod hyperparameters;
@@ -25,9 +26,10 @@ mod starts;
 mod table;
 pub(crate) mod weight_space;
 
+pub use configuration::{search_configuration_term, ConfigurationEvidence};
 pub use defaults::{default_joint_kernel, normalisation_of};
 pub use geometry::{is_length, GeometricBasis, GEOMETRY_PRIOR_STD};
-pub use hyperparameters::CbdHyperparameters;
+pub use hyperparameters::{CbdHyperparameters, ConfigurationHyperparameters};
 pub(crate) use table::PairTable;
 pub use weight_space::WeightSpaceReport;
 
@@ -263,7 +265,14 @@ mod tests {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 25, seed: 3 }, 2));
         let norm = crate::evidence::normalisation_of(&data);
         let table = PairTable::new(&rr::nominal(), &data, &norm);
-        let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
+        let theta = Theta {
+            log_widths: vec![0.3f64.ln(), 1.7f64.ln()],
+            log_gamma_v: -3.0,
+            log_a: 0.2,
+            log_gamma_w: -4.0,
+            log_sigma: -4.0,
+            config: None,
+        };
         search::assert_gradient_matches_central_differences(&table, &theta.pack(), 1e-6);
     }
 
@@ -282,7 +291,14 @@ mod tests {
         table.joint = JointPairTable::new(forms, &data);
         let delta = data.joints(4)[0] - data.joints(1)[0];
         assert_eq!(table.joint.terms_of(JointPairTable::pair_index(4, 1))[0], (2.0 * delta).cos() - 1.0);
-        let theta = Theta { log_widths: vec![0.3f64.ln(), 1.7f64.ln()], log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
+        let theta = Theta {
+            log_widths: vec![0.3f64.ln(), 1.7f64.ln()],
+            log_gamma_v: -3.0,
+            log_a: 0.2,
+            log_gamma_w: -4.0,
+            log_sigma: -4.0,
+            config: None,
+        };
         search::assert_gradient_matches_central_differences(&table, &theta.pack(), 1e-6);
         // The starts' widths lie in the box, and the search from each stays in it and does not end
         // worse than it began.

@@ -29,6 +29,11 @@ impl DataScales {
         DataScales { var_r, gamma_v0, log_half, log_spacing: median_spacing(table).ln() }
     }
 
+    /// Per axis, the log parameter at which typical pairs of rows have kernel ½.
+    pub fn log_half(&self) -> &[f64] {
+        &self.log_half
+    }
+
     /// Joint widths shifted by `shift` in log weight (log b; ℓ moves by half as much the other way).
     fn widths(&self, table: &PairTable, shift: f64) -> Vec<f64> {
         table.joint.forms.iter().zip(&self.log_half).map(|(f, l)| l + shift / f.log_weight_slope()).collect()
@@ -45,6 +50,7 @@ impl DataScales {
                 log_a: 0.0,
                 log_gamma_w: (0.5 * var_r).ln(),
                 log_sigma: 0.5 * (0.1 * var_r).ln(),
+                config: None,
             },
             // Smooth: near-constant joint kernel (offsets and first harmonics) and a nearly affine task field.
             Theta {
@@ -53,6 +59,7 @@ impl DataScales {
                 log_a: 10f64.ln(),
                 log_gamma_w: (100.0 * var_r).ln(),
                 log_sigma: 0.5 * (1e-4 * var_r).ln(),
+                config: None,
             },
             // Nearly noise-free: the balanced kernels, noise 1e-5 of the residual.
             Theta {
@@ -61,6 +68,7 @@ impl DataScales {
                 log_a: 0.0,
                 log_gamma_w: (0.5 * var_r).ln(),
                 log_sigma: 0.5 * (1e-10 * var_r).ln(),
+                config: None,
             },
             // Rough: narrow kernels, more noise.
             Theta {
@@ -69,6 +77,7 @@ impl DataScales {
                 log_a: 0.3f64.ln(),
                 log_gamma_w: (0.5 * var_r).ln(),
                 log_sigma: 0.5 * (0.03 * var_r).ln(),
+                config: None,
             },
         ]
     }

@@ -86,22 +86,31 @@ impl PairTable {
         self.count * self.m
     }
 
-    /// K_lin + σ² I for θ (normalised units), and per pair the unit kernels K̃_V, K̃_W.
-    pub(super) fn covariance(&self, theta: &Theta) -> (Mat<f64>, Vec<f64>, Vec<f64>) {
+    /// K_lin + σ² I for θ (normalised units), and per pair the unit kernels K̃_V, K̃_W and, with the
+    /// configuration term, K̃_C = K̃_Q(q, q') K̃_X(k0, k0') (docs/DESIGN.md §16).
+    pub(super) fn covariance(&self, theta: &Theta) -> (Mat<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
         let m = self.m;
         let w = self.joint.axis_weights(&theta.log_widths);
         let (gv, gw, sigma2) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp(), (2.0 * theta.log_sigma).exp());
         let inv_2a2 = 0.5 * (-2.0 * theta.log_a).exp();
+        let config = theta.config.as_ref().map(|c| (self.joint.axis_weights(&c.log_widths), c.task_factor_weight(), c.log_gamma.exp()));
+        let gc = config.as_ref().map_or(0.0, |c| c.2);
         let dim = self.dim();
         let pairs = self.dist2.len();
         let (mut kv_all, mut kw_all) = (Vec::with_capacity(pairs), Vec::with_capacity(pairs));
-        let mut k = assemble_k_lin(self.count, m, gv, gw, |i, j, jj| {
+        let mut kc_all = Vec::with_capacity(if config.is_some() { pairs } else { 0 });
+        let mut k = assemble_k_lin(self.count, m, gv, gw, gc, |i, j, jj| {
             let at = JointPairTable::pair_index(i, j);
             let (kv, kw) = (self.joint.unit_kernel(at, &w), (-self.dist2[at] * inv_2a2).exp());
+            // K̃_C = exp(Σ_d c_d f_d) · exp(−|k0_i − k0_j|² / 2a_C²) (the second factor 1 when flat).
+            let kc = config.as_ref().map_or(0.0, |(c, inv_2ac2, _)| self.joint.unit_kernel(at, c) * (-self.dist2[at] * inv_2ac2).exp());
             jj.copy_from_slice(&self.jj[at * m * m..(at + 1) * m * m]);
             kv_all.push(kv);
             kw_all.push(kw);
-            (kv, kw)
+            if config.is_some() {
+                kc_all.push(kc);
+            }
+            (kv, kw, kc)
         });
         for r in 0..dim {
             k[(r, r)] += sigma2;
@@ -109,14 +118,14 @@ impl PairTable {
         if let Some(ggt) = &self.explicit {
             k += ggt;
         }
-        (k, kv_all, kw_all)
+        (k, kv_all, kw_all, kc_all)
     }
 
     /// K = K_lin + σ² I at θ factored: L, α = K⁻¹ r and K⁻¹ (lower triangle), on the solver's fixed
     /// split (the result never depends on the thread count). None when K is not positive definite.
     pub(super) fn factor(&self, theta: &Theta) -> Option<Factored> {
         let dim = self.dim();
-        let (k, kv, kw) = self.covariance(theta);
+        let (k, kv, kw, kc) = self.covariance(theta);
         let par = crate::numeric::FIXED_SPLIT;
         let mut l = k;
         let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(dim, par, Default::default()));
@@ -131,7 +140,7 @@ impl PairTable {
         let mut inv = Mat::<f64>::zeros(dim, dim);
         let mut mem = MemBuffer::new(llt_inverse_scratch::<f64>(dim, par));
         llt_inverse(inv.as_mut(), lower, par, MemStack::new(&mut mem));
-        Some(Factored { l, alpha, quad, inv, kv, kw })
+        Some(Factored { l, alpha, quad, inv, kv, kw, kc })
     }
 
     /// ½ tr(Q ∂K/∂θ) for every θ component, Q symmetric (given by its entries), accumulated over
@@ -141,7 +150,9 @@ impl PairTable {
         let (gv, gw) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp());
         let inv_a2 = (-2.0 * theta.log_a).exp();
         let w = self.joint.axis_weights(&theta.log_widths);
-        let mut grad = vec![0.0; n + 4];
+        let config = theta.config.as_ref().map(|c| (self.joint.axis_weights(&c.log_widths), c.task_factor_weight(), c.log_gamma.exp()));
+        // θ's packed order: widths, γ_V, a, γ_W, [c_1..c_n, a_C, γ_C], σ.
+        let mut grad = vec![0.0; theta.len()];
         let mut at = 0;
         for i in 0..self.count {
             for j in 0..=i {
@@ -157,7 +168,7 @@ impl PairTable {
                     t += q(i * m + a, j * m + a);
                 }
                 let s = weight * s * gv * f.kv[at];
-                let t = weight * t * gw * f.kw[at];
+                let t = weight * t;
                 let terms = self.joint.terms_of(at);
                 for d in 0..n {
                     // The form's ∂(w t)/∂ log p: periodic ∂(b f)/∂ log b = b f; Gaussian ∂(f/ℓ²)/∂ log ℓ = −2 f/ℓ².
@@ -165,14 +176,25 @@ impl PairTable {
                     grad[d] += s * dexp;
                 }
                 grad[n] += s;
-                grad[n + 1] += t * self.dist2[at] * inv_a2;
-                grad[n + 2] += t;
+                let tw = t * gw * f.kw[at];
+                grad[n + 1] += tw * self.dist2[at] * inv_a2;
+                grad[n + 2] += tw;
+                if let Some((c, inv_2ac2, gc)) = &config {
+                    // ∂(γ_C K̃_Q K̃_X)/∂ log c_d = γ_C K̃_C c_d f_d (form's rule), ∂/∂ log a_C = γ_C K̃_C |Δk0|²/a_C², ∂/∂ log γ_C = γ_C K̃_C.
+                    let tc = t * gc * f.kc[at];
+                    for d in 0..n {
+                        grad[n + 3 + d] += tc * self.joint.forms[d].exponent_log_derivative(c[d], terms[d]);
+                    }
+                    grad[2 * n + 3] += tc * self.dist2[at] * 2.0 * inv_2ac2;
+                    grad[2 * n + 4] += tc;
+                }
                 at += 1;
             }
         }
         let sigma2 = (2.0 * theta.log_sigma).exp();
         // ½ tr(Q ∂K/∂ log σ), ∂K/∂ log σ = 2σ² I.
-        grad[n + 3] = sigma2 * (0..dim).map(|i| q(i, i)).sum::<f64>();
+        let last = grad.len() - 1;
+        grad[last] = sigma2 * (0..dim).map(|i| q(i, i)).sum::<f64>();
         grad
     }
 }
@@ -195,6 +217,8 @@ pub(super) struct Factored {
     /// Per pair, the unit kernels K̃_V and K̃_W.
     pub kv: Vec<f64>,
     pub kw: Vec<f64>,
+    /// Per pair, K̃_C (empty without the configuration term).
+    pub kc: Vec<f64>,
 }
 
 impl Factored {
@@ -212,16 +236,50 @@ pub(super) struct Theta {
     pub(super) log_a: f64,
     pub(super) log_gamma_w: f64,
     pub(super) log_sigma: f64,
+    /// The configuration-dependent task term γ_C K̃_Q(q, q') K̃_X(k0, k0') I (docs/DESIGN.md §16), if in the model.
+    pub(super) config: Option<ConfigTheta>,
+}
+
+/// The configuration term's θ (logs, normalised units): per-joint weights of K̃_Q in the joint
+/// kernel's forms, the task width a_C (`None`: flat, K̃_X = 1) and the amplitude γ_C.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct ConfigTheta {
+    pub(super) log_widths: Vec<f64>,
+    pub(super) log_a: f64,
+    pub(super) log_gamma: f64,
+}
+
+impl ConfigTheta {
+    /// 1/(2 a_C²).
+    pub(super) fn task_factor_weight(&self) -> f64 {
+        0.5 * (-2.0 * self.log_a).exp()
+    }
 }
 
 impl Theta {
+    /// Packed length: n + 4, or 2n + 6 with the configuration term.
+    pub(super) fn len(&self) -> usize {
+        self.log_widths.len() + 4 + self.config.as_ref().map_or(0, |c| c.log_widths.len() + 2)
+    }
+    /// Packed: widths, γ_V, a, γ_W, [c_1..c_n, a_C, γ_C], σ (σ last: the search raises it first).
     pub(super) fn pack(&self) -> Vec<f64> {
         let mut v = self.log_widths.clone();
-        v.extend([self.log_gamma_v, self.log_a, self.log_gamma_w, self.log_sigma]);
+        v.extend([self.log_gamma_v, self.log_a, self.log_gamma_w]);
+        if let Some(c) = &self.config {
+            v.extend(&c.log_widths);
+            v.extend([c.log_a, c.log_gamma]);
+        }
+        v.push(self.log_sigma);
         v
     }
+    /// The inverse of [`Theta::pack`] for n joints: the configuration term when `p` has 2n + 6 entries.
     pub(super) fn unpack(p: &[f64], n: usize) -> Self {
-        Theta { log_widths: p[..n].to_vec(), log_gamma_v: p[n], log_a: p[n + 1], log_gamma_w: p[n + 2], log_sigma: p[n + 3] }
+        let config = (p.len() == 2 * n + 6).then(|| ConfigTheta {
+            log_widths: p[n + 3..2 * n + 3].to_vec(),
+            log_a: p[2 * n + 3],
+            log_gamma: p[2 * n + 4],
+        });
+        Theta { log_widths: p[..n].to_vec(), log_gamma_v: p[n], log_a: p[n + 1], log_gamma_w: p[n + 2], log_sigma: p[p.len() - 1], config }
     }
 }
 
@@ -243,8 +301,8 @@ mod tests {
         let nominal = rr::nominal();
         let table = PairTable::new(&nominal, &data, &norm);
         for log_widths in [vec![0.3f64.ln(), 1.7f64.ln()], vec![8f64.ln(), 0.02f64.ln()]] {
-            let theta = Theta { log_widths, log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0 };
-            let (k, _, _) = table.covariance(&theta);
+            let theta = Theta { log_widths, log_gamma_v: -3.0, log_a: 0.2, log_gamma_w: -4.0, log_sigma: -4.0, config: None };
+            let (k, _, _, _) = table.covariance(&theta);
             let (gv, gw, sigma2) = (theta.log_gamma_v.exp(), theta.log_gamma_w.exp(), (2.0 * theta.log_sigma).exp());
             // The fit's kernels for θ: the blob's (γ = γ_V / γ_W, unit task kernel), K_lin = γ_W × that.
             let axes: Vec<JointKernelAxis> = theta.log_widths.iter().map(|l| JointKernelAxis::Periodic { b: l.exp() }).collect();

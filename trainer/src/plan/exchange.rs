@@ -56,6 +56,7 @@ mod tests {
             task_width: 1.0,
             task_gamma: 1e-4,
             sigma: 1e-3,
+            configuration: None,
         };
         let (count_c, count_w) = (60, 24);
         let q = crate::plan::candidates::uniform_within(&[[-3.1, 3.1], [0.2, 3.0]], count_c + count_w, 4);

@@ -374,6 +374,7 @@ mod tests {
             task_width: 0.8,
             task_gamma: 1e-3,
             sigma: 1e-2,
+            configuration: None,
         }
     }
 

@@ -39,6 +39,7 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
         task_width: reach,
         task_gamma: 0.5 * e2 / m as f64,
         sigma: prior.noise,
+        configuration: None,
     }
 }
 

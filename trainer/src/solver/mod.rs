@@ -11,5 +11,6 @@ pub mod step;
 pub mod subspace;
 
 pub use fit::{
-    fit_cbd, CbdFit, CbdOptions, FitError, FitReport, FlowHyperparameters, IterationLog, SolverMethod, SolverSettings, DENSE_MAX_UNKNOWNS,
+    fit_cbd, predict_with_configuration, solve_with_configuration, CbdFit, CbdOptions, FitError, FitReport, FlowHyperparameters,
+    IterationLog, SolverMethod, SolverSettings, DENSE_MAX_UNKNOWNS,
 };

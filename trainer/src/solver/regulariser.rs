@@ -1,8 +1,8 @@
 //! The quadratic part of energy (16) and the linearised model around P0 = 0.
 
 use crate::flow::ControlPoints;
-use cbd_protocol::{MAX_JOINTS, MAX_TASK_DIM};
-use cbd_runtime::kernel::{joint_kernel_from_features, read_features, task_kernel};
+use cbd_protocol::{ConfigurationKernel, JointKernel, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
+use cbd_runtime::kernel::{joint_kernel, joint_kernel_from_features, read_features, task_kernel};
 use faer::Mat;
 
 /// J_i J_jᵀ (m × m, row-major) of two m × n Jacobians stored row-major: Σ_d J_i[a, d] J_j[b, d].
@@ -14,25 +14,29 @@ pub(crate) fn jacobian_outer(ji: &[f64], jj: &[f64], m: usize, n: usize, out: &m
     }
 }
 
-/// K_lin = γ_V Dk0 K̃_V Dk0ᵀ + γ_W K̃_W I (docs/DESIGN.md §3), the one assembly: block (i, j) is
-/// (γ_V k_V) J_i J_jᵀ + (γ_W k_W) I, rows and columns i·m + a, with `pair(i, j, jj)` giving
-/// (k_V, k_W) of rows i ≥ j and writing J_i J_jᵀ into `jj`; the upper blocks are the lower ones
-/// mirrored (every kernel here is symmetric to the bit).
+/// K_lin = γ_V Dk0 K̃_V Dk0ᵀ + γ_W K̃_W I + γ_C K̃_C I (docs/DESIGN.md §3, §16), the one assembly:
+/// block (i, j) is (γ_V k_V) J_i J_jᵀ + (γ_W k_W + γ_C k_C) I, rows and columns i·m + a, with
+/// `pair(i, j, jj)` giving (k_V, k_W, k_C) of rows i ≥ j and writing J_i J_jᵀ into `jj` (k_C and
+/// γ_C zero without the configuration term); the upper blocks are the lower ones mirrored (every
+/// kernel here is symmetric to the bit).
 pub(crate) fn assemble_k_lin(
     count: usize,
     m: usize,
     gamma_v: f64,
     gamma_w: f64,
-    mut pair: impl FnMut(usize, usize, &mut [f64]) -> (f64, f64),
+    gamma_c: f64,
+    mut pair: impl FnMut(usize, usize, &mut [f64]) -> (f64, f64, f64),
 ) -> Mat<f64> {
     let mut k = Mat::<f64>::zeros(count * m, count * m);
     let mut jj = [0.0; MAX_TASK_DIM * MAX_TASK_DIM];
     for i in 0..count {
         for j in 0..=i {
-            let (kv, kw) = pair(i, j, &mut jj[..m * m]);
+            let (kv, kw, kc) = pair(i, j, &mut jj[..m * m]);
+            // Without the term the diagonal is γ_W k_W exactly as before (no + 0 · k_C rounding).
+            let iso = if gamma_c == 0.0 { gamma_w * kw } else { gamma_w * kw + gamma_c * kc };
             for a in 0..m {
                 for b in 0..m {
-                    let v = gamma_v * kv * jj[a * m + b] + if a == b { gamma_w * kw } else { 0.0 };
+                    let v = gamma_v * kv * jj[a * m + b] + if a == b { iso } else { 0.0 };
                     k[(i * m + a, j * m + b)] = v;
                     k[(j * m + b, i * m + a)] = v;
                 }
@@ -42,35 +46,53 @@ pub(crate) fn assemble_k_lin(
     k
 }
 
-/// `joint_sign` · Dk0 K_V Dk0ᵀ + K_W at the control points' initial state, the kernels the
-/// runtime's (`joint_kernel_from_features`, `task_kernel`; K_V carries γ and the flow's sign).
-fn combined(cp: &ControlPoints, joint_sign: f64) -> Mat<f64> {
+/// `joint_sign` · Dk0 K_V Dk0ᵀ + K_W (+ γ_C K̃_Q K̃_X I with the configuration term) at the control
+/// points' initial state, the kernels the runtime's (`joint_kernel_from_features`, `joint_kernel`,
+/// `task_kernel`; K_V carries γ and the flow's sign).
+fn combined(cp: &ControlPoints, joint_sign: f64, configuration: Option<&ConfigurationKernel>) -> Mat<f64> {
     let dims = cp.dims;
     let (m, n, len) = (dims.m, dims.n, dims.state_len());
     let s = |i: usize| &cp.initial[i * len..(i + 1) * len];
     let features = |i: usize| read_features(&cp.features, n, i);
     let (mut g, mut gw) = ([0.0; MAX_JOINTS], [0.0; MAX_TASK_DIM]);
-    assemble_k_lin(cp.len(), m, joint_sign, 1.0, |i, j, jj| {
+    // K̃_Q with unit amplitude in the configuration kernel's axes, and its task factor (1 when flat).
+    let config = configuration.map(|c| (JointKernel { gamma: 1.0, axes: c.axes.clone() }, c.task_width.map(|width| TaskKernel { width })));
+    let point = |i: usize| &cp.points[i * n..(i + 1) * n];
+    assemble_k_lin(cp.len(), m, joint_sign, 1.0, configuration.map_or(0.0, |c| c.gamma), |i, j, jj| {
         let kv = joint_kernel_from_features(&cp.joint_kernel, &features(i), &features(j), &mut g);
         let mut diff = [0.0; MAX_TASK_DIM];
         for c in 0..m {
             diff[c] = s(i)[c] - s(j)[c];
         }
         jacobian_outer(&s(i)[m..m + m * n], &s(j)[m..m + m * n], m, n, jj);
-        (kv, task_kernel(&cp.task_kernel, &diff, m, &mut gw))
+        let kc = match &config {
+            // c_j(ξ)/γ_C = exp(Σ_d f_d(ξ_d − q_jd)) · exp(−|k0(ξ) − k0(q_j)|²/2a_C²) (§16).
+            Some((kq, kx)) => {
+                joint_kernel(kq, point(i), point(j), &mut g) * kx.as_ref().map_or(1.0, |kx| task_kernel(kx, &diff, m, &mut gw))
+            }
+            None => 0.0,
+        };
+        (kv, task_kernel(&cp.task_kernel, &diff, m, &mut gw), kc)
     })
+}
+
+/// K_lin with the configuration-dependent task term (docs/DESIGN.md §16): Dk0 K_V Dk0ᵀ + K_W I +
+/// γ_C K̃_Q(q_i, q_j) K̃_X(k0_i, k0_j) I, the regulariser and (Hamiltonian law, Euler × 1) the linear
+/// response of the model whose blob carries `configuration`.
+pub fn k_lin_with_configuration(cp: &ControlPoints, configuration: &ConfigurationKernel) -> Mat<f64> {
+    combined(cp, cp.law.joint_field_sign(), Some(configuration))
 }
 
 /// K_lin = Dk0 K_V Dk0ᵀ + K_W: energy (16)'s regulariser is ½ P0ᵀ K_lin P0 (`cp.joint_kernel`
 /// carries the field's sign s, so s · s K_V = K_V).
 pub fn regulariser_matrix(cp: &ControlPoints) -> Mat<f64> {
-    combined(cp, cp.law.joint_field_sign())
+    combined(cp, cp.law.joint_field_sign(), None)
 }
 
 /// ∂k1/∂P0 at P0 = 0: K_W − s Dk0 K_V Dk0ᵀ (the flow moves k by w − J v, v = s K_V Jᵀ P): K_lin
 /// itself for the Hamiltonian laws (s = −1).
 pub fn linear_response(cp: &ControlPoints) -> Mat<f64> {
-    combined(cp, -1.0)
+    combined(cp, -1.0, None)
 }
 
 #[cfg(test)]

@@ -5,7 +5,14 @@ use crate::simulate::{configurations, rr, Sampling};
 
 /// θ near what the evidence picks on noisy RR data (flat joint kernels, a wide task kernel).
 fn theta() -> Theta {
-    Theta { log_widths: vec![0.05f64.ln(), 0.02f64.ln()], log_gamma_v: -6.0, log_a: 2.0f64.ln(), log_gamma_w: -7.0, log_sigma: -8.0 }
+    Theta {
+        log_widths: vec![0.05f64.ln(), 0.02f64.ln()],
+        log_gamma_v: -6.0,
+        log_a: 2.0f64.ln(),
+        log_gamma_w: -7.0,
+        log_sigma: -8.0,
+        config: None,
+    }
 }
 
 fn rr_rows(count: usize) -> crate::data::Measurements {
@@ -79,6 +86,7 @@ fn refine_from(per_axis: usize, factors: &[f64]) -> (f64, Vec<(f64, Theta, usize
                 log_a: (h.task_width / s).ln(),
                 log_gamma_w: (h.task_gamma / s / s).ln(),
                 log_sigma: (h.sigma / s).ln(),
+                config: None,
             };
             let options = crate::evidence::EvidenceOptions { max_weight_space_weights: 6000, ..Default::default() };
             let evaluations = std::cell::RefCell::new(0);

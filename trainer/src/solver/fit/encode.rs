@@ -39,7 +39,7 @@ pub(super) fn encode_checked(
             weights: F64Slice::from_le_bytes(&weights),
         }),
         noise_sigma: opts.noise_sigma,
-        configuration_kernel: None,
+        configuration_kernel: opts.configuration_kernel.clone(),
         drift: None,
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(FitError::Encode)?;

@@ -10,6 +10,8 @@
 //! tangent and a factorisation). For large N the momenta are searched in K_lin's dominant
 //! eigenspace (`SolverMethod`, `solver::subspace`), with damping that is a ball in momentum space.
 
+mod configuration;
+pub use configuration::{predict_with_configuration, solve_with_configuration};
 mod encode;
 mod flow_expansion;
 mod hyperparameters;
@@ -42,6 +44,9 @@ pub struct CbdOptions {
     /// The noise σ per coordinate in the data's unit the blob records (format 7; the pipeline sets
     /// it, `calibrate::options_for`); `None`: not recorded.
     pub noise_sigma: Option<f64>,
+    /// The configuration-dependent task term (docs/DESIGN.md §16, γ_C normalised like the joint
+    /// kernel's γ); the fit is then Euler × 1's closed form in the kernel form only.
+    pub configuration_kernel: Option<cbd_protocol::ConfigurationKernel>,
 }
 
 /// How a fit runs, besides its model: one struct that the pipeline's `Settings` (what a user sets,
@@ -95,7 +100,7 @@ impl CbdOptions {
     /// solver's defaults ([`SolverSettings::default`]) but the fields as momenta (the pipeline,
     /// `calibrate::options_for`, sets the user's representation).
     pub fn new(hyperparameters: FlowHyperparameters, integrator: Integrator, normalisation: Normalisation) -> Self {
-        let FlowHyperparameters { joint_kernel, task_kernel, sigma } = hyperparameters;
+        let FlowHyperparameters { joint_kernel, task_kernel, sigma, configuration_kernel } = hyperparameters;
         CbdOptions {
             joint_kernel,
             task_kernel,
@@ -104,6 +109,7 @@ impl CbdOptions {
             normalisation,
             solver: SolverSettings { representation: crate::expansion::Representation::Kernel, ..SolverSettings::default() },
             noise_sigma: None,
+            configuration_kernel,
         }
     }
 
@@ -117,6 +123,7 @@ impl CbdOptions {
             joint_kernel: cbd_protocol::paper_rr::joint_kernel(),
             task_kernel: cbd_protocol::paper_rr::task_kernel(),
             sigma: 1e-6,
+            configuration_kernel: None,
         };
         CbdOptions::new(hyperparameters, integrator, Normalisation::IDENTITY)
     }
@@ -274,6 +281,8 @@ pub enum FitError {
     },
     /// The runtime could not load the blob or does not reproduce the training predictions.
     RuntimeMismatch(String),
+    /// The configuration field asked of a scheme or law the blob format does not evaluate it with.
+    Configuration(String),
     /// The expansion's least-squares problem does not fit in the memory this process may use.
     /// An error, not a fall-back to the kernel form: the blob never depends on the memory limit.
     Memory(String),
@@ -307,6 +316,7 @@ impl std::fmt::Display for FitError {
                 )
             }
             FitError::RuntimeMismatch(e) => write!(f, "the runtime does not reproduce the fit: {e}"),
+            FitError::Configuration(why) => write!(f, "{why}"),
             FitError::Memory(why) => write!(f, "{why}: raise the memory limit, or fit the kernel form (--representation kernel)"),
         }
     }
@@ -337,16 +347,11 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     check_shapes(nominal, data)?;
     let m = nominal.task_dim();
     let norm = &opts.normalisation;
-    let target: Vec<f64> = data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c]))).collect();
-    let cp = ControlPoints::new(
-        nominal,
-        norm,
-        data.joints.clone(),
-        opts.joint_kernel.clone(),
-        opts.task_kernel,
-        opts.solver.law,
-        opts.integrator,
-    );
+    let (cp, target) = control_points_and_target(nominal, data, opts);
+    // With the configuration field: Euler × 1's closed form in the kernel form only (§16).
+    if let Some(c) = &opts.configuration_kernel {
+        return configuration::fit(nominal, data, opts, &cp, c, &target, start);
+    }
     // One Euler step from P0: k1 = k0 + w(k0) − Dk0 v(x) is linear in P0, so the closed-form
     // Jacobian stays exact everywhere and no tangent is ever needed.
     let linear_scheme = opts.integrator.method == cbd_protocol::IntegratorMethod::Euler && opts.integrator.steps == 1;
@@ -443,6 +448,22 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
             expansion_declined,
         },
     })
+}
+
+/// The control points of `data` for `opts`' kernels and the measured positions (internal units).
+fn control_points_and_target(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> (ControlPoints, Vec<f64>) {
+    let (m, norm) = (nominal.task_dim(), &opts.normalisation);
+    let target: Vec<f64> = data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c]))).collect();
+    let cp = ControlPoints::new(
+        nominal,
+        norm,
+        data.joints.clone(),
+        opts.joint_kernel.clone(),
+        opts.task_kernel,
+        opts.solver.law,
+        opts.integrator,
+    );
+    (cp, target)
 }
 
 /// The expansion the blob carries (docs/DESIGN.md §11), or why none: only the linear scheme
