@@ -152,6 +152,20 @@ fn ur5_example_blob_is_unchanged() {
     // (format 8; 72565 bytes, fa2b4b76… before).
     let default = cbd_blob("ur5-default", &["fit", "--quiet", "--model", &model, "--data", &data]);
     assert_eq!((default.len(), sha256_hex(&default).as_str()), (72583, "c48d7bcd6889f0463af1e7b15ec9f14b4b67a653de20c0b9c96640212db616e5"));
+    // The shipped split's figure (README, BENCHMARKS; issue 49 item 4): what that blob makes of the 20
+    // test poses, mean error within 1 % of 0.07518 mm.
+    let blob_path = scratch("ur5-shipped").join("default.blob");
+    std::fs::write(&blob_path, &default).unwrap();
+    let json = blob_path.with_extension("json");
+    let test = format!("{ur5}/test.csv");
+    let out = Command::new(CBD)
+        .args(["eval", "--model", &model, "--blob", blob_path.to_str().unwrap(), "--data", &test, "--json", json.to_str().unwrap()])
+        .output()
+        .expect("run cbd eval");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let mean = report["calibrated"]["mean"].as_f64().unwrap();
+    assert!((mean / 0.07518 - 1.0).abs() <= 0.01, "shipped split: default {mean} mm, pinned 0.07518 within 1 %");
     // Without the drift it is that blob, byte for byte.
     let mut without = cbd_protocol::decode(&default).unwrap();
     assert!(without.drift.is_some_and(|d| d.sd > 0.02 && d.length > 2.0));

@@ -134,23 +134,34 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
         Some(c) if settings.configuration == ConfigurationField::Auto => {
             // The term has no expansion in format 8: where the plain model's fields are written in
             // the kernels' own basis (their kernel form cancels, so f32 controllers would lose every
-            // digit: the RR demo's 1 : 3e10), `auto` keeps the plain model and says why.
+            // digit: the RR demo's 1 : 3e10), or where the term's kernel form cancels beyond what
+            // the runtime reproduces (1e-12), `auto` keeps the plain model and says why.
             let plain = plain_fit(&base, data, &hyperparameters, &norm, settings)?;
-            if configuration::needs_expansion(&plain.3) {
-                if let Some(c) = configuration.as_mut() {
-                    c.not_used = Some("the plain model's fields need the kernels' own basis, which the field lacks".into());
-                }
-                early_warnings.push(format!(
-                    "the configuration field was chosen by evidence (+{:.1} nats) but is not used: the plain model's fields are \
-                     written in the kernels' own basis (their kernel form cancels), and the field has no such form yet; \
-                     --configuration-field on fits it in the kernel form",
-                    c.with_term_log_evidence - c.plain_log_evidence
-                ));
-                plain
+            let h = settings.overrides.apply(&base, c.with_term.clone());
+            let with = if configuration::needs_expansion(&plain.3) {
+                Err("the plain model's fields need the kernels' own basis, which the field lacks".to_string())
             } else {
-                let h = settings.overrides.apply(&base, c.with_term.clone());
-                let (scheme, options, fit) = configuration::fit(&base, data, &h, &norm, settings)?;
-                (h, scheme, options, fit)
+                match configuration::fit(&base, data, &h, &norm, settings) {
+                    Ok(fitted) => Ok(fitted),
+                    Err(e) if matches!(e.stage_error(), Some(crate::solver::FitError::RuntimeMismatch(_))) => {
+                        Err(format!("its kernel form cancels beyond what the runtime reproduces ({e})"))
+                    }
+                    Err(e) => return Err(e),
+                }
+            };
+            match with {
+                Ok((scheme, options, fit)) => (h, scheme, options, fit),
+                Err(why) => {
+                    early_warnings.push(format!(
+                        "the configuration field was chosen by evidence (+{:.1} nats) but is not used: {why}; \
+                         --configuration-field on fits it in the kernel form",
+                        c.with_term_log_evidence - c.plain_log_evidence
+                    ));
+                    if let Some(c) = configuration.as_mut() {
+                        c.not_used = Some(why);
+                    }
+                    plain
+                }
             }
         }
         Some(c) => {
