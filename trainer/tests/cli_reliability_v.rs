@@ -207,3 +207,103 @@ fn an_unwritable_plots_directory_is_refused_before_the_work() {
         assert_eq!(std::fs::read_to_string(dir.join("e.json")).unwrap(), "before\n");
     }
 }
+
+/// The UR5 example's chain in metres, named `name` (TOML basic string, escapes allowed), its base
+/// `base` (a TOML inline table), the data in millimetres as the example's.
+fn ur5_in_metres(base: &str, name: &str) -> String {
+    format!(
+        "name = \"{name}\"\nlength_unit = \"m\"\nangle_unit = \"deg\"\n[chain]\nconvention = \"standard\"\njoints = [\n  {{ a = 0, alpha = 90, d = 0.089159, theta_offset = 0 }},\n  {{ a = -0.425, alpha = 0, d = 0, theta_offset = 0 }},\n  {{ a = -0.39225, alpha = 0, d = 0, theta_offset = 0 }},\n  {{ a = 0, alpha = 90, d = 0.10915, theta_offset = 0 }},\n  {{ a = 0, alpha = -90, d = 0.09465, theta_offset = 0 }},\n  {{ a = 0, alpha = 0, d = 0.0823, theta_offset = 0 }},\n]\nbase = {base}\ntool = {{ translation = [0, 0, 0.031] }}\n[measurements]\njoints = [\"q1_deg\", \"q2_deg\", \"q3_deg\", \"q4_deg\", \"q5_deg\", \"q6_deg\"]\npositions = [\"x_mm\", \"y_mm\", \"z_mm\"]\nangle_unit = \"deg\"\nlength_unit = \"mm\"\nmin_rows = 10\n"
+    )
+}
+
+/// The `<joint>` origins (metres) of a URDF read back by urdf-rs, by joint name.
+fn origins(urdf: &str) -> Vec<(String, [f64; 3])> {
+    urdf_rs::read_from_string(urdf).unwrap().joints.iter().map(|j| (j.name.clone(), j.origin.xyz.0)).collect()
+}
+
+/// Issue 51 class 1 through `cbd export`: a metre model whose name and file names hold entities,
+/// quotes, `---`, a newline and non-ASCII writes a URDF and a YAML that parse back (the name as
+/// written), and its geometry-alone line is readable; a model whose base is registered on a
+/// tracker's data exports that frame with the links where the nominal puts them in it (no link
+/// slid metres along its axis), the TCP the tool's 31 mm.
+#[test]
+fn export_writes_well_formed_files_in_the_right_frame() {
+    let dir = scratch("rel5-export");
+    let name = "UR5 &amp; <\\\"ü\\\"> --- x\\nsecond";
+    let model = write(&dir, "ur5 --- m.toml", ur5_in_metres("{ translation = [0, 0, 0], rpy = [0, 0, 0] }", name));
+    let data = ur5_head(&dir, "train.csv", 300);
+    let blob = "fit -- \"ü\" &amp; \n---.blob";
+    succeeds(&cbd(&dir, &["fit", "--quiet", "--dh-first", "--model", &model, "--data", &data, "--out", blob]));
+    let test = ur5_dir().join("test.csv");
+    let out = cbd(
+        &dir,
+        &["export", "--model", &model, "--blob", blob, "--urdf", "m.urdf", "--ur-kinematics", "m.yaml", "--data", test.to_str().unwrap()],
+    );
+    succeeds(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout.lines().find(|l| l.contains("URDF alone")).expect("the geometry-alone line");
+    assert!(!line.contains(" 0.000 m") && line.contains("e-"), "{line}");
+    let urdf = std::fs::read_to_string(dir.join("m.urdf")).unwrap();
+    for event in xml::reader::EventReader::from_str(&urdf) {
+        event.unwrap_or_else(|e| panic!("{e}\n{urdf}"));
+    }
+    assert_eq!(urdf_rs::read_from_string(&urdf).unwrap().name, "UR5 &amp; <\"ü\"> --- x\nsecond");
+    let yaml = std::fs::read_to_string(dir.join("m.yaml")).unwrap();
+    let docs = yaml_rust2::YamlLoader::load_from_str(&yaml).unwrap_or_else(|e| panic!("{e}\n{yaml}"));
+    assert_eq!(docs.len(), 1);
+    assert_eq!(docs[0].as_hash().unwrap().len(), 1, "{yaml}");
+    assert!(docs[0]["kinematics"]["shoulder"]["z"].as_f64().is_some_and(|z| (z - 0.089159).abs() < 0.01), "{yaml}");
+    // The URDF imports as a model file's chain (cbd's own reader) too.
+    write(
+        &dir,
+        "back.toml",
+        "length_unit = \"m\"\nangle_unit = \"rad\"\n[urdf]\npath = \"m.urdf\"\nbase_link = \"base_link\"\ntip_link = \"tool0\"\n",
+    );
+    let back = cbd_trainer::data::model_file::load_model_file(dir.join("back.toml")).unwrap();
+    assert_eq!(back.joint_names.len(), 6);
+
+    // A base registered on a tracker's data (3 m away, turned 30°).
+    let tracked = "tracker.csv";
+    succeeds(&cbd(
+        &dir,
+        &[
+            "simulate",
+            "--robot",
+            "six",
+            "--sampling",
+            "uniform",
+            "--count",
+            "200",
+            "--seed",
+            "2",
+            "--tracker-frame",
+            "3000,-2000,1000;1,1,0,30",
+            "--out",
+            tracked,
+        ],
+    ));
+    let registered = write(
+        &dir,
+        "registered.toml",
+        std::fs::read_to_string(ur5_model())
+            .unwrap()
+            .replace("base = { translation = [0, 0, 0], rpy = [0, 0, 0] }", "base = { register = true }"),
+    );
+    succeeds(&cbd(&dir, &["fit", "--quiet", "--dh-first", "--model", &registered, "--data", tracked, "--out", "r.blob"]));
+    let out = cbd(
+        &dir,
+        &["export", "--model", &registered, "--blob", "r.blob", "--urdf", "r.urdf", "--ur-kinematics", "r.yaml", "--data", tracked],
+    );
+    succeeds(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let tcp = stdout.lines().find(|l| l.contains("TCP in tool0")).unwrap();
+    let z: f64 = tcp.split("xyz [").nth(1).unwrap().split(']').next().unwrap().split(", ").nth(2).unwrap().parse().unwrap();
+    assert!((z - 0.031).abs() < 0.002, "{tcp}");
+    let origins = origins(&std::fs::read_to_string(dir.join("r.urdf")).unwrap());
+    let base = origins.iter().find(|(n, _)| n == "base_joint").unwrap().1;
+    assert!((base[0] - 3.0).abs() < 0.01 && (base[1] + 2.0).abs() < 0.01, "the registered frame: {base:?}");
+    for (joint, xyz) in origins.iter().filter(|(n, _)| n != "base_joint") {
+        let length = xyz.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(length < 0.5, "{joint} slid {length} m: {origins:?}");
+    }
+}
