@@ -307,3 +307,77 @@ fn export_writes_well_formed_files_in_the_right_frame() {
         assert!(length < 0.5, "{joint} slid {length} m: {origins:?}");
     }
 }
+
+/// Issue 51 classes 3 and 6: one bound for σ wherever it is read (flag, blob), refused with the
+/// field and the value as written; values near a bound echoed exactly; a ratio far from 1 printed
+/// readably; "not finite" only for what is not; a header's invisible character named.
+#[test]
+fn numbers_are_bounded_once_and_echoed_as_written() {
+    let dir = scratch("rel5-numbers");
+    write(&dir, "rr.toml", PLANAR_RR_MODEL);
+    rr_grid(&dir, "train.csv", 8);
+    // σ from a blob: 1e300 and a subnormal refused, naming the blob and the field.
+    succeeds(&cbd(&dir, &["fit", "--quiet", "--model", "rr.toml", "--data", "train.csv", "--out", "rr.blob"]));
+    let blob = std::fs::read(dir.join("rr.blob")).unwrap();
+    let sigma = cbd_protocol::decode(&blob).unwrap().noise_sigma.expect("a format-7 blob records its σ");
+    for (bad, shown) in [(1e300, "1e300"), (4e-320, "4e-320")] {
+        write(&dir, "bad.blob", reframe(&blob, |p| replace_f64(p, sigma, bad, 0)));
+        fails_with(
+            &cbd(&dir, &["eval", "--model", "rr.toml", "--blob", "bad.blob", "--data", "train.csv"]),
+            &["bad.blob: noise_sigma must be a number in [1e-100, 1e100], got ", shown],
+        );
+    }
+    // σ from a flag: the same bound; within it, the figures stay readable.
+    fails_with(
+        &cbd(&dir, &["fit", "--model", "rr.toml", "--data", "train.csv", "--out", "x.blob", "--sigma", "1e-300"]),
+        &["--sigma must be a number in [1e-100, 1e100], got 1e-300"],
+    );
+    fails_with(
+        &cbd(&dir, &["fit", "--model", "rr.toml", "--data", "train.csv", "--out", "x.blob", "--sigma", "1e30"]),
+        &["--sigma 1e30 is over 1000 × the spread of train.csv's positions"],
+    );
+    for sigma in ["1e-30", "100"] {
+        let out = cbd(&dir, &["fit", "--quiet", "--model", "rr.toml", "--data", "train.csv", "--out", "s.blob", "--sigma", sigma]);
+        let err = succeeds(&out) + &String::from_utf8_lossy(&out.stdout);
+        let line = err.lines().find(|l| l.contains("× floor")).unwrap_or_else(|| panic!("{err}"));
+        let longest = line.split(|c: char| !c.is_ascii_digit()).map(str::len).max().unwrap_or(0);
+        assert!(longest <= 6 && !line.contains(" 0.00 ×") && !line.contains("inf"), "{line}");
+    }
+    // A value next to an accepted one is echoed as written, never as the accepted one.
+    fails_with(
+        &cbd(&dir, &["simulate", "--grid", "4", "--out", "e.csv", "--effect", "encoder_scale:joint=1,scale=0.99999999999999999999"]),
+        &["scale = 1: an encoder scale error must lie within (-1, 1)"],
+    );
+    fails_with(
+        &cbd(&dir, &["simulate", "--grid", "4", "--out", "e.csv", "--effect", "encoder_scale:joint=1,scale=-1.0000000000000002"]),
+        &["scale = -1.0000000000000002:"],
+    );
+    // Finite but beyond the bound: said so, not "not finite".
+    let err = fails_with(
+        &cbd(
+            &dir,
+            &[
+                "simulate",
+                "--robot",
+                "six",
+                "--sampling",
+                "uniform",
+                "--count",
+                "20",
+                "--out",
+                "t.csv",
+                "--tracker-frame",
+                "1e300,0,0;0,0,1,30",
+            ],
+        ),
+        &["1e300 is beyond ±1e100"],
+    );
+    assert!(!err.contains("finite"), "{err}");
+    // A header with a zero-width space after q1.
+    let text = std::fs::read_to_string(dir.join("train.csv")).unwrap().replacen("q1", "q1\u{200b}", 1);
+    write(&dir, "zw.csv", text);
+    fails_with(
+        &cbd(&dir, &["eval", "--model", "rr.toml", "--blob", "rr.blob", "--data", "zw.csv"]),
+        &["zw.csv", "header column 1 is q1\\u{200b}", "invisible character U+200B"],
+    );
+}
