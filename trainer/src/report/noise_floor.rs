@@ -87,6 +87,19 @@ impl FloorVerdict {
         }
     }
 
+    /// Writes the verdict into a JSON row: `floor_ratio` and `at_floor`, or — for a figure that is
+    /// not a number (a failed method) — both `null` and `"failed": true`: no verdict on it.
+    pub fn write_json(&self, row: &mut serde_json::Value) {
+        if self.ratio.is_finite() {
+            row["floor_ratio"] = serde_json::json!(self.ratio);
+            row["at_floor"] = serde_json::json!(self.at_floor);
+        } else {
+            row["floor_ratio"] = serde_json::Value::Null;
+            row["at_floor"] = serde_json::Value::Null;
+            row["failed"] = serde_json::json!(true);
+        }
+    }
+
     /// A short table cell: "1.04 =" (at the floor) / "12.10 >" (above it); "failed" for a figure
     /// that is not a number (a method that failed): no verdict on it.
     pub fn cell(&self) -> String {
@@ -143,6 +156,9 @@ mod tests {
         assert_eq!(NoiseFloor::new(1.0, 3, "test").verdict(1.5957691216057308, 100).cell(), "1.00 =");
         let failed = floor.verdict(f64::NAN, 100);
         assert_eq!(failed.cell(), "failed");
+        let mut row = serde_json::json!({"mean": f64::NAN});
+        failed.write_json(&mut row);
+        assert_eq!(row, serde_json::json!({"mean": null, "floor_ratio": null, "at_floor": null, "failed": true}));
         assert!(failed.describe().contains("no verdict") && !failed.describe().contains('>'), "{}", failed.describe());
     }
 }
