@@ -86,7 +86,11 @@ def test_bad_queries_raise_cbd_errors(ur5_fit):
         (lambda: model.compensate(np.zeros((4, 2))), "targets must be a float64 numpy array of shape (n, 3)"),
         (lambda: model.compensate(np.zeros((4, 3)), seeds=np.zeros((3, 6))), "targets has 4 rows and seeds 3"),
         (lambda: model.compensate(np.full((1, 3), np.nan)), "targets row 0:"),
-        (lambda: model.compensate(np.zeros((1, 3)), iterations=0), "iterations must be at least 1"),
+        (lambda: model.compensate(np.zeros((1, 3)), iterations=0), "iterations must be between 1 and 64"),
+        # Issue 51 class 7: the CLI's bound, and a negative or huge int named, not an OverflowError.
+        (lambda: model.compensate(np.zeros((1, 3)), iterations=10**8), "iterations must be between 1 and 64 (as `cbd compensate --iterations`), got 100000000"),
+        (lambda: model.compensate(np.zeros((1, 3)), iterations=-3), "iterations must be between 1 and 64 (as `cbd compensate --iterations`), got -3"),
+        (lambda: model.evaluate(q, point=-1), "point -1: the model has 1 tool point(s)"),
     ]
     for call, words in cases:
         with pytest.raises(cbd.CbdError) as e:
