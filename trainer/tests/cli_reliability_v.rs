@@ -58,6 +58,8 @@ fn leaves_outputs_alone(dir: &Path, case: &Case) {
     let out = cbd(dir, &args);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{}: should fail late; stderr:\n{err}", case.what);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(!stdout.contains("written to"), "{}: a line claims a file the failure did not write:\n{stdout}", case.what);
     assert!(!err.contains("panicked"), "{}: {err}", case.what);
     let after = tree(dir);
     for (name, bytes) in &before {

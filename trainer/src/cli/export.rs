@@ -50,6 +50,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         "Joint zero offsets are folded into the joint origins. The blob's flows (and any physical effects)".into(),
         "are not in this file: for its full accuracy evaluate or compensate with the blob (runtime, cbd compensate).".into(),
     ];
+    let mut report = Vec::new();
     if let Some(out) = &args.urdf {
         let (text, what) = match &file.urdf {
             Some(source) => {
@@ -76,7 +77,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
             }
         };
         crate::cli::write_atomically(out, text.as_bytes())?;
-        outln!("URDF written to {}: {what}", out.display());
+        report.push(format!("URDF written to {}: {what}", out.display()));
     }
     if let Some(out) = &args.ur_kinematics {
         let (frames, root) = frames_and_root(&file, &calibrated, to_metres)?;
@@ -84,8 +85,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
         crate::cli::write_atomically(out, k.text.as_bytes())?;
         let [x, y, z] = k.tcp.translation();
         let [r, p, yaw] = crate::nominal::export::rpy_of(&k.tcp.rotation());
-        outln!("UR kinematics written to {} (hash {})", out.display(), k.hash);
-        outln!("  TCP in tool0 (the measured tool point: set it as the tool): xyz [{x:.6}, {y:.6}, {z:.6}] m, rpy [{r:.6}, {p:.6}, {yaw:.6}] rad");
+        report.push(format!("UR kinematics written to {} (hash {})", out.display(), k.hash));
+        report.push(format!(
+            "  TCP in tool0 (the measured tool point: set it as the tool): xyz [{x:.6}, {y:.6}, {z:.6}] m, rpy [{r:.6}, {p:.6}, {yaw:.6}] rad"
+        ));
     }
     if model.nominal.effects() != &cbd_protocol::Effects::NONE {
         errln!("note: the blob's physical effects (gravity compliance, transmission, …) are not in the exported geometry; the blob carries them");
@@ -94,7 +97,11 @@ pub fn run(args: ExportArgs) -> Result<()> {
         errln!("note: the base was registered on the data (a tracker's frame): the exported base (URDF base_joint, the kinematics file's first origin) is that frame");
     }
     if let Some(path) = &args.data {
-        outln!("{}", geometry_alone(&file, &calibrated, &blob, path)?);
+        report.push(geometry_alone(&file, &calibrated, &blob, path)?);
+    }
+    // Said once everything is done: a later failure (--data) writes no file, so no line claims one.
+    for line in report {
+        outln!("{line}");
     }
     Ok(())
 }
