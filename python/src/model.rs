@@ -103,11 +103,11 @@ impl Model {
     /// array, bit for bit what the runtime (and the C library, the firmware) computes. With
     /// `jacobian=True`, `(positions, jacobians)`, the exact Jacobians as (n, task_dim, joints).
     #[pyo3(signature = (q, jacobian=false, point=0))]
-    fn evaluate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool, point: usize) -> PyResult<Bound<'py, PyAny>> {
+    fn evaluate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool, point: i64) -> PyResult<Bound<'py, PyAny>> {
         let q = self.queries("q", q, self.task_dim * (1 + if jacobian { self.n_joints } else { 0 }))?;
-        if point >= self.tool_points {
-            return Err(cbd_error(format!("point {point}: the model has {} tool point(s)", self.tool_points)));
-        }
+        let Some(point) = usize::try_from(point).ok().filter(|p| *p < self.tool_points) else {
+            return Err(cbd_error(format!("point {point}: the model has {} tool point(s) (point is 0-based)", self.tool_points)));
+        };
         let (n, m, rows) = (self.n_joints, self.task_dim, q.rows);
         let (positions, jacobians) = py
             .detach(|| {
@@ -180,8 +180,14 @@ impl Model {
         py: Python<'py>,
         targets: &Bound<'py, PyAny>,
         seeds: Option<&Bound<'py, PyAny>>,
-        iterations: usize,
+        iterations: i64,
     ) -> PyResult<Bound<'py, PyTuple>> {
+        // The CLI's bound (`cbd compensate --iterations`), checked before any work; a negative or
+        // huge int is this error too, never an OverflowError without the argument's name.
+        let max = cbd_trainer::cli::compensate::MAX_ITERATIONS;
+        let Some(iterations) = usize::try_from(iterations).ok().filter(|k| (1..=max).contains(k)) else {
+            return Err(cbd_error(format!("iterations must be between 1 and {max} (as `cbd compensate --iterations`), got {iterations}")));
+        };
         // Per target: its command and the compensation's work rows (a few of the joints' size), a flag.
         let answer = 8 * (4 * self.n_joints + self.task_dim) + 32;
         let t = matrix("targets", targets, self.task_dim, "positions in the model's length unit", answer)?;
@@ -190,9 +196,6 @@ impl Model {
             if s.rows != t.rows {
                 return Err(cbd_error(format!("targets has {} rows and seeds {}: one seed per target", t.rows, s.rows)));
             }
-        }
-        if iterations == 0 {
-            return Err(cbd_error("iterations must be at least 1"));
         }
         let (targets, seeds) = (t.to_vecs(), s.map(|s| s.to_vecs()));
         let rows = py

@@ -38,7 +38,7 @@ FIT_CASES = [
     ("no rows", lambda q, y: (q[:0], y[:0]), {}, ["0 data rows"]),
     ("unknown option", lambda q, y: (q, y), {"sigmaa": 1.0}, ["unexpected argument '--sigmaa'", "'--sigma'"]),
     ("option given as an argument", lambda q, y: (q, y), {"out": "x.blob"}, ["fit(): `out` is not an option here"]),
-    ("negative sigma", lambda q, y: (q, y), {"sigma": -1.0}, ["--sigma must be a number in (0, 1e100], got -1"]),
+    ("negative sigma", lambda q, y: (q, y), {"sigma": -1.0}, ["--sigma must be a number in [1e-100, 1e100], got -1"]),
     ("bad integrator", lambda q, y: (q, y), {"integrator": "leapfrog"}, ["unknown integrator `leapfrog`"]),
     ("bad number", lambda q, y: (q, y), {"max_rows": "many"}, ["invalid value 'many' for '--max-rows"]),
     ("max_rows too small", lambda q, y: (q, y), {"max_rows": 1}, ["--max-rows must be at least 2"]),
@@ -86,7 +86,11 @@ def test_bad_queries_raise_cbd_errors(ur5_fit):
         (lambda: model.compensate(np.zeros((4, 2))), "targets must be a float64 numpy array of shape (n, 3)"),
         (lambda: model.compensate(np.zeros((4, 3)), seeds=np.zeros((3, 6))), "targets has 4 rows and seeds 3"),
         (lambda: model.compensate(np.full((1, 3), np.nan)), "targets row 0:"),
-        (lambda: model.compensate(np.zeros((1, 3)), iterations=0), "iterations must be at least 1"),
+        (lambda: model.compensate(np.zeros((1, 3)), iterations=0), "iterations must be between 1 and 64"),
+        # Issue 51 class 7: the CLI's bound, and a negative or huge int named, not an OverflowError.
+        (lambda: model.compensate(np.zeros((1, 3)), iterations=10**8), "iterations must be between 1 and 64 (as `cbd compensate --iterations`), got 100000000"),
+        (lambda: model.compensate(np.zeros((1, 3)), iterations=-3), "iterations must be between 1 and 64 (as `cbd compensate --iterations`), got -3"),
+        (lambda: model.evaluate(q, point=-1), "point -1: the model has 1 tool point(s)"),
     ]
     for call, words in cases:
         with pytest.raises(cbd.CbdError) as e:

@@ -151,7 +151,7 @@ pub fn excerpt(text: &str) -> String {
 /// [`excerpt`] with room for `chars` characters (a parser's message that quotes the file).
 pub fn excerpt_of(text: &str, chars: usize) -> String {
     let escape = |c: char| -> String {
-        if c.is_control() {
+        if c.is_control() || invisible(c) {
             c.escape_default().collect()
         } else {
             c.to_string()
@@ -218,6 +218,29 @@ mod tests {
     }
 }
 
+/// A character that shows as nothing (or moves text) where it is printed: zero-width spaces and
+/// joiners, the soft hyphen, bidirectional marks and the byte-order mark. A name holding one looks
+/// like another name; messages write it as its escape (`q1\u{200b}`).
+pub fn invisible(c: char) -> bool {
+    matches!(c, '\u{ad}' | '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2060}'..='\u{2064}' | '\u{2066}'..='\u{2069}' | '\u{feff}')
+}
+
+/// A refused value echoed as it reads: the shortest text that parses back to exactly `v`, so a
+/// value next to an accepted one (`-1.0000000000000002` for a sign) never prints as the accepted
+/// one (`-1`). Short values as [`number`] prints them.
+pub fn as_written(v: f64) -> String {
+    let short = number(v);
+    if short.parse::<f64>().ok() == Some(v) || !v.is_finite() {
+        return short;
+    }
+    let plain = format!("{v}");
+    if plain.len() <= 24 {
+        plain
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// A number as a message prints it: short — as written when that is short (`0.5`, `360`,
 /// `1e300`), else in scientific form with five significant digits (`3.6e101`, `3.3333e-1`); `{v}`
 /// of 1e300 is 301 digits. NaN and infinities by name.
@@ -240,6 +263,13 @@ mod number_tests {
     #[test]
     fn numbers_in_messages_are_short() {
         assert_eq!(super::number(1e300), "1e300");
+        // Issue 51: a refused value is never echoed as an accepted one.
+        assert_eq!(super::as_written(-1.0000000000000002), "-1.0000000000000002");
+        assert_eq!(super::as_written(0.99999999999), "0.99999999999");
+        assert_eq!(super::as_written(1.000000000000001e300), "1.000000000000001e300");
+        assert_eq!(super::as_written(-1.0), "-1");
+        assert_eq!(super::as_written(1e300), "1e300");
+        assert_eq!(super::excerpt("q1\u{200b}"), "q1\\u{200b}");
         assert_eq!(super::number(-2.5e-300), "-2.5e-300");
         assert_eq!(super::number(0.5), "0.5");
         assert_eq!(super::number(360.0), "360");

@@ -50,6 +50,10 @@ pub fn is_stdout(path: &Path) -> bool {
 /// so an interrupted write never leaves a truncated file at `path`. Errors name `path`. The rename
 /// would replace whatever is at `path` (a symlink, a FIFO, a device node), so only a regular file
 /// or a new path is accepted; `-` writes to standard output.
+///
+/// Within [`with_staged_outputs`] (every `cbd` command) the file is only staged: written and synced
+/// beside `path`, and renamed over it when the command succeeds; a command that fails later leaves
+/// whatever was at `path` as it was.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
     if is_stdout(path) {
@@ -61,13 +65,37 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = output_dir(path);
     let name = path.file_name().ok_or_else(|| Error::Path { path: path.to_path_buf(), reason: "not a file path".into() })?;
     let tmp = temporary_name(dir, name);
-    let result = write_unnamed(dir, &tmp, bytes).unwrap_or_else(|| write_named(&tmp, bytes)).and_then(|()| std::fs::rename(&tmp, path));
+    if STAGED.with(|s| s.borrow().is_some()) {
+        let staged = match unnamed_file(dir, bytes) {
+            Some(Ok(file)) => Staged { path: path.to_path_buf(), tmp, unnamed: Some(file) },
+            Some(Err(e)) => return Err(Error::io(path, e)),
+            None => match write_named(&tmp, bytes) {
+                Ok(()) => Staged { path: path.to_path_buf(), tmp, unnamed: None },
+                Err(e) => {
+                    let _ = std::fs::remove_file(&tmp);
+                    return Err(Error::io(path, e));
+                }
+            },
+        };
+        STAGED.with(|s| {
+            let mut s = s.borrow_mut();
+            let outputs = &mut s.as_mut().expect("staging checked above").files;
+            // A second write of the same output replaces the first.
+            if let Some(k) = outputs.iter().position(|o| same_output(&o.path, path)) {
+                outputs.remove(k).discard();
+            }
+            outputs.push(staged);
+        });
+        return Ok(());
+    }
+    let result = match unnamed_file(dir, bytes) {
+        Some(file) => file.and_then(|f| link_unnamed(&f, &tmp)),
+        None => write_named(&tmp, bytes),
+    }
+    .and_then(|()| std::fs::rename(&tmp, path));
     match result {
         Ok(()) => {
-            // Make the rename itself durable where the platform allows.
-            if let Ok(d) = std::fs::File::open(dir) {
-                let _ = d.sync_all();
-            }
+            sync_dir(dir);
             Ok(())
         }
         Err(e) => {
@@ -75,6 +103,154 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
             Err(Error::io(path, e))
         }
     }
+}
+
+/// Makes a rename in `dir` durable where the platform allows.
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
+/// An output written and synced but not yet at its path ([`write_atomically`] within
+/// [`with_staged_outputs`]).
+struct Staged {
+    path: PathBuf,
+    /// The hidden name beside `path` the file takes on its way there.
+    tmp: PathBuf,
+    /// The unnamed file (Linux `O_TMPFILE`) holding the bytes, or `None` when they are at `tmp`.
+    unnamed: Option<std::fs::File>,
+}
+
+impl Staged {
+    /// Puts the file at its path.
+    fn commit(&self) -> std::io::Result<()> {
+        if let Some(f) = &self.unnamed {
+            link_unnamed(f, &self.tmp)?;
+        }
+        std::fs::rename(&self.tmp, &self.path).inspect_err(|_| {
+            let _ = std::fs::remove_file(&self.tmp);
+        })
+    }
+
+    /// Drops the file: nothing at `path` changes.
+    fn discard(self) {
+        if self.unnamed.is_none() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+
+    /// The staged bytes.
+    fn read(&self) -> std::io::Result<Vec<u8>> {
+        match &self.unnamed {
+            Some(f) => {
+                use std::io::{Read, Seek};
+                let mut f = f;
+                f.seek(std::io::SeekFrom::Start(0))?;
+                let mut bytes = Vec::new();
+                f.read_to_end(&mut bytes)?;
+                Ok(bytes)
+            }
+            None => std::fs::read(&self.tmp),
+        }
+    }
+}
+
+/// What a command has written so far ([`with_staged_outputs`]).
+#[derive(Default)]
+struct Outputs {
+    files: Vec<Staged>,
+    /// Directories made for the outputs (`--plots DIR`), outermost first: removed again, when
+    /// empty, if the command fails.
+    dirs: Vec<PathBuf>,
+}
+
+std::thread_local! {
+    /// The outputs of the command running on this thread, while one runs.
+    static STAGED: std::cell::RefCell<Option<Outputs>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `command` with its outputs staged: every file [`write_atomically`] writes (standard output
+/// aside) is held, written and synced beside its path, until `command` returns; then all are
+/// renamed into place if it succeeded, or dropped if it failed (or panicked), so that a failing
+/// command leaves every output path as it found it. Nested calls join the outer one.
+pub fn with_staged_outputs<R>(command: impl FnOnce() -> Result<R>) -> Result<R> {
+    if STAGED.with(|s| s.borrow().is_some()) {
+        return command();
+    }
+    /// Drops what is staged if `command` unwinds.
+    struct Guard;
+    impl Drop for Guard {
+        fn drop(&mut self) {
+            if let Some(outputs) = STAGED.with(|s| s.borrow_mut().take()) {
+                discard(outputs);
+            }
+        }
+    }
+    STAGED.with(|s| *s.borrow_mut() = Some(Outputs::default()));
+    let guard = Guard;
+    let result = command();
+    let outputs = STAGED.with(|s| s.borrow_mut().take()).unwrap_or_default();
+    drop(guard);
+    match result {
+        Ok(r) => commit(outputs).map(|()| r),
+        Err(e) => {
+            discard(outputs);
+            Err(e)
+        }
+    }
+}
+
+/// Renames every staged file into place, once each path is found still fit to take it.
+fn commit(outputs: Outputs) -> Result<()> {
+    if let Some(e) = outputs.files.iter().find_map(|o| check_existing_output(&o.path).err()) {
+        discard(outputs);
+        return Err(e);
+    }
+    let mut files = outputs.files.into_iter();
+    for output in files.by_ref() {
+        if let Err(e) = output.commit() {
+            files.for_each(Staged::discard);
+            return Err(Error::io(&output.path, e));
+        }
+        sync_dir(output_dir(&output.path));
+    }
+    Ok(())
+}
+
+fn discard(outputs: Outputs) {
+    outputs.files.into_iter().for_each(Staged::discard);
+    for dir in outputs.dirs.iter().rev() {
+        let _ = std::fs::remove_dir(dir);
+    }
+}
+
+/// The bytes a command has written to `path` so far: the staged file's
+/// ([`with_staged_outputs`]), else what is on disk.
+pub fn read_output(path: &Path) -> Result<Vec<u8>> {
+    let staged = STAGED.with(|s| s.borrow().as_ref().and_then(|o| o.files.iter().find(|f| same_output(&f.path, path)).map(Staged::read)));
+    match staged {
+        Some(bytes) => bytes.map_err(|e| Error::io(path, e)),
+        None => std::fs::read(path).map_err(|e| Error::io(path, e)),
+    }
+}
+
+/// Makes the directory `dir` (and its missing parents) for a command's outputs; within
+/// [`with_staged_outputs`], the directories made are removed again (when empty) if it fails.
+pub fn create_output_dir(dir: &Path) -> Result<()> {
+    let mut missing = Vec::new();
+    let mut at = Some(dir);
+    while let Some(d) = at.filter(|d| !d.as_os_str().is_empty() && !d.exists()) {
+        missing.push(d.to_path_buf());
+        at = d.parent();
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    STAGED.with(|s| {
+        if let Some(o) = s.borrow_mut().as_mut() {
+            o.dirs.extend(missing.into_iter().rev());
+        }
+    });
+    Ok(())
 }
 
 /// A hidden name beside the output, unique to this process and write.
@@ -93,34 +269,42 @@ fn write_named(tmp: &Path, bytes: &[u8]) -> std::io::Result<()> {
     f.sync_all()
 }
 
-/// Writes and syncs `bytes` in an unnamed file of `dir` (Linux `O_TMPFILE`) and only then gives it
-/// the name `tmp`: a process killed while writing (a 76 MB simulation takes a while) leaves no
-/// hidden file behind, since a file without a name is freed with the process. `None` where the
-/// kernel or file system has no unnamed files (the caller writes a named one).
+/// Writes and syncs `bytes` in an unnamed file of `dir` (Linux `O_TMPFILE`), named later
+/// ([`link_unnamed`]): a process killed while writing (a 76 MB simulation takes a while) or before
+/// its command ends leaves no hidden file behind, since a file without a name is freed with the
+/// process. `None` where the kernel or file system has no unnamed files (the caller writes a named one).
 #[cfg(target_os = "linux")]
-fn write_unnamed(dir: &Path, tmp: &Path, bytes: &[u8]) -> Option<std::io::Result<()>> {
+fn unnamed_file(dir: &Path, bytes: &[u8]) -> Option<std::io::Result<std::fs::File>> {
     use std::io::Write;
-    use std::os::unix::ffi::OsStrExt;
     use std::os::unix::fs::OpenOptionsExt;
+    let mut f = std::fs::OpenOptions::new().read(true).write(true).custom_flags(libc::O_TMPFILE).mode(0o666).open(dir).ok()?;
+    Some(f.write_all(bytes).and_then(|()| f.sync_all()).map(|()| f))
+}
+
+/// Gives the unnamed file `f` the name `tmp`.
+#[cfg(target_os = "linux")]
+fn link_unnamed(f: &std::fs::File, tmp: &Path) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
     use std::os::unix::io::AsRawFd;
-    let mut f = std::fs::OpenOptions::new().write(true).custom_flags(libc::O_TMPFILE).mode(0o666).open(dir).ok()?;
-    let written = f.write_all(bytes).and_then(|()| f.sync_all());
-    Some(written.and_then(|()| {
-        let fd_path = std::ffi::CString::new(format!("/proc/self/fd/{}", f.as_raw_fd())).map_err(std::io::Error::other)?;
-        let name = std::ffi::CString::new(tmp.as_os_str().as_bytes()).map_err(std::io::Error::other)?;
-        // SAFETY: both are NUL-terminated paths that outlive the call; linkat only reads them.
-        let linked = unsafe { libc::linkat(libc::AT_FDCWD, fd_path.as_ptr(), libc::AT_FDCWD, name.as_ptr(), libc::AT_SYMLINK_FOLLOW) };
-        if linked == 0 {
-            Ok(())
-        } else {
-            Err(std::io::Error::last_os_error())
-        }
-    }))
+    let fd_path = std::ffi::CString::new(format!("/proc/self/fd/{}", f.as_raw_fd())).map_err(std::io::Error::other)?;
+    let name = std::ffi::CString::new(tmp.as_os_str().as_bytes()).map_err(std::io::Error::other)?;
+    // SAFETY: both are NUL-terminated paths that outlive the call; linkat only reads them.
+    let linked = unsafe { libc::linkat(libc::AT_FDCWD, fd_path.as_ptr(), libc::AT_FDCWD, name.as_ptr(), libc::AT_SYMLINK_FOLLOW) };
+    if linked == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
 }
 
 #[cfg(not(target_os = "linux"))]
-fn write_unnamed(_: &Path, _: &Path, _: &[u8]) -> Option<std::io::Result<()>> {
+fn unnamed_file(_: &Path, _: &[u8]) -> Option<std::io::Result<std::fs::File>> {
     None
+}
+
+#[cfg(not(target_os = "linux"))]
+fn link_unnamed(_: &std::fs::File, _: &Path) -> std::io::Result<()> {
+    Err(std::io::Error::other("no unnamed files on this platform"))
 }
 
 /// A file the run reads: device and inode (the same file under another name or a hard link is
@@ -227,14 +411,37 @@ fn same_output(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// A directory the run writes figures into (`--plots`): missing (it is created) or a directory.
+/// A directory the run writes figures into (`--plots`), checked before any work: a writable
+/// directory, or missing with a writable directory as its nearest existing ancestor (it is made).
 pub fn check_output_dir(flag: &str, dir: &Path) -> Result<()> {
-    match std::fs::metadata(dir) {
-        Ok(meta) if !meta.is_dir() => Err(Error::Path {
+    let mut existing = dir;
+    while !existing.as_os_str().is_empty() && std::fs::symlink_metadata(existing).is_err() {
+        existing = existing.parent().unwrap_or(Path::new(""));
+    }
+    let existing = if existing.as_os_str().is_empty() { Path::new(".") } else { existing };
+    match std::fs::metadata(existing) {
+        Ok(meta) if meta.is_dir() => {}
+        _ => {
+            let what = if existing == dir { "is not a directory" } else { "cannot be made: a parent is not a directory" };
+            return Err(Error::Path {
+                path: dir.to_path_buf(),
+                reason: format!("{what} ({flag} names the directory figures are written into)"),
+            });
+        }
+    }
+    let probe = existing.join(format!(".cbd-write-probe-{}", std::process::id()));
+    match std::fs::File::create_new(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(Error::Path {
             path: dir.to_path_buf(),
-            reason: format!("is not a directory ({flag} names the directory figures are written into)"),
+            reason: format!(
+                "the directory {} is not writable: {e} ({flag} names the directory figures are written into)",
+                existing.display()
+            ),
         }),
-        _ => Ok(()),
     }
 }
 
@@ -312,6 +519,10 @@ pub fn check_output(path: &Path) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// The inputs noted are the process's: tests that note or write files take turns, and forget
+    /// their inputs when done (a deleted input's inode comes back as another test's file).
+    static FILES: Mutex<()> = Mutex::new(());
+
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("cbd-io-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -323,6 +534,7 @@ mod tests {
     /// only, replaced whole.
     #[test]
     fn atomic_write_leaves_only_the_output() {
+        let _turn = FILES.lock().unwrap_or_else(|e| e.into_inner());
         let dir = scratch("atomic");
         let out = dir.join("a.txt");
         write_atomically(&out, b"first").unwrap();
@@ -336,6 +548,7 @@ mod tests {
     /// Issue 27 item 6: an output that is an input (the same file by any name) or another output is refused.
     #[test]
     fn outputs_are_neither_inputs_nor_each_other() {
+        let _turn = FILES.lock().unwrap_or_else(|e| e.into_inner());
         let dir = scratch("inputs");
         let (data, link) = (dir.join("data.csv"), dir.join("link.csv"));
         std::fs::write(&data, b"q1,q2,x,y\n").unwrap();
@@ -351,6 +564,51 @@ mod tests {
         let dash = Path::new(STDOUT);
         assert!(check_paths(&[], &[("--out", Some(dash)), ("--json", Some(dash))]).is_err());
         assert!(check_paths(&[("--data", Some(&data))], &[("--out", Some(&new)), ("--json", None)]).is_ok());
+        forget_inputs();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Issue 51 class 2: within a command, outputs are staged; a failure (or a panic) leaves every
+    /// path as it was and no file or directory behind; success puts them all in place.
+    #[test]
+    fn staged_outputs_reach_their_paths_only_when_the_command_succeeds() {
+        let _turn = FILES.lock().unwrap_or_else(|e| e.into_inner());
+        let dir = scratch("staged");
+        let (a, b) = (dir.join("a.json"), dir.join("b.urdf"));
+        std::fs::write(&a, b"old a").unwrap();
+        let plots = dir.join("plots").join("inner");
+        let failed: Result<()> = with_staged_outputs(|| {
+            write_atomically(&a, b"new a")?;
+            create_output_dir(&plots)?;
+            write_atomically(&plots.join("f.svg"), b"figure")?;
+            write_atomically(&b, b"first b")?;
+            write_atomically(&b, b"second b")?;
+            assert_eq!(read_output(&b)?, b"second b");
+            assert_eq!(std::fs::read(&a).unwrap(), b"old a", "nothing in place before the end");
+            Err(Error::InvalidInput("late".into()))
+        });
+        assert!(failed.is_err());
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("a.json")]);
+        assert_eq!(std::fs::read(&a).unwrap(), b"old a");
+        let panicked = std::panic::catch_unwind(|| {
+            let _ = with_staged_outputs(|| -> Result<()> {
+                write_atomically(&a, b"new a").unwrap();
+                panic!("a bug")
+            });
+        });
+        assert!(panicked.is_err());
+        assert_eq!(std::fs::read(&a).unwrap(), b"old a");
+        with_staged_outputs(|| {
+            write_atomically(&a, b"new a")?;
+            with_staged_outputs(|| write_atomically(&b, b"b"))?;
+            create_output_dir(&plots)?;
+            write_atomically(&plots.join("f.svg"), b"figure")
+        })
+        .unwrap();
+        assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new a".to_vec(), b"b".to_vec()));
+        assert_eq!(std::fs::read(plots.join("f.svg")).unwrap(), b"figure");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 3, "no temporary file left");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

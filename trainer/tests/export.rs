@@ -364,3 +364,81 @@ fn cbd_export_writes_both_files_and_states_what_they_leave_out() {
         &["rr.toml: a planar arm ([planar]) has no URDF"],
     );
 }
+
+/// Names as a user may write them (issue 51 class 1): XML entities, quotes, dashes, non-ASCII,
+/// white space an attribute would fold.
+const NASTY_NAMES: [&str; 6] = ["a&amp;b", "x \"q\" 'y'", "--->", "ünïcødé ✓", "tab\there", "<joint name=\"z\"/>"];
+
+/// Issue 51 class 1: a URDF whose joints are named with entities (`&amp;`), quotes and non-ASCII
+/// gets every calibrated origin, read back by name — not the nominal one under a "calibrated" line.
+#[test]
+fn urdf_patch_finds_joints_named_with_entities() {
+    let plain = ur_description();
+    let names = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"];
+    let mut text = plain.clone();
+    let mut renamed = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let new = format!("{name}{}", NASTY_NAMES[k]);
+        let escaped = quick_xml::escape::escape(new.as_str()).replace('\t', "&#9;");
+        text = text.replace(&format!("\"{name}\""), &format!("\"{escaped}\""));
+        renamed.push(new);
+    }
+    let robot = parse(&text).unwrap();
+    let nominal = chain_from_urdf(&robot, "world", "tool0", 1000.0).unwrap().chain;
+    let calibrated = cbd_trainer::nominal::dh_parameters::apply_parameters(&nominal, &common::six_joint_geometric_errors(5));
+    let patched = urdf_patch::patch_urdf(&text, "world", "tool0", 1000.0, &calibrated).unwrap();
+    assert_eq!(patched.joints[..6], renamed[..]);
+    // Read back by an independent parser (xml-rs) and by cbd's import: the calibrated chain.
+    let mut origins = 0;
+    for event in xml::reader::EventReader::from_str(&patched.text) {
+        if let xml::reader::XmlEvent::StartElement { name, .. } = event.expect("well-formed XML") {
+            origins += usize::from(name.local_name == "origin");
+        }
+    }
+    assert_eq!(origins, text.matches("<origin").count());
+    assert_urdf_is("patched URDF, entity names", &parse(&patched.text).unwrap(), "world", "tool0", &calibrated, 7);
+}
+
+/// Issue 51 class 1: whatever the names in the comment (file names with `---`, newlines, quotes) and
+/// the robot's name, the written URDF and UR kinematics file parse back (xml-rs, urdf-rs,
+/// yaml-rust2) with the names as given and the comment lines comments only.
+#[test]
+fn written_urdf_and_yaml_parse_back_whatever_the_names() {
+    let chain = calibrated_ur5(3);
+    let joints: Vec<String> = (1..=6).map(|k| format!("q{k}")).collect();
+    let frames = LinkFrames::of_dh_chain(&chain);
+    let mut names: Vec<String> = NASTY_NAMES.iter().map(|s| s.to_string()).collect();
+    names.extend(
+        ["line\nbreak.blob", "cr\rlf\u{2028}sep\u{85}.toml", "-", "ends with -", "a---b--", "kinematics: {x: 1}"].map(String::from),
+    );
+    for name in &names {
+        let comment = vec![format!("Written from {name} (model {name})."), name.clone()];
+        let naming = urdf_write::UrdfNaming { robot: name, joints: &joints, to_metres: 1e-3, limits: &[], comment: &comment };
+        let text = urdf_write::write_urdf(&frames, &Frame::from_transform(&chain.base), &naming);
+        let mut comments = 0;
+        for event in xml::reader::ParserConfig::new().ignore_comments(false).create_reader(text.as_bytes()) {
+            match event.unwrap_or_else(|e| panic!("{name:?}: {e}\n{text}")) {
+                xml::reader::XmlEvent::Comment(_) => comments += 1,
+                xml::reader::XmlEvent::StartElement { name: element, attributes, .. } if element.local_name == "robot" => {
+                    assert_eq!(attributes[0].value, *name, "robot name read back");
+                }
+                _ => {}
+            }
+        }
+        assert_eq!(comments, 2, "{name:?}: {text}");
+        let robot = urdf_rs::read_from_string(&text).unwrap_or_else(|e| panic!("{name:?}: {e}"));
+        assert_eq!(robot.name, *name);
+        assert_urdf_is("written URDF, named", &robot, "base_link", "tool0", &chain, 5);
+
+        let k = ur_kinematics::ur_kinematics(&frames, &Frame::IDENTITY, 1e-3, &comment).unwrap();
+        let docs = yaml_rust2::YamlLoader::load_from_str(&k.text).unwrap_or_else(|e| panic!("{name:?}: {e}\n{}", k.text));
+        assert_eq!(docs.len(), 1, "{name:?}: one document\n{}", k.text);
+        let top = docs[0].as_hash().expect("a mapping");
+        assert_eq!(top.len(), 1, "{name:?}: only `kinematics` at the top\n{}", k.text);
+        assert_eq!(docs[0]["kinematics"]["hash"].as_str(), Some(k.hash.as_str()));
+        assert!(docs[0]["kinematics"]["wrist_3"]["yaw"].as_f64().is_some() || docs[0]["kinematics"]["wrist_3"]["yaw"].as_i64().is_some());
+    }
+    // A name XML cannot hold at all is refused, naming the field.
+    let e = urdf_write::check_name("arm.toml: name", "bell\u{7}").unwrap_err().to_string();
+    assert!(e.contains("arm.toml: name") && e.contains("U+0007"), "{e}");
+}

@@ -75,6 +75,9 @@ pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod> {
     }
 }
 
+/// Largest `--sigma` accepted, relative to the training positions' spread ([`SolverArgs::check_against`]).
+pub const MAX_SIGMA_PER_EXTENT: f64 = 1e3;
+
 impl SolverArgs {
     /// Rejects out-of-range values before any work, naming the flag.
     pub fn validate(&self) -> Result<()> {
@@ -87,8 +90,8 @@ impl SolverArgs {
         ] {
             if let Some(v) = value {
                 // Squares and products of two such values must stay finite (σ², γ |Dk0|², a²).
-                if !(v > 0.0 && v <= 1e100) {
-                    return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {}", crate::error::number(v))));
+                if let Some(refusal) = crate::limits::positive_scale_out_of_bounds(flag, v) {
+                    return Err(Error::InvalidInput(refusal));
                 }
             }
         }
@@ -105,6 +108,30 @@ impl SolverArgs {
         }
         if self.max_iterations == 0 {
             return Err(Error::InvalidInput("--max-iterations must be at least 1".into()));
+        }
+        Ok(())
+    }
+
+    /// `--sigma` against the training rows at `path`: a noise σ over [`MAX_SIGMA_PER_EXTENT`] ×
+    /// the positions' spread (RMS distance from their mean) would swamp every measurement — a σ
+    /// given in another unit — and the fit would fail later with a message about diverging flows.
+    pub fn check_against(&self, data: &crate::data::Measurements, path: &std::path::Path) -> Result<()> {
+        let (Some(sigma), m) = (self.sigma, data.task_dim) else { return Ok(()) };
+        let n = data.len();
+        if n == 0 || m == 0 {
+            return Ok(());
+        }
+        let mean: Vec<f64> = (0..m).map(|c| (0..n).map(|i| data.position(i)[c]).sum::<f64>() / n as f64).collect();
+        let spread = ((0..n).map(|i| data.position(i).iter().zip(&mean).map(|(p, c)| (p - c) * (p - c)).sum::<f64>()).sum::<f64>()
+            / n as f64)
+            .sqrt();
+        if spread > 0.0 && sigma > MAX_SIGMA_PER_EXTENT * spread {
+            return Err(Error::InvalidInput(format!(
+                "--sigma {} is over {MAX_SIGMA_PER_EXTENT} × the spread of {}'s positions (RMS {} from their mean): a noise that size would swamp every measurement; give σ in the data's length unit",
+                crate::error::as_written(sigma),
+                path.display(),
+                crate::error::number(spread)
+            )));
         }
         Ok(())
     }

@@ -3,7 +3,7 @@
 
 use crate::cli::peers::{fitters, PeerContext, PEERS};
 use crate::data::Measurements;
-use crate::evaluation::commanded::{commanded_arm, fit_and_command, CommandedAccuracy};
+use crate::evaluation::commanded::{commanded_arm, fit_and_command, CommandedAccuracy, SimulatedArm};
 use crate::evaluation::compare::{compare_peers, read_compare_files};
 use crate::evaluation::peers::Peer;
 use cbd_protocol::NominalModel;
@@ -63,12 +63,40 @@ fn commanded_table(
     unit: &str,
 ) -> crate::Result<CommandedAccuracy> {
     let arm = commanded_arm(robot, nominal)?;
+    if let Some(note) = not_the_arms_data(robot, &arm, nominal, train) {
+        errln!("warning: {note}");
+    }
     let fitters = fitters(PEERS, context);
     let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
     let command = crate::evaluation::commanded_pose::commander_for(nominal);
     let c = fit_and_command(&arm, nominal, train, &peers, command, 1000, 15)?;
     outln!("{}", c.table(unit));
     Ok(c)
+}
+
+/// Why the training rows were not measured on the simulated arm `robot` (`cbd simulate --robot
+/// robot`), when they were not: that arm's noise-free positions at the rows' joints are no closer
+/// to the measured ones than the nominal model's. The commanded table is then that arm's, not the
+/// data's robot's — said, since its figures would read as the user's robot's.
+fn not_the_arms_data(robot: &str, arm: &SimulatedArm, nominal: &NominalModel, train: &Measurements) -> Option<String> {
+    let m = train.task_dim;
+    let nominal_positions = crate::nominal::positions(nominal, &train.joints, m);
+    let (mut to_arm, mut to_nominal) = (0.0, 0.0);
+    for i in 0..train.len() {
+        let measured = train.position(i);
+        let at = arm.true_position(train.joints(i));
+        to_arm += measured.iter().zip(&at).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+        to_nominal += measured.iter().zip(&nominal_positions[i * m..(i + 1) * m]).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+    }
+    let n = train.len().max(1) as f64;
+    let (to_arm, to_nominal) = ((to_arm / n).sqrt(), (to_nominal / n).sqrt());
+    (to_arm.is_finite() && to_arm > 0.5 * to_nominal).then(|| {
+        format!(
+            "--commanded {robot}: the training rows are {} from the simulated arm `cbd simulate --robot {robot}` measures (RMS at their joints), no closer than the nominal model ({}): they were not measured on that arm, and the commanded table below is that arm's accuracy, not your robot's",
+            crate::error::number(to_arm),
+            crate::error::number(to_nominal)
+        )
+    })
 }
 
 pub fn run(args: CompareArgs) -> crate::Result<()> {
@@ -169,6 +197,25 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
 }
 
 /// The commanded-accuracy table with the peers wired as `cbd compare --commanded` wires them.
+#[cfg(test)]
+mod provenance_tests {
+    use super::*;
+
+    /// Issue 51 class 4: `--commanded six` on rows from another arm is explained; on the arm's own
+    /// rows it is not.
+    #[test]
+    fn rows_from_another_arm_are_noted() {
+        let arm = SimulatedArm::named("six").unwrap();
+        let SimulatedArm::Six(robot) = &arm else { unreachable!() };
+        let own = robot.measure(&crate::simulate::six_joint::random_configurations(40, 3), 4);
+        assert_eq!(not_the_arms_data("six", &arm, &robot.nominal, &own), None);
+        let other = crate::simulate::six_joint::SixJointRobot::ur5_like(9);
+        let foreign = other.measure(&crate::simulate::six_joint::random_configurations(40, 3), 4);
+        let note = not_the_arms_data("six", &arm, &robot.nominal, &foreign).expect("a note");
+        assert!(note.contains("--commanded six: the training rows are") && note.contains("not your robot's"), "{note}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

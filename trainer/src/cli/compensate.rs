@@ -11,6 +11,9 @@ use crate::evaluation::compensation::{compensate_all, compensate_all_poses, Comp
 use cbd_protocol::NominalModel;
 use std::path::{Path, PathBuf};
 
+/// Most Gauss–Newton steps a compensation takes (`--iterations`; the Python package's `iterations`).
+pub const MAX_ITERATIONS: usize = 64;
+
 #[derive(Debug, clap::Args)]
 pub struct CompensateArgs {
     #[command(flatten)]
@@ -134,8 +137,8 @@ pub fn run(args: CompensateArgs) -> Result<()> {
         ],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    if args.iterations == 0 || args.iterations > 64 {
-        return Err(Error::InvalidInput(format!("--iterations must be between 1 and 64, got {}", args.iterations)));
+    if args.iterations == 0 || args.iterations > MAX_ITERATIONS {
+        return Err(Error::InvalidInput(format!("--iterations must be between 1 and {MAX_ITERATIONS}, got {}", args.iterations)));
     }
     if let Some(t) = args.tolerance {
         if !(t > 0.0 && t <= crate::limits::MAX_MAGNITUDE) {

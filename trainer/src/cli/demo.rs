@@ -161,7 +161,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     crate::cli::write_atomically(&args.out, &fit.blob)?;
 
     // The controller's view: load the blob written to disk and evaluate it.
-    let blob = std::fs::read(&args.out).map_err(|e| Error::io(&args.out, e))?;
+    let blob = crate::io::read_output(&args.out)?;
     let calibrated_test = crate::predict::evaluate_blob(&blob, &test.joints)?;
     let calibrated_grid = crate::predict::evaluate_blob(&blob, &train.joints)?;
 

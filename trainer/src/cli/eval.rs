@@ -86,6 +86,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
     let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;
     // The σ the calibration assumed, which the blob records (format 7; older blobs: no floor).
+    if let Some(refusal) = cal.model().noise_sigma.and_then(|sigma| crate::limits::positive_scale_out_of_bounds("noise_sigma", sigma)) {
+        return Err(Error::InvalidInput(format!("{}: {refusal} (the calibration's σ, recorded in the blob)", args.blob.display())));
+    }
     let floor = cal.model().noise_sigma.map(|sigma| NoiseFloor::new(sigma, m, "the calibration's, recorded in the blob"));
     let verdict = |s: &ErrorStats| floor.as_ref().map(|f| f.verdict(s.mean, data.len()));
     outln!(

@@ -50,6 +50,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         "Joint zero offsets are folded into the joint origins. The blob's flows (and any physical effects)".into(),
         "are not in this file: for its full accuracy evaluate or compensate with the blob (runtime, cbd compensate).".into(),
     ];
+    let mut report = Vec::new();
     if let Some(out) = &args.urdf {
         let (text, what) = match &file.urdf {
             Some(source) => {
@@ -57,26 +58,26 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 let original =
                     String::from_utf8(original).map_err(|e| Error::Urdf(format!("{}: not UTF-8 text: {e}", source.path.display())))?;
                 let scale = 1.0 / to_metres;
-                let patched = urdf_patch::patch_urdf(&original, &source.base_link, &source.tip_link, scale, &calibrated)
-                    .context(source.path.display())?;
+                let patched =
+                    urdf_patch::patch_urdf_in_frame(&original, &source.base_link, &source.tip_link, scale, &calibrated, file.register_base)
+                        .context(source.path.display())?;
                 (patched.text, format!("{} with the calibrated origins of {}", source.path.display(), patched.joints.join(", ")))
             }
             None => {
+                let robot = file.name.as_deref().unwrap_or("calibrated");
+                urdf_write::check_name(&format!("{}: name", args.model.display()), robot)?;
+                for (k, name) in file.joint_names.iter().enumerate() {
+                    urdf_write::check_name(&format!("{}: joint {}'s name", args.model.display(), k + 1), name)?;
+                }
                 let limits = file.column_spec().map(|s| s.joint_limits).unwrap_or_default();
-                let naming = urdf_write::UrdfNaming {
-                    robot: file.name.as_deref().unwrap_or("calibrated"),
-                    joints: &file.joint_names,
-                    to_metres,
-                    limits: &limits,
-                    comment: &comment,
-                };
+                let naming = urdf_write::UrdfNaming { robot, joints: &file.joint_names, to_metres, limits: &limits, comment: &comment };
                 let (frames, _) = frames_and_root(&file, &calibrated, to_metres)?;
                 let base = Frame::from_transform(&calibrated.base);
                 (urdf_write::write_urdf(&frames, &base, &naming), format!("{} joints from base_link to tool0", calibrated.joints.len()))
             }
         };
         crate::cli::write_atomically(out, text.as_bytes())?;
-        outln!("URDF written to {}: {what}", out.display());
+        report.push(format!("URDF written to {}: {what}", out.display()));
     }
     if let Some(out) = &args.ur_kinematics {
         let (frames, root) = frames_and_root(&file, &calibrated, to_metres)?;
@@ -84,8 +85,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
         crate::cli::write_atomically(out, k.text.as_bytes())?;
         let [x, y, z] = k.tcp.translation();
         let [r, p, yaw] = crate::nominal::export::rpy_of(&k.tcp.rotation());
-        outln!("UR kinematics written to {} (hash {})", out.display(), k.hash);
-        outln!("  TCP in tool0 (the measured tool point: set it as the tool): xyz [{x:.6}, {y:.6}, {z:.6}] m, rpy [{r:.6}, {p:.6}, {yaw:.6}] rad");
+        report.push(format!("UR kinematics written to {} (hash {})", out.display(), k.hash));
+        report.push(format!(
+            "  TCP in tool0 (the measured tool point: set it as the tool): xyz [{x:.6}, {y:.6}, {z:.6}] m, rpy [{r:.6}, {p:.6}, {yaw:.6}] rad"
+        ));
     }
     if model.nominal.effects() != &cbd_protocol::Effects::NONE {
         errln!("note: the blob's physical effects (gravity compliance, transmission, …) are not in the exported geometry; the blob carries them");
@@ -94,7 +97,11 @@ pub fn run(args: ExportArgs) -> Result<()> {
         errln!("note: the base was registered on the data (a tracker's frame): the exported base (URDF base_joint, the kinematics file's first origin) is that frame");
     }
     if let Some(path) = &args.data {
-        outln!("{}", geometry_alone(&file, &calibrated, &blob, path)?);
+        report.push(geometry_alone(&file, &calibrated, &blob, path)?);
+    }
+    // Said once everything is done: a later failure (--data) writes no file, so no line claims one.
+    for line in report {
+        outln!("{line}");
     }
     Ok(())
 }
@@ -158,14 +165,21 @@ fn no_calibrated_geometry(args: &ExportArgs) -> Error {
 fn frames_and_root(file: &ModelFile, calibrated: &DhChain, to_metres: f64) -> Result<(LinkFrames, Frame)> {
     let Some(source) = &file.urdf else {
         let NominalModel::DhChain(nominal) = &file.nominal else { return Err(Error::Internal("export: a planar model".into())) };
-        let frames = LinkFrames::of_dh_chain(calibrated).slid_toward(&LinkFrames::of_dh_chain(nominal));
+        // Registered (`base = { register = true }`): the nominal in the registered frame, else
+        // each link would slide metres along its axis toward the nominal's unregistered place.
+        let mut reference = nominal.clone();
+        if file.register_base {
+            reference.base = calibrated.base;
+        }
+        let frames = LinkFrames::of_dh_chain(calibrated).slid_toward(&LinkFrames::of_dh_chain(&reference));
         return Ok((frames, Frame::IDENTITY));
     };
     let text = crate::data::read_capped(&source.path, crate::data::MAX_URDF_BYTES, "URDF")?;
     let text = String::from_utf8(text).map_err(|e| Error::Urdf(format!("{}: not UTF-8 text: {e}", source.path.display())))?;
     // The patched URDF read back: its link frames are the ones written, whatever the URDF's layout.
     let patched =
-        urdf_patch::patch_urdf(&text, &source.base_link, &source.tip_link, 1.0 / to_metres, calibrated).context(source.path.display())?;
+        urdf_patch::patch_urdf_in_frame(&text, &source.base_link, &source.tip_link, 1.0 / to_metres, calibrated, file.register_base)
+            .context(source.path.display())?;
     let robot = crate::nominal::urdf::parse(&patched.text).context(source.path.display())?;
     urdf_patch::link_frames(&robot, &source.base_link, &source.tip_link, 1.0 / to_metres).context(source.path.display())
 }
@@ -181,9 +195,20 @@ fn geometry_alone(file: &ModelFile, calibrated: &DhChain, blob: &[u8], path: &st
     let nominal = crate::nominal::positions(&file.nominal, &data.joints, m);
     let [g, f, n] = [&geometric, &full, &nominal].map(|p| ErrorStats::of_positions(p, &data.positions, m).mean);
     let unit = file.length_unit.name();
+    let [g, f, n] = [g, f, n].map(readable);
     Ok(format!(
-        "{} ({} rows), mean error: URDF alone {g:.3} {unit}; with the runtime's correction {f:.3} {unit} (nominal {n:.3} {unit})",
+        "{} ({} rows), mean error: URDF alone {g} {unit}; with the runtime's correction {f} {unit} (nominal {n} {unit})",
         path.display(),
         data.len()
     ))
+}
+
+/// An error as the geometry-alone line prints it: three decimals from 0.01 up (mm data), three
+/// significant digits below (a metre model's 6.04e-5 m, not 0.000 m).
+fn readable(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || v.abs() >= 0.01 {
+        format!("{v:.3}")
+    } else {
+        format!("{v:.2e}")
+    }
 }

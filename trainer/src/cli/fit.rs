@@ -147,6 +147,7 @@ pub fn fit_measurements(
         errln!("warning: {w}");
     }
     let data = evenly_spaced_rows(imported.measurements, args.max_rows);
+    args.solver.check_against(&data, &args.data)?;
     let mut settings = args.solver.settings()?;
     // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
     // the solver checks only if it falls back to the kernel form (against what the workers leave).

@@ -143,7 +143,13 @@ pub fn run(cli: Cli) -> Result<()> {
     crate::workers::run_in_pool(threads, move || dispatch(cli))?
 }
 
+/// Runs one command with its outputs staged (`crate::io::with_staged_outputs`): they reach their
+/// paths only if it succeeds, so a command that fails leaves every output path as it found it.
 fn dispatch(cli: Cli) -> Result<()> {
+    crate::io::with_staged_outputs(|| command(cli))
+}
+
+fn command(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Simulate(args) => simulate::run(args),

@@ -77,8 +77,8 @@ pub fn run(args: PlanArgs) -> Result<()> {
     }
     for (flag, v) in [("--noise", args.noise), ("--prior-error", args.prior_error)] {
         if let Some(v) = v {
-            if !(v > 0.0 && v <= 1e100) {
-                return Err(Error::InvalidInput(format!("{flag} must be a number in (0, 1e100], got {}", crate::error::number(v))));
+            if let Some(refusal) = crate::limits::positive_scale_out_of_bounds(flag, v) {
+                return Err(Error::InvalidInput(refusal));
             }
         }
     }

@@ -81,8 +81,11 @@ pub fn parse_tracker_frame(text: &str) -> Result<crate::nominal::Frame> {
     if t.len() != 3 || r.len() != 4 {
         return Err(bad("3 numbers, then 4"));
     }
-    if t.iter().chain(r).any(|v| !(v.is_finite() && v.abs() <= MAX_MAGNITUDE)) {
-        return Err(bad("every number finite"));
+    if let Some(v) = t.iter().chain(r).find(|v| !v.is_finite()) {
+        return Err(bad(&format!("{v} is not a finite number")));
+    }
+    if let Some(v) = t.iter().chain(r).find(|v| v.abs() > MAX_MAGNITUDE) {
+        return Err(bad(&format!("{} is beyond ±{MAX_MAGNITUDE:e}", crate::error::as_written(*v))));
     }
     let length = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
     if !(length > 0.0 && length.is_finite()) {

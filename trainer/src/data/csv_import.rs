@@ -240,7 +240,24 @@ impl<'a> RowReader<'a> {
             let hits: Vec<usize> = header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
             match hits.as_slice() {
                 [i] => Ok(*i),
-                [] => Err(err.at(Some(1), Some(name), format!("no such column in the header (columns: {})", header_excerpt(header)))),
+                [] => {
+                    // A header name that reads as `name` but holds a character that shows as nothing.
+                    let visible = |h: &str| h.chars().filter(|&c| !crate::error::invisible(c)).collect::<String>();
+                    if let Some((k, h)) = header.iter().enumerate().find(|(_, h)| *h != name && visible(h) == name) {
+                        let c = h.chars().find(|&c| crate::error::invisible(c)).unwrap_or(' ');
+                        return Err(err.at(
+                            Some(1),
+                            Some(name),
+                            format!(
+                                "no such column: header column {} is {} — `{name}` with the invisible character U+{:04X} in it; remove it",
+                                k + 1,
+                                crate::error::excerpt(h),
+                                c as u32
+                            ),
+                        ));
+                    }
+                    Err(err.at(Some(1), Some(name), format!("no such column in the header (columns: {})", header_excerpt(header))))
+                }
                 _ => Err(err.at(Some(1), Some(name), "column name appears more than once in the header".into())),
             }
         };
@@ -515,6 +532,14 @@ mod tests {
             ImportError::Csv { line, column, message, .. } => (line, column, message),
             e => panic!("{e}"),
         }
+    }
+
+    /// Issue 51 class 6: a header name with a character that shows as nothing is named as such.
+    #[test]
+    fn a_header_name_with_an_invisible_character_is_named() {
+        let (line, column, message) = csv_err("z,x,y,s2,q1\u{200b}\n3,1,2,500,180\n");
+        assert_eq!((line, column.as_deref()), (Some(1), Some("q1")));
+        assert!(message.contains("header column 5 is q1\\u{200b}") && message.contains("invisible character U+200B"), "{message}");
     }
 
     #[test]

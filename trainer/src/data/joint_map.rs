@@ -79,7 +79,7 @@ impl JointMap {
                         "scale" => "a finite, non-zero factor within ±1e100",
                         _ => "a finite value within ±1e100",
                     };
-                    return Err((field, format!("{name} = {}: needs {need}", number(v))));
+                    return Err((field, format!("{name} = {}: needs {need}", crate::error::as_written(v))));
                 }
                 out[i] = v;
             }

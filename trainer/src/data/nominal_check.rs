@@ -64,7 +64,9 @@ pub fn nominal_warnings(
             "{}: the nominal model is {rms:.3e} from the measurements (RMS), more than {FAR_FACTOR} times their size {measured_size:.3e}: wrong unit, DH table or columns?",
             file.display()
         ));
-    } else if rms > FAR_FROM_EXTENT * measured_extent {
+    } else if measured_extent > STILL_FRACTION * measured_size && rms > FAR_FROM_EXTENT * measured_extent {
+        // (Rows with no extent — one row, or the same position repeated — have no scale to hold
+        // the distance against: no "inf %" alarm; the size check above still applies.)
         // Suggest only what exists for this model: a planar file has no `register`.
         let remedy = match (registered, nominal) {
             (true, _) => "the base is registered already, so not a frame: wrong DH table, joint columns or joint map?",
@@ -92,6 +94,24 @@ mod tests {
             data.push(&q, &cbd_runtime::kinematics::forward_kinematics(&real, &q).position[..2]);
         }
         (data, (2..18).collect())
+    }
+
+    /// Issue 51 class 4: one row, or rows at one position, have no extent: no "inf %" alarm.
+    #[test]
+    fn rows_without_extent_raise_no_extent_alarm() {
+        let (data, lines) = rr_data();
+        let file = Path::new("t.csv");
+        let sound = NominalModel::planar(&[1.05, 0.48]).unwrap();
+        let mut same = Measurements::new(2, 2);
+        for _ in 0..3 {
+            same.push(data.joints(0), data.position(0));
+        }
+        let mut one = Measurements::new(2, 2);
+        one.push(data.joints(1), data.position(1));
+        for rows in [&same, &one] {
+            let w = nominal_warnings(&sound, rows, &lines, file, false).unwrap();
+            assert!(w.iter().all(|w| !w.contains("inf") && !w.contains("% of their extent")), "{w:?}");
+        }
     }
 
     /// Issue 17 item 6: absurd nominal models (a length of −1e30; lengths [0, 0]) were fitted with

@@ -118,9 +118,14 @@ pub fn text(d: &Diagnosis, model: &NominalModel, units: &Units) -> String {
     out += &format!("  {:<26} {:>11} {:>11} {:>11} {:>11}{floor_header}\n", "model", "mean", "median", "p99", "max");
     for r in &d.table {
         let floor = d.noise_floor.as_ref().map_or(String::new(), |f| format!(" {:>9}", f.verdict(r.stats.mean, r.errors.len()).cell()));
+        let cell = |v: f64| if v.is_finite() { format!("{v:>11.4e}") } else { format!("{:>11}", "failed") };
         out += &format!(
-            "  {:<26} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e}{floor}\n",
-            r.name, r.stats.mean, r.stats.median, r.stats.p99, r.stats.max
+            "  {:<26} {} {} {} {}{floor}\n",
+            r.name,
+            cell(r.stats.mean),
+            cell(r.stats.median),
+            cell(r.stats.p99),
+            cell(r.stats.max)
         );
     }
     if let Some(f) = &d.noise_floor {
@@ -236,9 +241,10 @@ pub fn to_json(d: &Diagnosis, model: &NominalModel, units: &Units) -> Value {
     for r in &d.table {
         let mut row = json!({"mean": r.stats.mean, "median": r.stats.median, "p99": r.stats.p99, "max": r.stats.max});
         if let Some(f) = &d.noise_floor {
-            let v = f.verdict(r.stats.mean, r.errors.len());
-            row["floor_ratio"] = json!(v.ratio);
-            row["at_floor"] = json!(v.at_floor);
+            f.verdict(r.stats.mean, r.errors.len()).write_json(&mut row);
+        }
+        if !r.stats.mean.is_finite() {
+            row["failed"] = json!(true);
         }
         if let Some(pose) = &r.pose {
             row["pose"] = pose.to_json();

@@ -417,11 +417,11 @@ pub fn check_effect_value(name: &str, v: f64) -> Result<(), EffectValueError> {
 /// `name` is the value's key (`compliance`, `scale`).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EffectValueError {
-    #[error("{name} = {value} is not finite")]
+    #[error("{name} = {} is not finite", crate::error::as_written(*value))]
     NotFinite { name: String, value: f64 },
-    #[error("{name} = {value:e} is beyond ±{:e}", crate::limits::MAX_MAGNITUDE)]
+    #[error("{name} = {} is beyond ±{:e}", crate::error::as_written(*value), crate::limits::MAX_MAGNITUDE)]
     TooLarge { name: String, value: f64 },
-    #[error("scale = {scale:e}: an encoder scale error must lie within (-1, 1)")]
+    #[error("scale = {}: an encoder scale error must lie within (-1, 1)", crate::error::as_written(*scale))]
     EncoderScale { scale: f64 },
 }
 

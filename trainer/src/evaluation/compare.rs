@@ -68,9 +68,10 @@ impl Comparison {
                 method["pose"] = pose.to_json();
             }
             if let Some(floor) = &self.noise_floor {
-                let v = floor.verdict(r.stats.mean, r.test_errors.len());
-                method["floor_ratio"] = json!(v.ratio);
-                method["at_floor"] = json!(v.at_floor);
+                floor.verdict(r.stats.mean, r.test_errors.len()).write_json(&mut method);
+            }
+            if !r.stats.mean.is_finite() {
+                method["failed"] = json!(true);
             }
             if self.written_by_fit() == Some(r.name.as_str()) {
                 method["written_by_fit"] = json!(true);
@@ -110,7 +111,16 @@ impl Comparison {
     pub fn table(&self, unit: &str) -> String {
         let errors = self.rows.iter().flat_map(|r| [r.stats.mean, r.stats.median, r.stats.p99, r.stats.max]);
         let scientific = errors.filter(|v| *v != 0.0).any(|v| v.abs() < 0.01);
-        let cell = |v: f64| if scientific { format!("{v:>10.3e}") } else { format!("{v:>10.4}") };
+        // A failed method's figures are not numbers: said so, with no verdict beside them.
+        let cell = |v: f64| {
+            if !v.is_finite() {
+                format!("{:>10}", "failed")
+            } else if scientific {
+                format!("{v:>10.3e}")
+            } else {
+                format!("{v:>10.4}")
+            }
+        };
         let floor_header = if self.noise_floor.is_some() { format!(" {:>8}", "/ floor") } else { String::new() };
         let mut out = format!(
             "{:<8} {:>10} {:>10} {:>10} {:>10} {:>10}{floor_header}  ({unit})\n",
@@ -323,6 +333,16 @@ mod tests {
         assert!(small.contains("1.292e-5") && small.contains("1.083e-1") && !small.contains("0.0000"), "{small}");
         let large = table(vec![row("nominal", 3.25), row("cbd", 0.0876)]);
         assert!(large.contains("3.2500") && large.contains("0.0876"), "{large}");
+        // Issue 51 class 4: a method that failed (NaN figures) shows as failed, with no verdict,
+        // in the table and the JSON.
+        let floor = crate::report::noise_floor::NoiseFloor::new(0.01, 3, "test");
+        let c = Comparison { rows: vec![row("nominal", 3.25), row("krr", f64::NAN)], noise_floor: Some(floor), ..Comparison::default() };
+        let text = c.table("m");
+        let failed = text.lines().find(|l| l.starts_with("krr")).unwrap();
+        assert!(failed.contains("failed") && !failed.contains("NaN") && !failed.contains('>') && !failed.contains('='), "{text}");
+        let json = c.to_json();
+        assert_eq!(json["methods"]["krr"]["failed"], true);
+        assert!(json["methods"]["krr"]["at_floor"].is_null() && json["methods"]["nominal"]["at_floor"] == false, "{json}");
     }
 
     /// Issue 26: a DH fit at its iteration limit said only "200 iterations" in the text output.

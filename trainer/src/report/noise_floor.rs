@@ -78,16 +78,45 @@ impl NoiseFloor {
 impl FloorVerdict {
     /// "at the floor" or "× r above it", with what to do about it.
     pub fn describe(&self) -> String {
-        if self.at_floor {
-            format!("{:.2} × floor: at the noise floor (more data or effects will not help)", self.ratio)
+        if !self.ratio.is_finite() {
+            format!("no ratio to the floor ({}): no verdict", self.ratio)
+        } else if self.at_floor {
+            format!("{} × floor: at the noise floor (more data or effects will not help)", ratio_text(self.ratio))
         } else {
-            format!("{:.2} × floor: structure left (try `cbd diagnose`)", self.ratio)
+            format!("{} × floor: structure left (try `cbd diagnose`)", ratio_text(self.ratio))
         }
     }
 
-    /// A short table cell: "1.04 floor" / "12.1 above".
+    /// Writes the verdict into a JSON row: `floor_ratio` and `at_floor`, or — for a figure that is
+    /// not a number (a failed method) — both `null` and `"failed": true`: no verdict on it.
+    pub fn write_json(&self, row: &mut serde_json::Value) {
+        if self.ratio.is_finite() {
+            row["floor_ratio"] = serde_json::json!(self.ratio);
+            row["at_floor"] = serde_json::json!(self.at_floor);
+        } else {
+            row["floor_ratio"] = serde_json::Value::Null;
+            row["at_floor"] = serde_json::Value::Null;
+            row["failed"] = serde_json::json!(true);
+        }
+    }
+
+    /// A short table cell: "1.04 =" (at the floor) / "12.10 >" (above it); "failed" for a figure
+    /// that is not a number (a method that failed): no verdict on it.
     pub fn cell(&self) -> String {
-        format!("{:.2}{}", self.ratio, if self.at_floor { " =" } else { " >" })
+        if !self.ratio.is_finite() {
+            return "failed".into();
+        }
+        format!("{}{}", ratio_text(self.ratio), if self.at_floor { " =" } else { " >" })
+    }
+}
+
+/// A ratio to the floor as lines and cells print it: two decimals from 0.01 to 10⁶, three
+/// significant digits beyond (`2.67e26`, `1.25e-30`, not 27 digits or `0.00`).
+fn ratio_text(ratio: f64) -> String {
+    if ratio == 0.0 || (0.01..1e6).contains(&ratio.abs()) {
+        format!("{ratio:.2}")
+    } else {
+        format!("{ratio:.2e}")
     }
 }
 
@@ -114,5 +143,22 @@ mod tests {
             let v = floor.verdict_rms(rms, n);
             assert!(v.at_floor && (v.ratio - 1.0).abs() < 5e-3, "m = {m}: RMS ratio {}", v.ratio);
         }
+    }
+
+    /// Issue 51 classes 3 and 4: a ratio far from 1 prints in three significant digits (not 27
+    /// digits, not `0.00`); a ratio that is not a number (a failed method) gets no verdict.
+    #[test]
+    fn ratios_print_readably_and_a_failed_figure_gets_no_verdict() {
+        let floor = NoiseFloor::new(1e-30, 3, "test");
+        let v = floor.verdict(1e-3, 100);
+        assert!(v.describe().starts_with("6.27e26 × floor: structure left"), "{}", v.describe());
+        assert_eq!(NoiseFloor::new(1e30, 3, "test").verdict(1e-3, 100).cell(), "6.27e-34 =");
+        assert_eq!(NoiseFloor::new(1.0, 3, "test").verdict(1.5957691216057308, 100).cell(), "1.00 =");
+        let failed = floor.verdict(f64::NAN, 100);
+        assert_eq!(failed.cell(), "failed");
+        let mut row = serde_json::json!({"mean": f64::NAN});
+        failed.write_json(&mut row);
+        assert_eq!(row, serde_json::json!({"mean": null, "floor_ratio": null, "at_floor": null, "failed": true}));
+        assert!(failed.describe().contains("no verdict") && !failed.describe().contains('>'), "{}", failed.describe());
     }
 }

@@ -127,6 +127,39 @@ pub fn decimal(v: f64) -> String {
     }
 }
 
+/// `text` as one comment line can hold it whatever it is (a file name with a newline, `--`, a
+/// quote, an invisible character): every control character, line or paragraph separator and
+/// byte-order mark is written as its escape (`\n`, `\u{2028}`), so the line never ends early.
+fn one_line(text: &str) -> String {
+    text.chars()
+        .map(|c| match c {
+            c if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{feff}') => c.escape_default().to_string(),
+            c => c.to_string(),
+        })
+        .collect()
+}
+
+/// `<!-- text -->`, whatever `text` holds: one line ([`one_line`]); no `--` inside an XML comment
+/// and no `-` just before its end (each `-` that follows a `-` gets a space before it).
+pub fn xml_comment(text: &str) -> String {
+    let mut body = String::new();
+    for c in one_line(text).chars() {
+        if c == '-' && body.ends_with('-') {
+            body.push(' ');
+        }
+        body.push(c);
+    }
+    if body.ends_with('-') {
+        body.push(' ');
+    }
+    format!("<!-- {body} -->")
+}
+
+/// `# text`, one YAML comment line whatever `text` holds ([`one_line`]).
+pub fn yaml_comment(text: &str) -> String {
+    format!("# {}", one_line(text))
+}
+
 /// Magnitude (metres or radians) below which an exported origin's entry is written as 0: what is
 /// left of a zero after composing frames (1e-16 of their lengths), far below anything physical.
 pub const ROUNDING_ZERO: f64 = 1e-14;

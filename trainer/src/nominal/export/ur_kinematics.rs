@@ -75,7 +75,7 @@ pub fn ur_kinematics(frames: &LinkFrames, root: &Frame, to_metres: f64, comment:
     let hash = format!("cbd_{:08x}", crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(body.as_bytes()));
     let mut text = String::new();
     for line in comment {
-        let _ = writeln!(text, "# {line}");
+        let _ = writeln!(text, "{}", super::yaml_comment(line));
     }
     let _ = writeln!(text, "kinematics:\n{body}  hash: {hash}");
     Ok(UrKinematics { text, segments, tcp, hash })

@@ -22,6 +22,21 @@ pub struct PatchedUrdf {
 /// that chain after calibration (lengths in the model's unit: `length_scale` per metre, as
 /// [`chain_from_urdf`] read it).
 pub fn patch_urdf(text: &str, base_link: &str, tip_link: &str, length_scale: f64, calibrated: &DhChain) -> Result<PatchedUrdf> {
+    patch_urdf_in_frame(text, base_link, tip_link, length_scale, calibrated, false)
+}
+
+/// [`patch_urdf`], `base_registered` when `calibrated`'s base is a frame registered on the data
+/// (`base = { register = true }`: a tracker's, metres from the URDF's base): each link is then
+/// slid toward the nominal link moved into that frame, not toward the URDF's own (which would slide
+/// the links metres along their axes).
+pub fn patch_urdf_in_frame(
+    text: &str,
+    base_link: &str,
+    tip_link: &str,
+    length_scale: f64,
+    calibrated: &DhChain,
+    base_registered: bool,
+) -> Result<PatchedUrdf> {
     let robot = crate::nominal::urdf::parse(text)?;
     let nominal_dh = chain_from_urdf(&robot, base_link, tip_link, length_scale)?.chain;
     let ChainWalk { path, frames: nominal, movable, .. } = walk(&robot, base_link, tip_link, length_scale)?;
@@ -39,7 +54,13 @@ pub fn patch_urdf(text: &str, base_link: &str, tip_link: &str, length_scale: f64
             path[last].name
         )));
     }
-    let frames = LinkFrames::carried_over(&nominal, &nominal_dh, calibrated).slid_toward(&nominal);
+    let reference = if base_registered {
+        let moved = Frame::from_transform(&calibrated.base).compose(&Frame::from_transform(&nominal_dh.base).inverse());
+        LinkFrames { links: nominal.links.iter().map(|l| moved.compose(l)).collect(), ..nominal.clone() }
+    } else {
+        nominal.clone()
+    };
+    let frames = LinkFrames::carried_over(&nominal, &nominal_dh, calibrated).slid_toward(&reference);
     let mut origins: Vec<(String, Frame)> = Vec::new();
     let mut pose = Frame::IDENTITY;
     let mut next = 0;
@@ -63,6 +84,15 @@ pub fn patch_urdf(text: &str, base_link: &str, tip_link: &str, length_scale: f64
         .map(|(name, f)| (name.as_str(), [triple(f.translation(), 1.0 / length_scale), triple(rpy_of(&f.rotation()), 1.0)]))
         .collect();
     let text = rewrite_origins(text, &written)?;
+    // Every joint reported calibrated had its origin rewritten (read back by name).
+    let reread = crate::nominal::urdf::parse(&text)?;
+    for (name, values) in &written {
+        let joint = reread.joints.iter().find(|j| j.name == *name);
+        let got = joint.map(|j| [triple(j.origin.xyz.0, 1.0), triple(j.origin.rpy.0, 1.0)]);
+        if got.as_ref() != Some(values) {
+            return Err(Error::Internal(format!("URDF rewrite: joint '{name}' kept its origin")));
+        }
+    }
     Ok(PatchedUrdf { text, joints: origins.into_iter().map(|(name, _)| name).collect() })
 }
 
@@ -135,8 +165,12 @@ fn rewrite_origins(text: &str, origins: &HashMap<&str, [String; 2]>) -> Result<S
                 }
                 let name = e.name();
                 if name.as_ref() == b"joint" && element_depth == 2 && matches!(event, Event::Start(_)) {
-                    let joint = attribute(e, b"name", text)?.map(|r| &text[r]);
-                    if let Some(values) = joint.and_then(|j| origins.get(j)) {
+                    // The name as the URDF means it: `a&amp;b` is the joint `a&b`.
+                    let raw = attribute(e, b"name", text)?.map(|r| &text[r]);
+                    let joint = raw
+                        .map(|r| quick_xml::escape::unescape(r).map_err(|e| Error::Urdf(format!("joint name {r:?}: {e}"))))
+                        .transpose()?;
+                    if let Some(values) = joint.and_then(|j| origins.get(j.as_ref())) {
                         open = Some((values, element_depth, end, false));
                     }
                 } else if name.as_ref() == b"origin" {

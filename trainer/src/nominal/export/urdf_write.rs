@@ -2,10 +2,10 @@
 //! joint a joint about its own z axis whose origin is the fixed motion between it and the previous
 //! one ([`LinkFrames::origin`]), the θ offsets and the calibrated a, α, d folded into those origins.
 
-use super::{decimal, rpy_of, triple, LinkFrames};
+use super::{decimal, rpy_of, triple, xml_comment, LinkFrames};
+use crate::error::{Error, Result};
 use crate::nominal::Frame;
 use cbd_protocol::JointKind;
-use quick_xml::escape::escape;
 use std::fmt::Write as _;
 
 /// Names and units of a written URDF.
@@ -34,9 +34,9 @@ pub fn write_urdf(frames: &LinkFrames, base: &Frame, naming: &UrdfNaming<'_>) ->
     let n = frames.links.len();
     let mut out = String::from("<?xml version=\"1.0\"?>\n");
     for line in naming.comment {
-        let _ = writeln!(out, "<!-- {} -->", line.replace("--", "- -"));
+        let _ = writeln!(out, "{}", xml_comment(line));
     }
-    let _ = writeln!(out, "<robot name=\"{}\">", escape(naming.robot));
+    let _ = writeln!(out, "<robot name=\"{}\">", attribute(naming.robot));
     out.push_str("  <link name=\"base_link\"/>\n");
     for i in 0..=n {
         let _ = writeln!(out, "  <link name=\"link_{i}\"/>");
@@ -46,7 +46,7 @@ pub fn write_urdf(frames: &LinkFrames, base: &Frame, naming: &UrdfNaming<'_>) ->
     for i in 0..n {
         let origin = frames.origin(i, base);
         let (parent, child) = (format!("link_{i}"), format!("link_{}", i + 1));
-        let name = escape(&naming.joints[i]);
+        let name = attribute(&naming.joints[i]);
         match frames.kinds[i] {
             JointKind::Revolute => joint(&mut out, &name, "continuous", &parent, &child, &origin, naming.to_metres, Some(None)),
             JointKind::Prismatic => {
@@ -60,6 +60,41 @@ pub fn write_urdf(frames: &LinkFrames, base: &Frame, naming: &UrdfNaming<'_>) ->
     joint(&mut out, "tool_joint", "fixed", &format!("link_{n}"), "tool0", &frames.tip_in_last_link(), naming.to_metres, None);
     out.push_str("</robot>\n");
     out
+}
+
+/// `value` as an XML attribute's text: `&`, `<`, `>`, quotes and the white space an attribute would
+/// otherwise turn into spaces (tab, line feed, carriage return) as references, so it reads back as
+/// written. Characters XML cannot hold at all are refused first ([`check_name`]).
+fn attribute(value: &str) -> String {
+    let mut out = String::with_capacity(value.len());
+    for c in value.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            '\t' | '\n' | '\r' => out.push_str(&format!("&#{};", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// A name a URDF can hold (the robot's, a joint's): not empty, and no character XML 1.0 cannot
+/// hold even as a reference (control characters other than tab, line feed and carriage return;
+/// U+FFFE, U+FFFF). `what` names it in the error (`[chain] joint 2's name`).
+pub fn check_name(what: &str, name: &str) -> Result<()> {
+    if name.is_empty() {
+        return Err(Error::InvalidInput(format!("{what} is empty; a URDF needs a name there")));
+    }
+    if let Some(c) = name.chars().find(|&c| (c.is_control() && !matches!(c, '\t' | '\n' | '\r')) || matches!(c, '\u{fffe}' | '\u{ffff}')) {
+        return Err(Error::InvalidInput(format!(
+            "{what} {name:?} holds the character U+{:04X}, which an XML file (a URDF) cannot hold; rename it",
+            c as u32
+        )));
+    }
+    Ok(())
 }
 
 /// One `<joint>`; `axis`: `None` for a fixed joint, `Some(limit)` for a movable one about or along

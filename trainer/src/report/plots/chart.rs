@@ -35,7 +35,7 @@ pub(super) trait Figure {
 /// that holds a figure's name, never over a file the run reads, never half-written.
 pub(super) fn render<F: Figure>(dir: &Path, stem: &str, size: (u32, u32), fig: &F) -> crate::Result<Vec<PathBuf>> {
     ensure_font();
-    std::fs::create_dir_all(dir).map_err(|e| crate::Error::io(dir, e))?;
+    crate::io::create_output_dir(dir)?;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     let png_bytes = render_png(size, fig).map_err(|e| e.context(png.display().to_string()))?;
