@@ -25,6 +25,7 @@ fn ur5_spec(flags: u8) -> ColumnSpec {
         planar_frame: None,
         tool_points: Vec::new(),
         orientation_columns: None,
+        order: cbd_trainer::data::RowOrder::Measured,
         range_hint: cbd_trainer::data::csv_import::RANGE_FROM_MODEL_FILE,
         joint_kinds: kinds,
         angle_unit: if flags & 2 != 0 { AngleUnit::Rad } else { AngleUnit::Deg },
