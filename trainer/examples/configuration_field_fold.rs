@@ -1,8 +1,8 @@
 //! The configuration-dependent task field on one train/test split (issue 49 item 3; docs/DESIGN.md
 //! §16): `cbd fit`'s default pipeline on TRAIN, then the test mean error of the plain model (its blob,
 //! evaluated by the runtime) and of the model with the term (the comparison's hyperparameters, fitted
-//! in closed form and evaluated by the trainer's own kernels: the runtime does not evaluate the term
-//! before branch cfg-runtime lands), with both log evidences and the decision.
+//! in closed form and evaluated by the trainer's own kernels, which the runtime reproduces: a
+//! reference independent of the blob), with both log evidences and the decision.
 //!
 //!     cargo run --release -p cbd-trainer --example configuration_field_fold -- MODEL.toml|- TRAIN.csv TEST.csv
 
