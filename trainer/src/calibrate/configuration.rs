@@ -65,7 +65,7 @@ fn scheme_refused() -> crate::Error {
 /// Whether `fit`'s blob carries its fields in the kernels' own basis (an expansion): its kernel form
 /// cancels, which the configuration field's kernel form would share.
 pub fn needs_expansion(fit: &CbdFit) -> bool {
-    cbd_protocol::decode(&fit.blob).is_ok_and(|m| m.expansion.is_some())
+    fit.report.expansion.is_some()
 }
 
 #[cfg(test)]

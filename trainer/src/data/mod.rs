@@ -57,9 +57,15 @@ pub const ORDER_GAP_POSES: usize = 10;
 /// block widened by the gap on each side — the poses not used for training).
 pub fn blocked_fold(poses: usize, folds: usize, fold: usize) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
     let folds = folds.max(1);
-    let (lo, hi) = (fold * poses / folds, ((fold + 1) * poses / folds).min(poses));
-    let gap = ORDER_GAP_POSES.min((hi - lo) / 4);
-    (lo..hi, lo.saturating_sub(gap)..(hi + gap).min(poses))
+    let held = fold * poses / folds..((fold + 1) * poses / folds).min(poses);
+    (held.clone(), with_gap(held, poses))
+}
+
+/// The held-out block `held` of `poses` measured poses widened by the gap on each side
+/// ([`ORDER_GAP_POSES`], at most a quarter of the block): the poses not used for training.
+pub fn with_gap(held: std::ops::Range<usize>, poses: usize) -> std::ops::Range<usize> {
+    let gap = ORDER_GAP_POSES.min(held.len() / 4);
+    held.start.saturating_sub(gap)..(held.end + gap).min(poses)
 }
 
 impl Measurements {

@@ -402,9 +402,7 @@ pub fn drift_of_chain(chain: &cbd_protocol::NominalModel, data: &Measurements, o
     }
     let rows: Vec<usize> = (0..data.len().min(options.window.saturating_mul(data.points_per_pose.max(1)))).collect();
     let tested = data.subset(&rows);
-    let m = tested.task_dim;
-    let predicted = crate::nominal::positions(chain, &tested.joints, m);
-    let residual: Vec<f64> = tested.positions.iter().zip(&predicted).map(|(y, k)| y - k).collect();
+    let residual = super::residual(chain, &tested);
     let revolute: Vec<bool> = (0..chain.n_joints()).map(|d| chain.is_revolute(d)).collect();
     let fitted = crate::parametric::identifiable::identification_jacobian(chain, &tested.joints).map(|(jac, _)| jac);
     drift_test(&tested, &revolute, &residual, fitted.as_ref().map(|j| j.as_ref()), options)

@@ -284,8 +284,7 @@ pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurem
         }
         crate::data::RowOrder::Measured => {
             let start = rng.gen_range(0..=poses - held);
-            let gap = crate::data::ORDER_GAP_POSES.min(held / 4);
-            let out = start.saturating_sub(gap)..(start + held + gap).min(poses);
+            let out = crate::data::with_gap(start..start + held, poses);
             ((0..poses).filter(|k| !out.contains(k)).collect(), (start..start + held).collect())
         }
     };

@@ -72,16 +72,7 @@ fn the_posterior_mean_is_the_kernel_forms_without_the_cancellation() {
     let opts = &kernel_form.options;
     assert_eq!(opts.integrator, Integrator { method: IntegratorMethod::Euler, steps: 1 });
     let norm = &opts.normalisation;
-    let cp = ControlPoints::new(
-        &nominal,
-        norm,
-        data.joints.clone(),
-        opts.joint_kernel.clone(),
-        opts.task_kernel,
-        opts.solver.law,
-        opts.integrator,
-    );
-    let target: Vec<f64> = data.positions.chunks_exact(2).flat_map(|y| (0..2).map(move |c| norm.position_to_internal(c, y[c]))).collect();
+    let (cp, target) = crate::solver::fit::control_points_and_target(&nominal, &data, opts);
     let e = fit_linear(&cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, &target).unwrap();
     assert!(e.len() < 512, "{} weights for 512 momenta", e.len());
     assert!(e.cancellation < 1e3, "the expansion's terms cancel 1 : {:e}", e.cancellation);

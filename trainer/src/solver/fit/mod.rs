@@ -451,7 +451,7 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
 }
 
 /// The control points of `data` for `opts`' kernels and the measured positions (internal units).
-fn control_points_and_target(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> (ControlPoints, Vec<f64>) {
+pub(crate) fn control_points_and_target(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -> (ControlPoints, Vec<f64>) {
     let (m, norm) = (nominal.task_dim(), &opts.normalisation);
     let target: Vec<f64> = data.positions.chunks_exact(m).flat_map(|y| (0..m).map(move |c| norm.position_to_internal(c, y[c]))).collect();
     let cp = ControlPoints::new(
