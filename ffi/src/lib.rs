@@ -26,8 +26,8 @@ mod shared;
 #[cfg(test)]
 mod tests;
 
-use cbd_runtime::protocol::{decode, DecodeError, FORMAT_VERSION, MAX_JOINTS, MAX_TASK_DIM, OLDEST_FORMAT_VERSION};
-use cbd_runtime::real::Real;
+use cbd_protocol::{decode, DecodeError, FORMAT_VERSION, MAX_JOINTS, MAX_TASK_DIM, OLDEST_FORMAT_VERSION};
+use cbd_runtime::Real;
 use cbd_runtime::{storage_len_for, Calibrator, Error};
 use core::ffi::{c_char, c_void};
 use core::mem::{align_of, size_of};
@@ -43,7 +43,7 @@ pub const CBD_MAX_JOINTS: usize = 16;
 pub const CBD_MAX_TASK_DIM: usize = 3;
 
 const _: () = assert!(
-    CBD_MAX_JOINTS == cbd_runtime::protocol::MAX_JOINTS_ANY_BUILD && MAX_JOINTS <= CBD_MAX_JOINTS && CBD_MAX_TASK_DIM == MAX_TASK_DIM
+    CBD_MAX_JOINTS == cbd_protocol::MAX_JOINTS_ANY_BUILD && MAX_JOINTS <= CBD_MAX_JOINTS && CBD_MAX_TASK_DIM == MAX_TASK_DIM
 );
 const _: () = assert!(align_of::<CbdCalibrator>() <= CBD_STORAGE_ALIGN && align_of::<Real>() <= CBD_STORAGE_ALIGN);
 
@@ -148,7 +148,7 @@ const LOADED: u32 = 0x4342_444C;
 const HEAD: usize = size_of::<CbdCalibrator>().div_ceil(CBD_STORAGE_ALIGN) * CBD_STORAGE_ALIGN;
 
 /// Storage bytes for a decoded model ([`storage_len_for`]: the kernel form or the expansion).
-fn storage_bytes(model: &cbd_runtime::protocol::Model<'_>) -> Option<usize> {
+fn storage_bytes(model: &cbd_protocol::Model<'_>) -> Option<usize> {
     storage_len_for(model).checked_mul(size_of::<Real>())?.checked_add(HEAD)
 }
 
@@ -488,7 +488,7 @@ pub unsafe extern "C" fn cbd_compensate_pose(
         *dst = *src;
     }
     let seed = core::slice::from_raw_parts(seed, n);
-    let mut out = [0.0; cbd_runtime::protocol::MAX_JOINTS];
+    let mut out = [0.0; cbd_protocol::MAX_JOINTS];
     let Some(out) = out.get_mut(..n) else { return CBD_ERR_INTERNAL };
     let c = match handle.cal.compensate_pose(position, &rows, seed, out) {
         Ok(c) => c,
@@ -544,7 +544,7 @@ pub unsafe extern "C" fn cbd_compensate(
         return CBD_ERR_QUERY_DIMENSION;
     }
     let (target, seed) = (core::slice::from_raw_parts(target, m), core::slice::from_raw_parts(seed, n));
-    let mut out = [0.0; cbd_runtime::protocol::MAX_JOINTS];
+    let mut out = [0.0; cbd_protocol::MAX_JOINTS];
     let Some(out) = out.get_mut(..n) else { return CBD_ERR_INTERNAL };
     let c = match handle.cal.compensate(target, seed, out) {
         Ok(c) => c,

@@ -94,7 +94,7 @@ fn load_and_evaluate(blob: &[u8], data: &[u8], storage: &mut [f64]) {
     for (seed, target_source) in all.iter().zip(all.iter().rev()) {
         let target: Vec<f64> = target_source.iter().copied().take(m).collect();
         let mut start = vec![0.0; seed.len()];
-        let seed = match cbd_runtime::inverse_kinematics::nominal_position(&nominal, &target, seed, &mut start, 4, scale) {
+        let seed = match cbd_runtime::internals::inverse_kinematics::nominal_position(&nominal, &target, seed, &mut start, 4, scale) {
             Some(_) => start,
             None => seed.clone(),
         };

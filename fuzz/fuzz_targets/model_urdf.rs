@@ -27,7 +27,7 @@ fn check_urdf(text: &str, flags: u8) {
             assert_eq!(conv.joint_names.len(), conv.chain.joints.len());
             let model = NominalModel::DhChain(conv.chain);
             let q = vec![0.3; model.n_joints()];
-            let k = cbd_runtime::kinematics::forward_kinematics(&model, &q);
+            let k = cbd_runtime::internals::kinematics::forward_kinematics(&model, &q);
             assert!(k.position.iter().all(|v| !v.is_nan()), "NaN position from a converted URDF");
         }
     }

@@ -10,14 +10,14 @@ use crate::evaluate::{self, Evaluation};
 use crate::flow::inverse::Direction;
 use crate::flow_maps;
 use crate::load;
-pub use crate::load::{storage_len, storage_len_for, Calibrator};
+use crate::load::Calibrator;
 use crate::pose::{self, PoseEvaluation};
 use crate::real::Real;
 use cbd_protocol::Model;
 
 impl<'a> Calibrator<'a> {
     /// Decodes and validates `blob`, then integrates the control points' trajectories into `storage`
-    /// (with an expansion: copies its weights), which must hold at least [`storage_len_for`] values.
+    /// (with an expansion: copies its weights), which must hold at least [`crate::storage_len_for`] values.
     pub fn load(blob: &'a [u8], storage: &'a mut [Real]) -> Result<Self, Error> {
         load::load(blob, storage)
     }

@@ -3,7 +3,7 @@
 //! input (NaN/inf, wrong lengths), unreachable targets and singular seeds flagged, never a panic.
 
 use cbd_protocol::*;
-use cbd_runtime::inverse_kinematics::nominal_position;
+use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::{Calibrator, Error};
 use cbd_tests::{lcg, model_blob, reference_blob};
 

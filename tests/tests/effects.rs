@@ -6,8 +6,8 @@
 //! random effects never panic.
 
 use cbd_protocol::*;
-use cbd_runtime::flow::query_derivatives::nominal_hessian;
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::flow::query_derivatives::nominal_hessian;
+use cbd_runtime::internals::kinematics::forward_kinematics;
 use cbd_runtime::{Calibrator, Error};
 use cbd_tests::{lcg, model_blob};
 use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
@@ -192,7 +192,7 @@ fn gravity_torques_match_the_simulators_numerical_torques() {
         let n = case.rigid.n_joints();
         let (mut worst, mut largest): (f64, f64) = (0.0, 0.0);
         for q in case.configurations.chunks_exact(n) {
-            let runtime = cbd_runtime::kinematics::augmented::gravity_torques(&case.rigid, q);
+            let runtime = cbd_runtime::internals::kinematics::augmented::gravity_torques(&case.rigid, q);
             let sim = cbd_trainer::simulate::effects::gravity_torques_numerical(&case.rigid, &case.rigid.effects().gravity, q);
             for (a, b) in runtime.iter().zip(&sim) {
                 worst = worst.max((a - b).abs());

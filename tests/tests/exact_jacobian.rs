@@ -2,7 +2,7 @@
 //! planar RR arm and for 6-joint DH chains (standard and modified, with a prismatic joint).
 
 use cbd_protocol::*;
-use cbd_runtime::flow::query_derivatives::nominal_hessian;
+use cbd_runtime::internals::flow::query_derivatives::nominal_hessian;
 use cbd_runtime::Calibrator;
 use cbd_tests::{lcg, model_blob};
 
@@ -89,8 +89,8 @@ fn nominal_hessian_matches_finite_differences() {
             xa[d] += step;
             xb[d] -= step;
             let (ja, jb) = (
-                cbd_runtime::kinematics::forward_kinematics(&nominal, &xa).jacobian,
-                cbd_runtime::kinematics::forward_kinematics(&nominal, &xb).jacobian,
+                cbd_runtime::internals::kinematics::forward_kinematics(&nominal, &xa).jacobian,
+                cbd_runtime::internals::kinematics::forward_kinematics(&nominal, &xb).jacobian,
             );
             for a in 0..3 {
                 for e in 0..6 {

@@ -4,9 +4,9 @@
 //! its storage.
 
 use cbd_protocol::*;
-use cbd_runtime::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
-use cbd_runtime::flow::control_points::initial_state;
-use cbd_runtime::inverse_kinematics::nominal_position;
+use cbd_runtime::internals::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
+use cbd_runtime::internals::flow::control_points::initial_state;
+use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::{storage_len_for, Calibrator, Error};
 use cbd_tests::{expansion_blob, joint_codes, lcg, task_exponents};
 
@@ -192,7 +192,7 @@ fn an_expansion_built_from_the_momenta_reproduces_the_kernel_form() {
         worst_jacobian = worst_jacobian.max(diff(&ja, &jb) / norm(&ja));
         assert!((a.support() - b.support()).abs() <= 1e-12, "support {} vs {}", a.support(), b.support());
         // The deformation itself is not negligible: the comparison tests the fields.
-        let k0 = cbd_runtime::kinematics::forward_kinematics(&model.nominal, &q);
+        let k0 = cbd_runtime::internals::kinematics::forward_kinematics(&model.nominal, &q);
         worst_deformation = worst_deformation.max((0..m).map(|r| (a.position()[r] - k0.position[r]).abs()).fold(0.0, f64::max));
     }
     eprintln!("kernel form vs expansion: position {worst_position:.1e}, Jacobian {worst_jacobian:.1e} (relative); deformation up to {worst_deformation:.1e}");

@@ -4,7 +4,7 @@
 //! and on which compensation with the runtime's default reaches ≥ 99 % of reachable targets.
 
 use cbd_protocol::*;
-use cbd_runtime::inverse_kinematics::nominal_position;
+use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::Calibrator;
 use cbd_tests::lcg;
 use cbd_trainer::calibrate::{calibrate, Settings};

@@ -3,8 +3,8 @@
 //! it by a term of second order in the deformation.
 
 use cbd_protocol::*;
-use cbd_runtime::flow::inverse::Direction;
-use cbd_runtime::inverse_kinematics::nominal_position;
+use cbd_runtime::internals::flow::inverse::Direction;
+use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::Calibrator;
 use cbd_tests::{lcg, model_blob, reference_blob};
 

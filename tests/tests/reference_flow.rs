@@ -2,8 +2,8 @@
 //! (`data/rr_flow_reference.json`, see `data/REFERENCE.md`): RK4 × 10 and Heun × 5 steps.
 
 use cbd_protocol::*;
-use cbd_runtime::flow::control_points::{initial_state, integrate_control_points};
-use cbd_runtime::flow::{Dims, FlowParams};
+use cbd_runtime::internals::flow::control_points::{initial_state, integrate_control_points};
+use cbd_runtime::internals::flow::{Dims, FlowParams};
 use cbd_runtime::Calibrator;
 use serde_json::Value;
 

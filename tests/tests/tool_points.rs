@@ -2,8 +2,8 @@
 //! control point c is tool point c % m_p, and `evaluate_point` is exact.
 
 use cbd_protocol::*;
-use cbd_runtime::flow::control_points::{initial_state, integrate_control_points};
-use cbd_runtime::flow::{Dims, FlowParams};
+use cbd_runtime::internals::flow::control_points::{initial_state, integrate_control_points};
+use cbd_runtime::internals::flow::{Dims, FlowParams};
 use cbd_runtime::{Calibrator, Error};
 use cbd_tests::lcg;
 
@@ -66,7 +66,7 @@ fn each_control_point_is_its_tool_point_and_a_query_there_follows_it() {
     // k(0) of control point c is k0 of tool point c % 3, normalised.
     for (c, s) in state.chunks(dims.state_len()).enumerate() {
         let k0 =
-            cbd_runtime::kinematics::forward_kinematics_at(&model.nominal, &x[6 * c..6 * c + 6], c % 3).normalised(&model.normalisation);
+            cbd_runtime::internals::kinematics::forward_kinematics_at(&model.nominal, &x[6 * c..6 * c + 6], c % 3).normalised(&model.normalisation);
         assert_eq!(&s[..3], &k0.position[..], "control point {c}");
     }
     let flow_kernel = model.joint_kernel.for_flow(model.momentum_law);
@@ -156,7 +156,7 @@ fn without_a_deformation_the_pose_is_the_nominal_tool_frame() {
     let NominalModel::DhChain(chain) = &nominal else { unreachable!() };
     let q = [0.3, -1.1, 1.4, 0.2, -0.7, 2.1];
     let pose = cal.evaluate_pose(&q).unwrap();
-    let walk = cbd_runtime::kinematics::rigid::dh_walk(chain, &q);
+    let walk = cbd_runtime::internals::kinematics::rigid::dh_walk(chain, &q);
     for a in 0..3 {
         assert!((pose.origin()[a] - walk.tool[a]).abs() < 1e-9, "origin");
         for b in 0..3 {
@@ -259,7 +259,7 @@ fn pose_compensation_on(nominal: NominalModel, momentum: f64, label: &str) -> (u
             q[4] = 1.2;
         }
         let pose = cal.evaluate_pose(&q).unwrap();
-        let (nominal_frame, _) = cbd_runtime::kinematics::tool_point::nominal_tool_frame(&cal.model().nominal, &q).unwrap();
+        let (nominal_frame, _) = cbd_runtime::internals::kinematics::tool_point::nominal_tool_frame(&cal.model().nominal, &q).unwrap();
         let shift: f64 = (0..3).map(|a| (pose.origin()[a] - nominal_frame.origin[a]).powi(2)).sum::<f64>().sqrt();
         deformation = deformation.max(shift);
         let seed: Vec<f64> = q.iter().map(|v| v + 0.2 * lcg(&mut s)).collect();

@@ -65,7 +65,7 @@
 mod rr_prior;
 
 use cbd_protocol::*;
-use cbd_runtime::expansion::{joint_row_len, write_joint_basis};
+use cbd_runtime::internals::expansion::{joint_row_len, write_joint_basis};
 use cbd_trainer::axis_forms::weights::{periodic_weights, periodic_weights_and_log_derivatives};
 use cbd_trainer::baselines::kernel_ridge::fit_kernel_ridge_peer;
 use cbd_trainer::expansion::basis::{truncate, AxisSeries, Basis};

@@ -9,7 +9,7 @@
 mod cli_support;
 
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::forward_kinematics;
 use cbd_trainer::data::model_file::load_model_file;
 use cbd_trainer::nominal::dh_parameters::{apply_parameters, parameter_count};
 use cbd_trainer::simulate::add_noise;

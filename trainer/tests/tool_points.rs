@@ -120,7 +120,7 @@ fn three_tool_points_calibrate_position_and_orientation() {
 /// The simulated arm's true tool frame (origin, rotation) at command `q`: its real chain at the
 /// joints gravity deflects `q` to (the arm `cbd simulate --robot six` measures).
 fn true_frame(robot: &cbd_trainer::simulate::six_joint::SixJointRobot, q: &[f64]) -> Frame {
-    let walk = cbd_runtime::kinematics::rigid::dh_walk(&robot.real, &robot.deflected(q));
+    let walk = cbd_runtime::internals::kinematics::rigid::dh_walk(&robot.real, &robot.deflected(q));
     Frame::new(walk.tool_rotation, walk.tool)
 }
 
@@ -133,7 +133,7 @@ fn mean_errors(frames: &[Frame], truth: &[Frame]) -> (f64, f64) {
     let position = frames
         .iter()
         .zip(truth)
-        .map(|(a, b)| cbd_runtime::kinematics::spatial::norm(cbd_runtime::kinematics::spatial::sub(a.translation(), b.translation())))
+        .map(|(a, b)| cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(a.translation(), b.translation())))
         .sum::<f64>();
     let angle = frames.iter().zip(truth).map(|(a, b)| rotation_angle(a, b).to_degrees()).sum::<f64>();
     (position / count, angle / count)
@@ -143,7 +143,7 @@ fn mean_errors(frames: &[Frame], truth: &[Frame]) -> (f64, f64) {
 /// error e = (t* − t(q), L · rotation vector of R* R(q)ᵀ), L = 57.7 mm (the tool points' RMS lever),
 /// steps (JᵀJ + λI)⁻¹Jᵀe kept only when |e| falls (λ adapted), 40 iterations.
 fn dh_pose_command(model: &cbd_protocol::NominalModel, target: &Frame, seed: &[f64]) -> Vec<f64> {
-    use cbd_runtime::kinematics::tool_point::nominal_tool_frame;
+    use cbd_runtime::internals::kinematics::tool_point::nominal_tool_frame;
     const LEVER: f64 = 57.735;
     let error = |q: &[f64]| -> Option<(Vec<f64>, [[f64; cbd_protocol::MAX_JOINTS]; 6])> {
         let (fit, jac) = nominal_tool_frame(model, q)?;

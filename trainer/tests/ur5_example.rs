@@ -1,6 +1,6 @@
 //! The UR5 example: model file, measurement files, and the nominal model against upstream's own.
 
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::forward_kinematics;
 use cbd_trainer::data::csv_import::read_measurements;
 use cbd_trainer::data::model_file::load_model_file;
 use cbd_trainer::report::stats::ErrorStats;

@@ -13,8 +13,8 @@ use core::fmt::Write;
 use core::hint::black_box;
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use cbd_runtime::protocol::MAX_JOINTS;
-use cbd_runtime::real::Real;
+use cbd_runtime::MAX_JOINTS;
+use cbd_runtime::Real;
 use cbd_runtime::Calibrator;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::{entry, exception};
@@ -207,7 +207,7 @@ fn run(out: &mut hio::HostStream) -> Result<(), ()> {
     let mut compensate_costs = [0u32; shared::COMPENSATE_COUNT];
     let mut seed = [0.0; MAX_JOINTS];
     let mut command = [0.0; MAX_JOINTS];
-    let mut target = [0.0; cbd_runtime::protocol::MAX_TASK_DIM];
+    let mut target = [0.0; cbd_runtime::MAX_TASK_DIM];
     for (i, cost) in compensate_costs.iter_mut().enumerate() {
         let (seed, command) = (seed.get_mut(..n).ok_or(())?, command.get_mut(..n).ok_or(())?);
         let written = match shared::compensate_inputs(&mut cal, i, seed, &mut target) {

@@ -95,7 +95,7 @@ pub fn compensate_inputs(
     cal: &mut cbd_runtime::Calibrator<'_>,
     i: usize,
     seed: &mut [f64],
-    target: &mut [f64; cbd_runtime::protocol::MAX_TASK_DIM],
+    target: &mut [f64; cbd_runtime::MAX_TASK_DIM],
 ) -> Result<usize, cbd_runtime::Error> {
     config(i, seed);
     let e = cal.evaluate_transported(seed)?;

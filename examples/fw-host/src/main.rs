@@ -103,7 +103,7 @@ fn eval(path: &Path, transported: bool) -> Result<(), String> {
         }
     }
     // Compensation cases, as the firmware prints them (after its evaluations).
-    let (mut seed, mut command, mut target) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS], [0.0; cbd_runtime::protocol::MAX_TASK_DIM]);
+    let (mut seed, mut command, mut target) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS], [0.0; cbd_runtime::MAX_TASK_DIM]);
     for i in 0..shared::COMPENSATE_COUNT {
         let (seed, command) = (&mut seed[..n], &mut command[..n]);
         let written = match shared::compensate_inputs(&mut cal, i, seed, &mut target) {

@@ -317,7 +317,7 @@ fn eval_one(n: usize, blob: &[u8]) -> Result<EvalBench> {
     let krr = KernelRidge::fit(&nominal, &train, kernel, 1e-12)?;
     let rounds = 7;
     let ns = time_per_query(&queries, rounds, |q| cal.evaluate(q).map(|e| e.position()[0]).unwrap_or(f64::NAN));
-    let nominal_ns = time_per_query(&queries, rounds, |q| cbd_runtime::kinematics::forward_kinematics(&nominal, q).position[0]);
+    let nominal_ns = time_per_query(&queries, rounds, |q| cbd_runtime::internals::kinematics::forward_kinematics(&nominal, q).position[0]);
     // Like with like: the peer's position and Jacobian, its kernel from the same feature table.
     let krr_ns = time_per_query(&queries, rounds, |q| {
         let e = krr.evaluate(&nominal, q);

@@ -75,7 +75,7 @@ fn targets_spec(spec: &ColumnSpec) -> ColumnSpec {
 /// line or coincident (no orientation), or not a rigid copy of the tool points (RMS misfit over
 /// [`TARGET_MISFIT`] of their lever: a triangle twice the tool's). With the file lines.
 fn pose_targets(path: &Path, spec: &ColumnSpec, lever: f64) -> Result<PoseTargets> {
-    use cbd_runtime::kinematics::tool_frame::determines_orientation;
+    use cbd_runtime::internals::kinematics::tool_frame::determines_orientation;
     let imported = crate::data::csv_import::read_measurements(path, &targets_spec(spec))?;
     let data = &imported.measurements;
     let p = data.points_per_pose;
@@ -261,14 +261,14 @@ impl FlagCounts {
 /// `cbd compensate` with target poses (a model file with ≥ 3 tool points): the joint columns, then
 /// `position_residual` (length unit), `angle_residual_deg` (degrees) and `flags`.
 fn run_poses(args: &CompensateArgs, spec: &ColumnSpec, nominal: &NominalModel, blob: &[u8], periodic: &[bool], length: f64) -> Result<()> {
-    use cbd_runtime::kinematics::tool_frame::determines_orientation;
+    use cbd_runtime::internals::kinematics::tool_frame::determines_orientation;
     let model_name = args.model.model.as_ref().map_or(String::new(), |p| p.display().to_string());
     if !determines_orientation(&spec.tool_points) {
         return Err(Error::InvalidInput(format!(
             "{model_name}: [chain.tool] points lie on one line: they determine no orientation, so a target pose cannot be reached (compensate positions with a model of one tool point, or add a point off the line)"
         )));
     }
-    let targets = pose_targets(&args.targets, spec, cbd_runtime::compensate_pose::tool_lever(nominal))?;
+    let targets = pose_targets(&args.targets, spec, cbd_runtime::internals::compensate_pose::tool_lever(nominal))?;
     let seeds = match &args.seeds {
         Some(path) => Some(read_rows(path, &seeds_spec(spec))?.0),
         None => None,

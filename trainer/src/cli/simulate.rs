@@ -281,7 +281,7 @@ fn simulate_six_points(
 ) -> Result<()> {
     use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
     let p = tool_points.len();
-    if args.pose && !cbd_runtime::kinematics::tool_frame::determines_orientation(tool_points) {
+    if args.pose && !cbd_runtime::internals::kinematics::tool_frame::determines_orientation(tool_points) {
         return Err(Error::InvalidInput(format!(
             "--pose needs at least 3 tool points off one line (--tool-points has {p}{}): the tool frame's orientation is not determined",
             if p >= 3 { " on a line" } else { "" }

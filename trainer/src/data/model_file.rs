@@ -425,7 +425,7 @@ fn check_pose_section(m: &MeasurementSection, pose: &PoseSection, task_dim: usiz
 mod tests {
     use super::*;
     use cbd_protocol::{DhConvention, Effect};
-    use cbd_runtime::kinematics::forward_kinematics;
+    use cbd_runtime::internals::kinematics::forward_kinematics;
 
     const SMALL: &str = r#"
 length_unit = "m"

@@ -91,7 +91,7 @@ mod tests {
         let mut data = Measurements::new(2, 2);
         for i in 0..16 {
             let q = [0.4 * i as f64 - 3.0, 0.3 * i as f64 - 2.0];
-            data.push(&q, &cbd_runtime::kinematics::forward_kinematics(&real, &q).position[..2]);
+            data.push(&q, &cbd_runtime::internals::kinematics::forward_kinematics(&real, &q).position[..2]);
         }
         (data, (2..18).collect())
     }

@@ -1,11 +1,11 @@
 //! The augmented nominal kinematics k0_aug(q) = k_rigid(q + δ(q)) + b(q) and the response of one
-//! effect, as the diagnosis needs them: evaluated by the runtime (`cbd_runtime::kinematics::augmented`), so that
+//! effect, as the diagnosis needs them: evaluated by the runtime (`cbd_runtime::internals::kinematics::augmented`), so that
 //! the diagnosis, the CbD fit on top of it and the controller all use one implementation. (The
 //! simulator's independent implementation, `simulate::effects`, only makes test data.)
 
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::augmented::{effect_terms, Order};
-use cbd_runtime::kinematics::tool_point::forward_kinematics_at;
+use cbd_runtime::internals::kinematics::augmented::{effect_terms, Order};
+use cbd_runtime::internals::kinematics::tool_point::forward_kinematics_at;
 
 /// What one effect adds at q, with its own parameter values: to δ (joint) or to b (task)
 /// (each kind's `effects::EffectKind::response`).
@@ -43,5 +43,5 @@ pub fn deflected_rigid_jacobian(model: &NominalModel, rigid: &NominalModel, q: &
 
 /// Gravity torque τ_j(q) of the nominal chain under its mass model.
 pub fn gravity_torques(model: &NominalModel, q: &[f64]) -> Vec<f64> {
-    cbd_runtime::kinematics::augmented::gravity_torques(model, q).iter().copied().take(q.len()).collect()
+    cbd_runtime::internals::kinematics::augmented::gravity_torques(model, q).iter().copied().take(q.len()).collect()
 }

@@ -13,7 +13,7 @@ use crate::effects::{Instance, Kind, Site, KINDS};
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count_for, parameter_names_for};
 use crate::nominal::positions;
 use cbd_protocol::{Effect, NominalModel};
-use cbd_runtime::kinematics::augmented::{effect_terms, Order};
+use cbd_runtime::internals::kinematics::augmented::{effect_terms, Order};
 use faer::Mat;
 
 pub use crate::effects::LibraryOptions;

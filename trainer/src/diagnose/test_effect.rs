@@ -77,7 +77,7 @@ fn the_simulator_injects_it_and_the_effect_spec_names_it() {
     for q in [[0.3f64, 1.1], [-0.4, -2.0]] {
         let deflected = [q[0], q[1] + 0.01 * q[1].signum()];
         assert_eq!(arm.deflection(&q), [0.0, 0.01 * q[1].signum()]);
-        assert_eq!(arm.position(&q, 0), cbd_runtime::kinematics::forward_kinematics(&rigid, &deflected).position[..2].to_vec());
+        assert_eq!(arm.position(&q, 0), cbd_runtime::internals::kinematics::forward_kinematics(&rigid, &deflected).position[..2].to_vec());
     }
     let parsed = parse_effect_of(&[STEP], "index_step:joint=2,step=0.01", 2).unwrap();
     assert_eq!(parsed, step(1, 0.01).into());

@@ -4,7 +4,7 @@
 use super::{EffectKind, EffectSpecError, FieldError, FieldType, Fields, FileUnits, Injected, Instance};
 use super::{LibraryGroup, LibraryOptions, SimulatedArm, Site, Spec};
 use cbd_protocol::{Effect, NominalModel};
-use cbd_runtime::kinematics::spatial::{dot, norm, scale, sub};
+use cbd_runtime::internals::kinematics::spatial::{dot, norm, scale, sub};
 
 pub struct LinkBending;
 

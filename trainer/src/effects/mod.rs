@@ -15,7 +15,7 @@ pub mod link_bending;
 pub mod transmission;
 
 use cbd_protocol::{Effect, NominalModel};
-use cbd_runtime::kinematics::augmented::{effect_terms, Order};
+use cbd_runtime::internals::kinematics::augmented::{effect_terms, Order};
 use std::collections::BTreeMap;
 
 /// Every effect kind, in the order the library offers them at a joint and `--effect` lists them.

@@ -7,7 +7,7 @@
 //! own base, which is what it evaluates.
 
 use cbd_protocol::{Model, NominalModel};
-use cbd_runtime::kinematics::forward_kinematics_at;
+use cbd_runtime::internals::kinematics::forward_kinematics_at;
 
 /// Most of the blob's training configurations the size comparison evaluates.
 const COMPARED: usize = 64;

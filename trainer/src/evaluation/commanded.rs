@@ -19,7 +19,7 @@ use crate::parametric::{calibrate_dh, DhCalibrationOptions};
 use crate::report::stats::ErrorStats;
 use crate::simulate::{rr::RealRr, six_joint::SixJointRobot};
 use cbd_protocol::NominalModel;
-use cbd_runtime::inverse_kinematics::{nominal_position, planar};
+use cbd_runtime::internals::inverse_kinematics::{nominal_position, planar};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -62,7 +62,7 @@ impl SimulatedArm {
         match self {
             SimulatedArm::Rr(_) => None,
             SimulatedArm::Six(robot) => {
-                let walk = cbd_runtime::kinematics::rigid::dh_walk(&robot.real, &robot.deflected(q));
+                let walk = cbd_runtime::internals::kinematics::rigid::dh_walk(&robot.real, &robot.deflected(q));
                 Some(crate::nominal::Frame::new(walk.tool_rotation, walk.tool))
             }
         }
@@ -136,7 +136,7 @@ impl PlanarCalibration {
             let mut q = [sol[0] - self.offsets[0], sol[1] + self.offsets[0] - self.offsets[1]];
             let mut d = 0.0;
             for (qi, h) in q.iter_mut().zip(hint) {
-                *qi += cbd_runtime::inverse_kinematics::nearest_turn(h - *qi);
+                *qi += cbd_runtime::internals::inverse_kinematics::nearest_turn(h - *qi);
                 d += (*qi - h).powi(2);
             }
             if best.map(|(bd, _)| d < bd).unwrap_or(true) {
@@ -274,7 +274,7 @@ pub fn commanded_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: usize,
     // chain moved to it (the runtime's position-only compensation commands point 1 too).
     let point = (nominal.tool_point_count() > 1).then(|| nominal.tool_point(0)).flatten();
     let at_point = |model: &NominalModel| match point {
-        Some(_) => cbd_runtime::kinematics::tool_point::at_tool_point(model, 0).unwrap_or_else(|| model.clone()),
+        Some(_) => cbd_runtime::internals::kinematics::tool_point::at_tool_point(model, 0).unwrap_or_else(|| model.clone()),
         None => model.clone(),
     };
     let target = match point {

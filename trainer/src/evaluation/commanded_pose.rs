@@ -4,7 +4,7 @@
 //! the table reports where the arm's true tool frame goes: the origin's miss |t(q) − t*| and the
 //! orientation's angle |log(R* R(q)ᵀ)| in degrees, as the forward table reports a pose.
 //!
-//! (a) nominal: the nominal pose inverse kinematics (`cbd_runtime::compensate_pose::nominal_pose_inverse`:
+//! (a) nominal: the nominal pose inverse kinematics (`cbd_runtime::internals::compensate_pose::nominal_pose_inverse`:
 //! the UR closed form nearest the hint, else damped Gauss–Newton on the tool frame); (b) DH: the
 //! same on the DH-calibrated chain from (a)'s command; (c, c') kernel ridge by pose redefinition on
 //! the tool points, y'_j ← y'_j + y*_j − krr_j(q) (y*_j = R* p_j + t*), the frame fitted to y'
@@ -18,7 +18,7 @@ use crate::nominal::tool_points::{rotation_angle, tool_frame};
 use crate::nominal::Frame;
 use crate::report::stats::ErrorStats;
 use cbd_protocol::NominalModel;
-use cbd_runtime::compensate_pose::{nominal_pose_inverse, MIN_POSE_JOINTS};
+use cbd_runtime::internals::compensate_pose::{nominal_pose_inverse, MIN_POSE_JOINTS};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -33,7 +33,7 @@ const HINT_PERTURBATION: f64 = 0.05;
 pub fn takes_pose_targets(nominal: &NominalModel) -> bool {
     nominal.n_joints() >= MIN_POSE_JOINTS
         && nominal.tool_point_count() >= 3
-        && cbd_runtime::kinematics::tool_frame::determines_orientation(nominal.tool_points())
+        && cbd_runtime::internals::kinematics::tool_frame::determines_orientation(nominal.tool_points())
 }
 
 /// The table for `nominal`'s targets: poses ([`commanded_pose_accuracy`]) when it
@@ -78,7 +78,7 @@ pub fn commanded_pose_accuracy(arm: &SimulatedArm, fitted: &Fitted<'_>, count: u
         .collect();
     let scale =
         (targets.iter().map(|t| t.translation().iter().map(|v| v * v).sum::<f64>()).sum::<f64>() / count.max(1) as f64).sqrt().max(1e-12);
-    let lever = cbd_runtime::compensate_pose::tool_lever(nominal);
+    let lever = cbd_runtime::internals::compensate_pose::tool_lever(nominal);
     // Reached by the model's own account: the runtime's tolerances (1e-9 of the scale, its angle at the lever).
     let tolerance = 1e-9 * scale;
     let ik = |model: &NominalModel, target: &Frame, seed: &[f64]| -> (Vec<f64>, bool) {

@@ -4,7 +4,7 @@
 
 use crate::error::Error;
 use cbd_protocol::{Model, NominalModel};
-use cbd_runtime::inverse_kinematics::nominal_position;
+use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::{CompensateOptions, Compensation};
 
 /// Steps of the nominal inverse kinematics that makes the seed of every row.
@@ -80,7 +80,7 @@ pub fn nearest_training_poses(model: &Model<'_>, target: &crate::nominal::Frame,
     nearest_training_configurations(model, count, |q| {
         (0..m_p)
             .map(|j| {
-                let k0 = cbd_runtime::kinematics::forward_kinematics_at(&model.nominal, q, j);
+                let k0 = cbd_runtime::internals::kinematics::forward_kinematics_at(&model.nominal, q, j);
                 (0..3).map(|c| (k0.position[c] - wanted[j][c]).powi(2)).sum::<f64>()
             })
             .sum()
@@ -91,7 +91,7 @@ pub fn nearest_training_poses(model: &Model<'_>, target: &crate::nominal::Frame,
 /// default hint of the nominal inverse kinematics.
 pub fn nearest_training_configuration(model: &Model<'_>, target: &[f64]) -> Vec<f64> {
     let mut nearest = nearest_training_configurations(model, 1, |q| {
-        let k0 = cbd_runtime::kinematics::forward_kinematics(&model.nominal, q);
+        let k0 = cbd_runtime::internals::kinematics::forward_kinematics(&model.nominal, q);
         k0.position.iter().zip(target).map(|(a, b)| (a - b) * (a - b)).sum()
     });
     nearest.pop().unwrap_or_else(|| vec![0.0; model.n_joints()])

@@ -67,7 +67,7 @@ pub fn fit_per_tool_point(fit: CorrectionFitter, base: &NominalModel, data: &Mea
     let mut predictors = Vec::with_capacity(points);
     let mut notes = Vec::with_capacity(points);
     for j in 0..points {
-        let model = cbd_runtime::kinematics::tool_point::at_tool_point(base, j)
+        let model = cbd_runtime::internals::kinematics::tool_point::at_tool_point(base, j)
             .ok_or_else(|| Error::Internal(format!("tool point {j} of {points}")))?;
         let fitted = fit(&model, &data.point(j))?;
         notes.push(format!("point {}: {}", j + 1, fitted.note));

@@ -278,7 +278,7 @@ mod tests {
 mod choice_tests {
     use super::*;
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
-    use cbd_runtime::kinematics::forward_kinematics;
+    use cbd_runtime::internals::kinematics::forward_kinematics;
 
     /// Six-joint arm measured on its nominal chain plus a translation that depends on the
     /// configuration (0.5 mm along x times sin(2 q1 + q4) cos q6; positions in mm) and 0.02 mm noise: the term is

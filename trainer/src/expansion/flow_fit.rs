@@ -18,8 +18,8 @@ use crate::numeric::least_squares::QrLeastSquares;
 use crate::numeric::levenberg_marquardt as lm;
 use crate::numeric::FIXED_SPLIT;
 use cbd_protocol::{Integrator, IntegratorMethod, JointKernel, TaskKernel, MAX_TASK_DIM as MT};
-use cbd_runtime::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
-use cbd_runtime::flow::Dims;
+use cbd_runtime::internals::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
+use cbd_runtime::internals::flow::Dims;
 use faer::Mat;
 use rayon::prelude::*;
 
@@ -154,9 +154,9 @@ impl<'a> StageProblem<'a> {
         write_joint_basis(self.joint_kernel, &self.joint.codes, n, x, &mut rows, false);
         let mut y = vec![0.0; ql * (1 + params)];
         y[..ql].copy_from_slice(&self.initial[i * ql..(i + 1) * ql]);
-        let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(y.len())];
+        let mut scratch = vec![0.0; cbd_runtime::internals::integrate::scratch_len(y.len())];
         let mut task_rows = vec![0.0; self.task.len() * (1 + m + m * m)];
-        cbd_runtime::integrate::integrate(self.integrator.method, self.integrator.steps, &mut y, &mut scratch, |stage, s, out| {
+        cbd_runtime::internals::integrate::integrate(self.integrator.method, self.integrator.steps, &mut y, &mut scratch, |stage, s, out| {
             let weights = &theta[stage * w..(stage + 1) * w];
             self.rates(stage, weights, scale, &rows, &mut task_rows, s, out, params);
             Ok::<(), ()>(())

@@ -8,8 +8,8 @@ use super::basis::Basis;
 use crate::numeric::least_squares::QrLeastSquares;
 use crate::numeric::FIXED_SPLIT;
 use cbd_protocol::{JointKernel, TaskKernel, MAX_TASK_DIM};
-use cbd_runtime::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
-use cbd_runtime::flow::Dims;
+use cbd_runtime::internals::expansion::{for_each_task_basis, joint_row_len, write_joint_basis};
+use cbd_runtime::internals::flow::Dims;
 use faer::Mat;
 
 /// The data of the linear fit, internal units: configurations, k0 and Dk0 at each, residual y − k0.

@@ -2,7 +2,7 @@
 //! for the tangent.
 
 use cbd_protocol::{Integrator, JointKernel, MomentumLaw, NominalModel, Normalisation, TaskKernel};
-use cbd_runtime::flow::{Dims, FlowParams};
+use cbd_runtime::internals::flow::{Dims, FlowParams};
 
 /// The fixed part of a flow: configurations, their nominal kinematics, kernels and scheme.
 #[derive(Debug, Clone)]
@@ -12,7 +12,7 @@ pub struct ControlPoints {
     pub points: Vec<f64>,
     /// N × state_len initial state with P = 0: k0(x_i), Dk0(x_i) in internal units.
     pub initial: Vec<f64>,
-    /// The configurations' joint-kernel features (`cbd_runtime::kernel::write_features`), as the
+    /// The configurations' joint-kernel features (`cbd_runtime::internals::kernel::write_features`), as the
     /// runtime keeps them.
     pub features: Vec<f64>,
     /// The joint kernel as the flow integrates it: γ carries the law's field sign
@@ -53,8 +53,8 @@ impl ControlPoints {
                 s[m + a * n..m + (a + 1) * n].copy_from_slice(&k0.jacobian[a][..n]);
             }
         }
-        let mut features = vec![0.0; cbd_runtime::kernel::features_len(points.len() / n, n)];
-        cbd_runtime::kernel::write_features(&joint_kernel, n, &points, &mut features);
+        let mut features = vec![0.0; cbd_runtime::internals::kernel::features_len(points.len() / n, n)];
+        cbd_runtime::internals::kernel::write_features(&joint_kernel, n, &points, &mut features);
         let joint_kernel = joint_kernel.for_flow(law);
         ControlPoints { dims, points, initial, features, joint_kernel, task_kernel, law, integrator }
     }
@@ -102,12 +102,12 @@ impl ControlPoints {
         }
         let stages = self.integrator.stage_count();
         let mut stage_states = vec![0.0; stages * state.len()];
-        let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(state.len())];
+        let mut scratch = vec![0.0; cbd_runtime::internals::integrate::scratch_len(state.len())];
         let mut trajectory = vec![0.0; stages * count * self.dims.sample_len()];
         let block = state.len();
         let params = self.params();
         let rows_per_task = count.div_ceil(16).max(1);
-        cbd_runtime::flow::control_points::integrate_points(
+        cbd_runtime::internals::flow::control_points::integrate_points(
             self.dims,
             self.integrator,
             count,
@@ -119,7 +119,7 @@ impl ControlPoints {
                 out.par_chunks_mut(rows_per_task * len).enumerate().for_each(|(task, out)| {
                     let start = task * rows_per_task;
                     let rows = start..start + out.len() / len;
-                    cbd_runtime::flow::control_point_rates_with_features(&params, &self.features, y, samples, rows, out);
+                    cbd_runtime::internals::flow::control_point_rates_with_features(&params, &self.features, y, samples, rows, out);
                 });
             },
         )?;

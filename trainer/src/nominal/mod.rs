@@ -1,7 +1,7 @@
 //! Nominal models built from files: rigid transforms (the runtime's [`Frame`]) as URDF and model
 //! files give them, and the conversion of a URDF joint
 //! chain into an equivalent standard Denavit–Hartenberg chain. The DH frame walk itself is the
-//! runtime's (`cbd_runtime::kinematics::rigid::dh_walk`): one walk for the trainer and the controller.
+//! runtime's (`cbd_runtime::internals::kinematics::rigid::dh_walk`): one walk for the trainer and the controller.
 
 pub mod dh_parameters;
 pub mod export;
@@ -12,8 +12,8 @@ pub mod rigid_fit;
 pub mod tool_points;
 pub mod urdf;
 
-pub use cbd_runtime::kinematics::spatial::Frame;
-pub(crate) use cbd_runtime::kinematics::spatial::{add, cross, dot, norm, scale, sub};
+pub use cbd_runtime::internals::kinematics::spatial::Frame;
+pub(crate) use cbd_runtime::internals::kinematics::spatial::{add, cross, dot, norm, scale, sub};
 
 /// Rotation by `angle` (radians) about the unit vector `axis` (Rodrigues), no translation.
 pub fn rotation_about(axis: [f64; 3], angle: f64) -> Frame {

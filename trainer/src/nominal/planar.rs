@@ -155,7 +155,7 @@ pub fn as_planar(model: &NominalModel) -> Option<NominalModel> {
 mod tests {
     use super::*;
     use cbd_protocol::Effect;
-    use cbd_runtime::kinematics::forward_kinematics;
+    use cbd_runtime::internals::kinematics::forward_kinematics;
 
     #[test]
     fn the_dh_form_of_a_planar_arm_moves_and_deflects_like_it() {

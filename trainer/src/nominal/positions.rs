@@ -1,7 +1,7 @@
 //! Batched nominal forward kinematics: k0(x_i) for every row of a joint matrix.
 
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::{forward_kinematics_at, Kinematics};
+use cbd_runtime::internals::kinematics::{forward_kinematics_at, Kinematics};
 
 /// The first `m` coordinates of `model`'s tool position at every row of `joints` (row-major,
 /// `model.n_joints()` per row), by the runtime's forward kinematics (effects included); with

@@ -10,7 +10,7 @@ use cbd_protocol::{DhChain, NominalModel};
 pub fn point_chain(chain: &DhChain, p: [f64; 3]) -> DhChain {
     let mut with_point = chain.clone();
     with_point.tool_points = heapless::Vec::from_slice(&[p]).expect("one point");
-    match cbd_runtime::kinematics::tool_point::at_tool_point(&NominalModel::DhChain(with_point), 0) {
+    match cbd_runtime::internals::kinematics::tool_point::at_tool_point(&NominalModel::DhChain(with_point), 0) {
         Some(NominalModel::DhChain(moved)) => moved,
         _ => unreachable!("a DH chain with one tool point"),
     }

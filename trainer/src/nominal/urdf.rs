@@ -282,7 +282,7 @@ mod tests {
     use super::tests_support::TEST_URDF;
     use super::*;
     use cbd_protocol::NominalModel;
-    use cbd_runtime::kinematics::forward_kinematics;
+    use cbd_runtime::internals::kinematics::forward_kinematics;
 
     /// Issue 27 item 4: 30 000 nested elements (210 KB) overflowed the stack inside urdf-rs's
     /// recursive reader (abort). The nesting is now checked first, without recursion.
@@ -346,7 +346,7 @@ mod tests {
                 );
             }
             // The whole tip frame, not only its position.
-            let tip = cbd_runtime::kinematics::rigid::dh_walk(&conv.chain, &q_mm).tool_rotation;
+            let tip = cbd_runtime::internals::kinematics::rigid::dh_walk(&conv.chain, &q_mm).tool_rotation;
             for i in 0..3 {
                 for j in 0..3 {
                     assert!((tip[i][j] - reference.rotation()[i][j]).abs() < 1e-12);

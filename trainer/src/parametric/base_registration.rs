@@ -111,7 +111,7 @@ pub fn register_base(nominal: &mut NominalModel, data: &Measurements) -> Result<
 /// a mirror image of the nominal positions (no rotation carries one onto the other; a fit over
 /// such a frame ran for minutes and meant nothing).
 fn check_geometry(p: &[[f64; 3]], y: &[[f64; 3]]) -> Result<(), RegisterError> {
-    use cbd_runtime::kinematics::tool_frame::determines_orientation;
+    use cbd_runtime::internals::kinematics::tool_frame::determines_orientation;
     for (what, points) in [("measured", y), ("nominal", p)] {
         // Far from the origin f64 keeps fewer of the spread's digits (1e50 mm away: none).
         let magnitude = points.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -254,8 +254,8 @@ mod tests {
             // Only the base and joint 1's folded parameters differ: the other joints stay nominal.
             for q1 in [-2.0, 0.0, 0.7, 3.0] {
                 let q = [q1, -1.0, 0.5, 0.2, 1.1, -0.4];
-                let want = cbd_runtime::kinematics::rigid::dh_walk(&calibrated, &q);
-                let got = cbd_runtime::kinematics::rigid::dh_walk(&folded, &q);
+                let want = cbd_runtime::internals::kinematics::rigid::dh_walk(&calibrated, &q);
+                let got = cbd_runtime::internals::kinematics::rigid::dh_walk(&folded, &q);
                 for (a, b) in want.ends.iter().zip(&got.ends) {
                     for k in 0..3 {
                         assert!((a[k] - b[k]).abs() < 1e-9, "{convention:?} q1 = {q1}: {a:?} vs {b:?}");

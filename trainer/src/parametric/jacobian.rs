@@ -14,7 +14,7 @@ use faer::Mat;
 pub(super) fn analytic_jacobian(chain: &DhChain, data: &Measurements, jac: &mut Mat<f64>) {
     use crate::nominal::{cross, sub};
     use cbd_protocol::DhConvention;
-    use cbd_runtime::kinematics::rigid::dh_walk;
+    use cbd_runtime::internals::kinematics::rigid::dh_walk;
     let (n, m) = (chain.joints.len(), data.task_dim);
     let column = |r: &[[f64; 3]; 3], c: usize| [r[0][c], r[1][c], r[2][c]];
     let model = cbd_protocol::NominalModel::DhChain(chain.clone());

@@ -4,7 +4,7 @@ use super::*;
 use crate::data::Measurements;
 use crate::nominal::dh_parameters::{apply_parameters, parameter_count, parameter_names};
 use cbd_protocol::{DhChain, DhConvention};
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::forward_kinematics;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -166,7 +166,7 @@ fn tool_rotation_columns_match_the_analytic_derivative() {
     use super::jacobian::jacobian_at;
     use crate::nominal::dh_parameters::parameter_count_for;
     use crate::nominal::row_kinematics;
-    use cbd_runtime::kinematics::rigid::dh_walk;
+    use cbd_runtime::internals::kinematics::rigid::dh_walk;
     let mut chain = ur5_like(DhConvention::Modified);
     chain.tool_points = heapless::Vec::from_slice(&[[30.0, -20.0, 50.0], [-80.0, 10.0, 5.0]]).unwrap();
     chain.tool.rotation = crate::nominal::rpy(0.3, -0.2, 1.1).to_transform().rotation;

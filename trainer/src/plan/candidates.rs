@@ -3,8 +3,8 @@
 
 use crate::nominal::{cross, norm, sub};
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::forward_kinematics;
-use cbd_runtime::kinematics::rigid::dh_walk;
+use cbd_runtime::internals::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::rigid::dh_walk;
 use faer::{Mat, Side};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

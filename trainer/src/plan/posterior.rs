@@ -6,8 +6,8 @@
 
 use crate::evidence::CbdHyperparameters;
 use cbd_protocol::{JointKernel, NominalModel, TaskKernel, MAX_JOINTS};
-use cbd_runtime::kernel::{joint_features, joint_kernel_from_features, FEATURES_PER_JOINT};
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::kernel::{joint_features, joint_kernel_from_features, FEATURES_PER_JOINT};
+use cbd_runtime::internals::kinematics::forward_kinematics;
 
 /// A configuration with what the kernel needs: k0, Dk0 (m × n, row-major), the joint features and
 /// the geometric basis G = J_dh L (m × p, row-major; L L^T the parameters' prior covariance).
@@ -82,7 +82,7 @@ impl Prior {
             diff[c] = a.position[c] - b.position[c];
         }
         let mut tgrad = [0.0; cbd_protocol::MAX_TASK_DIM];
-        let kw = self.task_gamma * cbd_runtime::kernel::task_kernel(&self.task, &diff, m, &mut tgrad);
+        let kw = self.task_gamma * cbd_runtime::internals::kernel::task_kernel(&self.task, &diff, m, &mut tgrad);
         for r in 0..m {
             for s in 0..m {
                 let jj: f64 = (0..n).map(|d| a.jacobian[r * n + d] * b.jacobian[s * n + d]).sum();

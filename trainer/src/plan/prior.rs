@@ -7,7 +7,7 @@ use crate::calibrate::{Geometry, GeometryChoice, Settings};
 use crate::data::Measurements;
 use crate::evidence::CbdHyperparameters;
 use cbd_protocol::NominalModel;
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::forward_kinematics;
 
 /// What is assumed before any pose is measured, in the model's length unit.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,5 +1,5 @@
 //! Physical effects injected into simulated measurements, implemented here independently of the
-//! runtime's `cbd_runtime::kinematics::augmented` (gravity torques by differentiating the potential
+//! runtime's `cbd_runtime::internals::kinematics::augmented` (gravity torques by differentiating the potential
 //! energy numerically, effects composed here; only the rigid DH frames come from the runtime's one
 //! walk, `dh_walk`, itself checked against a URDF chain walk in `nominal::urdf`): an independent check of what `cbd diagnose` finds and of what
 //! the runtime evaluates. Also effects outside the diagnosis library (a localized bump, a dead
@@ -11,8 +11,8 @@ pub use crate::effects::EffectSpecError;
 use crate::effects::{Injected, Instance, Kind, SimulatedArm, Spec, KINDS};
 use crate::nominal::{dot, Frame};
 use cbd_protocol::{Effect, GravityModel, NominalModel};
-use cbd_runtime::kinematics::forward_kinematics;
-use cbd_runtime::kinematics::rigid::dh_walk;
+use cbd_runtime::internals::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::rigid::dh_walk;
 
 /// One injected effect: a kind of the library (`effects::KINDS`, its blob form converts with
 /// `From<Effect>`), or one outside it. `joint` is 0-based.

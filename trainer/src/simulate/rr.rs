@@ -89,7 +89,7 @@ mod tests {
         let x = configurations(Sampling::Uniform { count: 2000, seed: 1 }, 2);
         let mut errors = Vec::new();
         for q in x.chunks_exact(2) {
-            let k0 = cbd_runtime::kinematics::forward_kinematics(&nominal, q);
+            let k0 = cbd_runtime::internals::kinematics::forward_kinematics(&nominal, q);
             let y = real.position(q);
             errors.push(((k0.position[0] - y[0]).powi(2) + (k0.position[1] - y[1]).powi(2)).sqrt());
         }

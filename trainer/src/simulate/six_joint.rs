@@ -7,8 +7,8 @@ use super::add_noise;
 use crate::data::Measurements;
 use crate::nominal::{cross, dot, sub};
 use cbd_protocol::{DhChain, NominalModel};
-use cbd_runtime::kinematics::forward_kinematics;
-use cbd_runtime::kinematics::rigid::dh_walk;
+use cbd_runtime::internals::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::rigid::dh_walk;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -2,7 +2,7 @@
 
 use crate::flow::ControlPoints;
 use cbd_protocol::{ConfigurationKernel, JointKernel, TaskKernel, MAX_JOINTS, MAX_TASK_DIM};
-use cbd_runtime::kernel::{joint_kernel, joint_kernel_from_features, read_features, task_kernel};
+use cbd_runtime::internals::kernel::{joint_kernel, joint_kernel_from_features, read_features, task_kernel};
 use faer::Mat;
 
 /// J_i J_jᵀ (m × m, row-major) of two m × n Jacobians stored row-major: Σ_d J_i[a, d] J_j[b, d].
@@ -134,8 +134,8 @@ mod tests {
     /// called directly, the mirrored upper blocks included.
     #[test]
     fn k_lin_is_the_runtimes_kernel_evaluation_to_the_last_bit() {
-        use cbd_runtime::kernel::joint_kernel;
-        use cbd_runtime::kinematics::forward_kinematics;
+        use cbd_runtime::internals::kernel::joint_kernel;
+        use cbd_runtime::internals::kinematics::forward_kinematics;
         let robot = crate::simulate::six_joint::SixJointRobot::ur5_like(3);
         let (count, n, m) = (7, 6, 3);
         let points = crate::simulate::six_joint::random_configurations(count, 4);

@@ -3,8 +3,8 @@
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, NominalModel, MAX_JOINTS};
-use cbd_runtime::kernel::{joint_features, joint_kernel, joint_kernel_from_features, read_features, write_features, FEATURES_PER_JOINT};
-use cbd_runtime::kinematics::{forward_kinematics, Kinematics};
+use cbd_runtime::internals::kernel::{joint_features, joint_kernel, joint_kernel_from_features, read_features, write_features, FEATURES_PER_JOINT};
+use cbd_runtime::internals::kinematics::{forward_kinematics, Kinematics};
 use faer::{linalg::solvers::Solve, Mat, Side};
 
 /// A fitted residual regression: one scalar-kernel regression per task coordinate.
@@ -12,7 +12,7 @@ use faer::{linalg::solvers::Solve, Mat, Side};
 pub struct KernelRidge {
     pub kernel: JointKernel,
     pub ridge: f64,
-    /// The training configurations' kernel features (`cbd_runtime::kernel::write_features`):
+    /// The training configurations' kernel features (`cbd_runtime::internals::kernel::write_features`):
     /// a prediction costs one `exp` per point, as the runtime's flow does.
     features: Vec<f64>,
     n_joints: usize,

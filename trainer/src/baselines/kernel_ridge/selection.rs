@@ -21,7 +21,7 @@ use crate::axis_forms::{axes_at, forms_of, AxisForm};
 use crate::data::Measurements;
 use crate::evidence::joint_pair_table::JointPairTable;
 use cbd_protocol::{JointKernel, NominalModel, Normalisation};
-use cbd_runtime::kinematics::forward_kinematics;
+use cbd_runtime::internals::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
 
 /// Search settings.

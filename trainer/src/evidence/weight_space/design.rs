@@ -4,7 +4,7 @@
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, JointKernelAxis};
-use cbd_runtime::expansion::{joint_row_len, write_joint_basis};
+use cbd_runtime::internals::expansion::{joint_row_len, write_joint_basis};
 use faer::Mat;
 
 /// Φ (N × r) for the basis `codes` (r functions × n axes, every axis periodic).

@@ -18,7 +18,7 @@ use super::super::table::Theta;
 use super::prior::PeriodicShares;
 use super::WeightSpaceTable;
 use crate::numeric::FIXED_SPLIT;
-use cbd_runtime::expansion::for_each_task_basis;
+use cbd_runtime::internals::expansion::for_each_task_basis;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::cholesky::llt::inverse::{inverse as llt_inverse, inverse_scratch as llt_inverse_scratch};

@@ -10,8 +10,8 @@
 
 use super::primal::{ControlPoints, PrimalFlow};
 use cbd_protocol::MAX_JOINTS;
-use cbd_runtime::flow::Dims;
-use cbd_runtime::kernel::{joint_kernel_from_features, read_features};
+use cbd_runtime::internals::flow::Dims;
+use cbd_runtime::internals::kernel::{joint_kernel_from_features, read_features};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
@@ -431,9 +431,9 @@ fn propagate(
         let cols = d1 - d0;
         let cached = first.and_then(|f| f[chunk].as_ref());
         let mut tan = initial_tangent(cp, d0, d1, &init);
-        let mut scratch = vec![0.0; cbd_runtime::integrate::scratch_len(tan.len())];
+        let mut scratch = vec![0.0; cbd_runtime::internals::integrate::scratch_len(tan.len())];
         let result: Result<(), ()> =
-            cbd_runtime::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
+            cbd_runtime::internals::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
                 let y = MatRef::from_column_major_slice(y, rows, cols);
                 let mut out = MatMut::from_column_major_slice_mut(out, rows, cols);
                 match cached {

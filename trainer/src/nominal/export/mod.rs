@@ -223,7 +223,7 @@ mod tests {
                 t = t.compose(&frames.origin(i, &Frame::IDENTITY)).compose(&motion);
             }
             t = t.compose(&frames.tip_in_last_link());
-            let walk = cbd_runtime::kinematics::rigid::dh_walk(&chain, &q);
+            let walk = cbd_runtime::internals::kinematics::rigid::dh_walk(&chain, &q);
             for c in 0..3 {
                 assert!((t.translation()[c] - walk.tool[c]).abs() < 1e-10, "{convention:?}");
                 for j in 0..3 {
