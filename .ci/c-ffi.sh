@@ -42,13 +42,13 @@ pass() { summary+=("PASS  $*"); }
 fail() { summary+=("FAIL  $*"); failures=$((failures + 1)); }
 
 # ---- host
-# README's "Using the runtime from C/C++" shows examples/c/eval_csv.c in full: the same text.
-if python3 - "$ROOT/README.md" "$ROOT/examples/c/eval_csv.c" <<'PY'
+# docs/guide/firmware.md shows examples/c/eval_csv.c in full: the same text.
+if python3 - "$ROOT/docs/guide/firmware.md" "$ROOT/examples/c/eval_csv.c" <<'PY'
 import sys
 readme, src = (open(p).read() for p in sys.argv[1:3])
 sys.exit(0 if "```c\n" + src + "```" in readme else 1)
 PY
-then pass "README's C host example is examples/c/eval_csv.c"; else fail "README's C host example differs from examples/c/eval_csv.c"; fi
+then pass "the guide's C host example is examples/c/eval_csv.c"; else fail "the guide's C host example (docs/guide/firmware.md) differs from examples/c/eval_csv.c"; fi
 clog "building libcbd_ffi.a (host, profile ffi)"
 (cd "$ROOT" && cargo build -q -p cbd-ffi --profile ffi)
 HOST_LIB="$ROOT/target/ffi/libcbd_ffi.a"
