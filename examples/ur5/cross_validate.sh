@@ -5,17 +5,29 @@
 # then has a training neighbour in time, whose drift it shares — issue 49), and whether what `cbd fit` writes by default (the row `compare` marks with *) is within one
 # standard error of the best other method's mean (issue 38).
 #
-#   [FOLDS=interleaved|blocked] bash examples/ur5/cross_validate.sh [CBD] [OUT_DIR]
+#   [FOLDS=interleaved|blocked|both] [BENCHMARKS=BENCHMARKS.md] bash examples/ur5/cross_validate.sh [CBD] [OUT_DIR]
 #
 # CBD defaults to target/release/cbd; OUT_DIR (default target/ur5-cv) gets each fold's files and
 # compare JSON and summary.json. Exit status 0 when the default is within one standard error.
+# FOLDS=both runs the blocked folds, then the interleaved ones (OUT_DIR/blocked, OUT_DIR/interleaved);
+# with BENCHMARKS=FILE it then rewrites FILE's table between the markers
+# `<!-- ur5-cv: begin -->` and `<!-- ur5-cv: end -->` (issue 49 item 4), blocked first.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 cbd="${1:-$here/../../target/release/cbd}"
 out="${2:-$here/../../target/ur5-cv}"
 mkdir -p "$out"
 folds="${FOLDS:-interleaved}"
-case "$folds" in interleaved|blocked) ;; *) echo "FOLDS must be interleaved or blocked, not '$folds'" >&2; exit 2 ;; esac
+case "$folds" in interleaved|blocked|both) ;; *) echo "FOLDS must be interleaved, blocked or both, not '$folds'" >&2; exit 2 ;; esac
+if [ "$folds" = both ]; then
+    status=0
+    FOLDS=blocked bash "$0" "$cbd" "$out/blocked" || status=1
+    FOLDS=interleaved bash "$0" "$cbd" "$out/interleaved" || status=1
+    if [ -n "${BENCHMARKS:-}" ]; then
+        python3 "$here/benchmarks_table.py" "$out/blocked/summary.json" "$out/interleaved/summary.json" "$BENCHMARKS" "$(uname -m), $(nproc) cores"
+    fi
+    exit "$status"
+fi
 python3 - "$here/train.csv" "$here/test.csv" "$out" "$folds" <<'PY'
 import sys
 train, test, out, folds = sys.argv[1:5]
