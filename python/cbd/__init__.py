@@ -23,4 +23,11 @@ from ._cbd import CbdError, Model, ModelFile, __version__, compare, diagnose, fi
 
 _logging.getLogger("cbd").addHandler(_logging.NullHandler())
 
-__all__ = ["CbdError", "Model", "ModelFile", "__version__", "compare", "diagnose", "fit", "simulate"]
+
+class CbdMemoryError(CbdError, MemoryError):
+    """An array refused before it is copied: this process's memory could not hold it, read and
+    answered (a broadcast view of 10^9 rows, say). Both a :class:`CbdError` (a ``ValueError``) and a
+    ``MemoryError``; the message names the argument and its shape."""
+
+
+__all__ = ["CbdError", "CbdMemoryError", "Model", "ModelFile", "__version__", "compare", "diagnose", "fit", "simulate"]
