@@ -11,7 +11,7 @@ VENV="$ROOT/target/python-venv"
 if [ ! -x "$VENV/bin/python" ]; then
     python3 -m venv "$VENV"
 fi
-"$VENV/bin/pip" install -q --disable-pip-version-check "maturin>=1.9.4,<2" pytest numpy pyyaml
+"$VENV/bin/pip" install -q --disable-pip-version-check "maturin>=1.9.4,<2" pytest numpy pyyaml hypothesis
 # The binaries `.ci/run` built before (cargo test --release, .ci/firmware.sh); built here only when
 # missing, since a per-package build would compile the trainer again under other features.
 [ -x target/release/cbd ] || cargo build -q --release -p cbd-trainer --bin cbd

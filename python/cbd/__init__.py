@@ -7,8 +7,11 @@ the same blob bytes), and the runtime a controller runs for evaluation and compe
     model_file = cbd.ModelFile.load("examples/ur5/ur5.toml")
     data = np.loadtxt("examples/ur5/train.csv", delimiter=",", skiprows=1)
     model = cbd.fit(model_file, data[:, :6], data[:, 6:], dh_first=True)
-    q, _ = model_file.to_model(data[:, :6], data[:, 6:])      # degrees → radians, as the import does
-    positions = model.evaluate(q)                              # mm, the model's length unit
+    positions = model.evaluate(data[:, :6])                   # degrees in, mm out: the file's columns
+
+Every array in and out is in the model file's column units, as ``cbd fit``'s CSV holds them (radians
+only where the model file says so); a blob loaded without a model file is in its own units (radians,
+the model's length unit). ``Model.units`` says which.
 
 Progress and warnings go to the ``logging`` logger ``"cbd"``; failures raise :class:`CbdError`
 (a ``ValueError``) with the command's message.
@@ -20,4 +23,11 @@ from ._cbd import CbdError, Model, ModelFile, __version__, compare, diagnose, fi
 
 _logging.getLogger("cbd").addHandler(_logging.NullHandler())
 
-__all__ = ["CbdError", "Model", "ModelFile", "__version__", "compare", "diagnose", "fit", "simulate"]
+
+class CbdMemoryError(CbdError, MemoryError):
+    """An array refused before it is copied: this process's memory could not hold it, read and
+    answered (a broadcast view of 10^9 rows, say). Both a :class:`CbdError` (a ``ValueError``) and a
+    ``MemoryError``; the message names the argument and its shape."""
+
+
+__all__ = ["CbdError", "CbdMemoryError", "Model", "ModelFile", "__version__", "compare", "diagnose", "fit", "simulate"]

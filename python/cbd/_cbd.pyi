@@ -50,16 +50,23 @@ class ModelFile:
         ``(q, y)``, one row per (pose, tool point). With ``y=None`` the joints alone."""
 
 class Model:
-    """A calibrated model: the blob ``cbd fit`` writes. Evaluated by the runtime, in the blob's
-    units: joints in radians (prismatic: the length unit) in the model's order, positions in its
-    length unit."""
+    """A calibrated model: the blob ``cbd fit`` writes, evaluated by the runtime. Units: a model
+    from ``fit(model_file, …)`` or loaded with a model file takes and returns arrays in that file's
+    column units, as ``cbd fit``'s CSV holds them (degrees and mm for examples/ur5/ur5.toml; a planar
+    frame's base, yaw and offsets applied); a blob alone is in its own units: joints in radians
+    (prismatic: the length unit) in the model's order, positions in its length unit."""
 
     @staticmethod
-    def from_bytes(data: bytes) -> "Model":
-        """A model from blob bytes, checked as ``cbd eval`` checks a blob file."""
+    def from_bytes(data: bytes, model: Optional[ModelFile] = None) -> "Model":
+        """A model from blob bytes, checked as ``cbd eval`` checks a blob file; with ``model``
+        (checked to fit the blob) arrays are in its column units, else in the blob's (radians)."""
     @staticmethod
-    def load(path: PathLike) -> "Model":
-        """Reads a blob file (``cbd fit --out``)."""
+    def load(path: PathLike, model: Optional[ModelFile] = None) -> "Model":
+        """Reads a blob file (``cbd fit --out``); with ``model`` (checked to fit the blob) arrays
+        are in its column units, else in the blob's (radians, the model's length unit)."""
+    @property
+    def units(self) -> str:
+        """The units of every array in and out: the model file's columns', or the blob's own."""
     def to_bytes(self) -> bytes:
         """The blob: what the runtime, the C library and the firmware load."""
     def save(self, path: PathLike) -> None:
@@ -75,19 +82,24 @@ class Model:
     def tool_point_count(self) -> int: ...
     def evaluate(self, q: Array, jacobian: bool = False, point: int = 0) -> Union[Array, Tuple[Array, Array]]:
         """Calibrated positions (n, task_dim) of tool point ``point`` at each row of ``q`` (n,
-        joints), bit for bit the runtime's; with ``jacobian=True`` also the exact Jacobians
-        (n, task_dim, joints)."""
+        joints); with ``jacobian=True`` also the exact Jacobians (n, task_dim, joints). ``q`` in the
+        model file's joint column units (degrees for the UR5 example), positions in its length unit
+        (``Model.units``); a blob alone: radians and the model's length unit, bit for bit the runtime's."""
     def evaluate_pose(self, q: Array, jacobian: bool = False) -> Tuple[Array, ...]:
         """The calibrated tool frame (3 or more tool points): ``(origins (n, 3), rotations (n, 3, 3))``,
-        with ``jacobian=True`` also (n, 6, joints)."""
+        with ``jacobian=True`` also (n, 6, joints). Units as ``evaluate``'s (origins in the length
+        unit of the model file's columns; rotations dimensionless)."""
     def compensate(self, targets: Array, seeds: Optional[Array] = None, iterations: int = 8) -> Tuple[Array, list[str]]:
         """Joint commands (n, joints) putting the calibrated tool at each target (n, task_dim), as
         ``cbd compensate``, and a flag per row (``ok``, or ``not_reached``/``outside_limits``/``singular``/
-        ``extrapolating`` joined by ``+``)."""
+        ``extrapolating`` joined by ``+``). Targets in the model file's length unit and frame, seeds
+        and commands in its joint column units (``Model.units``); a blob alone: the model's length
+        unit and radians."""
 
 def fit(model: Optional[ModelFile], q: Array, y: Array, **options: Option) -> Model:
     """Fits a calibrated model, as ``cbd fit`` on a CSV of these columns: ``q`` (n, joints) and
-    ``y`` (n, ·) in the model file's column units (``model=None``: the built-in RR arm). ``options``
+    ``y`` (n, ·) in the model file's column units (``model=None``: the built-in RR arm, radians
+    and metres); the model returned takes and returns arrays in the same units. ``options``
     are the command's flags by name (``dh_first=True``, ``max_rows=500``, ``sigma=1e-3``, …). The GIL
     is released while it runs; progress goes to the ``cbd`` logger."""
 

@@ -48,11 +48,14 @@ pub fn matrix(name: &str, value: &Bound<'_, PyAny>, cols: usize, what: &str, ans
     // The copy (and a row-vector copy of it where a call needs one) and the answer.
     let bytes = shape[0] as f64 * (2.0 * 8.0 * cols as f64 + answer_bytes_per_row as f64);
     cbd_trainer::memory::room_for(bytes, 0).map_err(|e| {
-        cbd_error(format!(
-            "{name}: an array of shape ({}, {cols}) {}; pass fewer rows at a time",
-            shape[0],
-            e.0.replacen("needs", "needs, read and answered,", 1)
-        ))
+        crate::errors::memory_error(
+            value.py(),
+            format!(
+                "{name}: an array of shape ({}, {cols}) {}; pass fewer rows at a time",
+                shape[0],
+                e.0.replacen("needs", "needs, read and answered,", 1)
+            ),
+        )
     })?;
     let readonly = array.try_readonly().map_err(|e| cbd_error(format!("{name}: {e}")))?;
     // `as_slice` also lends a Fortran-ordered array's memory (column-major): only a C-ordered one's

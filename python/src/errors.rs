@@ -14,6 +14,17 @@ pub fn cbd_error(message: impl Into<String>) -> PyErr {
     CbdError::new_err(message.into())
 }
 
+/// A `cbd.CbdMemoryError` with `message`: a `CbdError` that is also a `MemoryError`, raised where
+/// an array is refused before it is copied because this process's memory could not hold it (the
+/// class is the package's, `python/cbd/__init__.py`; a `CbdError` if it cannot be found).
+pub fn memory_error(py: Python<'_>, message: String) -> PyErr {
+    let class = py.import("cbd").and_then(|m| m.getattr("CbdMemoryError")).ok().and_then(|c| c.cast_into::<pyo3::types::PyType>().ok());
+    match class {
+        Some(class) => PyErr::from_type(class, message),
+        None => cbd_error(message),
+    }
+}
+
 /// A failure carried out of a detached call (the GIL released): only its message.
 pub struct Failure(pub String);
 

@@ -10,7 +10,9 @@ use pyo3::types::PyDict;
 
 /// Fits a calibrated model to measurements: `q` (n, joints) the joint columns and `y` (n, ·) the
 /// position columns of the model file's `[measurements]`, in their units — the numbers a CSV for
-/// `cbd fit --model …` would hold (`model=None`: the built-in RR arm, q1, q2 in radians, x, y).
+/// `cbd fit --model …` would hold (`model=None`: the built-in RR arm, q1, q2 in radians, x, y). The
+/// model returned takes and gives arrays in the same units (`Model.evaluate(q)` on the training `q`
+/// gives positions comparable with `y`).
 /// `options` are `cbd fit`'s flags by name (`dh_first=True`, `max_rows=500`, `sigma=1e-3`, …; every
 /// flag the command has, as it has it). The GIL is released while it runs; progress goes to the
 /// "cbd" logger. Raises CbdError with the command's message (a CSV line becomes `(q, y) row r`).
@@ -31,6 +33,9 @@ pub fn fit(
     let cbd_trainer::cli::Command::Fit(fit_args) = command_args(&args)? else { unreachable!("parsed as fit") };
     let (nominal, spec) = spec_of(model.as_deref())?;
     let text = arrays_csv(&spec, q, Some(y))?;
+    // The model answers in the arrays' units: the model file's columns (the built-in RR arm's are
+    // the blob's own, radians and metres).
+    let columns = model.as_ref().map(|m| (m.path.display().to_string(), nominal.clone(), crate::units::Columns { spec: spec.clone() }));
     let fitted = py
         .detach(|| {
             guarded(|| {
@@ -49,5 +54,6 @@ pub fn fit(
     cbd_trainer::errln!("{}", fitted.summary);
     cbd_trainer::errln!("{}", fitted.noise_floor);
     let report = serde_json::to_string(&fitted.report).map_err(|e| crate::errors::cbd_error(e.to_string()))?;
-    py.detach(|| guarded(|| Model::new(fitted.blob, Some(report)))).map_err(|e| e.into_py(&[]))
+    py.detach(|| guarded(|| Model::new(fitted.blob, Some(report), columns.as_ref().map(|(f, n, c)| (f.clone(), n, c.clone())))))
+        .map_err(|e| e.into_py(&[]))
 }

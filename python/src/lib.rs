@@ -10,6 +10,7 @@ mod fit;
 mod log;
 mod model;
 mod model_file;
+mod units;
 
 use pyo3::prelude::*;
 

@@ -1,9 +1,14 @@
 //! `cbd.Model`: a fitted model's blob, evaluated and compensated by the runtime (the code a
-//! controller runs), in the blob's units: joints in radians (prismatic: the model's length unit) in
-//! the model's joint order, positions in its length unit.
+//! controller runs). Arrays in and out are in the units of the model file the model came with (its
+//! columns' units, as `cbd fit`'s CSV: `crate::units`); a blob alone is in its own units, joints in
+//! radians (prismatic: the model's length unit) in the model's joint order, positions in its length
+//! unit — and then the values are the runtime's bit for bit.
 
 use crate::arrays::{matrix, out2, out3};
 use crate::errors::{cbd_error, guarded, Failure};
+use crate::model_file::{spec_of, ModelFile};
+use crate::units::{times, Columns};
+use cbd_protocol::NominalModel;
 use cbd_runtime::Calibrator;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
@@ -18,23 +23,83 @@ pub struct Model {
     n_joints: usize,
     task_dim: usize,
     tool_points: usize,
+    /// The model file's columns, when the model came with one: every array in and out is in their units.
+    columns: Option<Columns>,
+    /// Which joints are revolute (whole turns of them leave the model unchanged).
+    periodic: Vec<bool>,
 }
 
 impl Model {
     /// A checked model: the blob decodes, the runtime loads it, and it evaluates to finite values
     /// at its own training configurations (`predict::check_calibrator`).
-    pub fn new(blob: Vec<u8>, report: Option<String>) -> Result<Model, Failure> {
-        let (n_joints, task_dim, tool_points) = with_calibrator(&blob, |cal| {
+    /// With `model` (the model file's path and its nominal and columns), the blob is checked to fit
+    /// it as `cbd eval` checks a blob against `--model`, and arrays are then in its columns' units.
+    pub fn new(blob: Vec<u8>, report: Option<String>, model: Option<(String, &NominalModel, Columns)>) -> Result<Model, Failure> {
+        let (n_joints, task_dim, tool_points, periodic) = with_calibrator(&blob, |cal| {
             cbd_trainer::predict::check_calibrator(cal).map_err(|e| Failure(e.to_string()))?;
             let m = cal.model();
-            Ok((m.n_joints(), m.task_dim(), m.nominal.tool_point_count()))
+            if let Some((file, nominal, _)) = &model {
+                cbd_trainer::evaluation::blob_match::check_blob_fits(m, nominal)
+                    .map_err(|why| Failure(format!("the blob does not fit {file}: {why}")))?;
+            }
+            let periodic = (0..m.n_joints()).map(|d| m.nominal.is_revolute(d)).collect();
+            Ok((m.n_joints(), m.task_dim(), m.nominal.tool_point_count(), periodic))
         })?;
-        Ok(Model { blob, report, n_joints, task_dim, tool_points })
+        Ok(Model { blob, report, n_joints, task_dim, tool_points, columns: model.map(|m| m.2), periodic })
     }
 
-    /// `q` as joint rows, each answered by `answer_values` f64 values.
+    /// `q` as joint rows, each answered by `answer_values` f64 values, in the model's joints.
     fn queries(&self, name: &str, q: &Bound<'_, PyAny>, answer_values: usize) -> PyResult<crate::arrays::Rows> {
-        matrix(name, q, self.n_joints, "joints in radians (prismatic: the model's length unit), the model's order", 8 * answer_values)
+        let mut rows = matrix(name, q, self.n_joints, &self.joint_units(), 8 * answer_values)?;
+        if let Some(c) = &self.columns {
+            let values: Vec<f64> = (0..rows.rows).flat_map(|r| c.joints_in(rows.row(r))).collect();
+            rows.values = values;
+        }
+        Ok(rows)
+    }
+
+    /// What a joint array holds, for messages.
+    fn joint_units(&self) -> String {
+        match &self.columns {
+            Some(c) => format!("columns {} in the model file's units", c.spec.joint_columns.join(", ")),
+            None => "joints in radians (prismatic: the model's length unit), the model's order".into(),
+        }
+    }
+
+    /// What a position array holds, for messages.
+    fn position_units(&self) -> String {
+        match &self.columns {
+            Some(c) => format!("positions in {}, as the model file's columns", c.spec.length_unit.name()),
+            None => "positions in the model's length unit".into(),
+        }
+    }
+
+    /// Model positions (rows of `m`) into the arrays' units.
+    fn positions_out(&self, p: Vec<f64>, m: usize) -> Vec<f64> {
+        match &self.columns {
+            Some(c) => p.chunks_exact(m).flat_map(|row| c.position_out(row)).collect(),
+            None => p,
+        }
+    }
+
+    /// Jacobians (rows of `a` × n, the first `positions` rows lengths, the rest dimensionless) into
+    /// the arrays' units: ∂y/∂p · J · ∂q/∂c.
+    fn jacobians_out(&self, jac: Vec<f64>, a: usize, positions: usize) -> Vec<f64> {
+        let Some(c) = &self.columns else { return jac };
+        let n = self.n_joints;
+        let dq = c.joint_derivative(n);
+        let dy = c.position_derivative(positions);
+        let mut left = vec![0.0; a * a];
+        for i in 0..a {
+            for k in 0..a {
+                left[i * a + k] = match (i < positions, k < positions) {
+                    (true, true) => dy[i * positions + k],
+                    (false, false) => f64::from(u8::from(i == k)),
+                    _ => 0.0,
+                };
+            }
+        }
+        jac.chunks_exact(a * n).flat_map(|j| times(&times(&left, j, a, a, n), &dq, a, n, n)).collect()
     }
 }
 
@@ -48,18 +113,37 @@ fn with_calibrator<T>(blob: &[u8], work: impl FnOnce(&mut Calibrator<'_>) -> Res
 
 #[pymethods]
 impl Model {
-    /// A model from blob bytes (checked as `cbd eval` checks a blob file).
+    /// A model from blob bytes (checked as `cbd eval` checks a blob file). With `model` (a
+    /// ModelFile, checked to fit the blob) arrays in and out are in its columns' units (e.g. degrees
+    /// and mm for examples/ur5/ur5.toml); without, in the blob's: radians, the model's length unit.
     #[staticmethod]
-    fn from_bytes(py: Python<'_>, data: Vec<u8>) -> PyResult<Model> {
-        py.detach(|| guarded(|| Model::new(data, None))).map_err(|e| e.into_py(&[]))
+    #[pyo3(signature = (data, model=None))]
+    fn from_bytes(py: Python<'_>, data: Vec<u8>, model: Option<PyRef<'_, ModelFile>>) -> PyResult<Model> {
+        let with = with_file(model.as_deref())?;
+        py.detach(|| guarded(|| Model::new(data, None, with.as_ref().map(|(f, n, c)| (f.clone(), n, c.clone())))))
+            .map_err(|e| e.into_py(&[]))
     }
 
-    /// Reads a blob file (`cbd fit --out`).
+    /// Reads a blob file (`cbd fit --out`). With `model` (a ModelFile, checked to fit the blob)
+    /// arrays in and out are in its columns' units; without, in the blob's: radians, the model's
+    /// length unit.
     #[staticmethod]
-    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
+    #[pyo3(signature = (path, model=None))]
+    fn load(py: Python<'_>, path: PathBuf, model: Option<PyRef<'_, ModelFile>>) -> PyResult<Model> {
+        let with = with_file(model.as_deref())?;
         let blob =
             cbd_trainer::data::read_capped(&path, cbd_trainer::data::MAX_BLOB_BYTES, "blob").map_err(|e| cbd_error(e.to_string()))?;
-        py.detach(|| guarded(|| Model::new(blob, None))).map_err(|e| cbd_error(format!("{}: {}", path.display(), e.0)))
+        py.detach(|| guarded(|| Model::new(blob, None, with.as_ref().map(|(f, n, c)| (f.clone(), n, c.clone())))))
+            .map_err(|e| cbd_error(format!("{}: {}", path.display(), e.0)))
+    }
+
+    /// The units of every array in and out: the model file's columns', or the blob's own.
+    #[getter]
+    fn units(&self) -> String {
+        match &self.columns {
+            Some(c) => c.describe(),
+            None => "the blob's own: joints in radians (prismatic: the model's length unit) in the model's order, positions in the model's length unit".into(),
+        }
     }
 
     /// The blob's bytes: what `cbd fit` writes, what the runtime and the C library load.
@@ -100,8 +184,11 @@ impl Model {
     }
 
     /// The calibrated position of tool point `point` at each row of `q` (n, joints): an (n, task_dim)
-    /// array, bit for bit what the runtime (and the C library, the firmware) computes. With
-    /// `jacobian=True`, `(positions, jacobians)`, the exact Jacobians as (n, task_dim, joints).
+    /// array. Units (`Model.units`): with a model file, `q` in its joint columns' units (degrees for
+    /// examples/ur5/ur5.toml) and positions in its length unit and frame, as `cbd fit`'s CSV; a blob
+    /// alone, radians and the model's length unit, bit for bit what the runtime (and the C library,
+    /// the firmware) computes. With `jacobian=True`, `(positions, jacobians)`, the exact Jacobians as
+    /// (n, task_dim, joints) in the same units (length per joint column unit).
     #[pyo3(signature = (q, jacobian=false, point=0))]
     fn evaluate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool, point: i64) -> PyResult<Bound<'py, PyAny>> {
         let q = self.queries("q", q, self.task_dim * (1 + if jacobian { self.n_joints } else { 0 }))?;
@@ -127,17 +214,18 @@ impl Model {
                 })
             })
             .map_err(|e| e.into_py(&[]))?;
-        let positions = out2(py, positions, rows, m).into_any();
+        let positions = out2(py, self.positions_out(positions, m), rows, m).into_any();
         if !jacobian {
             return Ok(positions);
         }
-        Ok(PyTuple::new(py, [positions, out3(py, jacobians, rows, m, n).into_any()])?.into_any())
+        Ok(PyTuple::new(py, [positions, out3(py, self.jacobians_out(jacobians, m, m), rows, m, n).into_any()])?.into_any())
     }
 
     /// The calibrated tool frame at each row of `q` (models with 3 or more tool points): `(origins,
     /// rotations)`, (n, 3) and (n, 3, 3) — the least-squares frame of the calibrated points, as the
     /// runtime's `evaluate_pose`. With `jacobian=True` also its (n, 6, joints) Jacobians (origin
-    /// rows, then rotation rows).
+    /// rows, then rotation rows). Units as `evaluate`'s: `q` in the model file's joint columns'
+    /// units and origins in its length unit (a blob alone: radians, the model's length unit).
     #[pyo3(signature = (q, jacobian=false))]
     fn evaluate_pose<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, jacobian: bool) -> PyResult<Bound<'py, PyTuple>> {
         let q = self.queries("q", q, 12 + if jacobian { 6 * self.n_joints } else { 0 })?;
@@ -161,15 +249,18 @@ impl Model {
                 })
             })
             .map_err(|e| e.into_py(&[]))?;
-        let mut out = vec![out2(py, origins, rows, 3).into_any(), out3(py, rotations, rows, 3, 3).into_any()];
+        let mut out = vec![out2(py, self.positions_out(origins, 3), rows, 3).into_any(), out3(py, rotations, rows, 3, 3).into_any()];
         if jacobian {
-            out.push(out3(py, jacobians, rows, 6, n).into_any());
+            out.push(out3(py, self.jacobians_out(jacobians, 6, 3), rows, 6, n).into_any());
         }
         PyTuple::new(py, out)
     }
 
     /// Joint commands that put the calibrated tool at each target (n, task_dim), as `cbd compensate`
-    /// computes them: from `seeds` (n, joints), or without, from the training configuration whose
+    /// computes them. Units as `evaluate`'s: with a model file, targets in its length unit and frame,
+    /// seeds and commands in its joint columns' units (commands turned by whole turns into its joint
+    /// limits, as `cbd compensate` writes them); a blob alone, the model's length unit and radians.
+    /// Commands are computed from `seeds` (n, joints), or without, from the training configuration whose
     /// nominal position is nearest the target; `iterations` Gauss–Newton steps. Returns `(commands,
     /// flags)`: an (n, joints) array and one flag string per row (`ok`, or `not_reached`,
     /// `outside_limits` (a value not finite), `singular`, `extrapolating` joined by `+`; `ok` only when the
@@ -190,7 +281,11 @@ impl Model {
         };
         // Per target: its command and the compensation's work rows (a few of the joints' size), a flag.
         let answer = 8 * (4 * self.n_joints + self.task_dim) + 32;
-        let t = matrix("targets", targets, self.task_dim, "positions in the model's length unit", answer)?;
+        let mut t = matrix("targets", targets, self.task_dim, &self.position_units(), answer)?;
+        if let Some(c) = &self.columns {
+            let values: Vec<f64> = (0..t.rows).flat_map(|r| c.position_in(t.row(r))).collect();
+            t.values = values;
+        }
         let s = seeds.map(|s| self.queries("seeds", s, 0)).transpose()?;
         if let Some(s) = &s {
             if s.rows != t.rows {
@@ -232,11 +327,22 @@ impl Model {
                 .text()
             })
             .collect();
-        let commands = out2(py, rows.into_iter().flat_map(|r| r.joints).collect(), targets.len(), n);
+        let commands: Vec<f64> = match &self.columns {
+            Some(c) => rows.iter().flat_map(|r| c.joints_out(&r.joints, &self.periodic)).collect(),
+            None => rows.into_iter().flat_map(|r| r.joints).collect(),
+        };
+        let commands = out2(py, commands, targets.len(), n);
         PyTuple::new(py, [commands.into_any(), flags.into_pyobject(py)?.into_any()])
     }
 
     fn __repr__(&self) -> String {
         format!("Model({} joints, {}-D positions, {} bytes)", self.n_joints, self.task_dim, self.blob.len())
     }
+}
+
+/// A model file's path, nominal and columns, for a model loaded with it.
+fn with_file(model: Option<&ModelFile>) -> PyResult<Option<(String, NominalModel, Columns)>> {
+    let Some(m) = model else { return Ok(None) };
+    let (nominal, spec) = spec_of(Some(m))?;
+    Ok(Some((m.path.display().to_string(), nominal, Columns { spec })))
 }

@@ -113,6 +113,8 @@ def test_arrays_too_large_for_memory_raise_cbd_errors(ur5_fit, ur5_file):
     ]:
         with pytest.raises(cbd.CbdError) as e:
             call()
+        # Checked before the allocation: a MemoryError (and a CbdError, a ValueError), never an abort.
+        assert isinstance(e.value, MemoryError) and isinstance(e.value, cbd.CbdMemoryError), type(e.value)
         message = str(e.value)
         assert message.startswith(f"{name}: an array of shape (1000000000, ") and "this process may use" in message, message
         assert "pass fewer rows at a time" in message, message

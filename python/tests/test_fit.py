@@ -27,13 +27,17 @@ def test_rr_fit_without_a_model_file_and_with_flags_gives_the_cli_bytes(rr_dir, 
     assert (model.n_joints, model.task_dim, model.tool_point_count) == (2, 2, 1)
 
 
-def test_bytes_save_and_load_round_trip(ur5_fit, tmp_path):
+def test_bytes_save_and_load_round_trip(ur5_fit, ur5_file, tmp_path):
     model, _ = ur5_fit
     model.save(tmp_path / "m.blob")
     for back in (cbd.Model.load(tmp_path / "m.blob"), cbd.Model.from_bytes(model.to_bytes())):
         assert back.to_bytes() == model.to_bytes() and back.report is None
-    q = np.random.default_rng(1).uniform(-3, 3, (20, 6))
-    assert np.array_equal(cbd.Model.from_bytes(model.to_bytes()).evaluate(q), model.evaluate(q))
+    q = np.random.default_rng(1).uniform(-170, 170, (20, 6))  # degrees, the model file's columns
+    # The fitted model answers in the model file's units; the blob alone in its own (radians), the
+    # same values once converted as the CSV import converts them.
+    q_model, _ = ur5_file.to_model(q)
+    assert np.array_equal(cbd.Model.from_bytes(model.to_bytes()).evaluate(q_model), model.evaluate(q))
+    assert np.array_equal(cbd.Model.from_bytes(model.to_bytes(), ur5_file).evaluate(q), model.evaluate(q))
 
 
 def test_model_file_converts_arrays_as_the_csv_import(ur5_file, ur5_train):

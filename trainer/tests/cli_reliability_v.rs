@@ -383,3 +383,84 @@ fn numbers_are_bounded_once_and_echoed_as_written() {
         &["zw.csv", "header column 1 is q1\\u{200b}", "invisible character U+200B"],
     );
 }
+
+/// Class 5: commands that share inputs share the pipeline. `cbd plan --data` registers a base
+/// declared unknown as `cbd fit` does, and so chooses what fit chooses on the same rows (it kept the
+/// identity base: the nominal chosen, 0.55 mm predicted where fit reaches 0.04 mm); its lines use
+/// one meaning of "identified" (the information's rank, as it counts the planned poses).
+#[test]
+fn plan_registers_and_chooses_as_fit_does_and_counts_identified_poses_once() {
+    let dir = scratch("rel5-plan-as-fit");
+    let text = std::fs::read_to_string(ur5_dir().join("simulated-six.toml")).unwrap();
+    let registered = text.replace("base = { translation = [0, 0, 0], rpy = [0, 0, 0] }", "base = { register = true }");
+    assert_ne!(registered, text);
+    write(&dir, "tracker.toml", registered);
+    let simulate = ["simulate", "--robot", "six", "--sampling", "uniform", "--seed", "2", "--noise", "0.02", "--count", "60"];
+    succeeds(&cbd(&dir, &[&simulate[..], &["--tracker-frame", "3000,-2000,1000;1,1,0,30", "--out", "tracker.csv"]].concat()));
+    let fit = succeeds(&cbd(&dir, &["fit", "--model", "tracker.toml", "--data", "tracker.csv", "--out", "t.blob"]));
+    let plan = ["plan", "--model", "tracker.toml", "--data", "tracker.csv", "--count", "5", "--candidates", "300", "--workspace", "16"];
+    let planned = succeeds(&cbd(&dir, &[&plan[..], &["--out", "p.csv", "--json", "p.json"]].concat()));
+    let geometry = |err: &str| err.lines().find(|l| l.starts_with("geometry: ")).map(str::to_string);
+    assert!(planned.contains("tracker.csv: registered base"), "{planned}");
+    assert_eq!(geometry(&planned), geometry(&fit), "plan:\n{planned}\nfit:\n{fit}");
+    assert!(geometry(&fit).is_some_and(|g| g.starts_with("geometry: calibrated")), "{fit}");
+    let predicted = json(&dir.join("p.json"))["plan"]["measured_predicted_rms"].as_f64().unwrap();
+    assert!(predicted < 0.1, "predicted {predicted} mm after the measured poses:\n{planned}");
+
+    // 12 poses identify the group (23 parameters) without coordinates to spare: said once, in the
+    // plan's own terms, and the planned poses are not counted as "before it is identified".
+    write(&dir, "six.toml", text);
+    succeeds(&cbd(&dir, &[&simulate[..9], &["--count", "12", "--out", "twelve.csv"]].concat()));
+    let err = succeeds(&cbd(
+        &dir,
+        &[
+            "plan",
+            "--model",
+            "six.toml",
+            "--data",
+            "twelve.csv",
+            "--count",
+            "10",
+            "--candidates",
+            "300",
+            "--workspace",
+            "16",
+            "--out",
+            "q.csv",
+        ],
+    ));
+    assert!(err.contains("twelve.csv: 12 poses identify the geometric group (23 parameters) but leave too few coordinates"), "{err}");
+    assert!(!err.contains("do not identify") && !err.contains("before the geometric group"), "{err}");
+    assert!(err.contains("the geometric group (23 parameters) identified by the measured poses"), "{err}");
+}
+
+/// Class 4: no line claims a cross-validation the rows could not give (fit said "4-fold
+/// cross-validation … on 3 rows" beside the scheme's "too few rows"). Class 6: rows at the nominal
+/// (simulated with no error and no noise) name the file and the cause, not "no start gave a
+/// positive-definite covariance"; σ and the scales print readably (no 30-digit decimals).
+#[test]
+fn fit_says_what_it_did_and_why_it_cannot() {
+    let dir = scratch("rel5-fit-lines");
+    let text = std::fs::read_to_string(ur5_dir().join("simulated-six.toml")).unwrap();
+    write(&dir, "six.toml", text.replace("min_rows = 10", "min_rows = 3"));
+    succeeds(&cbd(&dir, &["simulate", "--robot", "six", "--sampling", "uniform", "--count", "3", "--seed", "1", "--out", "three.csv"]));
+    let fixed = ["--sigma", "0.01", "--gamma", "1e-5", "--joint-b", "0.25", "--task-width", "500", "--task-gamma", "0.4"];
+    let err = succeeds(&cbd(&dir, &[&["fit", "--model", "six.toml", "--data", "three.csv", "--out", "t.blob"][..], &fixed[..]].concat()));
+    assert!(!err.contains("-fold cross-validation"), "{err}");
+    assert!(err.contains("geometry: nominal (too few poses to cross-validate: 3, where 4 folds need at least 8"), "{err}");
+    assert!(err.contains("scheme: euler × 1 (too few poses to cross-validate: 3, where 4 folds need at least 8)"), "{err}");
+
+    let exact = ["simulate", "--robot", "six", "--noise", "0", "--sampling", "uniform", "--count", "40", "--exact-geometry"];
+    succeeds(&cbd(&dir, &[&exact[..], &["--effect", "thermal:dx=0,dy=0,dz=0", "--out", "exact.csv"]].concat()));
+    fails_with(
+        &cbd(&dir, &["fit", "--model", "six.toml", "--data", "exact.csv", "--out", "e.blob"]),
+        &["exact.csv: the positions are the nominal model's own", "no noise for CbD's evidence to estimate σ from"],
+    );
+    let rr = rr_grid(&dir, "rr.csv", 6);
+    let err = succeeds(&cbd(&dir, &["fit", "--data", &rr, "--out", "rr.blob"]));
+    let line = err.lines().find(|l| l.starts_with("hyperparameters")).unwrap();
+    assert!(!line.contains("0.0000"), "{line}");
+    for word in line.split(|c: char| c == ' ' || c == ';' || c == '[' || c == ']' || c == '=') {
+        assert!(word.len() <= 24, "{word:?} in {line}");
+    }
+}

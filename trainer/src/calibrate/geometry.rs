@@ -215,6 +215,12 @@ fn decide(
         (Some(a), Some(b)) => (evidence_scores(a, b, b.geometric_parameters), "evidence".to_string()),
         _ => {
             let folds = settings.scheme_folds.max(2);
+            // Too few poses for the folds: the nominal kept, and the line says so (it claimed
+            // "4-fold cross-validation … on 3 rows" beside the scheme's "too few rows").
+            if let Some(why) = super::scheme::too_few_to_cross_validate(data, folds) {
+                let by = format!("{why}: the nominal kept, as without evidence the calibrated geometry cannot be scored");
+                return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }));
+            }
             (cross_validated_scores(nominal, data, norm, settings, &plain, folds)?, format!("{folds}-fold cross-validation"))
         }
     };

@@ -122,6 +122,11 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     if data.len() < needed {
         return Err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }.into());
     }
+    if settings.searches_evidence(nominal) {
+        if let Some(why) = exact_nominal(nominal, data) {
+            return Err(crate::Error::InvalidInput(why));
+        }
+    }
     let norm = normalisation(data, settings);
     let (chosen, geometry) = geometry::choose_geometry(nominal, data, &norm, settings)?;
     let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
@@ -273,6 +278,42 @@ impl Calibration {
     }
 }
 
+/// Relative residual (RMS residual over the positions' RMS spread) at or below which rows are the
+/// nominal model's own positions: f64 forward kinematics agree to ~1e-15 of the reach; a tracker
+/// resolves ~1e-6 of it.
+pub const EXACT_NOMINAL: f64 = 1e-11;
+
+/// Why `data` leaves CbD's evidence nothing to estimate, or `None`: its positions are the nominal
+/// model's own (computed from the joints, or simulated with no error and no noise). The residual
+/// is zero, so no σ has a positive-definite covariance behind it ("no start gave a
+/// positive-definite covariance", or "the flow diverged … σ too small", with no word of the cause).
+/// The caller names the file.
+pub fn exact_nominal(nominal: &NominalModel, data: &Measurements) -> Option<String> {
+    let m = data.task_dim;
+    let predicted = crate::nominal::positions(nominal, &data.joints, m);
+    let count = data.len().max(1) as f64;
+    let rms = (predicted.iter().zip(&data.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / count).sqrt();
+    let mean: Vec<f64> = (0..m).map(|c| data.positions.iter().skip(c).step_by(m).sum::<f64>() / count).collect();
+    let spread = (data.positions.iter().enumerate().map(|(i, y)| (y - mean[i % m]).powi(2)).sum::<f64>() / count).sqrt();
+    (rms <= EXACT_NOMINAL * spread.max(f64::MIN_POSITIVE) && rms.is_finite()).then(|| {
+        format!(
+            "the positions are the nominal model's own (RMS residual {} against a spread of {}): no error to calibrate and no noise for CbD's evidence to estimate σ from — measured positions are needed",
+            crate::error::number(rms),
+            crate::error::number(spread)
+        )
+    })
+}
+
+/// `v` shortest round-trip (passed back, the same value), in exponent form outside [1e-3, 1e7):
+/// σ = 2.5942570536546676e-8, not 0.000000025942570536546676.
+pub fn readable(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-3..1e7).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// `--joint-b`/`--joint-widths`, `--gamma`, `--task-width`, `--task-gamma`, `--sigma` as one line.
 pub fn describe(h: &CbdHyperparameters) -> String {
     let axes: Vec<String> = h
@@ -280,7 +321,7 @@ pub fn describe(h: &CbdHyperparameters) -> String {
         .iter()
         .map(|a| {
             let (form, p) = crate::axis_forms::form_and_parameter(a);
-            format!("{}={p}", form.label())
+            format!("{}={}", form.label(), readable(p))
         })
         .collect();
     let configuration = match &h.configuration {
@@ -288,19 +329,80 @@ pub fn describe(h: &CbdHyperparameters) -> String {
             let axes: Vec<String> = c
                 .joint_axes
                 .iter()
-                .map(|a| format!("{}={}", crate::axis_forms::form_of(a).label(), crate::axis_forms::form_and_parameter(a).1))
+                .map(|a| format!("{}={}", crate::axis_forms::form_of(a).label(), readable(crate::axis_forms::form_and_parameter(a).1)))
                 .collect();
-            let width = c.task_width.map_or("flat".to_string(), |a| a.to_string());
-            format!("; configuration field [{}] task width {width} gamma {}", axes.join(" "), c.gamma)
+            let width = c.task_width.map_or("flat".to_string(), readable);
+            format!("; configuration field [{}] task width {width} gamma {}", axes.join(" "), readable(c.gamma))
         }
         None => String::new(),
     };
     format!(
         "joint kernel [{}] gamma {}; task kernel width {} gamma {}; sigma {}{configuration}",
         axes.join(" "),
-        h.joint_gamma,
-        h.task_width,
-        h.task_gamma,
-        h.sigma
+        readable(h.joint_gamma),
+        readable(h.task_width),
+        readable(h.task_gamma),
+        readable(h.sigma)
     )
+}
+
+#[cfg(test)]
+mod readable_tests {
+    use super::*;
+
+    #[test]
+    fn hyperparameters_print_readably_and_round_trip() {
+        for v in [2.5942570536546676e-8, 0.0000027424446836296227, 549.9198909809619, 1e-5, 0.4, 3e12] {
+            let s = readable(v);
+            assert!(s.len() <= 24, "{s}");
+            assert_eq!(s.parse::<f64>().unwrap(), v, "{s}");
+        }
+        assert_eq!(readable(2.5942570536546676e-8), "2.5942570536546676e-8");
+        assert_eq!(readable(0.4), "0.4");
+        let h = CbdHyperparameters {
+            joint_axes: vec![cbd_protocol::JointKernelAxis::Periodic { b: 0.25 }; 2],
+            joint_gamma: 0.0000027424446836296227,
+            task_width: 549.9,
+            task_gamma: 0.4,
+            sigma: 2.5942570536546676e-8,
+            configuration: None,
+        };
+        let line = describe(&h);
+        assert!(line.contains("sigma 2.5942570536546676e-8") && line.contains("gamma 2.7424446836296227e-6"), "{line}");
+        assert!(!line.contains("0.00000"), "{line}");
+    }
+
+    #[test]
+    fn rows_at_the_nominal_are_refused_with_the_cause_and_noisy_ones_are_not() {
+        let nominal = crate::simulate::rr::nominal();
+        let mut exact = Measurements::new(2, 2);
+        let mut noisy = Measurements::new(2, 2);
+        for i in 0..20 {
+            let q = [0.3 * i as f64, 1.0 - 0.1 * i as f64];
+            let y = crate::nominal::positions(&nominal, &q, 2);
+            exact.push(&q, &y);
+            noisy.push(&q, &[y[0] + 1e-6 * (i as f64).sin(), y[1]]);
+        }
+        let why = exact_nominal(&nominal, &exact).expect("exact rows refused");
+        assert!(why.contains("the nominal model's own") && why.contains("no noise"), "{why}");
+        assert_eq!(exact_nominal(&nominal, &noisy), None);
+        let settings = Settings::default();
+        let e = calibrate(&nominal, &exact, &settings).unwrap_err().to_string();
+        assert!(e.contains("the nominal model's own"), "{e}");
+    }
+
+    #[test]
+    fn no_choice_claims_folds_the_rows_cannot_give() {
+        let mut three = Measurements::new(2, 2);
+        for i in 0..3 {
+            three.push(&[i as f64, 0.0], &[0.0, i as f64]);
+        }
+        let why = scheme::too_few_to_cross_validate(&three, 4).unwrap();
+        assert_eq!(why, "too few poses to cross-validate: 3, where 4 folds need at least 8");
+        let mut eight = three.clone();
+        for i in 3..8 {
+            eight.push(&[i as f64, 0.0], &[0.0, i as f64]);
+        }
+        assert_eq!(scheme::too_few_to_cross_validate(&eight, 4), None);
+    }
 }

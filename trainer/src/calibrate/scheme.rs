@@ -41,6 +41,15 @@ pub fn label(i: Integrator) -> String {
     format!("{} × {}", format!("{:?}", i.method).to_lowercase(), i.steps)
 }
 
+/// Why `data` is too few poses for `folds`-fold cross-validation (each fold holds out at least one
+/// pose and trains on the rest: at least two poses a fold), or `None`. One rule for every choice
+/// the fit makes by cross-validation (the scheme's, the geometry's), so that no line claims a
+/// k-fold cross-validation the rows could not give.
+pub fn too_few_to_cross_validate(data: &Measurements, folds: usize) -> Option<String> {
+    let poses = data.pose_count();
+    (poses < 2 * folds).then(|| format!("too few poses to cross-validate: {poses}, where {folds} folds need at least {}", 2 * folds))
+}
+
 /// The scheme for `settings`: as given, or the candidate with the least cross-validated error.
 pub fn choose_scheme(
     base: &NominalModel,
@@ -55,12 +64,12 @@ pub fn choose_scheme(
     }
     let candidates = [Integrator { method, steps: 1 }, Integrator { method, steps: 2 }];
     let folds = settings.scheme_folds;
-    if folds < 2 || data.len() < 2 * folds {
-        return Ok(SchemeChoice {
-            integrator: candidates[0],
-            chosen_by: "too few rows to cross-validate".into(),
-            cross_validation: vec![],
-        });
+    let too_few = match folds {
+        0 | 1 => Some(format!("cross-validation off ({folds} folds)")),
+        _ => too_few_to_cross_validate(data, folds),
+    };
+    if let Some(why) = too_few {
+        return Ok(SchemeChoice { integrator: candidates[0], chosen_by: why, cross_validation: vec![] });
     }
     if data.len() * data.task_dim > DENSE_MAX_UNKNOWNS {
         return Ok(SchemeChoice {

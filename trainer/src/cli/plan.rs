@@ -82,7 +82,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
             }
         }
     }
-    let (nominal, spec) = load_nominal(&args.model)?;
+    let (mut nominal, spec) = load_nominal(&args.model)?;
     let model_name = args.model.model.as_ref().map_or("the built-in RR arm".to_string(), |p| p.display().to_string());
     if nominal.tool_point_count() > 1 {
         return Err(crate::plan::PlanError::ToolPoints { points: nominal.tool_point_count() }).context(&model_name);
@@ -98,6 +98,13 @@ pub fn run(args: PlanArgs) -> Result<()> {
         Some(path) => Some(read_measurements(path, &spec)?.measurements),
         None => None,
     };
+    // The frame `cbd fit` fits in: a base declared unknown (`register = true`) registered on the
+    // measured poses, as fit registers it, before the geometry and hyperparameters are chosen on
+    // them (plan kept the declared identity base: the nominal chosen, 0.55 mm predicted where fit
+    // reaches 0.038 mm).
+    if let (Some(data), Some(path)) = (&measured, &args.data) {
+        crate::cli::register_base_if_unknown(&args.model, &mut nominal, data, path)?;
+    }
     // The controller's values (the columns, in model units: where the limits apply) → the model's
     // joints, as the import maps them: the joint map, then a planar frame's offsets.
     let columns = crate::data::joint_columns::JointColumns::new(&spec);
@@ -179,12 +186,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         Some(data) => match crate::plan::identifiability::measured_identify_group(&nominal, &sample, &data.joints) {
             Ok(()) => true,
             Err(why) => {
-                errln!(
-                    "{data_name}: {} poses do not identify the geometric group ({} parameters; at least {} poses in general position, twice the parameters in coordinates): the predictions rest on the stated prior (--noise, --prior-error), not on CbD's evidence on these poses",
-                    why.poses,
-                    why.parameters,
-                    why.needed
-                );
+                errln!("{data_name}: {}", why.describe());
                 false
             }
         },
@@ -239,15 +241,23 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let unit = spec.model_length_unit.name();
     // Poses chosen before the geometric group was identified (every criterion).
     let geometric = result.geometric_identified_after.unwrap_or(result.poses.len()).min(result.poses.len());
+    let stages = match (geometry, geometric, result.measured_predicted_rms.is_some()) {
+        (crate::calibrate::Geometry::Nominal, ..) => {
+            "the nominal geometry kept (CbD's evidence on --data): no geometric group to identify".to_string()
+        }
+        (_, 0, true) => format!("the geometric group ({} parameters) identified by the measured poses", result.geometric_parameters),
+        _ => format!(
+            "{geometric} before the geometric group ({} parameters) is identified, {} after",
+            result.geometric_parameters,
+            result.poses.len() - geometric
+        ),
+    };
     errln!(
-        "planned {} poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s: {} before the geometric group ({} parameters) is identified, {} after",
+        "planned {} poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s: {stages}",
         result.poses.len(),
         result.candidates,
         result.rejected_singular,
         result.seconds,
-        geometric,
-        result.geometric_parameters,
-        result.poses.len() - geometric
     );
     if options.exchange > 0 {
         errln!("exchange passes (at most {}): {} swaps", options.exchange, result.exchange_swaps);

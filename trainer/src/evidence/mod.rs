@@ -79,7 +79,10 @@ impl std::fmt::Display for EvidenceError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             EvidenceError::TooFewRows(n) => write!(f, "CbD evidence: {n} rows are too few (need at least 3)"),
-            EvidenceError::NoValidSetting => write!(f, "CbD evidence: no start gave a positive-definite covariance"),
+            EvidenceError::NoValidSetting => write!(
+                f,
+                "CbD evidence: no start gave a positive-definite covariance (the residual after the geometry is zero or its rows coincide: no noise to estimate σ from, measured positions are needed)"
+            ),
         }
     }
 }

@@ -122,10 +122,11 @@ pub fn measured_identify_group(nominal: &cbd_protocol::NominalModel, generic: &[
     }
     let p = group.parameters();
     let needed = (2 * p).div_ceil(m.max(1));
-    if group.full_rank() && poses >= needed {
+    let identified = group.full_rank();
+    if identified && poses >= needed {
         Ok(())
     } else {
-        Err(GroupNotIdentified { poses, parameters: p, needed })
+        Err(GroupNotIdentified { poses, parameters: p, needed, identified, identifying: p.div_ceil(m.max(1)) })
     }
 }
 
@@ -136,6 +137,30 @@ pub struct GroupNotIdentified {
     pub parameters: usize,
     /// Poses in general position needed at least (twice the parameters in coordinates).
     pub needed: usize,
+    /// Whether the poses identify the group (their information of full rank: the criterion the
+    /// plan's "before the geometric group is identified" counts by), only without coordinates to spare.
+    pub identified: bool,
+    /// Poses in general position that can identify the group at the least (its parameters in coordinates).
+    pub identifying: usize,
+}
+
+impl GroupNotIdentified {
+    /// Why `data_name`'s poses give CbD's evidence nothing to stand on, in the plan's own terms of
+    /// "identified" (the information's rank, as the planned poses are counted), e.g. "12 poses
+    /// identify the geometric group (23 parameters) but leave no coordinates to spare: …".
+    pub fn describe(&self) -> String {
+        let why = match self.identified {
+            true => format!(
+                "{} poses identify the geometric group ({} parameters) but leave too few coordinates beyond it for CbD's evidence (at least {} poses, twice the parameters in coordinates)",
+                self.poses, self.parameters, self.needed
+            ),
+            false => format!(
+                "{} poses do not identify the geometric group ({} parameters; at least {} poses in general position, and {} for CbD's evidence: twice the parameters in coordinates)",
+                self.poses, self.parameters, self.identifying, self.needed
+            ),
+        };
+        format!("{why}: the predictions rest on the stated prior (--noise, --prior-error), not on CbD's evidence on these poses")
+    }
 }
 
 fn full_rank(info: &Mat<f64>) -> bool {
@@ -149,5 +174,30 @@ fn full_rank(info: &Mat<f64>) -> bool {
             max > 0.0 && min > RANK_RATIO * max
         }
         Err(_) => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn poses(count: usize, seed: f64) -> Vec<f64> {
+        (0..count * 6).map(|k| ((k as f64 + seed) * 0.731).sin() * 2.5).collect()
+    }
+
+    /// One meaning of "identified" (the information's rank, as the plan counts its poses): poses
+    /// that identify the group but leave no coordinates to spare are said to identify it.
+    #[test]
+    fn measured_poses_are_identified_by_the_plans_own_criterion() {
+        let nominal = cbd_protocol::NominalModel::DhChain(cbd_protocol::ur5::chain());
+        let generic = poses(200, 0.5);
+        let few = measured_identify_group(&nominal, &generic, &poses(3, 7.0)).unwrap_err();
+        assert!(!few.identified && few.identifying == few.parameters.div_ceil(3), "{few:?}");
+        assert!(few.describe().starts_with("3 poses do not identify the geometric group"), "{}", few.describe());
+        let some = measured_identify_group(&nominal, &generic, &poses(12, 7.0)).unwrap_err();
+        assert!(some.identified && some.poses < some.needed, "{some:?}");
+        let text = some.describe();
+        assert!(text.starts_with("12 poses identify the geometric group") && !text.contains("do not identify"), "{text}");
+        assert!(measured_identify_group(&nominal, &generic, &poses(40, 7.0)).is_ok());
     }
 }
