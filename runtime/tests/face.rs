@@ -23,6 +23,7 @@ const FACE: &[&str] = &[
 #[test]
 fn the_root_exports_the_face_and_one_module_of_internals() {
     let lib = include_str!("../src/lib.rs");
+    assert!(lib.lines().any(|l| l == "#![no_std]"), "the runtime must stay #![no_std]");
     let root: Vec<&str> = lib.lines().filter(|l| l.starts_with("pub ")).collect();
     assert_eq!(root, FACE, "the runtime's face changed: update FACE (and the firmware docs) deliberately");
     let names: usize = FACE
