@@ -36,6 +36,13 @@ pub fn fit(
     // The model answers in the arrays' units: the model file's columns (the built-in RR arm's are
     // the blob's own, radians and metres).
     let columns = model.as_ref().map(|m| (m.path.display().to_string(), nominal.clone(), crate::units::Columns { spec: spec.clone() }));
+    // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
+    let arm = cbd_trainer::cli::ArmModel {
+        path: model.as_ref().map(|m| m.path.clone()),
+        file: model.as_ref().map(|m| m.file.clone()),
+        nominal,
+        spec: spec.clone(),
+    };
     let fitted = py
         .detach(|| {
             guarded(|| {
@@ -44,7 +51,7 @@ pub fn fit(
                 let fitted = cbd_trainer::workers::run_in_pool(threads, || {
                     let imported =
                         cbd_trainer::data::csv_import::read_measurements_from(text.as_bytes(), std::path::Path::new(ARRAYS), &spec)?;
-                    cbd_trainer::cli::fit::fit_measurements(&fit_args, nominal, imported)
+                    cbd_trainer::cli::fit::fit_measurements(&fit_args, &arm, imported)
                 })
                 .map_err(cbd_trainer::Error::from)??;
                 Ok::<_, Failure>(fitted)

@@ -119,8 +119,8 @@ impl ModelFile {
 /// units; the built-in RR arm (q1, q2 in radians; x, y) for `None`.
 pub fn spec_of(model: Option<&ModelFile>) -> PyResult<(NominalModel, ColumnSpec)> {
     let Some(m) = model else {
-        let args = cbd_trainer::cli::ModelArgs { model: None };
-        return cbd_trainer::cli::load_nominal(&args).map_err(|e| cbd_error(e.to_string()));
+        let arm = cbd_trainer::cli::ArmModel::builtin_rr();
+        return Ok((arm.nominal, arm.spec));
     };
     let spec = match m.file.measurements {
         Some(_) => m.file.column_spec().map_err(|e| cbd_error(e.to_string()))?,

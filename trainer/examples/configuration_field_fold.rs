@@ -23,7 +23,8 @@ fn main() {
     let [_, model, train, test] = &args[..] else { panic!("usage: configuration_field_fold MODEL.toml TRAIN.csv TEST.csv") };
     // `-`: the paper's RR arm (CSV q1, q2, x, y), as `cbd` without --model.
     let model_args = cbd_trainer::cli::ModelArgs { model: (model != "-").then(|| model.into()) };
-    let (nominal, spec) = cbd_trainer::cli::load_nominal(&model_args).unwrap_or_else(|e| panic!("{e}"));
+    let arm = cbd_trainer::cli::ArmModel::read(&model_args).unwrap_or_else(|e| panic!("{e}"));
+    let (nominal, spec) = (arm.nominal, arm.spec);
     let train = read_measurements(train, &spec).unwrap_or_else(|e| panic!("{e}")).measurements;
     let test = read_measurements(test, &spec).unwrap_or_else(|e| panic!("{e}")).measurements;
     let mut settings = Settings::default();

@@ -107,7 +107,8 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
-    if args.commanded.is_some() && crate::cli::base_is_registered(&crate::cli::ModelArgs { model: Some(args.model.clone()) }) {
+    let model_file = crate::data::model_file::load_model_file(&args.model)?;
+    if args.commanded.is_some() && model_file.register_base {
         // The commanded table sends each method's commands to the simulated arm in its own base
         // frame; a registered frame is only an estimate of where that is (1000 of 1000 targets
         // "missed" by about a metre). Refused before any fit.
@@ -121,9 +122,9 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     settings.solver.verbose = false;
     // Each row deforms the model it is handed: `cbd` the nominal, `dh+cbd` the DH-calibrated chain.
     settings.geometry = crate::calibrate::Geometry::Nominal;
-    let inputs = read_compare_files(&args.model, &args.train, &args.test)?;
+    let inputs = read_compare_files(&model_file, &args.train, &args.test)?;
     if let Some(r) = &inputs.registration {
-        let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
+        let unit = model_file.length_unit.name();
         errln!("{}: {}", args.train.display(), r.describe(unit));
     }
     let mut warnings = inputs.warnings;
@@ -162,7 +163,7 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
     comparison.default_fit = Some(choice);
     let written = comparison.written_by_fit().and_then(|name| comparison.rows.iter().find(|r| r.name == name));
     comparison.noise_floor = written.and_then(|r| noise_floor(r.noise_sigma, &r.name, &settings, train.task_dim));
-    let unit = crate::data::model_file::load_model_file(&args.model).map(|m| m.length_unit.name()).unwrap_or("length units");
+    let unit = model_file.length_unit.name();
     outln!("{}", comparison.table(unit));
     for w in comparison.warnings() {
         errln!("warning: {w}");

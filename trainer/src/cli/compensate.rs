@@ -2,7 +2,7 @@
 //! (`Calibrator::compensate`: damped minimum-norm Gauss–Newton on the exact Jacobian of k1 from a
 //! seed, the nominal model's inverse kinematics), with the residual and flags of every row.
 
-use crate::cli::{load_nominal, ModelArgs};
+use crate::cli::{ArmModel, ModelArgs};
 use crate::data::csv_import::ColumnSpec;
 use crate::data::joint_columns::JointColumns;
 use crate::error::{Context, Error, Result};
@@ -148,7 +148,8 @@ pub fn run(args: CompensateArgs) -> Result<()> {
             )));
         }
     }
-    let (nominal, spec) = load_nominal(&args.model)?;
+    let arm = ArmModel::read(&args.model)?;
+    let (nominal, spec) = (arm.nominal.clone(), arm.spec.clone());
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
     crate::evaluation::blob_match::check_blob_fits(&model, &nominal)
@@ -354,7 +355,7 @@ mod tests {
     /// seeds of 1e200, extra fields and targets beyond ±1e100); errors name the file, line and column.
     #[test]
     fn targets_and_seeds_are_read_with_the_importers_rules() {
-        let (_, spec) = load_nominal(&ModelArgs { model: None }).unwrap();
+        let spec = ArmModel::builtin_rr().spec;
         // The error's message, as `cbd` prints it.
         let message = |e: Error| e.to_string();
         let targets = |name: &str, text: &str| read_rows(&file(name, text), &targets_spec(&spec)).map_err(message);

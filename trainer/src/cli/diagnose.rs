@@ -1,7 +1,7 @@
 //! `cbd diagnose`: structure left in the residual, traced to physical effects of the library,
 //! selected out of sample, reported with the error before and after on held-out rows.
 
-use crate::cli::{load_nominal, ModelArgs};
+use crate::cli::{ArmModel, ModelArgs};
 use crate::data::model_file::AngleUnit;
 use crate::diagnose::{diagnose, report, DiagnoseOptions};
 use crate::error::{Context, Error, Result};
@@ -66,15 +66,16 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
-    let (mut nominal, spec) = load_nominal(&args.model)?;
+    let arm = ArmModel::read(&args.model)?;
+    let (mut nominal, spec) = (arm.nominal.clone(), &arm.spec);
     type Read = (crate::data::Measurements, Option<crate::parametric::base_registration::Registration>);
     let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
-        let imported = crate::data::csv_import::read_measurements(path, &spec)?;
+        let imported = crate::data::csv_import::read_measurements(path, spec)?;
         for w in imported.warnings(path) {
             errln!("warning: {w}");
         }
         let registration = match register {
-            true => crate::cli::register_base_if_unknown(&args.model, nominal, &imported.measurements, path)?,
+            true => crate::cli::register_base_if_unknown(&arm, nominal, &imported.measurements, path)?,
             false => None,
         };
         for w in crate::data::nominal_check::nominal_warnings(
@@ -82,7 +83,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             &imported.measurements,
             &imported.lines,
             path,
-            crate::cli::base_is_registered(&args.model),
+            arm.register_base(),
         )? {
             errln!("warning: {w}");
         }
@@ -108,10 +109,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         let cbd: Option<crate::evaluation::correction::CorrectionFitter> = if args.no_cbd { None } else { Some(&fitter) };
         diagnose(&nominal, &data, test.as_ref(), cbd, &options)
     })?;
-    let model_file = match &args.model.model {
-        Some(path) => Some(crate::data::model_file::load_model_file(path)?),
-        None => None,
-    };
+    let model_file = arm.file.as_ref();
     let unit = model_file.as_ref().map(|m| m.length_unit.name()).unwrap_or("length units");
     // The file's units; without a model file, the data's (joint angles in radians).
     let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
@@ -139,7 +137,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         let files = report::plots(dir, &d, &d.model_start, &names, &scales, unit)?;
         outln!("figures written to {} ({} files)", dir.display(), files.len());
     }
-    if let (Some(path), Some(mut file)) = (&args.write_model, model_file) {
+    if let (Some(path), Some(mut file)) = (&args.write_model, model_file.cloned()) {
         // A registered base is written as the pose the diagnosis found.
         file.register_base = false;
         // A [planar] file holds lengths and effects in a frame (base, yaw, joint offsets); the

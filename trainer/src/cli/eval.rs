@@ -1,7 +1,7 @@
 //! `cbd eval`: evaluate a blob on measured data and report the position error.
 
 use crate::cli::args::blob_misfit;
-use crate::cli::{load_nominal, ModelArgs};
+use crate::cli::{ArmModel, ModelArgs};
 use crate::error::{Context, Error, Result};
 use crate::report::noise_floor::NoiseFloor;
 use crate::report::stats::ErrorStats;
@@ -41,13 +41,14 @@ pub fn run(args: EvalArgs) -> Result<()> {
     if let Some(dir) = &args.plots {
         crate::io::check_output_dir("--plots", dir)?;
     }
-    let (mut nominal, spec) = load_nominal(&args.model)?;
-    let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
+    let arm = ArmModel::read(&args.model)?;
+    let (mut nominal, spec) = (arm.nominal.clone(), &arm.spec);
+    let imported = crate::data::csv_import::read_measurements(&args.data, spec)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
     crate::evaluation::blob_match::check_blob_fits(&model, &nominal).map_err(|why| blob_misfit(&args.blob, &args.model, why))?;
-    take_registered_base(&args, &mut nominal, &model.nominal, &data)?;
+    take_registered_base(&args, &arm, &mut nominal, &model.nominal, &data)?;
     if model.nominal != nominal {
         errln!(
             "note: {} carries its own nominal model (e.g. DH-calibrated); errors are reported against the model file's nominal",
@@ -182,15 +183,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
 /// DH-calibrated), never one registered on the rows being evaluated.
 fn take_registered_base(
     args: &EvalArgs,
+    arm: &ArmModel,
     nominal: &mut cbd_protocol::NominalModel,
     fitted: &cbd_protocol::NominalModel,
     data: &crate::data::Measurements,
 ) -> Result<()> {
-    let Some(path) = &args.model.model else { return Ok(()) };
-    let file = crate::data::model_file::load_model_file(path)?;
-    if !file.register_base {
-        return Ok(());
-    }
+    let (Some(path), true) = (&arm.path, arm.register_base()) else { return Ok(()) };
     let (cbd_protocol::NominalModel::DhChain(chain), cbd_protocol::NominalModel::DhChain(fitted)) = (&mut *nominal, fitted) else {
         return Err(Error::InvalidInput(format!(
             "{}: the base is declared unknown but {} holds no DH chain to take the registered base from",
@@ -208,7 +206,7 @@ fn take_registered_base(
         refined: true,
         stopped_at_limit: None,
     };
-    errln!("{}: {} (as fitted, from {})", args.data.display(), r.describe(file.length_unit.name()), args.blob.display());
+    errln!("{}: {} (as fitted, from {})", args.data.display(), r.describe(arm.length_unit()), args.blob.display());
     Ok(())
 }
 

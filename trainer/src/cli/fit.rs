@@ -1,7 +1,7 @@
 //! `cbd fit`: train a model blob from measured data.
 
 use crate::cli::args::{print_calibration, SolverArgs};
-use crate::cli::{load_nominal, ModelArgs};
+use crate::cli::{ArmModel, ModelArgs};
 use crate::error::{Context, Error, Result};
 use std::path::PathBuf;
 
@@ -69,9 +69,9 @@ pub fn run(args: FitArgs) -> Result<()> {
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data))],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    let (nominal, spec) = load_nominal(&args.model)?;
-    let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
-    let fitted = fit_measurements(&args, nominal, imported)?;
+    let arm = ArmModel::read(&args.model)?;
+    let imported = crate::data::csv_import::read_measurements(&args.data, &arm.spec)?;
+    let fitted = fit_measurements(&args, &arm, imported)?;
     crate::cli::write_atomically(&args.out, &fitted.blob)?;
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&fitted.report).map_err(Error::JsonOutput)?;
@@ -128,19 +128,17 @@ pub struct Fitted {
     pub memory: String,
 }
 
-/// The fit `cbd fit` runs, on measurements already read with the model's column spec (`args.data`
-/// names them in messages; `args.out` and `args.json` are not written here). One function for the
-/// command and the Python package, so both give the same blob for the same data and flags.
-pub fn fit_measurements(
-    args: &FitArgs,
-    mut nominal: cbd_protocol::NominalModel,
-    imported: crate::data::csv_import::ImportedMeasurements,
-) -> Result<Fitted> {
+/// The fit `cbd fit` runs, on measurements already read with `arm`'s column spec (`args.data`
+/// names them in messages; `args.model` is not read again — `arm` is it; `args.out` and
+/// `args.json` are not written here). One function for the command and the Python package, so
+/// both give the same blob for the same data and flags.
+pub fn fit_measurements(args: &FitArgs, arm: &ArmModel, imported: crate::data::csv_import::ImportedMeasurements) -> Result<Fitted> {
+    let mut nominal = arm.nominal.clone();
     check_flags(args)?;
     for w in imported.warnings(&args.data) {
         errln!("warning: {w}");
     }
-    let registration = crate::cli::register_base_if_unknown(&args.model, &mut nominal, &imported.measurements, &args.data)?;
+    let registration = crate::cli::register_base_if_unknown(arm, &mut nominal, &imported.measurements, &args.data)?;
     for w in
         crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, &args.data, registration.is_some())?
     {
@@ -178,7 +176,7 @@ pub fn fit_measurements(
         last
     );
     // The model's length unit (the data are read into it): the floor's line names it.
-    let unit = load_nominal(&args.model)?.1.model_length_unit.name();
+    let unit = arm.length_unit();
     let mut noise_floor = describe_noise_floor(&calibration, unit);
     // Drift in measurement order (issue 49 item 2), on the residual of the DH-calibrated chain (the
     // one CbD deforms, or fitted for the test where the nominal was kept: a nominal chain's error

@@ -2,7 +2,7 @@
 //! configurations, chosen for the geometric group's identifiability and then for CbD's posterior
 //! variance, with the RMS error the posterior predicts after each (docs/DESIGN.md §13).
 
-use crate::cli::{load_nominal, ModelArgs};
+use crate::cli::{ArmModel, ModelArgs};
 use crate::data::csv_import::{read_measurements, ColumnSpec};
 use crate::error::{Context, Error, Result};
 use crate::plan::{plan, prior, Criterion, PlanInput, PlanOptions};
@@ -82,8 +82,9 @@ pub fn run(args: PlanArgs) -> Result<()> {
             }
         }
     }
-    let (mut nominal, spec) = load_nominal(&args.model)?;
-    let model_name = args.model.model.as_ref().map_or("the built-in RR arm".to_string(), |p| p.display().to_string());
+    let arm = ArmModel::read(&args.model)?;
+    let (mut nominal, spec) = (arm.nominal.clone(), &arm.spec);
+    let model_name = arm.name();
     if nominal.tool_point_count() > 1 {
         return Err(crate::plan::PlanError::ToolPoints { points: nominal.tool_point_count() }).context(&model_name);
     }
@@ -95,7 +96,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         )));
     }
     let measured = match &args.data {
-        Some(path) => Some(read_measurements(path, &spec)?.measurements),
+        Some(path) => Some(read_measurements(path, spec)?.measurements),
         None => None,
     };
     // The frame `cbd fit` fits in: a base declared unknown (`register = true`) registered on the
@@ -103,7 +104,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     // them (plan kept the declared identity base: the nominal chosen, 0.55 mm predicted where fit
     // reaches 0.038 mm).
     if let (Some(data), Some(path)) = (&measured, &args.data) {
-        crate::cli::register_base_if_unknown(&args.model, &mut nominal, data, path)?;
+        crate::cli::register_base_if_unknown(&arm, &mut nominal, data, path)?;
     }
     // The controller's values (the columns, in model units: where the limits apply) → the model's
     // joints, as the import maps them: the joint map, then a planar frame's offsets.

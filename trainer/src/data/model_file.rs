@@ -259,8 +259,17 @@ pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError>
     parse_model_file(&text, path)
 }
 
+/// Model files parsed by this process so far: a command parses its own once (issue 52;
+/// `trainer/tests/model_parsed_once.rs` counts them).
+pub fn parses() -> usize {
+    PARSES.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+static PARSES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 /// Parses model-file text; `path` names it in errors and anchors a relative URDF path.
 pub fn parse_model_file(text: &str, path: &Path) -> Result<ModelFile, ImportError> {
+    PARSES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let file = path.to_path_buf();
     let raw: RawModelFile =
         toml::from_str(text).map_err(|e| ImportError::Toml { file: file.clone(), message: toml_error::toml_message(&e, text) })?;

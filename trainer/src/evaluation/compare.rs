@@ -185,7 +185,8 @@ pub fn compare_files(
     test_csv: impl AsRef<std::path::Path>,
     peers: &[Peer<'_>],
 ) -> Result<(Comparison, Vec<String>), ImportError> {
-    let inputs = read_compare_files(model_file, train_csv, test_csv)?;
+    let path = model_file.as_ref();
+    let inputs = read_compare_files(&crate::data::model_file::load_model_file(path)?, train_csv, test_csv)?;
     Ok((compare_peers(&inputs.nominal, &inputs.train.measurements, &inputs.test.measurements, peers), inputs.warnings))
 }
 
@@ -200,21 +201,20 @@ pub struct CompareInputs {
     pub registration: Option<crate::parametric::base_registration::Registration>,
 }
 
-/// Reads a comparison's model file and measurement files (no fitting yet); an unknown base is
-/// registered on the training rows.
+/// Reads a comparison's measurement files with `model`'s columns (no fitting yet); an unknown base
+/// is registered on the training rows.
 pub fn read_compare_files(
-    model_file: impl AsRef<std::path::Path>,
+    model: &crate::data::model_file::ModelFile,
     train_csv: impl AsRef<std::path::Path>,
     test_csv: impl AsRef<std::path::Path>,
 ) -> Result<CompareInputs, ImportError> {
     use crate::data::csv_import::read_measurements;
-    let model = crate::data::model_file::load_model_file(model_file)?;
     let spec = model.column_spec()?;
     let train = read_measurements(train_csv.as_ref(), &spec)?;
     let test = read_measurements(test_csv.as_ref(), &spec)?;
     let mut warnings = train.warnings(train_csv.as_ref());
     warnings.extend(test.warnings(test_csv.as_ref()));
-    let mut nominal = model.nominal;
+    let mut nominal = model.nominal.clone();
     let registration =
         match model.register_base {
             true => Some(crate::parametric::base_registration::register_and_refine(&mut nominal, &train.measurements).map_err(|e| {
