@@ -105,7 +105,7 @@ mod tests {
         };
         let flow = user.to_internal(&norm);
         let mut model = model_for_tests(cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap(), &[0.0; 2]);
-        model.normalisation = norm;
+        model.normalisation = norm.clone();
         model.joint_kernel = flow.joint_kernel;
         model.task_kernel = flow.task_kernel;
         model.sigma = flow.sigma;
