@@ -67,6 +67,17 @@ pub fn run(args: CheckArgs) -> Result<()> {
         return Err(Error::InvalidInput(format!("{}: {refusal} (the calibration's σ, recorded in the blob)", args.blob.display())));
     }
     let m = model.task_dim();
+    let need = crate::evaluation::check::covariance::covariance_bytes(model.n_points as usize, data.len(), m);
+    if let Some(available) = crate::cli::memory::available_bytes().filter(|a| need > *a) {
+        return Err(Error::InvalidInput(format!(
+            "{}: its {} measurement points and the {} fresh rows need about {} for the check's covariance, more than the {} this process may use; raise the memory limit",
+            args.blob.display(),
+            model.n_points,
+            data.len(),
+            crate::cli::memory::gigabytes(need),
+            crate::cli::memory::gigabytes(available)
+        )));
+    }
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model.clone(), &mut storage).context(args.blob.display())?;
     crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;

@@ -23,11 +23,10 @@ pub fn fresh_covariance(model: &Model, fresh: &Measurements) -> Option<Mat<f64>>
     // rows' own noise), the off-diagonal block K*.
     let k = crate::evidence::blob_covariance(model, &rows)?;
     let (t, f) = (trained * m, fresh.len() * m);
-    let ktt = k.as_ref().submatrix(0, 0, t, t).to_owned();
+    let l = cholesky(k.as_ref().submatrix(0, 0, t, t).to_owned())?;
     let mut v = k.as_ref().submatrix(0, t, t, f).to_owned();
-    let llt = ktt.llt(faer::Side::Lower).ok()?;
     // V = L⁻¹ K*: K*ᵀ (K + σ²I)⁻¹ K* = Vᵀ V.
-    faer::linalg::triangular_solve::solve_lower_triangular_in_place(llt.L(), v.as_mut(), crate::numeric::FIXED_SPLIT);
+    faer::linalg::triangular_solve::solve_lower_triangular_in_place(l.as_ref(), v.as_mut(), crate::numeric::FIXED_SPLIT);
     let mut c = k.as_ref().submatrix(t, t, f, f).to_owned();
     faer::linalg::matmul::matmul(c.as_mut(), faer::Accum::Add, v.transpose(), v.as_ref(), -1.0, crate::numeric::FIXED_SPLIT);
     if let Some(drift) = &model.drift {
@@ -37,6 +36,31 @@ pub fn fresh_covariance(model: &Model, fresh: &Measurements) -> Option<Mat<f64>>
     let c = Mat::from_fn(f, f, |i, j| 0.5 * (c[(i, j)] + c[(j, i)]));
     let finite = (0..f).all(|j| (0..f).all(|i| c[(i, j)].is_finite()));
     finite.then_some(c)
+}
+
+/// The lower Cholesky factor L of a symmetric positive-definite `a` (its lower triangle read; the
+/// upper one zeroed), on faer's fixed work split (the result never depends on the thread count);
+/// `None` when `a` is not positive definite.
+pub fn cholesky(mut a: Mat<f64>) -> Option<Mat<f64>> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+    let (n, par) = (a.nrows(), crate::numeric::FIXED_SPLIT);
+    let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(n, par, Default::default()));
+    cholesky_in_place(a.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default()).ok()?;
+    for j in 1..n {
+        for i in 0..j {
+            a[(i, j)] = 0.0;
+        }
+    }
+    Some(a)
+}
+
+/// Bytes the check's covariance takes for `points` blob points and `fresh` rows of `m`
+/// coordinates: the joint covariance, its training block's copy and factor (3 (N m)² f64), and the
+/// evidence table's per-pair J Jᵀ and distances ((N² / 2)(m² + 1) f64).
+pub fn covariance_bytes(points: usize, fresh: usize, m: usize) -> f64 {
+    let (all, points) = (((points + fresh) * m) as f64, points as f64 + fresh as f64);
+    8.0 * (3.0 * all * all + 0.5 * points * points * (m * m + 1) as f64)
 }
 
 /// + sd² exp(−|pose_i − pose_j| / length) on coordinate pairs (a, a): the recorded drift over the

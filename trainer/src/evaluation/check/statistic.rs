@@ -4,7 +4,6 @@
 //! rᵀC⁻¹r − bᵀ(TᵀC⁻¹T)⁻¹b, b = TᵀC⁻¹r, on dof − rank T (Seber & Lee, Linear Regression Analysis,
 //! §3.3: the residual sum of squares of a generalised least-squares fit is χ²(n − p) under the model).
 
-use faer::linalg::solvers::Solve;
 use faer::Mat;
 
 /// The statistic, its degrees of freedom and its p-value P(χ²(dof) ≥ statistic).
@@ -20,19 +19,25 @@ pub struct Statistic {
 /// definite or nothing is left to test.
 pub fn mahalanobis(c: &Mat<f64>, r: &[f64], tangent: Option<&Mat<f64>>) -> Option<Statistic> {
     let dim = r.len();
-    let llt = c.llt(faer::Side::Lower).ok()?;
+    let l = super::covariance::cholesky(c.clone())?;
     // w = L⁻¹ r: |w|² = rᵀ C⁻¹ r.
     let mut w = Mat::from_fn(dim, 1, |i, _| r[i]);
-    faer::linalg::triangular_solve::solve_lower_triangular_in_place(llt.L(), w.as_mut(), crate::numeric::FIXED_SPLIT);
+    faer::linalg::triangular_solve::solve_lower_triangular_in_place(l.as_ref(), w.as_mut(), crate::numeric::FIXED_SPLIT);
     let mut statistic: f64 = (0..dim).map(|i| w[(i, 0)] * w[(i, 0)]).sum();
     let mut dof = dim;
     if let Some(t) = tangent {
         // U = L⁻¹ T; the part of w in U's span, bᵀ(UᵀU)⁻¹b with b = Uᵀw, is what the frame explains.
         let mut u = t.clone();
-        faer::linalg::triangular_solve::solve_lower_triangular_in_place(llt.L(), u.as_mut(), crate::numeric::FIXED_SPLIT);
-        let b = u.transpose() * &w;
-        let utu = u.transpose() * &u;
-        let explained = (b.transpose() * utu.llt(faer::Side::Lower).ok()?.solve(&b))[(0, 0)];
+        faer::linalg::triangular_solve::solve_lower_triangular_in_place(l.as_ref(), u.as_mut(), crate::numeric::FIXED_SPLIT);
+        let (k, par) = (t.ncols(), crate::numeric::FIXED_SPLIT);
+        let mut b = Mat::<f64>::zeros(k, 1);
+        faer::linalg::matmul::matmul(b.as_mut(), faer::Accum::Replace, u.transpose(), w.as_ref(), 1.0, par);
+        let mut utu = Mat::<f64>::zeros(k, k);
+        faer::linalg::matmul::matmul(utu.as_mut(), faer::Accum::Replace, u.transpose(), u.as_ref(), 1.0, par);
+        // bᵀ (UᵀU)⁻¹ b = |M⁻¹ b|², M the Cholesky factor of UᵀU.
+        let m = super::covariance::cholesky(utu)?;
+        faer::linalg::triangular_solve::solve_lower_triangular_in_place(m.as_ref(), b.as_mut(), par);
+        let explained: f64 = (0..k).map(|i| b[(i, 0)] * b[(i, 0)]).sum();
         statistic = (statistic - explained).max(0.0);
         dof = dim.checked_sub(t.ncols())?;
     }
