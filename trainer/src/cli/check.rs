@@ -82,7 +82,11 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let mut cal = cbd_runtime::Calibrator::from_model(model.clone(), &mut storage).context(args.blob.display())?;
     crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
     let (predicted, far) = crate::cli::eval::evaluate_rows(&mut cal, &data, &lines, &args.blob, &args.data, 0.05)?;
-    let result = check(&model, &data, &predicted, register, args.alpha).map_err(|e| {
+    // A blob whose chain is not the model file's carries a DH-calibrated geometry (`cbd fit`'s
+    // default when the evidence chooses it): its parameters' uncertainty goes into C.
+    let geometry = model.nominal != nominal;
+    let options = crate::evaluation::check::CheckOptions { alpha: args.alpha, register, geometry };
+    let result = check(&model, &data, &predicted, options).map_err(|e| {
         let file = if e == CheckError::NotPositiveDefinite || e == CheckError::NoSigma { &args.blob } else { &args.data };
         Error::InvalidInput(format!("{}: {e}", file.display()))
     })?;

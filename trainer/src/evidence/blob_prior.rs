@@ -45,12 +45,38 @@ impl Theta {
 }
 
 /// K_lin + σ² I of the blob's linearised model on `rows` (the blob's nominal chain, its
-/// normalisation, its θ: [`Theta::from_blob`]), internal units, (rows · m)². `None` when the blob
-/// records no σ.
-pub(crate) fn blob_covariance(model: &Model, rows: &Measurements) -> Option<Mat<f64>> {
+/// normalisation, its θ: [`Theta::from_blob`]), internal units, (rows · m)². With `geometry`
+/// (the blob's chain is a DH-calibrated one), + G Gᵀ: the geometric group's identifiable
+/// parameters at the blob's chain as explicit basis functions with the evidence's prior
+/// ([`super::GeometricBasis`], docs/DESIGN.md §3 "The geometry choice"), so that conditioning on
+/// the blob's points leaves the fitted geometry's own uncertainty in the prediction. `None` when
+/// the blob records no σ.
+pub(crate) fn blob_covariance(model: &Model, rows: &Measurements, geometry: bool) -> Option<Mat<f64>> {
     let theta = Theta::from_blob(model)?;
-    let table = PairTable::new(&model.nominal, rows, &model.normalisation);
+    let mut table = PairTable::new(&model.nominal, rows, &model.normalisation);
+    if let (true, Some(group)) = (geometry, geometric_group(&model.nominal, rows)) {
+        table = table.with_geometry(&super::GeometricBasis::new(&group, rows, &model.normalisation));
+    }
     Some(table.covariance(&theta).0)
+}
+
+/// The geometric group of `chain` linearised at the chain itself (no change from it) on `rows`.
+fn geometric_group(chain: &cbd_protocol::NominalModel, rows: &Measurements) -> Option<crate::parametric::LinearisedGroup> {
+    let cbd_protocol::NominalModel::DhChain(dh) = &crate::nominal::planar::as_dh(chain) else { return None };
+    let names = crate::nominal::dh_parameters::parameter_names_for(dh);
+    let stats = crate::parametric::DhFitStats {
+        iterations: 0,
+        initial_rms: 0.0,
+        final_rms: 0.0,
+        n_parameters: names.len(),
+        rank: names.len(),
+        unidentifiable: Vec::new(),
+        parameter_changes: vec![0.0; names.len()],
+        parameter_names: names,
+        converged: true,
+        redundant_at_nominal: Vec::new(),
+    };
+    crate::parametric::linearised_group(chain, &stats, rows)
 }
 
 /// A blob of `nominal` whose control points are `points` (row-major configurations), with unit

@@ -10,8 +10,10 @@ use cbd_protocol::{Model, RowDrift};
 use faer::Mat;
 
 /// C at the fresh rows `fresh` (pose-major, the blob's tool points per pose), internal units;
-/// `None` when the blob records no σ or its covariance is not positive definite.
-pub fn fresh_covariance(model: &Model, fresh: &Measurements) -> Option<Mat<f64>> {
+/// `geometry`: the blob's chain is DH-calibrated, its parameters' uncertainty is part of C
+/// (`evidence::blob_covariance`). `None` when the blob records no σ or its covariance is not
+/// positive definite.
+pub fn fresh_covariance(model: &Model, fresh: &Measurements, geometry: bool) -> Option<Mat<f64>> {
     let (n, m) = (model.n_joints(), model.task_dim());
     let trained = model.n_points as usize;
     // The blob's measurement points, then the fresh rows: one covariance over both (positions are
@@ -21,7 +23,7 @@ pub fn fresh_covariance(model: &Model, fresh: &Measurements) -> Option<Mat<f64>>
     rows.positions = vec![0.0; (trained + fresh.len()) * m];
     // K_lin + σ² I over both: its training block is K + σ²I, its fresh block K** + σ²I (the fresh
     // rows' own noise), the off-diagonal block K*.
-    let k = crate::evidence::blob_covariance(model, &rows)?;
+    let k = crate::evidence::blob_covariance(model, &rows, geometry)?;
     let (t, f) = (trained * m, fresh.len() * m);
     let l = cholesky(k.as_ref().submatrix(0, 0, t, t).to_owned())?;
     let mut v = k.as_ref().submatrix(0, t, t, f).to_owned();
@@ -101,11 +103,11 @@ mod tests {
         let mut fresh = Measurements::new(2, 2);
         fresh.joints = q[2 * 30..].to_vec();
         fresh.positions = vec![0.0; 20];
-        let c = fresh_covariance(&model, &fresh).unwrap();
+        let c = fresh_covariance(&model, &fresh, false).unwrap();
         let mut all = Measurements::new(2, 2);
         all.joints = q.clone();
         all.positions = vec![0.0; 80];
-        let k = crate::evidence::blob_covariance(&model, &all).unwrap();
+        let k = crate::evidence::blob_covariance(&model, &all, false).unwrap();
         let l = k.llt(faer::Side::Lower).unwrap();
         let ktt = k.as_ref().submatrix(0, 0, 60, 60).to_owned();
         let ktt_llt = ktt.llt(faer::Side::Lower).unwrap();

@@ -66,10 +66,21 @@ impl std::fmt::Display for CheckError {
     }
 }
 
+/// How a check is made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckOptions {
+    /// The level: "changed" when p < alpha.
+    pub alpha: f64,
+    /// Register the fresh rows' rigid frame first.
+    pub register: bool,
+    /// The blob's chain is DH-calibrated: its parameters' uncertainty is part of C.
+    pub geometry: bool,
+}
+
 /// The check of `fresh` (measured positions, the data's = the model's length unit) against
-/// `predicted` (the blob's evaluation at the same rows) at level `alpha`, registering the fresh
-/// rows' frame first when `register`.
-pub fn check(model: &Model, fresh: &Measurements, predicted: &[f64], register: bool, alpha: f64) -> Result<Check, CheckError> {
+/// `predicted` (the blob's evaluation at the same rows).
+pub fn check(model: &Model, fresh: &Measurements, predicted: &[f64], options: CheckOptions) -> Result<Check, CheckError> {
+    let CheckOptions { alpha, register, geometry } = options;
     let m = fresh.task_dim;
     let (frame, measured) = if register {
         if m != 3 {
@@ -83,7 +94,7 @@ pub fn check(model: &Model, fresh: &Measurements, predicted: &[f64], register: b
     } else {
         (None, fresh.positions.clone())
     };
-    let c = covariance::fresh_covariance(model, fresh).ok_or(if model.noise_sigma.is_none() {
+    let c = covariance::fresh_covariance(model, fresh, geometry).ok_or(if model.noise_sigma.is_none() {
         CheckError::NoSigma
     } else {
         CheckError::NotPositiveDefinite
