@@ -89,8 +89,46 @@ mod tests {
     /// fresh rows jointly from the linearised model's own Gaussian N(0, K_lin + σ²I) (K from the
     /// evidence's table, drawn through its Cholesky factor), predict the fresh rows by the posterior
     /// mean K*ᵀ(K + σ²I)⁻¹ r_train, and the statistic of the fresh residual against C is χ²(dof):
-    /// its mean over 400 draws is dof (± 4 standard errors) and 1 % of them exceed χ²'s 1 % point
-    /// (a binomial band).
+    /// its mean over 400 draws is dof (± 4 standard errors) and about 1 % of them exceed χ²'s 1 %
+    /// point (a binomial band). `geometry`: with the geometric group's G Gᵀ in K.
+    fn own_draws_are_chi_square(model: &Model, q: &[f64], trained: usize, geometry: bool) {
+        let (n, m) = (model.n_joints(), model.task_dim());
+        let rows = q.len() / n;
+        let (t, f) = (trained * m, (rows - trained) * m);
+        let mut fresh = Measurements::new(n, m);
+        fresh.joints = q[n * trained..].to_vec();
+        fresh.positions = vec![0.0; f];
+        let c = fresh_covariance(model, &fresh, geometry).unwrap();
+        let mut all = Measurements::new(n, m);
+        all.joints = q.to_vec();
+        all.positions = vec![0.0; t + f];
+        let k = crate::evidence::blob_covariance(model, &all, geometry).unwrap();
+        let l = k.llt(faer::Side::Lower).unwrap();
+        let ktt_llt = k.as_ref().submatrix(0, 0, t, t).to_owned().llt(faer::Side::Lower).unwrap();
+        let kft = k.as_ref().submatrix(t, 0, f, t).to_owned();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let draws = 400;
+        let (mut sum, mut over) = (0.0, 0);
+        for _ in 0..draws {
+            // Box–Muller: √(−2 ln u) cos(2π v) is N(0, 1).
+            let z = Mat::from_fn(t + f, 1, |_, _| {
+                let (u, v): (f64, f64) = (1.0 - rng.gen::<f64>(), rng.gen());
+                (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+            });
+            let y = l.L() * &z;
+            let mean = &kft * faer::linalg::solvers::Solve::solve(&ktt_llt, &y.as_ref().submatrix(0, 0, t, 1).to_owned());
+            let r: Vec<f64> = (0..f).map(|i| y[(t + i, 0)] - mean[(i, 0)]).collect();
+            let s = super::super::statistic::mahalanobis(&c, &r, None).unwrap();
+            assert_eq!(s.dof, f);
+            sum += s.statistic;
+            over += usize::from(s.p_value < 0.01);
+        }
+        let mean = sum / draws as f64;
+        // sd of χ²(f) is √(2f); of the mean of 400, √(2f)/20.
+        assert!((mean - f as f64).abs() < 4.0 * (2.0 * f as f64).sqrt() / (draws as f64).sqrt(), "mean statistic {mean}, dof {f}");
+        assert!(over <= 12, "{over} of {draws} beyond the 1 % point");
+    }
+
     #[test]
     fn the_statistic_of_the_models_own_draws_is_chi_square() {
         let nominal = cbd_protocol::NominalModel::planar(&[1.0, 0.5]).unwrap();
@@ -100,41 +138,30 @@ mod tests {
         model.task_kernel.width = 0.6;
         model.sigma = 0.5; // σ / √γ_W with γ_W = 4e-4: σ = 0.01
         model.noise_sigma = Some(0.01);
-        let mut fresh = Measurements::new(2, 2);
-        fresh.joints = q[2 * 30..].to_vec();
-        fresh.positions = vec![0.0; 20];
-        let c = fresh_covariance(&model, &fresh, false).unwrap();
-        let mut all = Measurements::new(2, 2);
-        all.joints = q.clone();
-        all.positions = vec![0.0; 80];
-        let k = crate::evidence::blob_covariance(&model, &all, false).unwrap();
-        let l = k.llt(faer::Side::Lower).unwrap();
-        let ktt = k.as_ref().submatrix(0, 0, 60, 60).to_owned();
-        let ktt_llt = ktt.llt(faer::Side::Lower).unwrap();
-        let kft = k.as_ref().submatrix(60, 0, 20, 60).to_owned();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let (draws, dof) = (400, 20);
-        let (mut sum, mut over) = (0.0, 0);
-        for _ in 0..draws {
-            // Box–Muller: √(−2 ln u) cos(2π v) is N(0, 1).
-            let z = Mat::from_fn(80, 1, |_, _| {
-                let (u, v): (f64, f64) = (1.0 - rng.gen::<f64>(), rng.gen());
-                (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-            });
-            let y = l.L() * &z;
-            let mean = &kft * faer::linalg::solvers::Solve::solve(&ktt_llt, &y.as_ref().submatrix(0, 0, 60, 1).to_owned());
-            let r: Vec<f64> = (0..20).map(|i| y[(60 + i, 0)] - mean[(i, 0)]).collect();
-            let s = super::super::statistic::mahalanobis(&c, &r, None).unwrap();
-            assert_eq!(s.dof, dof);
-            sum += s.statistic;
-            over += usize::from(s.p_value < 0.01);
-        }
-        let mean = sum / draws as f64;
-        // sd of χ²(20) is √40; of the mean of 400, √40/20 ≈ 0.32.
-        assert!((mean - dof as f64).abs() < 4.0 * (2.0 * dof as f64).sqrt() / (draws as f64).sqrt(), "mean statistic {mean}, dof {dof}");
-        assert!(over <= 12, "{over} of {draws} beyond the 1 % point");
+        own_draws_are_chi_square(&model, &q, 30, false);
     }
 
+    /// The same with a DH chain's geometric group in K (`geometry`): C conditions the group's
+    /// parameters on the blob's points too. UR5 chain, metres-sized normalisation (scale 500 mm).
+    #[test]
+    fn the_statistic_with_the_geometry_term_is_chi_square() {
+        let nominal = cbd_protocol::NominalModel::DhChain(crate::simulate::six_joint::ur5_nominal());
+        let q: Vec<f64> = (0..6 * 48).map(|i| ((i as f64) * 0.537).sin() * 2.8).collect();
+        let mut model = crate::evidence::model_for_tests(nominal, &q[..6 * 40]);
+        model.normalisation = cbd_protocol::Normalisation { task_offset: [0.0; 3], task_scale: 500.0 };
+        model.joint_kernel.gamma = 0.05;
+        model.task_kernel.width = 0.3;
+        model.sigma = 0.5; // γ_W = (0.02 / 0.5)² mm²
+        model.noise_sigma = Some(0.02);
+        let mut fresh = Measurements::new(6, 3);
+        fresh.joints = q[6 * 40..].to_vec();
+        fresh.positions = vec![0.0; 24];
+        // The term is there: the geometry's uncertainty adds to C.
+        let (with, without) = (fresh_covariance(&model, &fresh, true).unwrap(), fresh_covariance(&model, &fresh, false).unwrap());
+        let trace = |c: &Mat<f64>| (0..24).map(|i| c[(i, i)]).sum::<f64>();
+        assert!(trace(&with) > 1.01 * trace(&without), "{} vs {}", trace(&with), trace(&without));
+        own_draws_are_chi_square(&model, &q, 40, true);
+    }
     /// The drift term: sd² on the diagonal, sd² e^(−1/length) between consecutive poses, none
     /// across coordinates; the tool points of one pose share its time.
     #[test]
