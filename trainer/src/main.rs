@@ -8,4 +8,9 @@ fn main() {
         cbd_trainer::errln!("error: {}", cbd_trainer::error::one_line(&e.to_string()));
         std::process::exit(1);
     }
+    // A command that succeeded may still answer with its code (`cbd check`: 3 when changed).
+    let code = cbd_trainer::cli::exit_code();
+    if code != 0 {
+        std::process::exit(code);
+    }
 }

@@ -70,19 +70,8 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model, &mut storage).context(args.blob.display())?;
     crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
-    let mut predicted = Vec::with_capacity(data.positions.len());
-    let mut far = 0;
-    // Row i is tool point i mod m_p (pose-major rows, docs/DESIGN.md §12).
-    let points = cal.model().nominal.tool_point_count();
     let tool_points = cal.model().nominal.tool_points().to_vec();
-    for i in 0..data.len() {
-        let line = lines.get(i).copied().unwrap_or(0);
-        let e = cal.evaluate_point(data.joints(i), i % points).map_err(|e| evaluation_error(e, &args.blob, &args.data, line))?;
-        if e.is_extrapolating(args.extrapolation_threshold) {
-            far += 1;
-        }
-        predicted.extend(e.position().iter());
-    }
+    let (predicted, far) = evaluate_rows(&mut cal, &data, &lines, &args.blob, &args.data, args.extrapolation_threshold)?;
     let nominal_pred = crate::nominal::positions(&nominal, &data.joints, m);
     let before = finite_statistics("nominal", &nominal_pred, &data.positions, m, &lines, &args.data)?;
     let after = finite_statistics("calibrated", &predicted, &data.positions, m, &lines, &args.data)?;
@@ -210,9 +199,34 @@ fn take_registered_base(
     Ok(())
 }
 
+/// The blob's positions at every row of `data` (row i is tool point i mod m_p: pose-major rows,
+/// docs/DESIGN.md §12) and how many rows have kernel support below `threshold` (extrapolating): the
+/// evaluation `cbd eval` and `cbd check` share. A failure names the blob or the data's line.
+pub(crate) fn evaluate_rows(
+    cal: &mut cbd_runtime::Calibrator<'_>,
+    data: &crate::data::Measurements,
+    lines: &[u64],
+    blob: &std::path::Path,
+    path: &std::path::Path,
+    threshold: f64,
+) -> Result<(Vec<f64>, usize)> {
+    let mut predicted = Vec::with_capacity(data.positions.len());
+    let mut far = 0;
+    let points = cal.model().nominal.tool_point_count();
+    for i in 0..data.len() {
+        let line = lines.get(i).copied().unwrap_or(0);
+        let e = cal.evaluate_point(data.joints(i), i % points).map_err(|e| evaluation_error(e, blob, path, line))?;
+        if e.is_extrapolating(threshold) {
+            far += 1;
+        }
+        predicted.extend(e.position().iter());
+    }
+    Ok((predicted, far))
+}
+
 /// Error statistics of one model, refused (not printed as inf/NaN, not written as JSON null) when
 /// any row's error is not finite; the message names the first such row's line.
-fn finite_statistics(
+pub(crate) fn finite_statistics(
     model: &str,
     predicted: &[f64],
     measured: &[f64],

@@ -17,6 +17,7 @@ pub mod compare;
 pub mod compensate;
 pub mod demo;
 pub mod diagnose;
+pub mod check;
 pub mod eval;
 pub mod export;
 pub mod fit;
@@ -47,6 +48,9 @@ pub enum Command {
     Fit(fit::FitArgs),
     /// Evaluate a blob on measurements: mean, median, p99 and max position error.
     Eval(eval::EvalArgs),
+    /// Does the calibration still hold? Fresh poses tested against the blob's own predictive
+    /// distribution: exit 0 when it holds, 3 when it changed.
+    Check(check::CheckArgs),
     /// One self-contained HTML page for a run: inputs, hyperparameters, convergence, error tables, figures.
     Report(report::ReportArgs),
     /// All peers side by side on the same data: nominal, DH, kernel ridge, CbD and hybrids.
@@ -188,6 +192,7 @@ fn command(cli: Cli) -> Result<()> {
         Command::Simulate(args) => simulate::run(args),
         Command::Fit(args) => fit::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Check(args) => check::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Report(args) => report::run(args),
@@ -196,6 +201,20 @@ fn command(cli: Cli) -> Result<()> {
         Command::Plan(args) => plan::run(args),
         Command::Export(args) => export::run(args),
     }
+}
+
+/// The exit code of a command that succeeded: 0, or 3 from `cbd check` when the calibration changed
+/// (docs/EXIT_CODES.md). `main` exits with it after the outputs are in place.
+static EXIT_CODE: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
+
+/// Sets the exit code of a successful command ([`exit_code`]).
+pub fn set_exit_code(code: i32) {
+    EXIT_CODE.store(code, std::sync::atomic::Ordering::SeqCst);
+}
+
+/// The exit code the command that succeeded asked for (0 unless it set one).
+pub fn exit_code() -> i32 {
+    EXIT_CODE.load(std::sync::atomic::Ordering::SeqCst)
 }
 
 // Output files (atomic writes, `-` for standard output) live in `crate::io`, the memory estimates

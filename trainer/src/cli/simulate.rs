@@ -186,7 +186,21 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             return Err(Error::InvalidInput("--tool-points, --pose and --tracker-frame are for the six-joint robot (--robot six)".into()))
         }
         "rr" => {}
-        "six" => return simulate_six(&args, step),
+        "six" => {
+            // Planted changes of the real geometry (issue 50) come out of the effect list: the arm
+            // keeps its other errors and its built-in compliance.
+            let mut args = args;
+            let mut planted = Vec::new();
+            let mut others = Vec::new();
+            for spec in std::mem::take(&mut args.effects) {
+                match crate::simulate::planted::parse_planted(&spec, 6) {
+                    Some(p) => planted.push(p?),
+                    None => others.push(spec),
+                }
+            }
+            args.effects = others;
+            return simulate_six(&args, step, &planted);
+        }
         other => return Err(Error::InvalidInput(format!("unknown robot `{other}` (expected rr or six)"))),
     }
     let sampling = match args.sampling.as_str() {
@@ -225,7 +239,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
 }
 
 /// The six-joint robot's rows; `step`: the walk's ([`walk_step`]), `None` unless walking.
-fn simulate_six(args: &SimulateArgs, step: Option<f64>) -> Result<()> {
+fn simulate_six(args: &SimulateArgs, step: Option<f64>, planted: &[crate::simulate::planted::Planted]) -> Result<()> {
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
     if !matches!(args.sampling.as_str(), "uniform" | "walk") && args.poses.is_none() {
         return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform or walk".into()));
@@ -233,6 +247,9 @@ fn simulate_six(args: &SimulateArgs, step: Option<f64>) -> Result<()> {
     let mut robot = SixJointRobot::ur5_like(1);
     if args.exact_geometry {
         robot.real = crate::simulate::six_joint::ur5_nominal();
+    }
+    for change in planted {
+        change.apply(&mut robot.real);
     }
     if let Some(noise) = args.noise {
         robot.noise_std = noise;
@@ -423,7 +440,10 @@ fn effect_help() -> String {
          process over the rows, each coordinate an AR(1)/Ornstein–Uhlenbeck sequence: standard deviation sd in the model's \
          unit, correlation exp(−|i − j|/length) between rows i and j; drawn from --seed). With any --effect the robot is its geometry (rr: \
          link lengths 1.09, 0.46; six: its DH, base and tool errors) plus these effects only: the built-in \
-         bending/stretch/base offset (rr) and joint compliance (six) are left out",
+         bending/stretch/base offset (rr) and joint compliance (six) are left out. Planted changes of the six-joint arm's \
+         geometry (`cbd check`: a calibration set and a changed set from the same arm; the arm keeps its compliance): \
+         joint_zero:joint=,offset= (radians) | base_shift:dx=,dy=,dz= | tool_shift:dx=,dy=,dz= (flange frame) | \
+         link_length:link=,delta= (DH a) | length_scale:scale= (every length of the chain)",
         library.join(" | ")
     )
 }

@@ -32,7 +32,7 @@ pub fn least_squares_sse(x: &Mat<f64>, r: &[f64]) -> (f64, usize) {
 }
 
 /// ln Γ(x), x > 0 (Lanczos, g = 7, 9 terms; relative error ~1e-15).
-fn ln_gamma(x: f64) -> f64 {
+pub(crate) fn ln_gamma(x: f64) -> f64 {
     const C: [f64; 9] = [
         0.999_999_999_999_809_9,
         676.520_368_121_885_1,

@@ -15,6 +15,7 @@
 //! gradient, from several starts, inside bounds (a quadratic wall outside the box, then clamped).
 //! Only the rows given are used: pass training rows, never test rows.
 
+mod blob_prior;
 mod configuration;
 mod defaults;
 mod geometry;
@@ -26,6 +27,9 @@ mod starts;
 mod table;
 pub(crate) mod weight_space;
 
+pub(crate) use blob_prior::blob_covariance;
+#[cfg(test)]
+pub(crate) use blob_prior::model_for_tests;
 pub use configuration::{search_configuration_term, ConfigurationEvidence};
 pub use defaults::{default_joint_kernel, normalisation_of};
 pub use geometry::{is_length, GeometricBasis, GEOMETRY_PRIOR_STD};

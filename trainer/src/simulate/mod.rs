@@ -1,6 +1,7 @@
 //! Simulated robots: a nominal model and a "real" arm that differs from it.
 
 pub mod effects;
+pub mod planted;
 pub mod rr;
 
 use rand::{Rng, SeedableRng};

@@ -1,0 +1,205 @@
+//! `cbd check`: does the calibration on the controller still hold? Fresh poses against the blob's
+//! own posterior predictive distribution (`evaluation::check`, docs/DESIGN.md "cbd check"); exit 0
+//! when it holds, 3 when it changed (docs/EXIT_CODES.md).
+
+use crate::cli::args::blob_misfit;
+use crate::cli::{load_nominal, ModelArgs};
+use crate::error::{Context, Error, Result};
+use crate::evaluation::check::{check, CheckError, Verdict};
+use crate::report::noise_floor::NoiseFloor;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, clap::Args)]
+pub struct CheckArgs {
+    #[command(flatten)]
+    pub model: ModelArgs,
+    /// The calibrated model on the controller.
+    #[arg(long)]
+    pub blob: PathBuf,
+    /// Fresh measurements (CSV, in measurement order; typically 10–30 poses).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The test's level: "changed" when p < alpha (0 < alpha < 1).
+    #[arg(long, default_value_t = 0.01)]
+    pub alpha: f64,
+    /// Fit the fresh rows' rigid frame first (a tracker set up anew); also when the model file's
+    /// base is `register = true`.
+    #[arg(long)]
+    pub register: bool,
+    /// Write the verdict and the statistics as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Append one JSON line per check here (time, p, error, verdict).
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+}
+
+pub fn run(args: CheckArgs) -> Result<()> {
+    if !(args.alpha > 0.0 && args.alpha < 1.0) {
+        return Err(Error::InvalidInput(format!("--alpha must be a number between 0 and 1 (exclusive), got {}", crate::error::number(args.alpha))));
+    }
+    crate::io::check_paths(
+        &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
+        &[("--json", args.json.as_deref()), ("--log", args.log.as_deref())],
+    )?;
+    let (nominal, spec) = load_nominal(&args.model)?;
+    let register = args.register || args.model.model.as_deref().map(crate::data::model_file::load_model_file).transpose()?.is_some_and(|f| f.register_base);
+    let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
+    let (data, lines) = (imported.measurements, imported.lines);
+    let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
+    crate::evaluation::blob_match::check_blob_fits(&model, &nominal).map_err(|why| blob_misfit(&args.blob, &args.model, why))?;
+    if model.n_joints() != data.n_joints || model.task_dim() != data.task_dim {
+        return Err(Error::InvalidInput(format!(
+            "{}: {} joints and {}-D positions, but {} has {} joints and {}-D positions",
+            args.data.display(),
+            data.n_joints,
+            data.task_dim,
+            args.blob.display(),
+            model.n_joints(),
+            model.task_dim()
+        )));
+    }
+    let Some(sigma) = model.noise_sigma else {
+        return Err(Error::InvalidInput(format!("{}: {}", args.blob.display(), CheckError::NoSigma)));
+    };
+    if let Some(refusal) = crate::limits::positive_scale_out_of_bounds("noise_sigma", sigma) {
+        return Err(Error::InvalidInput(format!("{}: {refusal} (the calibration's σ, recorded in the blob)", args.blob.display())));
+    }
+    let m = model.task_dim();
+    let need = crate::evaluation::check::covariance::covariance_bytes(model.n_points as usize, data.len(), m);
+    if let Some(available) = crate::cli::memory::available_bytes().filter(|a| need > *a) {
+        return Err(Error::InvalidInput(format!(
+            "{}: its {} measurement points and the {} fresh rows need about {} for the check's covariance, more than the {} this process may use; raise the memory limit",
+            args.blob.display(),
+            model.n_points,
+            data.len(),
+            crate::cli::memory::gigabytes(need),
+            crate::cli::memory::gigabytes(available)
+        )));
+    }
+    let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
+    let mut cal = cbd_runtime::Calibrator::from_model(model.clone(), &mut storage).context(args.blob.display())?;
+    crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
+    let (predicted, far) = crate::cli::eval::evaluate_rows(&mut cal, &data, &lines, &args.blob, &args.data, 0.05)?;
+    // A blob whose chain is not the model file's carries a DH-calibrated geometry (`cbd fit`'s
+    // default when the evidence chooses it): its parameters' uncertainty goes into C.
+    let geometry = model.nominal != nominal;
+    let options = crate::evaluation::check::CheckOptions { alpha: args.alpha, register, geometry };
+    let result = check(&model, &data, &predicted, options).map_err(|e| {
+        let file = if e == CheckError::NotPositiveDefinite || e == CheckError::NoSigma { &args.blob } else { &args.data };
+        Error::InvalidInput(format!("{}: {e}", file.display()))
+    })?;
+    let after = crate::cli::eval::finite_statistics("calibrated", &predicted, &result.measured, m, &lines, &args.data)?;
+    let unit = spec.model_length_unit.name();
+    // What a perfect model's error is on rows measured at another time: σ, and the recorded drift.
+    let drift_sd = model.drift.map_or(0.0, |d| d.sd);
+    let floor = NoiseFloor::new(
+        (sigma * sigma + drift_sd * drift_sd).sqrt(),
+        m,
+        if model.drift.is_some() { "σ and the calibration's drift, recorded in the blob" } else { "the calibration's σ, recorded in the blob" },
+    );
+    let floor_verdict = floor.verdict(after.mean, data.len());
+    if let Some(frame) = &result.frame {
+        outln!("{}: frame registered ({} dof, projected out of the test): {}", args.data.display(), crate::evaluation::check::register::FRAME_DOF, frame.describe(unit));
+    }
+    outln!("{:<12} {:>11} {:>11} {:>11} {:>11}   / floor", "model", "mean", "median", "p99", "max");
+    outln!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e} {:>9}", "calibrated", after.mean, after.median, after.p99, after.max, floor_verdict.cell());
+    outln!("{}; calibrated: {}", floor.describe(unit), floor_verdict.describe());
+    let s = &result.statistic;
+    let p = p_text(s.p_value);
+    outln!(
+        "statistic {:.4} on {} degrees of freedom (χ², the blob's predictive covariance at {} rows{}): p = {p}",
+        s.statistic,
+        s.dof,
+        data.len(),
+        if model.drift.is_some() { " with its recorded drift" } else { "" }
+    );
+    let verdict = match result.verdict {
+        Verdict::Holds => "holds",
+        Verdict::Changed => "changed",
+    };
+    outln!("{verdict} (p = {p}) at alpha = {}", args.alpha);
+    if far > 0 {
+        errln!("warning: {far} of {} configurations are far from every measured configuration (kernel support < 0.05): extrapolation", data.len());
+    }
+    if let Some(path) = &args.json {
+        let mut v = serde_json::json!({
+            "verdict": result.verdict,
+            "p_value": s.p_value,
+            "statistic": s.statistic,
+            "dof": s.dof,
+            "alpha": args.alpha,
+            "rows": data.len(),
+            // Naming the change is issue 50 item 3, not yet built: always empty.
+            "changes": [],
+            "calibrated": after,
+            "noise_floor": {"floor": floor, "calibrated": floor_verdict},
+            "extrapolating": far,
+        });
+        if let Some(frame) = &result.frame {
+            v["frame"] = frame.to_json();
+        }
+        let text = serde_json::to_string_pretty(&v).map_err(Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    if let Some(path) = &args.log {
+        let line = serde_json::json!({
+            "time": utc_now(),
+            "blob": args.blob.display().to_string(),
+            "data": args.data.display().to_string(),
+            "p_value": s.p_value,
+            "mean_error": after.mean,
+            "verdict": result.verdict,
+        });
+        append_line(path, &line.to_string())?;
+    }
+    if result.verdict == Verdict::Changed {
+        crate::cli::set_exit_code(3);
+    }
+    Ok(())
+}
+
+/// p as the verdict prints it: two decimals from 0.01 up, else one significant digit (3e-9).
+fn p_text(p: f64) -> String {
+    if p >= 0.01 {
+        format!("{p:.2}")
+    } else {
+        format!("{p:.0e}")
+    }
+}
+
+/// Appends `line` and a newline to `path` (made when missing).
+fn append_line(path: &Path, line: &str) -> Result<()> {
+    use std::io::Write;
+    let mut file = std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))?;
+    writeln!(file, "{line}").map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))
+}
+
+/// The time now as ISO 8601 UTC (`2026-12-06T19:44:23Z`): days to a civil date by Hinnant's
+/// `civil_from_days`.
+fn utc_now() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs()) as i64;
+    let (days, rest) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z", rest / 3600, rest % 3600 / 60, rest % 60)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn p_is_printed_as_the_verdict_shows_it() {
+        assert_eq!(p_text(0.4125), "0.41");
+        assert_eq!(p_text(3.2e-9), "3e-9");
+    }
+}

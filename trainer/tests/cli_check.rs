@@ -1,0 +1,188 @@
+//! `cbd check` (issue 50 items 1 and 2) through the real binary, on the simulated six-joint arm:
+//! the calibration holds on fresh poses of the same arm (exit 0), a joint's zero moved is "changed"
+//! (exit 3), a tracker set up anew holds with --register, bad input is one `error:` line naming
+//! the file (exit 1), and the same inputs give the same JSON.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+const CBD: &str = env!("CARGO_BIN_EXE_cbd");
+
+fn model() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/ur5/simulated-six.toml")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cbd-check-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn cbd(dir: &Path, args: &[&str]) -> Output {
+    Command::new(CBD).args(args).current_dir(dir).output().expect("run cbd")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// 150 calibration poses (noise 0.02 mm) of the simulated arm and the blob `cbd fit` writes.
+fn fixture() -> &'static PathBuf {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = scratch("fixture");
+        let m = model();
+        let m = m.to_str().unwrap();
+        let out = cbd(&dir, &["simulate", "--robot", "six", "--sampling", "uniform", "--count", "150", "--noise", "0.02", "--seed", "1", "--out", "cal.csv"]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let out = cbd(&dir, &["fit", "--model", m, "--data", "cal.csv", "--out", "arm.blob", "--quiet"]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        dir
+    })
+}
+
+/// 20 fresh poses of the same arm (seed `seed`), with extra simulate flags.
+fn fresh(dir: &Path, name: &str, seed: u64, extra: &[&str]) {
+    let seed = seed.to_string();
+    let mut args = vec!["simulate", "--robot", "six", "--sampling", "uniform", "--count", "20", "--noise", "0.02", "--seed", &seed, "--out", name];
+    args.extend_from_slice(extra);
+    let out = cbd(dir, &args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+}
+
+fn check(dir: &Path, data: &str, extra: &[&str]) -> Output {
+    let blob = fixture().join("arm.blob");
+    let m = model();
+    let mut args = vec!["check", "--model", m.to_str().unwrap(), "--blob", blob.to_str().unwrap(), "--data", data];
+    args.extend_from_slice(extra);
+    cbd(dir, &args)
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Exit code 1, one `error:` line holding every needle, no panic.
+#[track_caller]
+fn fails_with(out: &Output, needles: &[&str]) {
+    let err = text(&out.stderr);
+    assert!(!err.contains("panicked"), "panic:\n{err}");
+    assert_eq!(out.status.code(), Some(1), "stderr:\n{err}");
+    let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("no error line:\n{err}"));
+    for n in needles {
+        assert!(line.contains(n), "{line:?} lacks {n:?}");
+    }
+}
+
+#[test]
+fn fresh_poses_of_the_same_arm_hold_and_the_json_says_so() {
+    let dir = scratch("holds");
+    fresh(&dir, "fresh.csv", 1001, &[]);
+    let out = check(&dir, "fresh.csv", &["--json", "c.json", "--log", "checks.jsonl"]);
+    let stdout = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", text(&out.stderr));
+    assert!(stdout.contains("holds (p = "), "{stdout}");
+    assert!(stdout.contains("noise floor"), "{stdout}");
+    let v = json(&dir.join("c.json"));
+    assert_eq!(v["verdict"], "holds");
+    assert_eq!(v["dof"], 60);
+    assert_eq!(v["alpha"], 0.01);
+    assert_eq!(v["changes"], serde_json::json!([]));
+    assert!(v["frame"].is_null());
+    let p = v["p_value"].as_f64().unwrap();
+    assert!(p >= 0.01 && p <= 1.0, "p = {p}");
+    // Determinism: the same inputs, the same JSON, bit for bit.
+    let again = check(&dir, "fresh.csv", &["--json", "c2.json", "--log", "checks.jsonl"]);
+    assert_eq!(again.status.code(), Some(0));
+    assert_eq!(std::fs::read(dir.join("c.json")).unwrap(), std::fs::read(dir.join("c2.json")).unwrap());
+    // --log: one JSON line per check.
+    let log = std::fs::read_to_string(dir.join("checks.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 2);
+    assert_eq!(lines[1]["verdict"], "holds");
+    assert_eq!(lines[1]["p_value"], v["p_value"]);
+    assert!(lines[1]["time"].as_str().unwrap().ends_with('Z'));
+}
+
+/// Joint 2's zero moved by 0.01° (0.14 mm at the UR5's reach, seven times σ): the encoder reads
+/// q − δ at the same arm pose. Exit 3, "changed", also with --register (a joint zero is not a frame).
+#[test]
+fn a_moved_joint_zero_is_changed_with_exit_code_3() {
+    let dir = scratch("changed");
+    fresh(&dir, "raw.csv", 1002, &[]);
+    let raw = std::fs::read_to_string(dir.join("raw.csv")).unwrap();
+    let mut shifted = String::new();
+    for (i, line) in raw.lines().enumerate() {
+        if i == 0 {
+            shifted.push_str(line);
+        } else {
+            let mut f: Vec<String> = line.split(',').map(str::to_owned).collect();
+            f[1] = format!("{}", f[1].parse::<f64>().unwrap() - 0.01);
+            shifted.push_str(&f.join(","));
+        }
+        shifted.push('\n');
+    }
+    std::fs::write(dir.join("moved.csv"), shifted).unwrap();
+    for extra in [&[][..], &["--register"][..]] {
+        let mut args = vec!["--json", "c.json"];
+        args.extend_from_slice(extra);
+        let out = check(&dir, "moved.csv", &args);
+        let stdout = text(&out.stdout);
+        assert_eq!(out.status.code(), Some(3), "{extra:?}\n{stdout}\n{}", text(&out.stderr));
+        assert!(stdout.contains("changed (p = "), "{stdout}");
+        let v = json(&dir.join("c.json"));
+        assert_eq!(v["verdict"], "changed");
+        assert!(v["p_value"].as_f64().unwrap() < 1e-6, "{v}");
+    }
+}
+
+/// The tracker set up 1 m and 30° away: without --register a change, with it the calibration
+/// holds, the frame is reported and the test loses its 6 degrees of freedom.
+#[test]
+fn a_tracker_set_up_anew_holds_when_registered() {
+    let dir = scratch("tracker");
+    fresh(&dir, "moved.csv", 1003, &["--tracker-frame", "577.35,577.35,577.35;1,2,3,30"]);
+    let out = check(&dir, "moved.csv", &[]);
+    assert_eq!(out.status.code(), Some(3), "{}", text(&out.stdout));
+    let out = check(&dir, "moved.csv", &["--register", "--json", "c.json"]);
+    let stdout = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", text(&out.stderr));
+    assert!(stdout.contains("frame registered"), "{stdout}");
+    let v = json(&dir.join("c.json"));
+    assert_eq!(v["dof"], 54);
+    let angle = v["frame"]["angle_deg"].as_f64().unwrap();
+    assert!((angle - 30.0).abs() < 0.01, "{angle}");
+}
+
+#[test]
+fn bad_input_is_one_line_naming_the_file() {
+    let dir = scratch("bad");
+    fresh(&dir, "fresh.csv", 1004, &[]);
+    for alpha in ["--alpha=0", "--alpha=1", "--alpha=-0.5", "--alpha=nan"] {
+        fails_with(&check(&dir, "fresh.csv", &[alpha]), &["--alpha"]);
+    }
+    // Other columns than the model's: a planar arm's file.
+    let out = cbd(&dir, &["simulate", "--grid", "3", "--out", "rr.csv"]);
+    assert!(out.status.success());
+    fails_with(&check(&dir, "rr.csv", &[]), &["rr.csv"]);
+    // Fewer rows than the frame's 6 degrees of freedom (a model file that reads 1 row and up).
+    let text_model = std::fs::read_to_string(model()).unwrap().replace("min_rows = 10", "min_rows = 1");
+    std::fs::write(dir.join("six.toml"), text_model).unwrap();
+    let all = std::fs::read_to_string(dir.join("fresh.csv")).unwrap();
+    std::fs::write(dir.join("four.csv"), all.lines().take(5).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    let blob = fixture().join("arm.blob");
+    let out = cbd(&dir, &["check", "--model", "six.toml", "--blob", blob.to_str().unwrap(), "--data", "four.csv", "--register"]);
+    fails_with(&out, &["four.csv", "4 fresh rows", "6"]);
+    // A blob without σ (format 6 or older): refused, saying so.
+    let bytes = std::fs::read(&blob).unwrap();
+    let mut old = cbd_protocol::decode(&bytes).unwrap();
+    old.noise_sigma = None;
+    old.drift = None;
+    old.configuration_kernel = None;
+    std::fs::write(dir.join("old.blob"), cbd_protocol::encode_to_vec(&old).unwrap()).unwrap();
+    let m = model();
+    let out = cbd(&dir, &["check", "--model", m.to_str().unwrap(), "--blob", "old.blob", "--data", "fresh.csv"]);
+    fails_with(&out, &["old.blob", "no noise σ"]);
+}
