@@ -43,6 +43,7 @@ fn each_command_parses_its_model_file_once() {
         vec!["compare", "--model", &model, "--train", &train, "--test", &test],
         vec!["diagnose", "--model", &model, "--data", &train, "--test", &test, "--no-cbd"],
         vec!["plan", "--model", &model, "--data", &train, "--count", "2", "--out", &poses],
+        vec!["check", "--model", &model, "--blob", &blob, "--data", &test],
     ];
     let counted: Vec<(String, usize)> = commands.iter().map(|c| (c[0].to_string(), parses_of(c))).collect();
     let _ = std::fs::remove_dir_all(&dir);

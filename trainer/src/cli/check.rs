@@ -3,7 +3,7 @@
 //! when it holds, 3 when it changed (docs/EXIT_CODES.md).
 
 use crate::cli::args::blob_misfit;
-use crate::cli::{load_nominal, ModelArgs};
+use crate::cli::{ArmModel, ModelArgs};
 use crate::error::{Context, Error, Result};
 use crate::evaluation::check::{check, CheckError, Verdict};
 use crate::report::noise_floor::NoiseFloor;
@@ -42,8 +42,9 @@ pub fn run(args: CheckArgs) -> Result<()> {
         &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
         &[("--json", args.json.as_deref()), ("--log", args.log.as_deref())],
     )?;
-    let (nominal, spec) = load_nominal(&args.model)?;
-    let register = args.register || args.model.model.as_deref().map(crate::data::model_file::load_model_file).transpose()?.is_some_and(|f| f.register_base);
+    let arm = ArmModel::read(&args.model)?;
+    let register = args.register || arm.register_base();
+    let (nominal, spec) = (arm.nominal, arm.spec);
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
