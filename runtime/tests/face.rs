@@ -3,8 +3,8 @@
 //! of this file. The signatures are pinned by naming each item with its type.
 
 use cbd_runtime::{
-    storage_len, storage_len_for, Calibrator, CompensateOptions, Compensation, Error, Evaluation, PoseCompensateOptions,
-    PoseCompensation, PoseEvaluation, Real, MAX_JOINTS, MAX_TASK_DIM,
+    storage_len, storage_len_for, Calibrator, CompensateOptions, Compensation, Error, Evaluation, PoseCompensateOptions, PoseCompensation,
+    PoseEvaluation, Real, MAX_JOINTS, MAX_TASK_DIM,
 };
 
 /// Every `pub` line at the root of src/lib.rs (outside `internals`), as written.
@@ -26,10 +26,7 @@ fn the_root_exports_the_face_and_one_module_of_internals() {
     assert!(lib.lines().any(|l| l == "#![no_std]"), "the runtime must stay #![no_std]");
     let root: Vec<&str> = lib.lines().filter(|l| l.starts_with("pub ")).collect();
     assert_eq!(root, FACE, "the runtime's face changed: update FACE (and the firmware docs) deliberately");
-    let names: usize = FACE
-        .iter()
-        .map(|l| if l.contains('{') && l.contains('}') { l.matches(',').count() + 1 } else { 1 })
-        .sum();
+    let names: usize = FACE.iter().map(|l| if l.contains('{') && l.contains('}') { l.matches(',').count() + 1 } else { 1 }).sum();
     assert!(names <= 15, "{names} names at the root (issue 52: at most 15)");
     assert_eq!(root.iter().filter(|l| l.starts_with("pub mod")).count(), 1);
     assert!(!lib.lines().any(|l| l.starts_with("pub(crate) mod") || l.starts_with("pub mod ") && !l.starts_with("pub mod internals")));

@@ -261,7 +261,8 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
         position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
         let (mut tans, mut outs) = (tangents, out_tangents);
         for d in 0..n {
-            let Some((t_k, t_jac, o)) = next_direction(shape, &mut tans, &mut outs) else { break };
+            let Some((tan, o)) = next_direction(shape, &mut tans, &mut outs) else { break };
+            let (t_k, t_jac) = unpack(shape, tan);
             let (o_k, o_jac) = o.split_at_mut_checked(m)?;
             query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
             o_jac.fill(0.0);
@@ -273,7 +274,8 @@ pub(crate) fn query_rates<S: Shape, F: StageFields>(
     position_rates_shaped(shape, s_jac, &tf, &jf, dk, djac);
     let (mut tans, mut outs) = (tangents, out_tangents);
     for (d, ddv_d) in ddv.iter().enumerate().take(n) {
-        let Some((t_k, t_jac, o)) = next_direction(shape, &mut tans, &mut outs) else { break };
+        let Some((tan, o)) = next_direction(shape, &mut tans, &mut outs) else { break };
+        let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
         query_tangent_position_rate(shape, d, &jac, &tf, &jf, &t_k, &t_jac, o_k);
         query_tangent_jacobian_rate(shape, &jac, &tf, &t, &jf, ddv_d, &t_k, &t_jac, o_jac);
@@ -312,7 +314,8 @@ fn explicit_rates<S: Shape, F: StageFields>(
     let (m, n) = (shape.m(), shape.n());
     let (mut tans, mut outs) = (tangents, out_tangents);
     for d in 0..n {
-        let Some((t_k, t_jac, o)) = next_direction(shape, &mut tans, &mut outs) else { break };
+        let Some((tan, o)) = next_direction(shape, &mut tans, &mut outs) else { break };
+        let (t_k, t_jac) = unpack(shape, tan);
         let (o_k, o_jac) = o.split_at_mut_checked(m)?;
         query_tangent_position_rate(shape, d, jac, &tf, &jf, &t_k, &t_jac, o_k);
         // + ∂_d w
@@ -324,20 +327,19 @@ fn explicit_rates<S: Shape, F: StageFields>(
     Some(())
 }
 
-/// The next joint direction's tangent (δk_d, δJ_d), unpacked from the front of `tans`, and its
-/// rates' slot (δk_d', δJ_d') from the front of `outs`, both advanced past it; `None` when either
-/// runs out. By splitting (a zip of two `chunks_exact` keeps a division-by-zero panic path). A step
-/// the caller's loop takes, not a closure it hands over: the closure was compiled out of line, with
-/// its tangents through memory (+12 % per evaluate on the M7 for the kernel form, issue 52).
+/// The next joint direction's tangent (δk_d, δJ_d, packed) from the front of `tans`, and its rates'
+/// slot (δk_d', δJ_d') from the front of `outs`, both advanced past it; `None` when either runs
+/// out. By splitting (a zip of two `chunks_exact` keeps a division-by-zero panic path). A step the
+/// caller's loop takes (and unpacks in place), not a closure it hands over: the closure was compiled
+/// out of line, with its tangents through memory (+12 % per evaluate on the M7 for the kernel form,
+/// issue 52).
 #[inline(always)]
-#[allow(clippy::type_complexity)]
-fn next_direction<'o, S: Shape>(shape: S, tans: &mut &[Real], outs: &mut &'o mut [Real]) -> Option<([Real; MT], [[Real; NJ]; MT], &'o mut [Real])> {
+fn next_direction<'t, 'o, S: Shape>(shape: S, tans: &mut &'t [Real], outs: &mut &'o mut [Real]) -> Option<(&'t [Real], &'o mut [Real])> {
     let q = shape.m() + shape.m() * shape.n();
     let (tan, t_rest) = tans.split_at_checked(q)?;
     let (o, o_rest) = core::mem::take(outs).split_at_mut_checked(q)?;
     (*tans, *outs) = (t_rest, o_rest);
-    let (t_k, t_jac) = unpack(shape, tan);
-    Some((t_k, t_jac, o))
+    Some((tan, o))
 }
 
 /// Values of working space a query needs besides the kernel rows: its state with tangents and the
