@@ -42,9 +42,8 @@ pub const CBD_MAX_JOINTS: usize = 16;
 /// Largest task dimension (position coordinates) a model can have.
 pub const CBD_MAX_TASK_DIM: usize = 3;
 
-const _: () = assert!(
-    CBD_MAX_JOINTS == cbd_protocol::MAX_JOINTS_ANY_BUILD && MAX_JOINTS <= CBD_MAX_JOINTS && CBD_MAX_TASK_DIM == MAX_TASK_DIM
-);
+const _: () =
+    assert!(CBD_MAX_JOINTS == cbd_protocol::MAX_JOINTS_ANY_BUILD && MAX_JOINTS <= CBD_MAX_JOINTS && CBD_MAX_TASK_DIM == MAX_TASK_DIM);
 const _: () = assert!(align_of::<CbdCalibrator>() <= CBD_STORAGE_ALIGN && align_of::<Real>() <= CBD_STORAGE_ALIGN);
 
 /// The result of every call that can fail. `CBD_OK` is 0; every error is non-zero.

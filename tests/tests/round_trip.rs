@@ -30,8 +30,11 @@ fn runtime_reproduces_the_trainer_and_generalises() {
 
     let test = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 300, seed: 9 }, 2));
     let predicted = cbd_trainer::predict::evaluate_blob(&fit.blob, &test.joints).unwrap();
-    let nominal: Vec<f64> =
-        test.joints.chunks(2).flat_map(|q| cbd_runtime::internals::kinematics::forward_kinematics(&rr::nominal(), q).position[..2].to_vec()).collect();
+    let nominal: Vec<f64> = test
+        .joints
+        .chunks(2)
+        .flat_map(|q| cbd_runtime::internals::kinematics::forward_kinematics(&rr::nominal(), q).position[..2].to_vec())
+        .collect();
     let before = ErrorStats::of_positions(&nominal, &test.positions, 2);
     let after = ErrorStats::of_positions(&predicted, &test.positions, 2);
     // 64 measurements only: still at least three orders of magnitude on random configurations.

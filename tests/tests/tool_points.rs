@@ -65,8 +65,8 @@ fn each_control_point_is_its_tool_point_and_a_query_there_follows_it() {
     initial_state(&model, &mut state).unwrap();
     // k(0) of control point c is k0 of tool point c % 3, normalised.
     for (c, s) in state.chunks(dims.state_len()).enumerate() {
-        let k0 =
-            cbd_runtime::internals::kinematics::forward_kinematics_at(&model.nominal, &x[6 * c..6 * c + 6], c % 3).normalised(&model.normalisation);
+        let k0 = cbd_runtime::internals::kinematics::forward_kinematics_at(&model.nominal, &x[6 * c..6 * c + 6], c % 3)
+            .normalised(&model.normalisation);
         assert_eq!(&s[..3], &k0.position[..], "control point {c}");
     }
     let flow_kernel = model.joint_kernel.for_flow(model.momentum_law);

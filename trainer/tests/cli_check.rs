@@ -35,7 +35,24 @@ fn fixture() -> &'static PathBuf {
         let dir = scratch("fixture");
         let m = model();
         let m = m.to_str().unwrap();
-        let out = cbd(&dir, &["simulate", "--robot", "six", "--sampling", "uniform", "--count", "150", "--noise", "0.02", "--seed", "1", "--out", "cal.csv"]);
+        let out = cbd(
+            &dir,
+            &[
+                "simulate",
+                "--robot",
+                "six",
+                "--sampling",
+                "uniform",
+                "--count",
+                "150",
+                "--noise",
+                "0.02",
+                "--seed",
+                "1",
+                "--out",
+                "cal.csv",
+            ],
+        );
         assert!(out.status.success(), "{}", text(&out.stderr));
         let out = cbd(&dir, &["fit", "--model", m, "--data", "cal.csv", "--out", "arm.blob", "--quiet"]);
         assert!(out.status.success(), "{}", text(&out.stderr));
@@ -46,7 +63,8 @@ fn fixture() -> &'static PathBuf {
 /// 20 fresh poses of the same arm (seed `seed`), with extra simulate flags.
 fn fresh(dir: &Path, name: &str, seed: u64, extra: &[&str]) {
     let seed = seed.to_string();
-    let mut args = vec!["simulate", "--robot", "six", "--sampling", "uniform", "--count", "20", "--noise", "0.02", "--seed", &seed, "--out", name];
+    let mut args =
+        vec!["simulate", "--robot", "six", "--sampling", "uniform", "--count", "20", "--noise", "0.02", "--seed", &seed, "--out", name];
     args.extend_from_slice(extra);
     let out = cbd(dir, &args);
     assert!(out.status.success(), "{}", text(&out.stderr));

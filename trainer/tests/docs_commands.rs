@@ -16,8 +16,11 @@ fn repo() -> PathBuf {
 /// The README and every guide page.
 fn pages() -> Vec<PathBuf> {
     let mut pages = vec![repo().join("README.md")];
-    let mut guide: Vec<PathBuf> =
-        std::fs::read_dir(repo().join("docs/guide")).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "md")).collect();
+    let mut guide: Vec<PathBuf> = std::fs::read_dir(repo().join("docs/guide"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .collect();
     guide.sort();
     assert!(guide.len() >= 8, "docs/guide has {} pages", guide.len());
     pages.extend(guide);
@@ -67,10 +70,7 @@ fn commands_of(page: &Path, text: &str) -> Vec<DocumentedCommand> {
         if words.first().map(String::as_str) != Some("cbd") {
             continue;
         }
-        let words = words
-            .into_iter()
-            .map(|w| vars.iter().fold(w, |w, (name, value)| w.replace(name.as_str(), value)))
-            .collect();
+        let words = words.into_iter().map(|w| vars.iter().fold(w, |w, (name, value)| w.replace(name.as_str(), value))).collect();
         out.push(DocumentedCommand { place: format!("{}:{start}", page.strip_prefix(repo()).unwrap().display()), words });
     }
     out
@@ -110,7 +110,9 @@ fn every_documented_command_parses() {
             match cbd_trainer::cli::Cli::try_parse_from(&command.words) {
                 Ok(_) => parsed += 1,
                 Err(e) if matches!(e.kind(), clap::error::ErrorKind::DisplayHelp | clap::error::ErrorKind::DisplayVersion) => parsed += 1,
-                Err(e) => wrong.push(format!("{}: `{}`: {}", command.place, command.words.join(" "), e.to_string().lines().next().unwrap_or(""))),
+                Err(e) => {
+                    wrong.push(format!("{}: `{}`: {}", command.place, command.words.join(" "), e.to_string().lines().next().unwrap_or("")))
+                }
             }
         }
     }
@@ -126,7 +128,10 @@ fn the_extraction_sees_continuations_variables_and_comments() {
     assert_eq!(found.len(), 1);
     assert_eq!(found[0].words, ["cbd", "fit", "--model", "examples/x.toml", "--data", "a.csv", "--out", "b.blob"]);
     assert_eq!(found[0].place, "README.md:3");
-    assert_eq!(shell_words("cbd simulate --effect \"bump:centre=1;2\" --out x.csv | head"), ["cbd", "simulate", "--effect", "bump:centre=1;2", "--out", "x.csv"]);
+    assert_eq!(
+        shell_words("cbd simulate --effect \"bump:centre=1;2\" --out x.csv | head"),
+        ["cbd", "simulate", "--effect", "bump:centre=1;2", "--out", "x.csv"]
+    );
     // A flag that does not exist is refused (what the first test relies on).
     assert!(cbd_trainer::cli::Cli::try_parse_from(["cbd", "fit", "--joint-widths", "1"]).is_err());
 }

@@ -43,7 +43,12 @@ fn reach(chain: &DhChain, poses: &[Vec<f64>]) -> f64 {
     let base = Frame::from_transform(&chain.base).translation();
     poses
         .iter()
-        .map(|q| cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(tool_frame(chain, q).translation(), base)))
+        .map(|q| {
+            cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(
+                tool_frame(chain, q).translation(),
+                base,
+            ))
+        })
         .fold(0.0, f64::max)
 }
 
@@ -173,7 +178,10 @@ fn urdf_of_a_urdf_model_changes_only_the_calibrated_origins() {
     let (old, _) = urdf_patch::link_frames(&robot, "world", "tool0", 1000.0).unwrap();
     let (new, _) = urdf_patch::link_frames(&back, "world", "tool0", 1000.0).unwrap();
     for (a, b) in old.links.iter().zip(&new.links) {
-        let moved = cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(a.translation(), b.translation()));
+        let moved = cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(
+            a.translation(),
+            b.translation(),
+        ));
         assert!(moved < 5.0, "a link moved {moved} mm");
     }
 }

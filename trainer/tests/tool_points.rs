@@ -133,7 +133,12 @@ fn mean_errors(frames: &[Frame], truth: &[Frame]) -> (f64, f64) {
     let position = frames
         .iter()
         .zip(truth)
-        .map(|(a, b)| cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(a.translation(), b.translation())))
+        .map(|(a, b)| {
+            cbd_runtime::internals::kinematics::spatial::norm(cbd_runtime::internals::kinematics::spatial::sub(
+                a.translation(),
+                b.translation(),
+            ))
+        })
         .sum::<f64>();
     let angle = frames.iter().zip(truth).map(|(a, b)| rotation_angle(a, b).to_degrees()).sum::<f64>();
     (position / count, angle / count)

@@ -36,7 +36,10 @@ pub struct CheckArgs {
 
 pub fn run(args: CheckArgs) -> Result<()> {
     if !(args.alpha > 0.0 && args.alpha < 1.0) {
-        return Err(Error::InvalidInput(format!("--alpha must be a number between 0 and 1 (exclusive), got {}", crate::error::number(args.alpha))));
+        return Err(Error::InvalidInput(format!(
+            "--alpha must be a number between 0 and 1 (exclusive), got {}",
+            crate::error::number(args.alpha)
+        )));
     }
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
@@ -98,14 +101,31 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let floor = NoiseFloor::new(
         (sigma * sigma + drift_sd * drift_sd).sqrt(),
         m,
-        if model.drift.is_some() { "σ and the calibration's drift, recorded in the blob" } else { "the calibration's σ, recorded in the blob" },
+        if model.drift.is_some() {
+            "σ and the calibration's drift, recorded in the blob"
+        } else {
+            "the calibration's σ, recorded in the blob"
+        },
     );
     let floor_verdict = floor.verdict(after.mean, data.len());
     if let Some(frame) = &result.frame {
-        outln!("{}: frame registered ({} dof, projected out of the test): {}", args.data.display(), crate::evaluation::check::register::FRAME_DOF, frame.describe(unit));
+        outln!(
+            "{}: frame registered ({} dof, projected out of the test): {}",
+            args.data.display(),
+            crate::evaluation::check::register::FRAME_DOF,
+            frame.describe(unit)
+        );
     }
     outln!("{:<12} {:>11} {:>11} {:>11} {:>11}   / floor", "model", "mean", "median", "p99", "max");
-    outln!("{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e} {:>9}", "calibrated", after.mean, after.median, after.p99, after.max, floor_verdict.cell());
+    outln!(
+        "{:<12} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.4e} {:>9}",
+        "calibrated",
+        after.mean,
+        after.median,
+        after.p99,
+        after.max,
+        floor_verdict.cell()
+    );
     outln!("{}; calibrated: {}", floor.describe(unit), floor_verdict.describe());
     let s = &result.statistic;
     let p = p_text(s.p_value);
@@ -122,7 +142,10 @@ pub fn run(args: CheckArgs) -> Result<()> {
     };
     outln!("{verdict} (p = {p}) at alpha = {}", args.alpha);
     if far > 0 {
-        errln!("warning: {far} of {} configurations are far from every measured configuration (kernel support < 0.05): extrapolation", data.len());
+        errln!(
+            "warning: {far} of {} configurations are far from every measured configuration (kernel support < 0.05): extrapolation",
+            data.len()
+        );
     }
     if let Some(path) = &args.json {
         let mut v = serde_json::json!({
@@ -173,7 +196,11 @@ fn p_text(p: f64) -> String {
 /// Appends `line` and a newline to `path` (made when missing).
 fn append_line(path: &Path, line: &str) -> Result<()> {
     use std::io::Write;
-    let mut file = std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))?;
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))?;
     writeln!(file, "{line}").map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))
 }
 

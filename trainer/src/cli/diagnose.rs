@@ -78,13 +78,8 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             true => crate::cli::register_base_if_unknown(&arm, nominal, &imported.measurements, path)?,
             false => None,
         };
-        for w in crate::data::nominal_check::nominal_warnings(
-            &nominal,
-            &imported.measurements,
-            &imported.lines,
-            path,
-            arm.register_base(),
-        )? {
+        for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path, arm.register_base())?
+        {
             errln!("warning: {w}");
         }
         Ok((imported.measurements, registration))

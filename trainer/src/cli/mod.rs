@@ -13,11 +13,11 @@ macro_rules! outln {
 
 pub mod args;
 pub mod bench;
+pub mod check;
 pub mod compare;
 pub mod compensate;
 pub mod demo;
 pub mod diagnose;
-pub mod check;
 pub mod eval;
 pub mod export;
 pub mod fit;

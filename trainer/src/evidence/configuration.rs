@@ -205,7 +205,9 @@ pub fn search_configuration_term(
         term_widths[d] = best_plain_theta.log_widths[d];
         let mut base = best_plain_theta.clone();
         base.log_widths[d] = half[d];
-        starts.push(Theta { config: Some(ConfigTheta { log_widths: term_widths, log_a: flat, log_gamma: (0.3 * var_r).ln() }), ..base }.pack());
+        starts.push(
+            Theta { config: Some(ConfigTheta { log_widths: term_widths, log_a: flat, log_gamma: (0.3 * var_r).ln() }), ..base }.pack(),
+        );
     }
     let run = |table: &PairTable, from: &[Vec<f64>], iterations: u64| -> Vec<(f64, Vec<f64>)> {
         let table = Tight(table);

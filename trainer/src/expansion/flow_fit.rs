@@ -156,11 +156,17 @@ impl<'a> StageProblem<'a> {
         y[..ql].copy_from_slice(&self.initial[i * ql..(i + 1) * ql]);
         let mut scratch = vec![0.0; cbd_runtime::internals::integrate::scratch_len(y.len())];
         let mut task_rows = vec![0.0; self.task.len() * (1 + m + m * m)];
-        cbd_runtime::internals::integrate::integrate(self.integrator.method, self.integrator.steps, &mut y, &mut scratch, |stage, s, out| {
-            let weights = &theta[stage * w..(stage + 1) * w];
-            self.rates(stage, weights, scale, &rows, &mut task_rows, s, out, params);
-            Ok::<(), ()>(())
-        })
+        cbd_runtime::internals::integrate::integrate(
+            self.integrator.method,
+            self.integrator.steps,
+            &mut y,
+            &mut scratch,
+            |stage, s, out| {
+                let weights = &theta[stage * w..(stage + 1) * w];
+                self.rates(stage, weights, scale, &rows, &mut task_rows, s, out, params);
+                Ok::<(), ()>(())
+            },
+        )
         .ok()?;
         let finite = y.iter().all(|v| v.is_finite());
         let k1 = y[..m].to_vec();

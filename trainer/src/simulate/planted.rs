@@ -33,7 +33,9 @@ pub fn parse_planted(spec: &str, n_joints: usize) -> Option<Result<Planted, Effe
     if !PLANTED.contains(&kind.as_str()) {
         return None;
     }
-    let shift = |s: &Spec| -> Result<[f64; 3], EffectSpecError> { Ok([s.number("dx", Some(0.0))?, s.number("dy", Some(0.0))?, s.number("dz", Some(0.0))?]) };
+    let shift = |s: &Spec| -> Result<[f64; 3], EffectSpecError> {
+        Ok([s.number("dx", Some(0.0))?, s.number("dy", Some(0.0))?, s.number("dz", Some(0.0))?])
+    };
     let planted = (|| match kind.as_str() {
         "joint_zero" => Ok(Planted::JointZero { joint: s.index("joint")?, offset: s.number("offset", None)? }),
         "base_shift" => Ok(Planted::BaseShift(shift(&s)?)),

@@ -44,8 +44,13 @@ pub fn gravity_deflection_gap(
         .collect();
     let (mut gap, mut size) = (0.0, 0.0);
     for q in joints.chunks_exact(n) {
-        let fit = cbd_runtime::internals::kinematics::augmented::effect_terms(model, &gravity, q, cbd_runtime::internals::kinematics::augmented::Order::Value)
-            .delta[joint];
+        let fit = cbd_runtime::internals::kinematics::augmented::effect_terms(
+            model,
+            &gravity,
+            q,
+            cbd_runtime::internals::kinematics::augmented::Order::Value,
+        )
+        .delta[joint];
         let truth = arm.deflection(q)[joint];
         gap += (fit - truth).powi(2);
         size += truth.powi(2);

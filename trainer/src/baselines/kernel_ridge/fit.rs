@@ -3,7 +3,9 @@
 
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, NominalModel, MAX_JOINTS};
-use cbd_runtime::internals::kernel::{joint_features, joint_kernel, joint_kernel_from_features, read_features, write_features, FEATURES_PER_JOINT};
+use cbd_runtime::internals::kernel::{
+    joint_features, joint_kernel, joint_kernel_from_features, read_features, write_features, FEATURES_PER_JOINT,
+};
 use cbd_runtime::internals::kinematics::{forward_kinematics, Kinematics};
 use faer::{linalg::solvers::Solve, Mat, Side};
 

@@ -86,8 +86,17 @@ mod tests {
     /// are the first-order change of R x under a small turn (a finite difference of Rodrigues).
     #[test]
     fn a_known_frame_is_recovered_and_the_tangent_is_its_derivative() {
-        let p: Vec<f64> = (0..12).flat_map(|i| { let t = i as f64; [300.0 * (0.7 * t).sin(), 250.0 * (1.3 * t).cos(), 40.0 * t] }).collect();
-        let axis = { let v = [1.0, 2.0, -0.5]; let n = crate::nominal::norm(v); crate::nominal::scale(v, 1.0 / n) };
+        let p: Vec<f64> = (0..12)
+            .flat_map(|i| {
+                let t = i as f64;
+                [300.0 * (0.7 * t).sin(), 250.0 * (1.3 * t).cos(), 40.0 * t]
+            })
+            .collect();
+        let axis = {
+            let v = [1.0, 2.0, -0.5];
+            let n = crate::nominal::norm(v);
+            crate::nominal::scale(v, 1.0 / n)
+        };
         let tracker = crate::nominal::rotation_about(axis, 30f64.to_radians()).with_translation([600.0, -700.0, 400.0]);
         let measured: Vec<f64> = p.chunks_exact(3).flat_map(|c| tracker.apply([c[0], c[1], c[2]])).collect();
         let (frame, moved) = register(&measured, &p).unwrap();

@@ -109,7 +109,9 @@ mod tests {
             let (p, exact) = (chi2_survival(x, 2.0), (-x / 2.0f64).exp());
             assert!((p - exact).abs() <= 1e-12 * exact.max(1e-300), "χ²(2) at {x}: {p} vs {exact}");
         }
-        for (x, k, p) in [(3.841459, 1.0, 0.05), (6.634897, 1.0, 0.01), (23.209251, 10.0, 0.01), (88.379419, 60.0, 0.01), (79.081944, 60.0, 0.05)] {
+        for (x, k, p) in
+            [(3.841459, 1.0, 0.05), (6.634897, 1.0, 0.01), (23.209251, 10.0, 0.01), (88.379419, 60.0, 0.01), (79.081944, 60.0, 0.05)]
+        {
             let got = chi2_survival(x, k);
             assert!((got - p).abs() <= 2e-6 * p / 0.01, "χ²({k}) at {x}: {got} vs {p}");
         }
@@ -129,7 +131,9 @@ mod tests {
         assert!((s.statistic - direct).abs() < 1e-12 && s.dof == 4);
         // T one column: β̂ = (TᵀC⁻¹r)/(TᵀC⁻¹T); the residual e = r − T β̂, eᵀC⁻¹e.
         let t = Mat::from_fn(4, 1, |i, _| 1.0 + i as f64);
-        let tc = |v: &dyn Fn(usize) -> f64| -> f64 { (0..4).flat_map(|i| (0..4).map(move |j| (i, j))).map(|(i, j)| t[(i, 0)] * inv[(i, j)] * v(j)).sum() };
+        let tc = |v: &dyn Fn(usize) -> f64| -> f64 {
+            (0..4).flat_map(|i| (0..4).map(move |j| (i, j))).map(|(i, j)| t[(i, 0)] * inv[(i, j)] * v(j)).sum()
+        };
         let beta = tc(&|j| r[j]) / tc(&|j| t[(j, 0)]);
         let e: Vec<f64> = (0..4).map(|i| r[i] - t[(i, 0)] * beta).collect();
         let expected: f64 = (0..4).flat_map(|i| (0..4).map(move |j| (i, j))).map(|(i, j)| e[i] * inv[(i, j)] * e[j]).sum();

@@ -432,8 +432,12 @@ fn propagate(
         let cached = first.and_then(|f| f[chunk].as_ref());
         let mut tan = initial_tangent(cp, d0, d1, &init);
         let mut scratch = vec![0.0; cbd_runtime::internals::integrate::scratch_len(tan.len())];
-        let result: Result<(), ()> =
-            cbd_runtime::internals::integrate::integrate(cp.integrator.method, cp.integrator.steps, &mut tan, &mut scratch, |stage, y, out| {
+        let result: Result<(), ()> = cbd_runtime::internals::integrate::integrate(
+            cp.integrator.method,
+            cp.integrator.steps,
+            &mut tan,
+            &mut scratch,
+            |stage, y, out| {
                 let y = MatRef::from_column_major_slice(y, rows, cols);
                 let mut out = MatMut::from_column_major_slice_mut(out, rows, cols);
                 match cached {
@@ -447,7 +451,8 @@ fn propagate(
                     }
                 }
                 Ok(())
-            });
+            },
+        );
         let _ = result;
         drop(scratch);
         let mut positions = vec![0.0; m * count * cols];
