@@ -1,6 +1,7 @@
 //! What several commands share: their argument groups (the model file, CbD's hyperparameters and
 //! scheme) and the helpers behind them (CbD's fit for those flags, what a fit chose, a blob that
-//! does not fit its model). Commands import from here and from `cli` itself, never from each other.
+//! does not fit its model). Commands import from here, from `blob_rows` (a blob read and evaluated on
+//! rows) and from `cli` itself, never from each other.
 
 use crate::error::{Error, Result};
 

@@ -2,7 +2,7 @@
 //! own posterior predictive distribution (`evaluation::check`, docs/DESIGN.md "cbd check"); exit 0
 //! when it holds, 3 when it changed (docs/EXIT_CODES.md).
 
-use crate::cli::args::blob_misfit;
+use crate::cli::blob_rows::{decode_fitting, evaluate_rows, finite_statistics, recorded_sigma};
 use crate::cli::{ArmModel, ModelArgs};
 use crate::error::{Context, Error, Result};
 use crate::evaluation::check::{check, CheckError, Verdict};
@@ -51,8 +51,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
-    let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
-    crate::evaluation::blob_match::check_blob_fits(&model, &nominal).map_err(|why| blob_misfit(&args.blob, &args.model, why))?;
+    let model = decode_fitting(&blob, &args.blob, &args.model, &nominal)?;
     if model.n_joints() != data.n_joints || model.task_dim() != data.task_dim {
         return Err(Error::InvalidInput(format!(
             "{}: {} joints and {}-D positions, but {} has {} joints and {}-D positions",
@@ -64,12 +63,9 @@ pub fn run(args: CheckArgs) -> Result<()> {
             model.task_dim()
         )));
     }
-    let Some(sigma) = model.noise_sigma else {
+    let Some(sigma) = recorded_sigma(&model, &args.blob)? else {
         return Err(Error::InvalidInput(format!("{}: {}", args.blob.display(), CheckError::NoSigma)));
     };
-    if let Some(refusal) = crate::limits::positive_scale_out_of_bounds("noise_sigma", sigma) {
-        return Err(Error::InvalidInput(format!("{}: {refusal} (the calibration's σ, recorded in the blob)", args.blob.display())));
-    }
     let m = model.task_dim();
     let need = crate::evaluation::check::covariance::covariance_bytes(model.n_points as usize, data.len(), m);
     if let Some(available) = crate::cli::memory::available_bytes().filter(|a| need > *a) {
@@ -85,7 +81,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let mut storage = vec![0.0; cbd_runtime::storage_len_for(&model)];
     let mut cal = cbd_runtime::Calibrator::from_model(model.clone(), &mut storage).context(args.blob.display())?;
     crate::predict::check_calibrator(&mut cal).context(args.blob.display())?;
-    let (predicted, far) = crate::cli::eval::evaluate_rows(&mut cal, &data, &lines, &args.blob, &args.data, 0.05)?;
+    let (predicted, far) = evaluate_rows(&mut cal, &data, &lines, &args.blob, &args.data, 0.05)?;
     // A blob whose chain is not the model file's carries a DH-calibrated geometry (`cbd fit`'s
     // default when the evidence chooses it): its parameters' uncertainty goes into C.
     let geometry = model.nominal != nominal;
@@ -94,7 +90,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
         let file = if e == CheckError::NotPositiveDefinite || e == CheckError::NoSigma { &args.blob } else { &args.data };
         Error::InvalidInput(format!("{}: {e}", file.display()))
     })?;
-    let after = crate::cli::eval::finite_statistics("calibrated", &predicted, &result.measured, m, &lines, &args.data)?;
+    let after = finite_statistics("calibrated", &predicted, &result.measured, m, &lines, &args.data)?;
     let unit = spec.model_length_unit.name();
     // What a perfect model's error is on rows measured at another time: σ, and the recorded drift.
     let drift_sd = model.drift.map_or(0.0, |d| d.sd);

@@ -13,6 +13,7 @@ macro_rules! outln {
 
 pub mod args;
 pub mod bench;
+pub mod blob_rows;
 pub mod check;
 pub mod compare;
 pub mod compensate;
