@@ -106,9 +106,6 @@ fn minimise_restarted(
 const RESTARTS: usize = 4;
 const RESTART_GAIN: f64 = 0.5;
 
-/// Iteration limits up to this are screening (no restarts).
-const SCREENING_ITERATIONS: u64 = 40;
-
 /// Screened starts on the plain optimum found here (and the hand-over starts) refined to the end.
 const REFINED_ON_THE_OPTIMUM: usize = 2;
 
@@ -178,18 +175,21 @@ pub fn search_configuration_term(
     let widths = |shift: f64| -> Vec<f64> { table.joint.forms.iter().zip(half).map(|(f, l)| l + shift / f.log_weight_slope()).collect() };
     let fixed = |b: f64| -> Vec<f64> { table.joint.forms.iter().zip(half).map(|(f, l)| if f.periodic() { b.ln() } else { *l }).collect() };
     let balanced = Theta { log_sigma: plain_theta.log_sigma, ..scales.starts(&table)[0].clone() };
-    let mut starts = Vec::new();
-    for base in [&plain_theta, &balanced, &best_plain_theta] {
+    // [b = 5, b = 0.5, narrower task factor, negligible term] on `base`.
+    let starts_on = |base: &Theta| -> [Vec<f64>; 4] {
         let with = |log_widths: Vec<f64>, log_a: f64, gamma: f64| {
             Theta { config: Some(ConfigTheta { log_widths, log_a, log_gamma: (gamma * var_r).ln() }), ..base.clone() }.pack()
         };
-        starts.extend([
-            with(fixed(5.0), flat, 0.3),
-            with(fixed(0.5), flat, 0.3),
-            with(widths(0.0), 0.5f64.ln(), 0.3),
-            with(widths(0.0), flat, 1e-6),
-        ]);
-    }
+        [with(fixed(5.0), flat, 0.3), with(fixed(0.5), flat, 0.3), with(widths(0.0), 0.5f64.ln(), 0.3), with(widths(0.0), flat, 1e-6)]
+    };
+    let on_given = starts_on(&plain_theta);
+    let on_optimum_found = starts_on(&best_plain_theta);
+    // The negligible term on each plain optimum (see the screening below).
+    let nested = [on_given[3].clone(), on_optimum_found[3].clone()];
+    // Two groups, screened apart (below): the starts on the plain θ given and on the balanced start,
+    // and those on the plain optimum found here with the hand-over starts.
+    let given_group: Vec<Vec<f64>> = on_given.into_iter().chain(starts_on(&balanced)).collect();
+    let mut optimum_group: Vec<Vec<f64>> = on_optimum_found.into();
     // Hand-over starts: for each joint the plain optimum made narrower than typical pairs, the term
     // takes that narrow width (its other widths smooth, a flat task factor) and the joint field's
     // width of that joint returns to the typical pair's. The plain member can be local in a joint
@@ -205,20 +205,18 @@ pub fn search_configuration_term(
         term_widths[d] = best_plain_theta.log_widths[d];
         let mut base = best_plain_theta.clone();
         base.log_widths[d] = half[d];
-        starts.push(
+        optimum_group.push(
             Theta { config: Some(ConfigTheta { log_widths: term_widths, log_a: flat, log_gamma: (0.3 * var_r).ln() }), ..base }.pack(),
         );
     }
-    let run = |table: &PairTable, from: &[Vec<f64>], iterations: u64| -> Vec<(f64, Vec<f64>)> {
+    // Screening runs each start once; refinement restarts L-BFGS while it gains.
+    let run = |table: &PairTable, from: &[Vec<f64>], iterations: u64, restarted: bool| -> Vec<(f64, Vec<f64>)> {
         let table = Tight(table);
         let mut found: Vec<_> = from
             .iter()
-            .filter_map(|p| {
-                if iterations > SCREENING_ITERATIONS {
-                    minimise_restarted(&table, &lower, &upper, p, iterations, &evaluations)
-                } else {
-                    minimise(&table, &lower, &upper, p, iterations, &evaluations)
-                }
+            .filter_map(|p| match restarted {
+                true => minimise_restarted(&table, &lower, &upper, p, iterations, &evaluations),
+                false => minimise(&table, &lower, &upper, p, iterations, &evaluations),
             })
             .collect();
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -234,20 +232,19 @@ pub fn search_configuration_term(
     // starts (the best two go on): one ranking over all of them let the second group's starts, ahead
     // after a few coarse iterations, push out the start that leads to the highest optimum (UR5
     // interleaved fold 0: 1898 instead of 1975 nats).
-    let nested = [starts[3].clone(), starts[11].clone()];
     let screened: Vec<Vec<f64>> = match &coarse {
         Some(c) => {
             let best = |group: &[Vec<f64>], keep: usize| -> Vec<Vec<f64>> {
-                run(c, group, options.screening_iterations).into_iter().take(keep).map(|(_, p)| p).collect()
+                run(c, group, options.screening_iterations, false).into_iter().take(keep).map(|(_, p)| p).collect()
             };
-            let mut screened = best(&starts[..8], REFINED);
-            screened.extend(best(&starts[8..], REFINED_ON_THE_OPTIMUM));
+            let mut screened = best(&given_group, REFINED);
+            screened.extend(best(&optimum_group, REFINED_ON_THE_OPTIMUM));
             screened.extend(nested);
             screened
         }
-        None => starts,
+        None => given_group.into_iter().chain(optimum_group).collect(),
     };
-    let (term_nlml, term_packed) = run(&table, &screened, long).into_iter().next().ok_or(EvidenceError::NoValidSetting)?;
+    let (term_nlml, term_packed) = run(&table, &screened, long, true).into_iter().next().ok_or(EvidenceError::NoValidSetting)?;
     let term_theta = Theta::unpack(&term_packed, n);
     let mut with_term = term_theta.to_user(&table.joint.forms, norm);
     let mut at_bounds = Vec::new();
