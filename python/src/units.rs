@@ -56,35 +56,14 @@ impl Columns {
         y.iter().map(|v| v / f).collect()
     }
 
-    /// ∂q/∂c (n × n, row-major): the import's map from columns to joints is affine, so its columns
-    /// are the images of the unit vectors less the image of zero.
+    /// ∂q/∂c (n × n, row-major): the import's map from columns to joints.
     pub fn joint_derivative(&self, n: usize) -> Vec<f64> {
-        let zero = self.joints_in(&vec![0.0; n]);
-        let mut d = vec![0.0; n * n];
-        for k in 0..n {
-            let mut e = vec![0.0; n];
-            e[k] = 1.0;
-            let image = self.joints_in(&e);
-            for row in 0..n {
-                d[row * n + k] = image[row] - zero[row];
-            }
-        }
-        d
+        affine_derivative(n, |c| self.joints_in(c))
     }
 
     /// ∂y/∂p (m × m, row-major): a model position's derivative into the columns' units and frame.
     pub fn position_derivative(&self, m: usize) -> Vec<f64> {
-        let zero = self.position_out(&vec![0.0; m]);
-        let mut d = vec![0.0; m * m];
-        for k in 0..m {
-            let mut e = vec![0.0; m];
-            e[k] = 1.0;
-            let image = self.position_out(&e);
-            for row in 0..m {
-                d[row * m + k] = image[row] - zero[row];
-            }
-        }
-        d
+        affine_derivative(m, |p| self.position_out(p))
     }
 
     /// What the arrays hold, for docstrings' `units` and messages.
@@ -101,6 +80,22 @@ impl Columns {
             }
         )
     }
+}
+
+/// The linear part of an affine map `f` of `dim` values (dim × dim, row-major): its columns are the
+/// images of the unit vectors less the image of zero (exact for the import's maps, which are affine).
+fn affine_derivative(dim: usize, f: impl Fn(&[f64]) -> Vec<f64>) -> Vec<f64> {
+    let zero = f(&vec![0.0; dim]);
+    let mut d = vec![0.0; dim * dim];
+    for k in 0..dim {
+        let mut e = vec![0.0; dim];
+        e[k] = 1.0;
+        let image = f(&e);
+        for row in 0..dim {
+            d[row * dim + k] = image[row] - zero[row];
+        }
+    }
+    d
 }
 
 /// `left` (a × b) · `right` (b × c), row-major.
