@@ -17,22 +17,37 @@ use crate::solver::step::solve_regularised;
 use cbd_protocol::NominalModel;
 use std::time::Instant;
 
-/// The fit of a multi-step scheme in weight space, or `None` (with the reason) when the kernel
-/// form's own solver should run instead: the kernel form requested, a non-Hamiltonian law, too
-/// many momenta for the dense linear start, kernels without a usable expansion, or (`Auto`) an
-/// expansion longer than the momenta while the momenta do not cancel.
-pub(super) fn fit(
-    nominal: &NominalModel,
-    data: &Measurements,
-    opts: &CbdOptions,
-    cp: &ControlPoints,
-    target: &[f64],
-    start: Instant,
-) -> Result<Result<CbdFit, Declined>, FitError> {
-    let m = cp.dims.m;
-    if opts.solver.representation == Representation::Kernel {
+/// What the fits here are given: the problem the kernel form's solver would solve.
+#[derive(Clone, Copy)]
+pub(super) struct ExpansionInputs<'a> {
+    pub nominal: &'a NominalModel,
+    pub data: &'a Measurements,
+    pub opts: &'a CbdOptions,
+    pub cp: &'a ControlPoints,
+    pub target: &'a [f64],
+    pub start: Instant,
+}
+
+/// The fit in weight space — of a multi-step scheme, or of the linear scheme (`linear_scheme`)
+/// beyond the closed form's dense size —, or `Ok(Err(why))` when the kernel form's own solver
+/// should run instead (the kernel form requested, or as each fit below says).
+pub(super) fn fit(inputs: ExpansionInputs<'_>, linear_scheme: bool) -> Result<Result<CbdFit, Declined>, FitError> {
+    if inputs.opts.solver.representation == Representation::Kernel {
         return Ok(Err(Declined::KernelRequested));
     }
+    if linear_scheme {
+        fit_linear_scheme(inputs)
+    } else {
+        fit_multi_step(inputs)
+    }
+}
+
+/// A multi-step scheme in weight space; declined for a non-Hamiltonian law, too many momenta for
+/// the dense linear start, kernels without a usable expansion, or (`Auto`) an expansion longer
+/// than the momenta while the momenta do not cancel.
+fn fit_multi_step(inputs: ExpansionInputs<'_>) -> Result<Result<CbdFit, Declined>, FitError> {
+    let ExpansionInputs { nominal, data, opts, cp, target, start } = inputs;
+    let m = cp.dims.m;
     if opts.solver.law.joint_field_sign() > 0.0 {
         return Ok(Err(Declined::NotHamiltonian));
     }
@@ -138,17 +153,8 @@ fn dense_momenta(cp: &ControlPoints, opts: &CbdOptions, target: &[f64]) -> Resul
 /// The linear scheme (Euler × 1) beyond [`super::CLOSED_FORM_MAX_UNKNOWNS`]: the expansion's weights by
 /// its QR (O(N m r²)) and the kernel form's momenta from them, instead of the (N m)² closed form;
 /// `Ok(Err(why))` when the expansion cannot serve (the kernel form's solver then runs).
-pub(super) fn fit_linear_scheme(
-    nominal: &NominalModel,
-    data: &Measurements,
-    opts: &CbdOptions,
-    cp: &ControlPoints,
-    target: &[f64],
-    start: Instant,
-) -> Result<Result<CbdFit, Declined>, FitError> {
-    if opts.solver.representation == Representation::Kernel {
-        return Ok(Err(Declined::KernelRequested));
-    }
+fn fit_linear_scheme(inputs: ExpansionInputs<'_>) -> Result<Result<CbdFit, Declined>, FitError> {
+    let ExpansionInputs { nominal, data, opts, cp, target, start } = inputs;
     let linear = match fit_linear(cp, &opts.joint_kernel, &opts.task_kernel, opts.sigma, target) {
         Ok(l) => l,
         Err(Declined::Memory(why)) => return Err(FitError::Memory(why)),

@@ -361,13 +361,9 @@ fn fit_in_pool(nominal: &NominalModel, data: &Measurements, opts: &CbdOptions) -
     // Multi-step schemes in weight space when the expansion serves (flow_expansion), else the
     // kernel form's iterations below.
     let mut declined_flow = None;
-    if !linear_scheme {
-        match flow_expansion::fit(nominal, data, opts, &cp, &target, start)? {
-            Ok(fit) => return Ok(fit),
-            Err(why) => declined_flow = Some(why.to_string()),
-        }
-    } else if closed_form && cp.len() * m > CLOSED_FORM_MAX_UNKNOWNS {
-        match flow_expansion::fit_linear_scheme(nominal, data, opts, &cp, &target, start)? {
+    if !linear_scheme || (closed_form && cp.len() * m > CLOSED_FORM_MAX_UNKNOWNS) {
+        let inputs = flow_expansion::ExpansionInputs { nominal, data, opts, cp: &cp, target: &target, start };
+        match flow_expansion::fit(inputs, linear_scheme)? {
             Ok(fit) => return Ok(fit),
             Err(why) => declined_flow = Some(why.to_string()),
         }
