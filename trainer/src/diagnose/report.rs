@@ -173,26 +173,12 @@ fn drift_text(d: &Diagnosis, unit: &str) -> String {
 }
 
 /// With several tool points per pose: each held-out row's mean error per tool point, of the tool
-/// frame's origin and of its orientation (degrees: mean and RMS); empty otherwise.
+/// frame's origin and of its orientation; empty otherwise.
 fn pose_table(d: &Diagnosis, unit: &str) -> String {
-    let Some(points) = d.table.iter().find_map(|r| r.pose.as_ref().map(|p| p.per_point.len())) else { return String::new() };
-    let mut out =
-        format!("\nheld-out mean error per tool point and of the tool frame ({unit}; orientation in degrees):\n  {:<26}", "model");
-    for j in 1..=points {
-        out += &format!(" {:>11}", format!("point {j}"));
-    }
-    out += &format!(" {:>11} {:>11} {:>11}\n", "frame", "orient mean", "orient rms");
-    for r in &d.table {
-        let Some(p) = &r.pose else { continue };
-        out += &format!("  {:<26}", r.name);
-        for s in &p.per_point {
-            out += &format!(" {:>11.4e}", s.mean);
-        }
-        let frame = p.frame_position.map_or(f64::NAN, |s| s.mean);
-        let (mean, rms) = (p.orientation_deg.map_or(f64::NAN, |s| s.mean), p.orientation_rms_deg.unwrap_or(f64::NAN));
-        out += &format!(" {frame:>11.4e} {mean:>11.4e} {rms:>11.4e}\n");
-    }
-    out
+    use crate::evaluation::pose_errors::{pose_table, PoseTableLayout};
+    let rows: Vec<_> = d.table.iter().map(|r| (r.name.as_str(), r.pose.as_ref())).collect();
+    let heading = format!("held-out mean error per tool point and of the tool frame ({unit}; orientation in degrees)");
+    pose_table(&heading, "model", &PoseTableLayout { indent: "  ", name_width: 26, number_width: 11 }, &rows)
 }
 
 /// `name (not significant: p = …)` or `name (lowers the CV RMS by only …)`.

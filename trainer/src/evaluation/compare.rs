@@ -155,25 +155,12 @@ impl Comparison {
     }
 
     /// With several tool points per pose: each method's mean error per tool point, of the tool
-    /// frame's origin and of its orientation (degrees: mean and RMS); empty otherwise.
+    /// frame's origin and of its orientation; empty otherwise.
     pub fn pose_table(&self, unit: &str) -> String {
-        let Some(points) = self.rows.iter().find_map(|r| r.pose.as_ref().map(|p| p.per_point.len())) else { return String::new() };
-        let mut out = format!("\nmean test error per tool point and of the tool frame ({unit}; orientation in degrees):\n{:<8}", "method");
-        for j in 1..=points {
-            out += &format!(" {:>10}", format!("point {j}"));
-        }
-        out += &format!(" {:>10} {:>11} {:>11}\n", "frame", "orient mean", "orient rms");
-        for r in &self.rows {
-            let Some(p) = &r.pose else { continue };
-            out += &format!("{:<8}", r.name);
-            for s in &p.per_point {
-                out += &format!(" {:>10.4e}", s.mean);
-            }
-            let frame = p.frame_position.map_or(f64::NAN, |s| s.mean);
-            let (mean, rms) = (p.orientation_deg.map_or(f64::NAN, |s| s.mean), p.orientation_rms_deg.unwrap_or(f64::NAN));
-            out += &format!(" {frame:>10.4e} {mean:>11.4e} {rms:>11.4e}\n");
-        }
-        out
+        use super::pose_errors::{pose_table, PoseTableLayout};
+        let rows: Vec<_> = self.rows.iter().map(|r| (r.name.as_str(), r.pose.as_ref())).collect();
+        let heading = format!("mean test error per tool point and of the tool frame ({unit}; orientation in degrees)");
+        pose_table(&heading, "method", &PoseTableLayout { indent: "", name_width: 8, number_width: 10 }, &rows)
     }
 }
 

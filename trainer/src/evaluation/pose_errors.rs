@@ -19,6 +19,36 @@ pub struct PoseErrors {
     pub orientation_rms_deg: Option<f64>,
 }
 
+/// Column widths of a pose table: each line's indent, the name column, the numbers.
+pub struct PoseTableLayout {
+    pub indent: &'static str,
+    pub name_width: usize,
+    pub number_width: usize,
+}
+
+/// The table of each named model's mean error per tool point, of the tool frame's origin and of its
+/// orientation (degrees: mean and RMS) under `heading`; empty when no row has pose errors.
+pub fn pose_table<'a>(heading: &str, first_column: &str, layout: &PoseTableLayout, rows: &[(&'a str, Option<&'a PoseErrors>)]) -> String {
+    let PoseTableLayout { indent, name_width: nw, number_width: w } = *layout;
+    let Some(points) = rows.iter().find_map(|(_, p)| p.map(|p| p.per_point.len())) else { return String::new() };
+    let mut out = format!("\n{heading}:\n{indent}{first_column:<nw$}");
+    for j in 1..=points {
+        out += &format!(" {:>w$}", format!("point {j}"));
+    }
+    out += &format!(" {:>w$} {:>11} {:>11}\n", "frame", "orient mean", "orient rms");
+    for (name, p) in rows {
+        let Some(p) = p else { continue };
+        out += &format!("{indent}{name:<nw$}");
+        for s in &p.per_point {
+            out += &format!(" {:>w$.4e}", s.mean);
+        }
+        let frame = p.frame_position.map_or(f64::NAN, |s| s.mean);
+        let (mean, rms) = (p.orientation_deg.map_or(f64::NAN, |s| s.mean), p.orientation_rms_deg.unwrap_or(f64::NAN));
+        out += &format!(" {frame:>w$.4e} {mean:>11.4e} {rms:>11.4e}\n");
+    }
+    out
+}
+
 impl PoseErrors {
     /// The errors of `predicted` against `measured` (rows pose-major, `tool_points.len()` per pose,
     /// 3 coordinates each). `None` for one point per pose or a 2-D task space.
