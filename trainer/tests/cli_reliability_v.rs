@@ -431,7 +431,10 @@ fn plan_registers_and_chooses_as_fit_does_and_counts_identified_poses_once() {
     ));
     assert!(err.contains("twelve.csv: 12 poses identify the geometric group (23 parameters) but leave too few coordinates"), "{err}");
     assert!(!err.contains("do not identify") && !err.contains("before the geometric group"), "{err}");
-    assert!(err.contains("the geometric group (23 parameters) identified by the measured poses"), "{err}");
+    assert!(
+        err.contains("the geometric group (23 parameters identifiable at the nominal geometry) identified by the measured poses"),
+        "{err}"
+    );
 }
 
 /// Class 4: no line claims a cross-validation the rows could not give (fit said "4-fold

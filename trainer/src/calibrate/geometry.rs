@@ -65,7 +65,7 @@ impl GeometryChoice {
         };
         match &self.scores {
             Some(s) => format!(
-                "geometry: {chosen} (by {}: {} nominal {}, calibrated {} on {} rows, {} geometric parameters)",
+                "geometry: {chosen} (by {}: {} nominal {}, calibrated {} on {} rows, {} geometric parameters identifiable at the calibrated chain)",
                 self.by,
                 s.criterion,
                 short(s.nominal),

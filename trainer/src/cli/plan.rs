@@ -246,9 +246,12 @@ pub fn run(args: PlanArgs) -> Result<()> {
         (crate::calibrate::Geometry::Nominal, ..) => {
             "the nominal geometry kept (CbD's evidence on --data): no geometric group to identify".to_string()
         }
-        (_, 0, true) => format!("the geometric group ({} parameters) identified by the measured poses", result.geometric_parameters),
+        (_, 0, true) => format!(
+            "the geometric group ({} parameters identifiable at the nominal geometry) identified by the measured poses",
+            result.geometric_parameters
+        ),
         _ => format!(
-            "{geometric} before the geometric group ({} parameters) is identified, {} after",
+            "{geometric} before the geometric group ({} parameters identifiable at the nominal geometry) is identified, {} after",
             result.geometric_parameters,
             result.poses.len() - geometric
         ),
