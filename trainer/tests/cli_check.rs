@@ -204,3 +204,51 @@ fn bad_input_is_one_line_naming_the_file() {
     let out = cbd(&dir, &["check", "--model", m.to_str().unwrap(), "--blob", "old.blob", "--data", "fresh.csv"]);
     fails_with(&out, &["old.blob", "no noise σ"]);
 }
+
+/// Naming the change (issue 50 item 3): one planted change of a detectable size per set of 20
+/// fresh poses (`cbd simulate --effect`, the same arm); the check says "changed", the first named
+/// change is the planted one by its `--effect` spelling, its size within 4 standard errors of the
+/// truth (a shift: its length), and what is left after it is no longer a change at α = 0.01. With
+/// --register, base_shift is not offered (the frame holds it) and a joint zero is still named.
+#[test]
+fn a_planted_change_is_named_with_its_size() {
+    let dir = scratch("named");
+    let cases: [(&str, &str, f64, &[&str]); 6] = [
+        ("joint_zero:joint=2,offset=1e-4", "joint_zero:joint=2", 1e-4, &[]),
+        ("base_shift:dx=0.1", "base_shift", 0.1, &[]),
+        ("tool_shift:dz=0.1", "tool_shift", 0.1, &[]),
+        ("link_length:link=3,delta=0.1", "link_length:link=3", 0.1, &[]),
+        ("length_scale:scale=1.0002", "length_scale", 2e-4, &[]),
+        ("joint_zero:joint=3,offset=1e-4", "joint_zero:joint=3", 1e-4, &["--register"]),
+    ];
+    for (i, (plant, spelling, truth, extra)) in cases.into_iter().enumerate() {
+        let name = format!("changed{i}.csv");
+        fresh(&dir, &name, 1100 + i as u64, &["--effect", plant]);
+        let mut args = vec!["--json", "c.json"];
+        args.extend_from_slice(extra);
+        let out = check(&dir, &name, &args);
+        let stdout = text(&out.stdout);
+        assert_eq!(out.status.code(), Some(3), "{plant}\n{stdout}\n{}", text(&out.stderr));
+        assert!(stdout.contains("named change") && stdout.contains(spelling), "{plant}\n{stdout}");
+        let v = json(&dir.join("c.json"));
+        let changes = v["changes"].as_array().unwrap();
+        assert!(!changes.is_empty(), "{plant}: {v}");
+        let first = &changes[0];
+        assert_eq!(first["effect"], spelling, "{plant}: {v}");
+        let (size, se) = (first["size"].as_f64().unwrap(), first["se"].as_f64().unwrap());
+        assert!(se > 0.0 && (size - truth).abs() < 4.0 * se, "{plant}: size {size} ± {se}, truth {truth}");
+        let after = v["after_change"]["p_value"].as_f64().unwrap();
+        assert!(after >= 0.01, "{plant}: p after the named change {after}\n{stdout}");
+        if !extra.is_empty() {
+            assert!(stdout.contains("not offered: base_shift"), "{stdout}");
+            assert_eq!(v["after_change"]["not_offered"][0]["effect"], "base_shift");
+        }
+    }
+    // Nothing planted: the calibration holds, nothing named.
+    fresh(&dir, "same.csv", 1100, &[]);
+    let out = check(&dir, "same.csv", &["--json", "c.json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stdout));
+    let v = json(&dir.join("c.json"));
+    assert_eq!(v["changes"], serde_json::json!([]));
+    assert!(v["after_change"].is_null());
+}

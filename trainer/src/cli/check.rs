@@ -137,6 +137,46 @@ pub fn run(args: CheckArgs) -> Result<()> {
         Verdict::Changed => "changed",
     };
     outln!("{verdict} (p = {p}) at alpha = {}", args.alpha);
+    // Naming the change (issue 50 item 3): only when it changed.
+    let named = if result.verdict == Verdict::Changed {
+        match crate::evaluation::check::name::name_change(
+            &model,
+            &data,
+            &result.residual,
+            &result.covariance,
+            result.tangent.as_ref(),
+            unit,
+        ) {
+            Ok(named) => Some(named),
+            Err(e) => {
+                errln!("warning: the change is not named: {}", name_error(e));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    if let Some(named) = &named {
+        for (what, why) in &named.excluded {
+            outln!("not offered: {what} ({why})");
+        }
+        if named.changes.is_empty() {
+            outln!("no change of the library (joint zeros, link lengths and twists, encoder scales, base and tool shifts, length scale) explains the residual out of sample");
+        } else {
+            outln!("named change (leave-one-pose-out log predictive density {:.1} → {:.1}):", named.evidence_before, named.evidence_after);
+            for change in &named.changes {
+                outln!("  {}", change.describe());
+            }
+            let a = &named.after;
+            outln!(
+                "left after the named change: statistic {:.4} on {} degrees of freedom: p = {} ({})",
+                a.statistic,
+                a.dof,
+                p_text(a.p_value),
+                if a.p_value < args.alpha { "more changed than this" } else { "explained" }
+            );
+        }
+    }
     if far > 0 {
         errln!(
             "warning: {far} of {} configurations are far from every measured configuration (kernel support < 0.05): extrapolation",
@@ -151,14 +191,24 @@ pub fn run(args: CheckArgs) -> Result<()> {
             "dof": s.dof,
             "alpha": args.alpha,
             "rows": data.len(),
-            // Naming the change is issue 50 item 3, not yet built: always empty.
-            "changes": [],
+            // The named change (empty when the calibration holds or nothing explains it).
+            "changes": named.as_ref().map_or_else(Vec::new, |n| n.changes.iter().map(|c| c.to_json()).collect::<Vec<_>>()),
             "calibrated": after,
             "noise_floor": {"floor": floor, "calibrated": floor_verdict},
             "extrapolating": far,
         });
         if let Some(frame) = &result.frame {
             v["frame"] = frame.to_json();
+        }
+        if let Some(named) = &named {
+            v["after_change"] = serde_json::json!({
+                "statistic": named.after.statistic,
+                "dof": named.after.dof,
+                "p_value": named.after.p_value,
+                "loo_log_density_before": named.evidence_before,
+                "loo_log_density_after": named.evidence_after,
+                "not_offered": named.excluded.iter().map(|(w, why)| serde_json::json!({"effect": w, "why": why})).collect::<Vec<_>>(),
+            });
         }
         let text = serde_json::to_string_pretty(&v).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
@@ -178,6 +228,14 @@ pub fn run(args: CheckArgs) -> Result<()> {
         crate::cli::set_exit_code(3);
     }
     Ok(())
+}
+
+fn name_error(e: crate::evaluation::check::name::NameError) -> &'static str {
+    use crate::evaluation::check::name::NameError;
+    match e {
+        NameError::NotDhChain => "the library's changes are those of a DH chain measured in 3-D",
+        NameError::NotPositiveDefinite => "the fit of the library's changes is not defined on these rows",
+    }
 }
 
 /// p as the verdict prints it: two decimals from 0.01 up, else one significant digit (3e-9).

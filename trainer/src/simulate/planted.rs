@@ -7,7 +7,7 @@ use crate::effects::{EffectSpecError, Spec};
 use cbd_protocol::DhChain;
 
 /// The `--effect` types this module plants.
-pub const PLANTED: [&str; 5] = ["joint_zero", "base_shift", "tool_shift", "link_length", "length_scale"];
+pub const PLANTED: [&str; 6] = ["joint_zero", "base_shift", "tool_shift", "link_length", "link_twist", "length_scale"];
 
 /// One planted change.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -20,6 +20,8 @@ pub enum Planted {
     ToolShift([f64; 3]),
     /// Link L's DH length a grows by `delta`.
     LinkLength { link: usize, delta: f64 },
+    /// Link L's DH twist α grows by `delta` radians (a bent link; `cbd check` names it).
+    LinkTwist { link: usize, delta: f64 },
     /// Every length of the chain (a, d, base and tool translations) × `scale`.
     LengthScale(f64),
 }
@@ -41,6 +43,7 @@ pub fn parse_planted(spec: &str, n_joints: usize) -> Option<Result<Planted, Effe
         "base_shift" => Ok(Planted::BaseShift(shift(&s)?)),
         "tool_shift" => Ok(Planted::ToolShift(shift(&s)?)),
         "link_length" => Ok(Planted::LinkLength { link: s.index("link")?, delta: s.number("delta", None)? }),
+        "link_twist" => Ok(Planted::LinkTwist { link: s.index("link")?, delta: s.number("delta", None)? }),
         _ => {
             let scale = s.number("scale", None)?;
             if scale <= 0.0 {
@@ -60,6 +63,7 @@ impl Planted {
             Planted::BaseShift(d) => (0..3).for_each(|c| chain.base.translation[c] += d[c]),
             Planted::ToolShift(d) => (0..3).for_each(|c| chain.tool.translation[c] += d[c]),
             Planted::LinkLength { link, delta } => chain.joints[link].a += delta,
+            Planted::LinkTwist { link, delta } => chain.joints[link].alpha += delta,
             Planted::LengthScale(s) => {
                 for j in chain.joints.iter_mut() {
                     j.a *= s;
@@ -107,6 +111,9 @@ mod tests {
         assert!((d - 2.0).abs() < 1e-9, "{d}");
         assert!(parse_planted("joint_zero:joint=1,offset=0", 6).unwrap().is_ok(), "offset 0 allowed");
         assert!(parse_planted("link_length:link=7,delta=1", 6).unwrap().is_err());
+        let mut c = base.clone();
+        parse_planted("link_twist:link=2,delta=1e-3", 6).unwrap().unwrap().apply(&mut c);
+        assert!((c.joints[1].alpha - base.joints[1].alpha - 1e-3).abs() < 1e-15);
         assert!(parse_planted("length_scale:scale=1,oops=2", 6).unwrap().is_err());
         assert!(parse_planted("encoder_scale:joint=1,scale=1", 6).is_none());
     }

@@ -4,6 +4,7 @@
 //! rigid frame when the tracker was set up anew ([`register`]). docs/DESIGN.md "cbd check".
 
 pub mod covariance;
+pub mod name;
 pub mod register;
 pub mod statistic;
 
@@ -32,6 +33,11 @@ pub struct Check {
     /// The measured positions the residual was taken from (in the blob's frame when registered),
     /// the data's length unit, row-major.
     pub measured: Vec<f64>,
+    /// The residual the statistic was taken of (internal units), its covariance C and the
+    /// registered frame's tangent: what naming the change fits ([`name`]).
+    pub residual: Vec<f64>,
+    pub covariance: faer::Mat<f64>,
+    pub tangent: Option<faer::Mat<f64>>,
 }
 
 /// Why a check could not be made (the CLI names the files).
@@ -109,5 +115,5 @@ pub fn check(model: &Model, fresh: &Measurements, predicted: &[f64], options: Ch
         CheckError::NotPositiveDefinite
     })?;
     let verdict = if statistic.p_value < alpha { Verdict::Changed } else { Verdict::Holds };
-    Ok(Check { statistic, verdict, frame, measured })
+    Ok(Check { statistic, verdict, frame, measured, residual: r, covariance: c, tangent })
 }
