@@ -11,26 +11,20 @@
 #   sh examples/check/drift_false_alarms.sh      # SETS=200, POSES=20, uniform poses
 #   DRIFT="--sampling walk --step 0.1 --noise 0.02 --effect drift:sd=0.03,length=8" sh examples/check/drift_false_alarms.sh
 set -eu
-CBD=${CBD:-target/release/cbd}
-MODEL=examples/ur5/simulated-six.toml
+. examples/check/common.sh
 SETS=${SETS:-200}
 POSES=${POSES:-20}
-W=$(mktemp -d)
-trap 'rm -rf "$W"' EXIT
 DRIFT=${DRIFT:-"--sampling uniform --noise 0.02 --effect drift:sd=0.03,length=8"}
 
 # shellcheck disable=SC2086
-$CBD simulate --robot six $DRIFT --count 300 --seed 1 --out "$W/cal.csv" >/dev/null 2>&1
-$CBD fit --model "$MODEL" --data "$W/cal.csv" --out "$W/arm.blob" 2>&1 | grep -E '^(drift|noise floor)' || true
+calibrate $DRIFT
+grep -E '^(drift|noise floor)' "$W/fit.log" || true
 s=0
 while [ "$s" -lt "$SETS" ]; do
     # shellcheck disable=SC2086
     $CBD simulate --robot six $DRIFT --count "$POSES" --seed $((1000 + s)) --out "$W/fresh.csv" >/dev/null 2>&1
-    $CBD check --model "$MODEL" --blob "$W/arm.blob" --data "$W/fresh.csv" --json "$W/check.json" >/dev/null || [ $? -eq 3 ]
-    for key in p_value statistic dof; do
-        sed -n "s/.*\"$key\": \([^,]*\),*/\1/p" "$W/check.json"
-    done | tr '\n' ' ' >>"$W/p.txt"
-    echo >>"$W/p.txt"
+    check_fresh
+    p_statistic_dof >>"$W/p.txt"
     s=$((s + 1))
 done
 echo "| scenario ($POSES poses per set: $DRIFT) | sets | changed at α = 0.05 | changed at α = 0.01 | mean statistic / dof |"

@@ -11,26 +11,18 @@
 # Prints one table row per scenario: sets, rejections at α = 0.05 and 0.01 with their rates, and the
 # mean of statistic / dof (1 when the law holds). Planted changes: `cbd simulate --effect` (the same arm).
 set -eu
-CBD=${CBD:-target/release/cbd}
-MODEL=examples/ur5/simulated-six.toml
+. examples/check/common.sh
 SETS=${SETS:-200}
 POSES=${POSES:-20}
-W=$(mktemp -d)
-trap 'rm -rf "$W"' EXIT
-
-$CBD simulate --robot six --sampling uniform --count 300 --noise 0.02 --seed 1 --out "$W/cal.csv" >/dev/null 2>&1
-$CBD fit --model "$MODEL" --data "$W/cal.csv" --out "$W/arm.blob" >"$W/fit.log" 2>&1
+calibrate --sampling uniform --noise 0.02
 
 # p, statistic and dof of one fresh set: $1 seed, $2 extra simulate flags, $3 extra check flags.
 p_of() {
     # shellcheck disable=SC2086
     $CBD simulate --robot six --sampling uniform --count "$POSES" --noise 0.02 --seed "$1" $2 --out "$W/fresh.csv" >/dev/null 2>&1
     # shellcheck disable=SC2086
-    $CBD check --model "$MODEL" --blob "$W/arm.blob" --data "$W/fresh.csv" --json "$W/check.json" $3 >/dev/null || [ $? -eq 3 ]
-    for key in p_value statistic dof; do
-        sed -n "s/.*\"$key\": \([^,]*\),*/\1/p" "$W/check.json"
-    done | tr '\n' ' '
-    echo
+    check_fresh $3
+    p_statistic_dof
 }
 
 # One table row: $1 name, $2 simulate flags, $3 check flags. The fresh sets' seeds 1000, 1001, …

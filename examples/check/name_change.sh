@@ -9,15 +9,10 @@
 #
 #   sh examples/check/name_change.sh            # SEEDS=20, POSES=20
 set -eu
-CBD=${CBD:-target/release/cbd}
-MODEL=examples/ur5/simulated-six.toml
+. examples/check/common.sh
 SEEDS=${SEEDS:-20}
 POSES=${POSES:-20}
-W=$(mktemp -d)
-trap 'rm -rf "$W"' EXIT
-
-$CBD simulate --robot six --sampling uniform --count 300 --noise 0.02 --seed 1 --out "$W/cal.csv" >/dev/null 2>&1
-$CBD fit --model "$MODEL" --data "$W/cal.csv" --out "$W/arm.blob" >"$W/fit.log" 2>&1
+calibrate --sampling uniform --noise 0.02
 
 # One table row: $1 label, $2 simulate flags, $3 the expected spelling ("" for none), $4 the
 # planted size (as the check reports it: the offset, delta, |shift|, scale − 1), $5 check flags.
@@ -28,7 +23,7 @@ scenario() {
         # shellcheck disable=SC2086
         $CBD simulate --robot six --sampling uniform --count "$POSES" --noise 0.02 --seed $((1000 + s)) $2 --out "$W/fresh.csv" >/dev/null 2>&1
         # shellcheck disable=SC2086
-        $CBD check --model "$MODEL" --blob "$W/arm.blob" --data "$W/fresh.csv" --json "$W/check.json" $5 >/dev/null || [ $? -eq 3 ]
+        check_fresh $5
         # verdict, the named effects (comma-joined), the first one's size and se, the p left after.
         awk '
             /"verdict"/ { gsub(/[",]/, "", $2); verdict = $2 }
