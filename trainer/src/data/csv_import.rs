@@ -917,6 +917,28 @@ mod tests {
         assert!(msg.len() < 200, "{msg}");
     }
 
+    /// Issue 52: rows of numbers are the CSV's rows — the same measurements, lines and repeats, by
+    /// the same checks — and a fault names the arrays, the row and the column.
+    #[test]
+    fn rows_of_numbers_are_read_as_the_csv() {
+        let text = "q1,s2,x,y,z\n180,500,1,2,3\n-90,-250,10,20,30\n180,500,1.001,2,3\n";
+        let q = [180.0, 500.0, -90.0, -250.0, 180.0, 500.0];
+        let y = [1.0, 2.0, 3.0, 10.0, 20.0, 30.0, 1.001, 2.0, 3.0];
+        let rows = measurements_from_rows("(q, y)", &q, &y, 3, &spec()).unwrap();
+        assert_eq!(rows, read(text).unwrap());
+        let bad = [180.0, 500.0, -90.0, f64::NAN, 180.0, 500.0];
+        let e = measurements_from_rows("(q, y)", &bad, &y, 3, &spec()).unwrap_err().to_string();
+        assert_eq!(e, "(q, y) row 1: column 's2': not a finite number: 'NaN'");
+        let far = [180.0, 500.0, 400.0, -250.0, 180.0, 500.0];
+        let e = measurements_from_rows("(q, y)", &far, &y, 3, &spec()).unwrap_err().to_string();
+        assert!(e.starts_with("(q, y) row 1: column 'q1': 400.0 deg is outside the joint's range [-360, 360] deg"), "{e}");
+        let e = measurements_from_rows("(q, y)", &q[..2], &y[..3], 1, &spec()).unwrap_err().to_string();
+        assert_eq!(e, "(q, y): 1 data rows; at least 2 needed");
+        let y_far = [1.0, 2.0, 3.0, 10.0, 20.0, 30.0, 1.5, 2.0, 3.0];
+        let e = measurements_from_rows("(q, y)", &q, &y_far, 3, &spec()).unwrap_err().to_string();
+        assert!(e.starts_with("(q, y) row 2: contradictory measurements: the joint configuration repeats row 0"), "{e}");
+    }
+
     #[test]
     fn missing_file_is_an_io_error_naming_it() {
         let e = read_measurements("/nonexistent/dir/m.csv", &spec()).unwrap_err();
