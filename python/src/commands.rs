@@ -144,6 +144,14 @@ impl Data {
         }
     }
 
+    /// The file, where the data are one (an input the command's outputs must not overwrite).
+    fn file(&self) -> Option<&std::path::Path> {
+        match self {
+            Data::File(path) => Some(path),
+            Data::Arrays { .. } => None,
+        }
+    }
+
     /// The arrays' label, where messages must name rows rather than lines.
     fn label(&self) -> Option<&'static str> {
         match self {
@@ -192,8 +200,14 @@ pub fn compare<'py>(
         ("test", text(py, test.name().display().to_string())),
     ];
     let args: cbd_trainer::cli::compare::CompareArgs = typed_args(py, "compare", options, &["json"], &given)?;
-    let file = &model.file;
+    let (file, model_path) = (&model.file, model.path.as_path());
     let json = run(py, &sources([&train, &test]), || {
+        // The command's checks of its paths before any work (its outputs here: the figures).
+        let inputs = [("--model", Some(model_path)), ("--train", train.file()), ("--test", test.file())];
+        cbd_trainer::io::check_paths(&inputs, &[])?;
+        if let Some(dir) = &args.plots {
+            cbd_trainer::io::check_output_dir("--plots", dir)?;
+        }
         let (train, test) = (train.read(&spec)?, test.read(&spec)?);
         cbd_trainer::cli::compare::compare_measurements(&args, file, train, test)
     })?;
@@ -228,6 +242,13 @@ pub fn diagnose<'py>(
     }
     let args: cbd_trainer::cli::diagnose::DiagnoseArgs = typed_args(py, "diagnose", options, &["model", "test", "json"], &given)?;
     let json = run(py, &sources(std::iter::once(&data).chain(&test)), || {
+        // The command's checks of its paths before any work (its outputs here: the model file
+        // written and the figures).
+        let inputs = [("--model", arm.path.as_deref()), ("--data", data.file()), ("--test", test.as_ref().and_then(Data::file))];
+        cbd_trainer::io::check_paths(&inputs, &[("--write-model", args.write_model.as_deref())])?;
+        if let Some(dir) = &args.plots {
+            cbd_trainer::io::check_output_dir("--plots", dir)?;
+        }
         let measured = data.read(&arm.spec)?;
         let test = test.as_ref().map(|t| t.read(&arm.spec)).transpose()?;
         cbd_trainer::cli::diagnose::diagnose_measurements(&args, &arm, measured, test)

@@ -1,5 +1,6 @@
-//! `cbd.fit`: the fit `cbd fit` runs (`cli::fit::fit_measurements`), with the data as arrays and the
-//! command's own flags as keyword arguments — so the same data and flags give the same blob bytes.
+//! `cbd.fit`: the fit `cbd fit` runs (`cli::fit::fit_measurements`), with the data as arrays made
+//! measurements in memory (`csv_import::measurements_from_rows`) and the command's own arguments
+//! (`FitArgs`) read from the keywords — so the same data and flags give the same blob bytes.
 
 use crate::commands::{text, typed_args};
 use crate::errors::{guarded, one_at_a_time, Failure};
@@ -13,9 +14,10 @@ use pyo3::types::PyDict;
 /// `cbd fit --model …` would hold (`model=None`: the built-in RR arm, q1, q2 in radians, x, y). The
 /// model returned takes and gives arrays in the same units (`Model.evaluate(q)` on the training `q`
 /// gives positions comparable with `y`).
-/// `options` are `cbd fit`'s flags by name (`dh_first=True`, `max_rows=500`, `sigma=1e-3`, …; every
-/// flag the command has, as it has it). The GIL is released while it runs; progress goes to the
-/// "cbd" logger. Raises CbdError with the command's message (a CSV line becomes `(q, y) row r`).
+/// `options` are `cbd fit`'s arguments by the flags' names (`dh_first=True`, `max_rows=500`,
+/// `sigma=1e-3`, …; every flag the command has, of its type, with its default). The GIL is released
+/// while it runs; progress goes to the "cbd" logger. Raises CbdError with the command's message (an
+/// array row is named `(q, y) row r`).
 #[pyfunction]
 #[pyo3(signature = (model, q, y, **options))]
 pub fn fit(
