@@ -46,7 +46,7 @@ class ModelFile:
         """What ``y`` holds: positions (per tool point), or a pose's position then orientation."""
     def to_model(self, q: Array, y: Optional[Array] = None) -> Tuple[Array, Array]:
         """Rows in the columns' units → the model's (radians, the model's length unit, joint map
-        and planar frame applied, a pose read as its tool points), by the CSV import itself:
+        and planar frame applied, a pose read as its tool points), by the CSV import's own row code:
         ``(q, y)``, one row per (pose, tool point). With ``y=None`` the joints alone."""
 
 class Model:
@@ -100,14 +100,16 @@ def fit(model: Optional[ModelFile], q: Array, y: Array, **options: Option) -> Mo
     """Fits a calibrated model, as ``cbd fit`` on a CSV of these columns: ``q`` (n, joints) and
     ``y`` (n, ·) in the model file's column units (``model=None``: the built-in RR arm, radians
     and metres); the model returned takes and returns arrays in the same units. ``options``
-    are the command's flags by name (``dh_first=True``, ``max_rows=500``, ``sigma=1e-3``, …). The GIL
-    is released while it runs; progress goes to the ``cbd`` logger."""
+    are the command's arguments by the flags' names, each of the flag's type (``dh_first=True``,
+    ``max_rows=500``, ``sigma=1e-3``, …; ``None`` is the default; an unknown keyword or a wrong type
+    raises CbdError naming it). The arrays become measurements in memory, by the CSV import's own
+    conversion and checks. The GIL is released while it runs; progress goes to the ``cbd`` logger."""
 
 def compare(model: ModelFile, train: Data, test: Data, **options: Option) -> dict[str, Any]:
-    """Every method side by side (``cbd compare``); its JSON as a dict."""
+    """Every method side by side (``cbd compare``'s own function, in memory); its JSON value as a dict."""
 
 def diagnose(model: Optional[ModelFile], data: Data, test: Optional[Data] = None, **options: Option) -> dict[str, Any]:
-    """Traces the residual to physical effects (``cbd diagnose``); its JSON as a dict."""
+    """Traces the residual to physical effects (``cbd diagnose``'s own function, in memory); its JSON value as a dict."""
 
 def simulate(**options: Option) -> Tuple[Array, Array]:
-    """Simulated measurements (``cbd simulate``'s flags by name): ``(q, y)`` in the CSV's units."""
+    """Simulated measurements (``cbd simulate``'s flags by name): ``(q, y)``, the rows the command's CSV holds."""

@@ -1,115 +1,182 @@
-//! `cbd.compare`, `cbd.diagnose`, `cbd.simulate`: the commands themselves, run in this process on
-//! their own flags (keyword arguments), data given as arrays written to CSV files they read and
-//! their JSON or CSV output read back — no second pipeline.
+//! `cbd.compare`, `cbd.diagnose`, `cbd.simulate`: the commands' own library functions (the ones
+//! their `run` calls after reading files), in this process, on their own flags (keyword
+//! arguments); data given as arrays become measurements directly, and results come back as values
+//! — no file or text between them.
 
-use crate::arrays::out2;
+use crate::arrays::{out2, Rows};
 use crate::errors::{cbd_error, guarded, one_at_a_time, Failure};
-use crate::model_file::{arrays_csv, spec_of, ModelFile};
-use clap::Parser;
+use crate::model_file::{arrays_of, measurements, ModelFile};
+use cbd_trainer::data::csv_import::ColumnSpec;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-/// Keyword arguments as `cbd <command>` flags: `dh_first=True` → `--dh-first`, `max_rows=500` →
-/// `--max-rows=500`, a list or tuple → the flag once per item, `False`/`None` → left out. A name
-/// in `reserved` (the data, the outputs) is refused: the function takes those itself.
-pub fn flags_from_options(command: &str, options: Option<&Bound<'_, PyDict>>, reserved: &[&str]) -> PyResult<Vec<String>> {
-    let mut flags = Vec::new();
-    let Some(options) = options else { return Ok(flags) };
-    for (key, value) in options.iter() {
-        let key: String = key.extract()?;
-        if reserved.contains(&key.as_str()) {
-            return Err(cbd_error(format!(
-                "{command}(): `{key}` is not an option here (the function takes it as an argument, or returns it)"
-            )));
-        }
-        let flag = format!("--{}", key.replace('_', "-"));
-        let items: Vec<Bound<'_, PyAny>> = if value.is_instance_of::<pyo3::types::PyList>() || value.is_instance_of::<PyTuple>() {
-            value.try_iter()?.collect::<PyResult<_>>()?
-        } else {
-            vec![value]
-        };
-        for item in items {
-            if item.is_none() {
+/// Keyword arguments as `cbd <command>`'s typed arguments `T` (its clap `Args` struct, which is
+/// also serde's): `dh_first=True`, `max_rows=500`, `sigma=1e-3`, `effect=[…]` by the flags' own
+/// names, each the type the flag reads; `None` is left out (the flag's default) and a path-like
+/// object is its path. `given` are what the function takes itself (the data, the model file's
+/// path): a name among them or in `reserved` is refused as a keyword. An unknown keyword or a value
+/// of the wrong type is a CbdError naming the keyword.
+pub fn typed_args<'py, T: serde::de::DeserializeOwned + clap::Args>(
+    py: Python<'py>,
+    command: &str,
+    options: Option<&Bound<'py, PyDict>>,
+    reserved: &[&str],
+    given: &[(&str, Bound<'py, PyAny>)],
+) -> PyResult<T> {
+    // The command's flags by name (`--max-rows` → max_rows), for unknown keywords.
+    let names: Vec<String> =
+        T::augment_args(clap::Command::new("cbd")).get_arguments().filter_map(|a| a.get_long()).map(|l| l.replace('-', "_")).collect();
+    let mut keywords: Vec<(String, Bound<'py, PyAny>)> = Vec::new();
+    if let Some(options) = options {
+        for (key, value) in options.iter() {
+            let key: String = key.extract()?;
+            if reserved.contains(&key.as_str()) || given.iter().any(|(k, _)| *k == key) {
+                return Err(cbd_error(format!(
+                    "{command}(): `{key}` is not an option here (the function takes it as an argument, or returns it)"
+                )));
+            }
+            if !names.contains(&key) {
+                let near = names
+                    .iter()
+                    .filter(|n| !reserved.contains(&n.as_str()) && !given.iter().any(|(g, _)| g == n))
+                    .min_by_key(|n| distance(n, &key));
+                let tip = match near {
+                    Some(n) if distance(n, &key) <= 2.max(key.len() / 3) => format!(" (did you mean `{n}`?)"),
+                    _ => String::new(),
+                };
+                return Err(cbd_error(format!("{command}(): unknown keyword `{key}`{tip}")));
+            }
+            if value.is_none() {
                 continue;
             }
-            if let Ok(b) = item.cast::<pyo3::types::PyBool>() {
-                if b.is_true() {
-                    flags.push(flag.clone());
+            let value = if value.hasattr("__fspath__")? { py.import("os")?.call_method1("fspath", (value,))? } else { value };
+            keywords.push((key, value));
+        }
+    }
+    let read = |keywords: &[(String, Bound<'py, PyAny>)]| -> PyResult<Result<T, pythonize::PythonizeError>> {
+        let dict = PyDict::new(py);
+        for (key, value) in given {
+            dict.set_item(*key, value)?;
+        }
+        for (key, value) in keywords {
+            dict.set_item(key, value)?;
+        }
+        Ok(pythonize::depythonize::<T>(dict.as_any()))
+    };
+    match read(&keywords)? {
+        Ok(args) => Ok(args),
+        Err(all) => {
+            // The keyword at fault: the first that is refused on its own.
+            for keyword in &keywords {
+                if let Err(e) = read(std::slice::from_ref(keyword))? {
+                    return Err(cbd_error(format!("{command}(): keyword `{}`: {e}", keyword.0)));
                 }
-                continue;
             }
-            // str() of a float is its shortest round-trip form: the command reads the same number.
-            flags.push(format!("{flag}={}", item.str()?));
-        }
-    }
-    Ok(flags)
-}
-
-/// `cbd <args>` parsed by the command line's own parser; its error (an unknown flag, a bad value) as
-/// a CbdError, without the usage lines.
-pub fn command_args(args: &[String]) -> PyResult<cbd_trainer::cli::Command> {
-    let argv = std::iter::once("cbd".to_string()).chain(args.iter().cloned());
-    match cbd_trainer::cli::Cli::try_parse_from(argv) {
-        Ok(cli) => Ok(cli.command),
-        Err(e) => {
-            let text = e.render().to_string();
-            let first = text.split("\n\nUsage:").next().unwrap_or(&text).trim();
-            Err(cbd_error(first.strip_prefix("error: ").unwrap_or(first).to_string()))
+            Err(cbd_error(format!("{command}(): {all}")))
         }
     }
 }
 
-/// Runs `cbd <args>` as the binary would (worker pool sized for the memory), GIL released.
-fn run(py: Python<'_>, args: Vec<String>, sources: &[(&str, &str)]) -> PyResult<()> {
-    let command = command_args(&args)?;
+/// Edit distance of two names (an unknown keyword's nearest flag).
+fn distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut previous = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let current = row[j + 1];
+            row[j + 1] = (previous + usize::from(ca != *cb)).min(row[j] + 1).min(row[j + 1] + 1);
+            previous = current;
+        }
+    }
+    row[b.len()]
+}
+
+/// A Python string (a path or a label given to the command as its argument).
+pub fn text<'py>(py: Python<'py>, value: impl AsRef<str>) -> Bound<'py, PyAny> {
+    pyo3::types::PyString::new(py, value.as_ref()).into_any()
+}
+
+/// Runs `work` as the binary runs a command (worker pool sized for the memory, outputs staged:
+/// written only if it succeeds), GIL released; a failure's messages name `sources`' arrays.
+fn run<T: Send>(py: Python<'_>, sources: &[(&str, &str)], work: impl FnOnce() -> cbd_trainer::Result<T> + Send) -> PyResult<T> {
     py.detach(|| {
         guarded(|| {
             let _one = one_at_a_time();
-            cbd_trainer::cli::run(cbd_trainer::cli::Cli { command }).map_err(Failure::from)
+            let threads = cbd_trainer::cli::memory::workers_for_memory(cbd_trainer::cli::memory::available_bytes());
+            cbd_trainer::workers::run_in_pool(threads, || cbd_trainer::io::with_staged_outputs(work))
+                .map_err(cbd_trainer::Error::from)?
+                .map_err(Failure::from)
         })
     })
     .map_err(|e| e.into_py(sources))
 }
 
-/// A data argument: a CSV path, or `(q, y)` arrays written to `dir/name.csv` (and then named
-/// `label` in messages: pushed onto `named`).
-fn data_path(
-    model: Option<&ModelFile>,
-    value: &Bound<'_, PyAny>,
-    dir: &Path,
-    name: &str,
-    label: &'static str,
-    named: &mut Vec<(PathBuf, &'static str)>,
-) -> PyResult<PathBuf> {
-    if let Ok(tuple) = value.cast::<PyTuple>() {
-        if tuple.len() != 2 {
-            return Err(cbd_error(format!("{name}: give a CSV path or a (q, y) tuple of arrays; got a tuple of {}", tuple.len())));
+/// A data argument: a CSV path (read by the CSV import, as the command reads it) or `(q, y)`
+/// arrays (converted to measurements directly: no text between them).
+enum Data {
+    File(PathBuf),
+    Arrays { label: &'static str, q: Rows, y: Rows },
+}
+
+impl Data {
+    /// `value` as data with `spec`'s columns; `name` is the argument's, `label` what arrays are
+    /// called in messages.
+    fn of(spec: &ColumnSpec, value: &Bound<'_, PyAny>, name: &str, label: &'static str) -> PyResult<Data> {
+        if let Ok(tuple) = value.cast::<PyTuple>() {
+            if tuple.len() != 2 {
+                return Err(cbd_error(format!("{name}: give a CSV path or a (q, y) tuple of arrays; got a tuple of {}", tuple.len())));
+            }
+            let (q, y) = arrays_of(spec, &tuple.get_item(0)?, Some(&tuple.get_item(1)?))?;
+            return Ok(Data::Arrays { label, q, y: y.expect("y given") });
         }
-        let (_, spec) = spec_of(model)?;
-        let text = arrays_csv(&spec, &tuple.get_item(0)?, Some(&tuple.get_item(1)?))?;
-        let path = dir.join(format!("{name}.csv"));
-        std::fs::write(&path, text).map_err(|e| cbd_error(format!("{}: {e}", path.display())))?;
-        named.push((path.clone(), label));
-        return Ok(path);
+        let path: PathBuf = value.extract().map_err(|_| cbd_error(format!("{name}: give a CSV path or a (q, y) tuple of arrays")))?;
+        Ok(Data::File(path))
     }
-    let path: PathBuf = value.extract().map_err(|_| cbd_error(format!("{name}: give a CSV path or a (q, y) tuple of arrays")))?;
-    Ok(path)
+
+    /// What the data go by in messages: the file's path, or the arrays' label.
+    fn name(&self) -> PathBuf {
+        match self {
+            Data::File(path) => path.clone(),
+            Data::Arrays { label, .. } => PathBuf::from(label),
+        }
+    }
+
+    /// The file, where the data are one (an input the command's outputs must not overwrite).
+    fn file(&self) -> Option<&std::path::Path> {
+        match self {
+            Data::File(path) => Some(path),
+            Data::Arrays { .. } => None,
+        }
+    }
+
+    /// The arrays' label, where messages must name rows rather than lines.
+    fn label(&self) -> Option<&'static str> {
+        match self {
+            Data::File(_) => None,
+            Data::Arrays { label, .. } => Some(label),
+        }
+    }
+
+    fn read(&self, spec: &ColumnSpec) -> cbd_trainer::Result<cbd_trainer::data::csv_import::ImportedMeasurements> {
+        Ok(match self {
+            Data::File(path) => cbd_trainer::data::csv_import::read_measurements(path, spec)?,
+            Data::Arrays { label, q, y } => measurements(label, spec, q, Some(y))?,
+        })
+    }
 }
 
-fn scratch() -> PyResult<tempfile::TempDir> {
-    tempfile::Builder::new().prefix("cbd-python-").tempdir().map_err(|e| cbd_error(format!("a temporary directory: {e}")))
+/// The arrays among `data`, as (what messages call them, what to call them).
+fn sources<'a>(data: impl IntoIterator<Item = &'a Data>) -> Vec<(&'static str, &'static str)> {
+    data.into_iter().filter_map(Data::label).map(|l| (l, l)).collect()
 }
 
-/// The JSON a command wrote, as a dict.
-fn json_dict<'py>(py: Python<'py>, path: &Path) -> PyResult<Bound<'py, PyAny>> {
-    let text = std::fs::read_to_string(path).map_err(|e| cbd_error(format!("{}: {e}", path.display())))?;
+/// A command's JSON value as a Python dict (via the json module: text in memory, no file).
+fn json_dict<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(value).map_err(|e| cbd_error(e.to_string()))?;
     py.import("json")?.call_method1("loads", (text,))
-}
-
-/// The stand-ins of array data in messages: the temporary file's path → "train (q, y)".
-fn sources(paths: &[(PathBuf, &'static str)]) -> Vec<(String, &'static str)> {
-    paths.iter().map(|(p, name)| (p.display().to_string(), *name)).collect()
 }
 
 /// Every method side by side on the same data, as `cbd compare`: `train` and `test` are CSV paths
@@ -124,19 +191,26 @@ pub fn compare<'py>(
     test: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let dir = scratch()?;
-    let mut named = Vec::new();
-    let train = data_path(Some(&model), train, dir.path(), "train", "train (q, y)", &mut named)?;
-    let test = data_path(Some(&model), test, dir.path(), "test", "test (q, y)", &mut named)?;
-    let json = dir.path().join("compare.json");
-    let mut args: Vec<String> = ["compare", "--model"].map(String::from).into();
-    args.push(model.path.display().to_string());
-    for (flag, path) in [("--train", &train), ("--test", &test), ("--json", &json)] {
-        args.extend([flag.to_string(), path.display().to_string()]);
-    }
-    args.extend(flags_from_options("compare", options, &["model", "train", "test", "json"])?);
-    let named = sources(&named);
-    run(py, args, &named.iter().map(|(p, n)| (p.as_str(), *n)).collect::<Vec<_>>())?;
+    let spec = model.file.column_spec().map_err(|e| cbd_error(e.to_string()))?;
+    let train = Data::of(&spec, train, "train", "train (q, y)")?;
+    let test = Data::of(&spec, test, "test", "test (q, y)")?;
+    let given = [
+        ("model", text(py, model.path.display().to_string())),
+        ("train", text(py, train.name().display().to_string())),
+        ("test", text(py, test.name().display().to_string())),
+    ];
+    let args: cbd_trainer::cli::compare::CompareArgs = typed_args(py, "compare", options, &["json"], &given)?;
+    let (file, model_path) = (&model.file, model.path.as_path());
+    let json = run(py, &sources([&train, &test]), || {
+        // The command's checks of its paths before any work (its outputs here: the figures).
+        let inputs = [("--model", Some(model_path)), ("--train", train.file()), ("--test", test.file())];
+        cbd_trainer::io::check_paths(&inputs, &[])?;
+        if let Some(dir) = &args.plots {
+            cbd_trainer::io::check_output_dir("--plots", dir)?;
+        }
+        let (train, test) = (train.read(&spec)?, test.read(&spec)?);
+        cbd_trainer::cli::compare::compare_measurements(&args, file, train, test)
+    })?;
     json_dict(py, &json)
 }
 
@@ -152,22 +226,33 @@ pub fn diagnose<'py>(
     test: Option<&Bound<'py, PyAny>>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let dir = scratch()?;
-    let mut named = Vec::new();
-    let data = data_path(model.as_deref(), data, dir.path(), "data", "data (q, y)", &mut named)?;
-    let json = dir.path().join("diagnose.json");
-    let mut args: Vec<String> =
-        vec!["diagnose".into(), "--data".into(), data.display().to_string(), "--json".into(), json.display().to_string()];
+    // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
+    let arm = match &model {
+        Some(m) => cbd_trainer::cli::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string()))?,
+        None => cbd_trainer::cli::ArmModel::builtin_rr(),
+    };
+    let data = Data::of(&arm.spec, data, "data", "data (q, y)")?;
+    let test = test.map(|t| Data::of(&arm.spec, t, "test", "test (q, y)")).transpose()?;
+    let mut given = vec![("data", text(py, data.name().display().to_string()))];
     if let Some(m) = &model {
-        args.extend(["--model".into(), m.path.display().to_string()]);
+        given.push(("model", text(py, m.path.display().to_string())));
     }
-    if let Some(test) = test {
-        let test = data_path(model.as_deref(), test, dir.path(), "test", "test (q, y)", &mut named)?;
-        args.extend(["--test".into(), test.display().to_string()]);
+    if let Some(test) = &test {
+        given.push(("test", text(py, test.name().display().to_string())));
     }
-    args.extend(flags_from_options("diagnose", options, &["model", "data", "test", "json"])?);
-    let named = sources(&named);
-    run(py, args, &named.iter().map(|(p, n)| (p.as_str(), *n)).collect::<Vec<_>>())?;
+    let args: cbd_trainer::cli::diagnose::DiagnoseArgs = typed_args(py, "diagnose", options, &["model", "test", "json"], &given)?;
+    let json = run(py, &sources(std::iter::once(&data).chain(&test)), || {
+        // The command's checks of its paths before any work (its outputs here: the model file
+        // written and the figures).
+        let inputs = [("--model", arm.path.as_deref()), ("--data", data.file()), ("--test", test.as_ref().and_then(Data::file))];
+        cbd_trainer::io::check_paths(&inputs, &[("--write-model", args.write_model.as_deref())])?;
+        if let Some(dir) = &args.plots {
+            cbd_trainer::io::check_output_dir("--plots", dir)?;
+        }
+        let measured = data.read(&arm.spec)?;
+        let test = test.as_ref().map(|t| t.read(&arm.spec)).transpose()?;
+        cbd_trainer::cli::diagnose::diagnose_measurements(&args, &arm, measured, test)
+    })?;
     json_dict(py, &json)
 }
 
@@ -179,27 +264,17 @@ pub fn diagnose<'py>(
 #[pyfunction]
 #[pyo3(signature = (**options))]
 pub fn simulate<'py>(py: Python<'py>, options: Option<&Bound<'py, PyDict>>) -> PyResult<Bound<'py, PyTuple>> {
-    let dir = scratch()?;
-    let out = dir.path().join("simulated.csv");
-    let mut args: Vec<String> = vec!["simulate".into(), "--out".into(), out.display().to_string()];
-    args.extend(flags_from_options("simulate", options, &["out"])?);
-    run(py, args, &[])?;
-    let text = std::fs::read_to_string(&out).map_err(|e| cbd_error(format!("{}: {e}", out.display())))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    // The rows come back as arrays: `out` is not written.
+    let args: cbd_trainer::cli::simulate::SimulateArgs = typed_args(py, "simulate", options, &[], &[("out", text(py, "-"))])?;
+    let simulated = run(py, &[], || cbd_trainer::cli::simulate::simulate(args))?;
     // Joint columns: q1, q2 (rr) or q1_deg … (six); the quaternion's are qw, qx, ….
+    let header = &simulated.header;
     let n = header.iter().take_while(|h| h.strip_prefix('q').is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit()))).count();
-    let (mut q, mut y, mut rows) = (Vec::new(), Vec::new(), 0);
-    for (k, line) in lines.enumerate() {
-        let values: Vec<f64> = line
-            .split(',')
-            .map(|v| v.parse::<f64>())
-            .collect::<Result<_, _>>()
-            .map_err(|e| Failure(format!("{}:{}: {e}", out.display(), k + 2)).into_py(&[]))?;
-        q.extend_from_slice(&values[..n]);
-        y.extend_from_slice(&values[n..]);
-        rows += 1;
+    let (rows, width) = (simulated.rows(), header.len());
+    let (mut q, mut y) = (Vec::with_capacity(rows * n), Vec::with_capacity(rows * (width - n)));
+    for row in simulated.values.chunks_exact(width.max(1)) {
+        q.extend_from_slice(&row[..n]);
+        y.extend_from_slice(&row[n..]);
     }
-    let m = header.len() - n;
-    PyTuple::new(py, [out2(py, q, rows, n).into_any(), out2(py, y, rows, m).into_any()])
+    PyTuple::new(py, [out2(py, q, rows, n).into_any(), out2(py, y, rows, width - n).into_any()])
 }

@@ -1,10 +1,11 @@
-//! `cbd.fit`: the fit `cbd fit` runs (`cli::fit::fit_measurements`), with the data as arrays and the
-//! command's own flags as keyword arguments — so the same data and flags give the same blob bytes.
+//! `cbd.fit`: the fit `cbd fit` runs (`cli::fit::fit_measurements`), with the data as arrays made
+//! measurements in memory (`csv_import::measurements_from_rows`) and the command's own arguments
+//! (`FitArgs`) read from the keywords — so the same data and flags give the same blob bytes.
 
-use crate::commands::{command_args, flags_from_options};
+use crate::commands::{text, typed_args};
 use crate::errors::{guarded, one_at_a_time, Failure};
 use crate::model::Model;
-use crate::model_file::{arrays_csv, spec_of, ModelFile, ARRAYS};
+use crate::model_file::{arrays_of, measurements, spec_of, ModelFile, ARRAYS};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -13,9 +14,10 @@ use pyo3::types::PyDict;
 /// `cbd fit --model …` would hold (`model=None`: the built-in RR arm, q1, q2 in radians, x, y). The
 /// model returned takes and gives arrays in the same units (`Model.evaluate(q)` on the training `q`
 /// gives positions comparable with `y`).
-/// `options` are `cbd fit`'s flags by name (`dh_first=True`, `max_rows=500`, `sigma=1e-3`, …; every
-/// flag the command has, as it has it). The GIL is released while it runs; progress goes to the
-/// "cbd" logger. Raises CbdError with the command's message (a CSV line becomes `(q, y) row r`).
+/// `options` are `cbd fit`'s arguments by the flags' names (`dh_first=True`, `max_rows=500`,
+/// `sigma=1e-3`, …; every flag the command has, of its type, with its default). The GIL is released
+/// while it runs; progress goes to the "cbd" logger. Raises CbdError with the command's message (an
+/// array row is named `(q, y) row r`).
 #[pyfunction]
 #[pyo3(signature = (model, q, y, **options))]
 pub fn fit(
@@ -25,14 +27,14 @@ pub fn fit(
     y: &Bound<'_, PyAny>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Model> {
-    let mut args = vec!["fit".to_string(), "--data".into(), ARRAYS.into(), "--out".into(), "-".into()];
+    // The data are the arrays (named so in messages), the blob is returned: neither is a file.
+    let mut given = vec![("data", text(py, ARRAYS)), ("out", text(py, "-"))];
     if let Some(m) = &model {
-        args.extend(["--model".into(), m.path.display().to_string()]);
+        given.push(("model", text(py, m.path.display().to_string())));
     }
-    args.extend(flags_from_options("fit", options, &["model", "data", "out", "json"])?);
-    let cbd_trainer::cli::Command::Fit(fit_args) = command_args(&args)? else { unreachable!("parsed as fit") };
+    let fit_args: cbd_trainer::cli::fit::FitArgs = typed_args(py, "fit", options, &["model", "json"], &given)?;
     let (nominal, spec) = spec_of(model.as_deref())?;
-    let text = arrays_csv(&spec, q, Some(y))?;
+    let (q, y) = arrays_of(&spec, q, Some(y))?;
     // The model answers in the arrays' units: the model file's columns (the built-in RR arm's are
     // the blob's own, radians and metres).
     let columns = model.as_ref().map(|m| (m.path.display().to_string(), nominal.clone(), crate::units::Columns { spec: spec.clone() }));
@@ -49,8 +51,7 @@ pub fn fit(
                 let _one = one_at_a_time();
                 let threads = cbd_trainer::cli::memory::workers_for_memory(cbd_trainer::cli::memory::available_bytes());
                 let fitted = cbd_trainer::workers::run_in_pool(threads, || {
-                    let imported =
-                        cbd_trainer::data::csv_import::read_measurements_from(text.as_bytes(), std::path::Path::new(ARRAYS), &spec)?;
+                    let imported = measurements(ARRAYS, &spec, &q, y.as_ref())?;
                     cbd_trainer::cli::fit::fit_measurements(&fit_args, &arm, imported)
                 })
                 .map_err(cbd_trainer::Error::from)??;

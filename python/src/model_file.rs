@@ -9,7 +9,7 @@ use cbd_trainer::data::model_file::ModelFile as File;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
-/// Stand-in path of arrays read as a CSV file, in messages: its lines become array rows.
+/// What arrays `(q, y)` are called in messages (and where a message names the data's file).
 pub const ARRAYS: &str = "(q, y)";
 
 /// A model file, read and checked.
@@ -94,9 +94,8 @@ impl ModelFile {
             spec.orientation_columns = None;
             spec.tool_points.clear();
         }
-        let text = arrays_csv(&spec, q, y)?;
-        let imported = cbd_trainer::data::csv_import::read_measurements_from(text.as_bytes(), std::path::Path::new(ARRAYS), &spec)
-            .map_err(|e| Failure(e.to_string()).into_py(&[(ARRAYS, ARRAYS)]))?;
+        let (q, y) = arrays_of(&spec, q, y)?;
+        let imported = measurements(ARRAYS, &spec, &q, y.as_ref()).map_err(|e| Failure(e.to_string()).into_py(&[]))?;
         let d = imported.measurements;
         let n = d.len();
         let q = out2(py, d.joints, n, d.n_joints);
@@ -149,16 +148,16 @@ pub fn y_columns(spec: &ColumnSpec) -> Vec<String> {
     names
 }
 
-/// `q` and `y` as CSV text with `spec`'s columns, every value in shortest round-trip form: read by
-/// the CSV import, they are the numbers given, bit for bit, whatever their units.
-pub fn arrays_csv(spec: &ColumnSpec, q: &Bound<'_, PyAny>, y: Option<&Bound<'_, PyAny>>) -> PyResult<String> {
+/// `q` and `y` checked as matrices of `spec`'s columns (the joints; the positions, then a pose's
+/// orientation) with one row of each per measured pose; `y=None`: the joints alone.
+pub fn arrays_of(spec: &ColumnSpec, q: &Bound<'_, PyAny>, y: Option<&Bound<'_, PyAny>>) -> PyResult<(Rows, Option<Rows>)> {
     let joints = spec.joint_columns.join(", ");
-    // Each value's CSV text (shortest round-trip form: up to 24 characters and a separator).
-    let q = matrix("q", q, spec.joint_columns.len(), &format!("columns {joints}"), 26 * spec.joint_columns.len())?;
+    // The copy the measurements are built from, per row: joints and positions.
+    let q = matrix("q", q, spec.joint_columns.len(), &format!("columns {joints}"), 8 * spec.joint_columns.len())?;
     let y_names = y_columns(spec);
     let y = match y {
         Some(y) => {
-            let y = matrix("y", y, y_names.len(), &format!("columns {}", y_names.join(", ")), 26 * y_names.len())?;
+            let y = matrix("y", y, y_names.len(), &format!("columns {}", y_names.join(", ")), 8 * y_names.len())?;
             if y.rows != q.rows {
                 return Err(cbd_error(format!("q has {} rows and y {}: one row of each per measured pose", q.rows, y.rows)));
             }
@@ -166,22 +165,18 @@ pub fn arrays_csv(spec: &ColumnSpec, q: &Bound<'_, PyAny>, y: Option<&Bound<'_, 
         }
         None => None,
     };
-    Ok(csv_text(&spec.joint_columns, &y_names, &q, y.as_ref()))
+    Ok((q, y))
 }
 
-fn csv_text(joints: &[String], positions: &[String], q: &Rows, y: Option<&Rows>) -> String {
-    use std::fmt::Write as _;
-    let mut header: Vec<&str> = joints.iter().map(String::as_str).collect();
-    if y.is_some() {
-        header.extend(positions.iter().map(String::as_str));
-    }
-    let mut text = header.join(",") + "\n";
-    for r in 0..q.rows {
-        let row = q.row(r).iter().chain(y.map(|y| y.row(r)).unwrap_or(&[]));
-        for (k, v) in row.enumerate() {
-            let _ = write!(text, "{}{v:?}", if k == 0 { "" } else { "," });
-        }
-        text.push('\n');
-    }
-    text
+/// Measurements from arrays [`arrays_of`] checked, by the CSV import's own conversion and checks
+/// (`cbd_trainer::data::csv_import::measurements_from_rows`): no text between them. `source`
+/// names the arrays in messages (`(q, y) row 3: column 'q3_deg': …`).
+pub fn measurements(
+    source: &str,
+    spec: &ColumnSpec,
+    q: &Rows,
+    y: Option<&Rows>,
+) -> Result<cbd_trainer::data::csv_import::ImportedMeasurements, cbd_trainer::data::import_error::ImportError> {
+    let y = y.map_or(&[][..], |y| &y.values[..]);
+    cbd_trainer::data::csv_import::measurements_from_rows(source, &q.values, y, q.rows, spec)
 }

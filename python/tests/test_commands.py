@@ -6,6 +6,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 import cbd
 from conftest import UR5, read_csv, run
@@ -60,3 +61,17 @@ def test_the_gil_is_released_during_a_fit(ur5_file, ur5_train):
     worker.join()
     # Held, the main thread would not run until the fit returned: a few ticks at most.
     assert ticks[0] > 50, f"{ticks[0]} ticks in {time.perf_counter() - start:.2f} s"
+
+
+def test_keywords_are_the_commands_typed_arguments():
+    # No command line between them: an unknown keyword or a value of the wrong type is named as such.
+    with pytest.raises(cbd.CbdError, match=r"simulate\(\): unknown keyword `cout` \(did you mean `count`\?\)"):
+        cbd.simulate(robot="six", sampling="uniform", cout=5)
+    with pytest.raises(cbd.CbdError, match=r"simulate\(\): keyword `count`"):
+        cbd.simulate(robot="six", sampling="uniform", count="five")
+    with pytest.raises(cbd.CbdError, match=r"`out` is not an option here"):
+        cbd.simulate(out="s.csv")
+    # None is the flag's default; a list flag takes one value or a list.
+    q, y = cbd.simulate(robot="six", sampling="uniform", count=5, seed=None, effect=[])
+    assert q.shape == (5, 6) and y.shape == (5, 3)
+    assert np.array_equal(q, cbd.simulate(robot="six", sampling="uniform", count=5, seed=1)[0])

@@ -36,11 +36,11 @@ FIT_CASES = [
     ("joint beyond its range", lambda q, y: (q * 100, y), {}, ["(q, y) row 0: column 'q1_deg'", "outside the joint's range"]),
     ("too few rows", lambda q, y: (q[:5], y[:5]), {}, ["(q, y): 5 data rows; at least 10 needed"]),
     ("no rows", lambda q, y: (q[:0], y[:0]), {}, ["0 data rows"]),
-    ("unknown option", lambda q, y: (q, y), {"sigmaa": 1.0}, ["unexpected argument '--sigmaa'", "'--sigma'"]),
+    ("unknown option", lambda q, y: (q, y), {"sigmaa": 1.0}, ["fit(): unknown keyword `sigmaa` (did you mean `sigma`?)"]),
     ("option given as an argument", lambda q, y: (q, y), {"out": "x.blob"}, ["fit(): `out` is not an option here"]),
     ("negative sigma", lambda q, y: (q, y), {"sigma": -1.0}, ["--sigma must be a number in [1e-100, 1e100], got -1"]),
     ("bad integrator", lambda q, y: (q, y), {"integrator": "leapfrog"}, ["unknown integrator `leapfrog`"]),
-    ("bad number", lambda q, y: (q, y), {"max_rows": "many"}, ["invalid value 'many' for '--max-rows"]),
+    ("bad number", lambda q, y: (q, y), {"max_rows": "many"}, ["fit(): keyword `max_rows`:"]),
     ("max_rows too small", lambda q, y: (q, y), {"max_rows": 1}, ["--max-rows must be at least 2"]),
 ]
 

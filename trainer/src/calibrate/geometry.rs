@@ -11,7 +11,7 @@ use crate::parametric::{calibrate_dh, linearised_group, DhCalibration, DhCalibra
 use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
 
 /// Which base model CbD deforms.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Geometry {
     /// Decided from the data: CbD's evidence, else cross-validation.

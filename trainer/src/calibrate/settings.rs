@@ -64,7 +64,7 @@ impl Overrides {
 }
 
 /// Whether the model has the configuration-dependent task field (docs/DESIGN.md §16).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ConfigurationField {
     /// Decided by CbD's evidence: kept when it gains more than ½ ln(N m) nats per added hyperparameter.

@@ -6,7 +6,7 @@
 use crate::error::{Error, Result};
 
 /// The nominal model: a model file, or the built-in planar RR arm.
-#[derive(Debug, Clone, clap::Args)]
+#[derive(Debug, Clone, clap::Args, serde::Deserialize)]
 pub struct ModelArgs {
     /// Model file (TOML: DH table or URDF, units, CSV columns). Without it: the paper's RR arm,
     /// CSV columns q1, q2 (radians), x, y.
@@ -18,13 +18,14 @@ pub struct ModelArgs {
 /// CbD's own evidence on the training rows, then the scheme by cross-validation. Every length is in
 /// the data's unit and means the same in `fit`, `compare`, `diagnose` and `demo`; a value given
 /// replaces that one hyperparameter of the search's result.
-#[derive(Debug, Clone, clap::Args)]
+#[derive(Debug, Clone, clap::Args, serde::Deserialize)]
 pub struct SolverArgs {
     /// The configuration-dependent task field γ_C exp(Σ_d c_d (cos(q_d − q'_d) − 1)) exp(−|x − x'|²/2a_C²) I
     /// beside CbD's two fields (docs/DESIGN.md §16): auto keeps it when CbD's evidence gains more than
     /// ½ ln(N m) nats per added hyperparameter, searched after the geometry choice; on always adds it,
     /// off never. With it the blob is Euler × 1 in the kernel form (no scheme choice, no expansion).
-    #[arg(long, value_enum, default_value_t = crate::calibrate::ConfigurationField::Auto)]
+    #[arg(long, value_enum, default_value_t = defaults::configuration_field())]
+    #[serde(default = "defaults::configuration_field")]
     pub configuration_field: crate::calibrate::ConfigurationField,
     /// Measurement noise σ per coordinate, in the data's length unit.
     #[arg(long)]
@@ -48,10 +49,12 @@ pub struct SolverArgs {
     /// by cross-validation on the training rows).
     #[arg(long)]
     pub steps: Option<u16>,
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = defaults::max_iterations())]
+    #[serde(default = "defaults::max_iterations")]
     pub max_iterations: usize,
     /// Drop the −(div v) P term from the momentum law.
     #[arg(long)]
+    #[serde(default)]
     pub no_divergence: bool,
     /// auto, dense or eigenspace: search all N·m momenta (O(N³) per iteration), or K_lin's dominant
     /// eigenspace (O(N² r), r independent of N for smooth kernels); auto picks by problem size and spectrum.
@@ -60,9 +63,73 @@ pub struct SolverArgs {
     /// How the runtime evaluates the fields: auto (the kernels' own expansion when it is shorter
     /// than the momenta or the momenta cancel), kernel (points and momenta only) or expansion.
     #[arg(long, value_enum, default_value_t = crate::expansion::Representation::default())]
+    #[serde(default)]
     pub representation: crate::expansion::Representation,
     #[arg(long)]
+    #[serde(default)]
     pub quiet: bool,
+}
+
+/// A list flag given as one value or as a list (`effect="…"` or `effect=["…", "…"]`).
+pub fn one_or_many<'de, D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Vec<String>, D::Error> {
+    #[derive(serde::Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany {
+        One(String),
+        Many(Vec<String>),
+    }
+    Ok(match <OneOrMany as serde::Deserialize>::deserialize(deserializer)? {
+        OneOrMany::One(v) => vec![v],
+        OneOrMany::Many(v) => v,
+    })
+}
+
+/// The flags' defaults, one source for the command line (clap) and the Python package's keyword
+/// arguments (serde): `cli::settings_tests` checks that both read the same arguments from nothing.
+pub mod defaults {
+    pub fn configuration_field() -> crate::calibrate::ConfigurationField {
+        crate::calibrate::ConfigurationField::Auto
+    }
+
+    pub fn max_iterations() -> usize {
+        30
+    }
+
+    pub fn geometry() -> crate::calibrate::Geometry {
+        crate::calibrate::Geometry::Auto
+    }
+
+    pub fn harmonics() -> u8 {
+        3
+    }
+
+    pub fn folds() -> usize {
+        5
+    }
+
+    pub fn margin() -> f64 {
+        0.05
+    }
+
+    pub fn robot() -> String {
+        "rr".into()
+    }
+
+    pub fn sampling() -> String {
+        "grid".into()
+    }
+
+    pub fn grid() -> usize {
+        16
+    }
+
+    pub fn count() -> usize {
+        3000
+    }
+
+    pub fn seed() -> u64 {
+        1
+    }
 }
 
 /// `--solver` values.

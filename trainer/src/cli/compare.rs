@@ -4,12 +4,13 @@
 use crate::cli::peers::{fitters, PeerContext, PEERS};
 use crate::data::Measurements;
 use crate::evaluation::commanded::{commanded_arm, fit_and_command, CommandedAccuracy, SimulatedArm};
-use crate::evaluation::compare::{compare_peers, read_compare_files};
+use crate::evaluation::compare::{compare_inputs, compare_peers};
 use crate::evaluation::peers::Peer;
 use cbd_protocol::NominalModel;
 use std::path::PathBuf;
 
-#[derive(Debug, clap::Args)]
+#[derive(Debug, clap::Args, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CompareArgs {
     /// Model file (DH table or URDF, units, CSV columns).
     #[arg(long)]
@@ -33,6 +34,7 @@ pub struct CompareArgs {
     pub commanded: Option<String>,
     /// CbD's hyperparameters and scheme, as in `cbd fit` (chosen by the pipeline when unset).
     #[command(flatten)]
+    #[serde(flatten)]
     pub solver: crate::cli::args::SolverArgs,
 }
 
@@ -108,6 +110,20 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let model_file = crate::data::model_file::load_model_file(&args.model)?;
+    check_commanded(&args, &model_file)?;
+    let spec = model_file.column_spec()?;
+    let train = crate::data::csv_import::read_measurements(&args.train, &spec)?;
+    let test = crate::data::csv_import::read_measurements(&args.test, &spec)?;
+    let json = compare_measurements(&args, &model_file, train, test)?;
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&json).map_err(crate::Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// `--commanded` with a registered base is refused before any fit.
+fn check_commanded(args: &CompareArgs, model_file: &crate::data::model_file::ModelFile) -> crate::Result<()> {
     if args.commanded.is_some() && model_file.register_base {
         // The commanded table sends each method's commands to the simulated arm in its own base
         // frame; a registered frame is only an estimate of where that is (1000 of 1000 targets
@@ -117,12 +133,26 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
             args.model.display()
         )));
     }
+    Ok(())
+}
+
+/// The comparison `cbd compare` runs, on measurements already read with `model_file`'s columns
+/// (`args.train` and `args.test` name them in messages and are not read; `args.model` is not read
+/// again): prints its table, writes `--plots`, and returns the `--json` value (not written here).
+/// One function for the command and the Python package.
+pub fn compare_measurements(
+    args: &CompareArgs,
+    model_file: &crate::data::model_file::ModelFile,
+    train: crate::data::csv_import::ImportedMeasurements,
+    test: crate::data::csv_import::ImportedMeasurements,
+) -> crate::Result<serde_json::Value> {
+    check_commanded(args, model_file)?;
     let mut settings = args.solver.settings()?;
     // The table is the output here; the fits' own progress lines would drown it.
     settings.solver.verbose = false;
     // Each row deforms the model it is handed: `cbd` the nominal, `dh+cbd` the DH-calibrated chain.
     settings.geometry = crate::calibrate::Geometry::Nominal;
-    let inputs = read_compare_files(&model_file, &args.train, &args.test)?;
+    let inputs = compare_inputs(model_file, (&args.train, train), (&args.test, test))?;
     if let Some(r) = &inputs.registration {
         let unit = model_file.length_unit.name();
         errln!("{}: {}", args.train.display(), r.describe(unit));
@@ -183,18 +213,14 @@ pub fn run(args: CompareArgs) -> crate::Result<()> {
         Some(robot) => Some(crate::workers::on_workers(threads, || commanded_table(robot, &inputs.nominal, train, &context, unit))?),
         None => None,
     };
-    if let Some(path) = &args.json {
-        let mut json = comparison.to_json();
-        if let Some(r) = &inputs.registration {
-            json["registered_base"] = r.to_json();
-        }
-        if let Some(c) = &commanded {
-            json["commanded"] = c.to_json();
-        }
-        let text = serde_json::to_string_pretty(&json).map_err(crate::Error::JsonOutput)?;
-        crate::cli::write_atomically(path, text.as_bytes())?;
+    let mut json = comparison.to_json();
+    if let Some(r) = &inputs.registration {
+        json["registered_base"] = r.to_json();
     }
-    Ok(())
+    if let Some(c) = &commanded {
+        json["commanded"] = c.to_json();
+    }
+    Ok(json)
 }
 
 /// The commanded-accuracy table with the peers wired as `cbd compare --commanded` wires them.

@@ -8,9 +8,11 @@ use crate::error::{Context, Error, Result};
 use crate::nominal::planar::PlanarFrame;
 use std::path::PathBuf;
 
-#[derive(Debug, clap::Args)]
+#[derive(Debug, clap::Args, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DiagnoseArgs {
     #[command(flatten)]
+    #[serde(flatten)]
     pub model: ModelArgs,
     /// Measurements to diagnose (CSV, the model file's columns).
     #[arg(long)]
@@ -30,23 +32,29 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub write_model: Option<PathBuf>,
     /// Transmission harmonics 1..H tried per joint.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = crate::cli::args::defaults::harmonics())]
+    #[serde(default = "crate::cli::args::defaults::harmonics")]
     pub harmonics: u8,
     /// Cross-validation folds of the selection.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = crate::cli::args::defaults::folds())]
+    #[serde(default = "crate::cli::args::defaults::folds")]
     pub folds: usize,
     /// Smallest relative drop of the cross-validated RMS error for an effect to be kept.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = crate::cli::args::defaults::margin())]
+    #[serde(default = "crate::cli::args::defaults::margin")]
     pub margin: f64,
     /// Skip the CbD rows of the table (two CbD fits).
     #[arg(long)]
+    #[serde(default)]
     pub no_cbd: bool,
     /// CbD's hyperparameters and scheme for the CbD rows, as in `cbd fit`.
     #[command(flatten)]
+    #[serde(flatten)]
     pub solver: crate::cli::args::SolverArgs,
 }
 
-pub fn run(args: DiagnoseArgs) -> Result<()> {
+/// The flags' values, before any work.
+fn check_flags(args: &DiagnoseArgs) -> Result<()> {
     if !(1..=16).contains(&args.harmonics) {
         return Err(Error::InvalidInput(format!("--harmonics must be between 1 and 16, got {}", args.harmonics)));
     }
@@ -59,6 +67,11 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     if args.write_model.is_some() && args.model.model.is_none() {
         return Err(Error::InvalidInput("--write-model needs --model (the file the corrections are written into)".into()));
     }
+    Ok(())
+}
+
+pub fn run(args: DiagnoseArgs) -> Result<()> {
+    check_flags(&args)?;
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--data", Some(&args.data)), ("--test", args.test.as_deref())],
         &[("--json", args.json.as_deref()), ("--write-model", args.write_model.as_deref())],
@@ -67,15 +80,39 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         crate::io::check_output_dir("--plots", dir)?;
     }
     let arm = ArmModel::read(&args.model)?;
-    let (mut nominal, spec) = (arm.nominal.clone(), &arm.spec);
+    let data = crate::data::csv_import::read_measurements(&args.data, &arm.spec)?;
+    let test = args.test.as_ref().map(|path| crate::data::csv_import::read_measurements(path, &arm.spec)).transpose()?;
+    let json = diagnose_measurements(&args, &arm, data, test)?;
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// The diagnosis `cbd diagnose` runs, on measurements already read with `arm`'s column spec
+/// (`args.data` and `args.test` name them in messages and are not read; `args.model` is not read
+/// again — `arm` is it): prints its table, writes `--plots` and `--write-model`, and returns the
+/// `--json` value (not written here). One function for the command and the Python package.
+pub fn diagnose_measurements(
+    args: &DiagnoseArgs,
+    arm: &ArmModel,
+    data: crate::data::csv_import::ImportedMeasurements,
+    test: Option<crate::data::csv_import::ImportedMeasurements>,
+) -> Result<serde_json::Value> {
+    check_flags(args)?;
+    let (mut nominal, arm) = (arm.nominal.clone(), arm);
     type Read = (crate::data::Measurements, Option<crate::parametric::base_registration::Registration>);
-    let read = |path: &PathBuf, nominal: &mut cbd_protocol::NominalModel, register: bool| -> Result<Read> {
-        let imported = crate::data::csv_import::read_measurements(path, spec)?;
+    let read = |imported: crate::data::csv_import::ImportedMeasurements,
+                path: &PathBuf,
+                nominal: &mut cbd_protocol::NominalModel,
+                register: bool|
+     -> Result<Read> {
         for w in imported.warnings(path) {
             errln!("warning: {w}");
         }
         let registration = match register {
-            true => crate::cli::register_base_if_unknown(&arm, nominal, &imported.measurements, path)?,
+            true => crate::cli::register_base_if_unknown(arm, nominal, &imported.measurements, path)?,
             false => None,
         };
         for w in crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, path, arm.register_base())?
@@ -84,13 +121,16 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         }
         Ok((imported.measurements, registration))
     };
-    let (data, registration) = read(&args.data, &mut nominal, true)?;
+    let (data, registration) = read(data, &args.data, &mut nominal, true)?;
     // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
     let threads = match args.no_cbd {
         false => crate::cli::memory::check_fit_of(&args.data, &data, "--no-cbd skips the CbD rows")?,
         true => crate::workers::worker_threads(),
     };
-    let test = args.test.as_ref().map(|path| read(path, &mut nominal.clone(), false).map(|(data, _)| data)).transpose()?;
+    let test = match test {
+        Some(test) => Some(read(test, args.test.as_ref().unwrap_or(&args.data), &mut nominal.clone(), false)?.0),
+        None => None,
+    };
     let mut options = DiagnoseOptions::default();
     options.library.harmonics = args.harmonics;
     options.structure.harmonics = args.harmonics;
@@ -109,13 +149,9 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     // The file's units; without a model file, the data's (joint angles in radians).
     let units = report::Units { length: unit, angle: model_file.as_ref().map(|m| m.angle_unit).unwrap_or(AngleUnit::Rad) };
     outln!("{}", report::text(&d, &d.model_start, &units));
-    if let Some(path) = &args.json {
-        let mut json = report::to_json(&d, &d.model_start, &units);
-        if let Some(r) = &registration {
-            json["registered_base"] = r.to_json();
-        }
-        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
-        crate::cli::write_atomically(path, text.as_bytes())?;
+    let mut json = report::to_json(&d, &d.model_start, &units);
+    if let Some(r) = &registration {
+        json["registered_base"] = r.to_json();
     }
     if let Some(dir) = &args.plots {
         // Joint axes in the file's units: its angle unit for revolute joints, its length unit otherwise.
@@ -180,7 +216,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         crate::cli::write_atomically(path, text.as_bytes())?;
         outln!("model with the found effects written to {}", path.display());
     }
-    Ok(())
+    Ok(json)
 }
 
 /// As [`max_position_gap`] for a planar chain in `frame` against the diagnosed DH form `b`.

@@ -5,9 +5,11 @@ use crate::cli::{ArmModel, ModelArgs};
 use crate::error::{Context, Error, Result};
 use std::path::PathBuf;
 
-#[derive(Debug, clap::Args)]
+#[derive(Debug, clap::Args, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct FitArgs {
     #[command(flatten)]
+    #[serde(flatten)]
     pub model: ModelArgs,
     /// Training measurements (CSV).
     #[arg(long)]
@@ -19,10 +21,12 @@ pub struct FitArgs {
     /// flows (Levenberg–Marquardt; the blob then carries the calibrated chain): auto chooses by CbD's
     /// own evidence on the training rows (cross-validation where no evidence runs), nominal deforms
     /// the chain as given, calibrated always calibrates it first.
-    #[arg(long, value_enum, default_value_t = crate::calibrate::Geometry::Auto)]
+    #[arg(long, value_enum, default_value_t = crate::cli::args::defaults::geometry())]
+    #[serde(default = "crate::cli::args::defaults::geometry")]
     pub geometry: crate::calibrate::Geometry,
     /// The same as `--geometry calibrated`.
     #[arg(long, conflicts_with = "geometry")]
+    #[serde(default)]
     pub dh_first: bool,
     /// Fit at most this many measurements, evenly spaced through the file (a fit needs memory
     /// growing as the square of the rows; the error for too many names a value that fits).
@@ -33,6 +37,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub json: Option<PathBuf>,
     #[command(flatten)]
+    #[serde(flatten)]
     pub solver: SolverArgs,
 }
 
@@ -57,6 +62,10 @@ fn evenly_spaced_rows(data: crate::data::Measurements, max_rows: Option<usize>) 
 /// The flags' values, before any work.
 fn check_flags(args: &FitArgs) -> Result<()> {
     args.solver.validate()?;
+    // The command line refuses both flags given (clap's `conflicts_with`); keyword arguments here.
+    if args.dh_first && args.geometry != crate::calibrate::Geometry::Auto {
+        return Err(Error::InvalidInput("--dh-first cannot be used with --geometry (it is --geometry calibrated)".into()));
+    }
     if args.max_rows.is_some_and(|k| k < 2) {
         return Err(Error::InvalidInput("--max-rows must be at least 2".into()));
     }

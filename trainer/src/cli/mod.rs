@@ -242,3 +242,90 @@ pub fn print_line(args: std::fmt::Arguments<'_>) {
         }
     }
 }
+
+/// The commands' arguments read from keywords (serde: the Python package) and from the command
+/// line (clap) agree: one set of defaults, unknown names refused.
+#[cfg(test)]
+mod settings_tests {
+    use super::*;
+    use clap::Parser;
+
+    fn parsed(args: &[&str]) -> Command {
+        Cli::try_parse_from(std::iter::once("cbd").chain(args.iter().copied())).unwrap().command
+    }
+
+    fn keywords<T: serde::de::DeserializeOwned>(value: serde_json::Value) -> std::result::Result<T, String> {
+        serde_json::from_value(value).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn keyword_defaults_are_the_flags_defaults() {
+        use serde_json::json;
+        let Command::Fit(flags) = parsed(&["fit", "--data", "d.csv", "--out", "o.blob"]) else { unreachable!() };
+        let named: fit::FitArgs = keywords(json!({"data": "d.csv", "out": "o.blob"})).unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let Command::Compare(flags) = parsed(&["compare", "--model", "m.toml", "--train", "a.csv", "--test", "b.csv"]) else {
+            unreachable!()
+        };
+        let named: compare::CompareArgs = keywords(json!({"model": "m.toml", "train": "a.csv", "test": "b.csv"})).unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let Command::Diagnose(flags) = parsed(&["diagnose", "--data", "d.csv"]) else { unreachable!() };
+        let named: diagnose::DiagnoseArgs = keywords(json!({"data": "d.csv"})).unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv"]) else { unreachable!() };
+        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv"})).unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+    }
+
+    #[test]
+    fn keywords_are_the_flags_values() {
+        use serde_json::json;
+        let Command::Fit(flags) = parsed(&[
+            "fit",
+            "--data",
+            "d.csv",
+            "--out",
+            "o.blob",
+            "--model",
+            "m.toml",
+            "--dh-first",
+            "--max-rows",
+            "500",
+            "--sigma",
+            "0.001",
+            "--configuration-field",
+            "off",
+            "--representation",
+            "kernel",
+            "--quiet",
+        ]) else {
+            unreachable!()
+        };
+        let named: fit::FitArgs = keywords(json!({
+            "data": "d.csv", "out": "o.blob", "model": "m.toml", "dh_first": true, "max_rows": 500, "sigma": 1e-3,
+            "configuration_field": "off", "representation": "kernel", "quiet": true,
+        }))
+        .unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv", "--effect", "backlash", "--robot", "six"]) else {
+            unreachable!()
+        };
+        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv", "effect": "backlash", "robot": "six"})).unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv", "effect": ["backlash"], "robot": "six"})).unwrap();
+        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+    }
+
+    #[test]
+    fn unknown_or_mistyped_keywords_are_refused() {
+        use serde_json::json;
+        let e = keywords::<fit::FitArgs>(json!({"data": "d", "out": "o", "max_rowz": 3})).unwrap_err();
+        assert!(e.contains("max_rowz"), "{e}");
+        let e = keywords::<diagnose::DiagnoseArgs>(json!({"data": "d", "harmonic": 3})).unwrap_err();
+        assert!(e.contains("harmonic"), "{e}");
+        let e = keywords::<simulate::SimulateArgs>(json!({"out": "o", "out_dir": "x"})).unwrap_err();
+        assert!(e.contains("out_dir"), "{e}");
+        assert!(keywords::<fit::FitArgs>(json!({"data": "d", "out": "o", "max_rows": "many"})).is_err());
+        assert!(keywords::<fit::FitArgs>(json!({"data": "d", "out": "o", "sigma": "small"})).is_err());
+    }
+}

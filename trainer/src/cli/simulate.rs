@@ -5,27 +5,33 @@ use crate::limits::MAX_MAGNITUDE;
 use crate::simulate::{add_noise, configurations, rr, Sampling};
 use std::path::PathBuf;
 
-#[derive(Debug, clap::Args)]
+#[derive(Debug, clap::Args, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SimulateArgs {
     /// Which robot: `rr` (the paper's planar arm; columns q1,q2 in rad, x,y) or `six` (a UR5-like
     /// arm with geometric errors and gravity joint compliance, noise 0.01 mm by default; columns
     /// as in examples/ur5/ur5.toml: q1_deg…q6_deg, x_mm, y_mm, z_mm; `--sampling uniform` or `walk`).
-    #[arg(long, default_value = "rr")]
+    #[arg(long, default_value_t = crate::cli::args::defaults::robot())]
+    #[serde(default = "crate::cli::args::defaults::robot")]
     pub robot: String,
     /// `grid` (per-axis points given by --grid; rr only), `uniform` (--count random configurations)
     /// or `walk` (--count configurations along a random walk in joint space, in the order measured:
     /// Gaussian steps of --step radians per joint, reflected at the joint range's ends).
-    #[arg(long, default_value = "grid")]
+    #[arg(long, default_value_t = crate::cli::args::defaults::sampling())]
+    #[serde(default = "crate::cli::args::defaults::sampling")]
     pub sampling: String,
     /// With `--sampling walk`: the standard deviation of each joint's step between consecutive
     /// rows, radians (a real arm's campaign: UR5 poses are 1–16° apart, about 0.05–0.15).
     #[arg(long)]
     pub step: Option<f64>,
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = crate::cli::args::defaults::grid())]
+    #[serde(default = "crate::cli::args::defaults::grid")]
     pub grid: usize,
-    #[arg(long, default_value_t = 3000)]
+    #[arg(long, default_value_t = crate::cli::args::defaults::count())]
+    #[serde(default = "crate::cli::args::defaults::count")]
     pub count: usize,
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = crate::cli::args::defaults::seed())]
+    #[serde(default = "crate::cli::args::defaults::seed")]
     pub seed: u64,
     /// Standard deviation of Gaussian noise added to the measured positions
     /// (default: 0 for rr, the robot's own 0.01 mm for six).
@@ -36,6 +42,7 @@ pub struct SimulateArgs {
     pub out: PathBuf,
     /// Inject an effect nobody declares (repeatable): [`effect_help`].
     #[arg(long = "effect", help = effect_help())]
+    #[serde(default, rename = "effect", deserialize_with = "crate::cli::args::one_or_many")]
     pub effects: Vec<String>,
     /// Measure at these poses instead of sampling (`cbd plan --out`): a CSV with the robot's joint
     /// columns (rr: q1, q2 in radians; six: q1_deg … q6_deg), one pose per row; --sampling, --grid and
@@ -51,6 +58,7 @@ pub struct SimulateArgs {
     /// least-squares tool frame of the noisy points, x_mm, y_mm, z_mm and qw, qx, qy, qz — and the
     /// point columns as that frame's points (so both sets of columns hold the same data).
     #[arg(long)]
+    #[serde(default)]
     pub pose: bool,
     /// Six-joint robot: report the measurements in a tracker's frame instead of the robot's base
     /// frame, `tx,ty,tz;ax,ay,az,angle`: a point y of the base frame reads R y + t, R the turn by
@@ -62,6 +70,7 @@ pub struct SimulateArgs {
     /// six: the UR5 DH table, base and tool): only its effects — built-in or `--effect` — and the
     /// noise set it apart. For testing what a calibration does when there is no geometric error.
     #[arg(long)]
+    #[serde(default)]
     pub exact_geometry: bool,
 }
 
@@ -163,8 +172,48 @@ fn read_poses(args: &SimulateArgs) -> Result<Option<Vec<f64>>> {
     }
 }
 
+/// What `cbd simulate` writes: the CSV's header and its rows (row-major, one value per column,
+/// each the number the CSV holds), and what they are ("300 measurements of the simulated six-joint
+/// arm").
+#[derive(Debug, Clone, PartialEq)]
+pub struct Simulated {
+    pub header: Vec<String>,
+    pub values: Vec<f64>,
+    pub what: String,
+}
+
+impl Simulated {
+    fn new(header: Vec<String>, what: String) -> Simulated {
+        Simulated { header, values: Vec::new(), what }
+    }
+
+    pub fn rows(&self) -> usize {
+        self.values.len() / self.header.len().max(1)
+    }
+
+    /// The CSV text: every value in shortest round-trip form (read back, the same numbers).
+    pub fn csv(&self) -> String {
+        let mut text = self.header.join(",") + "\n";
+        for row in self.values.chunks(self.header.len().max(1)) {
+            let fields: Vec<String> = row.iter().map(|v| format!("{v:?}")).collect();
+            text.push_str(&(fields.join(",") + "\n"));
+        }
+        text
+    }
+}
+
 pub fn run(args: SimulateArgs) -> Result<()> {
     crate::io::check_paths(&[("--poses", args.poses.as_deref())], &[("--out", Some(&args.out))])?;
+    let out = args.out.clone();
+    let simulated = simulate(args)?;
+    crate::cli::write_atomically(&out, simulated.csv().as_bytes())?;
+    errln!("wrote {} to {}", simulated.what, out.display());
+    Ok(())
+}
+
+/// The rows `cbd simulate` writes, as numbers (`args.out` is not written; `args.poses` is read).
+/// One function for the command and the Python package.
+pub fn simulate(args: SimulateArgs) -> Result<Simulated> {
     if let Some(noise) = args.noise {
         // The importers' bound: a CSV that `cbd` writes, `cbd` reads back.
         if !(noise >= 0.0 && noise <= MAX_MAGNITUDE) {
@@ -228,18 +277,16 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     };
     add_noise(&mut data.positions, args.noise.unwrap_or(0.0), args.seed.wrapping_add(0x5eed));
     check_readable(&data)?;
-    let mut text = String::from("q1,q2,x,y\n");
+    let mut table = Simulated::new(["q1", "q2", "x", "y"].map(String::from).into(), format!("{} measurements", data.len()));
     for i in 0..data.len() {
         let (q, y) = (data.joints(i), data.position(i));
-        text.push_str(&format!("{:?},{:?},{:?},{:?}\n", q[0], q[1], y[0], y[1]));
+        table.values.extend([q[0], q[1], y[0], y[1]]);
     }
-    crate::cli::write_atomically(&args.out, text.as_bytes())?;
-    errln!("wrote {} measurements to {}", data.len(), args.out.display());
-    Ok(())
+    Ok(table)
 }
 
 /// The six-joint robot's rows; `step`: the walk's ([`walk_step`]), `None` unless walking.
-fn simulate_six(args: &SimulateArgs, step: Option<f64>, planted: &[crate::simulate::planted::Planted]) -> Result<()> {
+fn simulate_six(args: &SimulateArgs, step: Option<f64>, planted: &[crate::simulate::planted::Planted]) -> Result<Simulated> {
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
     if !matches!(args.sampling.as_str(), "uniform" | "walk") && args.poses.is_none() {
         return Err(Error::InvalidInput("the six-joint robot is sampled with --sampling uniform or walk".into()));
@@ -274,15 +321,13 @@ fn simulate_six(args: &SimulateArgs, step: Option<f64>, planted: &[crate::simula
     };
     into_tracker_frame(&mut data.positions, tracker.as_ref());
     check_readable(&data)?;
-    let mut text = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
+    let header = ["q1_deg", "q2_deg", "q3_deg", "q4_deg", "q5_deg", "q6_deg", "x_mm", "y_mm", "z_mm"].map(String::from).into();
+    let mut table = Simulated::new(header, format!("{} measurements of the simulated six-joint arm", data.len()));
     for i in 0..data.len() {
-        let q: Vec<String> = data.joints(i).iter().map(|v| format!("{:?}", v.to_degrees())).collect();
-        let y: Vec<String> = data.position(i).iter().map(|v| format!("{v:?}")).collect();
-        text.push_str(&format!("{},{}\n", q.join(","), y.join(",")));
+        table.values.extend(data.joints(i).iter().map(|v| v.to_degrees()));
+        table.values.extend_from_slice(data.position(i));
     }
-    crate::cli::write_atomically(&args.out, text.as_bytes())?;
-    errln!("wrote {} measurements of the simulated six-joint arm to {}", data.len(), args.out.display());
-    Ok(())
+    Ok(table)
 }
 
 /// The six-joint arm measured at several tool points: each point's noise-free position (the real
@@ -295,7 +340,7 @@ fn simulate_six_points(
     joints: &[f64],
     tool_points: &[[f64; 3]],
     tracker: Option<&crate::nominal::Frame>,
-) -> Result<()> {
+) -> Result<Simulated> {
     use crate::nominal::tool_points::{point_chain, point_of_pose, quaternion_of, rotation_of_quaternion, tool_frame};
     let p = tool_points.len();
     if args.pose && !cbd_runtime::internals::kinematics::tool_frame::determines_orientation(tool_points) {
@@ -334,9 +379,10 @@ fn simulate_six_points(
     if args.pose {
         header.extend(["x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz"].map(String::from));
     }
-    let mut text = header.join(",") + "\n";
+    let mut table = Simulated::new(header, format!("{poses} poses ({p} tool points each) of the simulated six-joint arm"));
     for k in 0..poses {
-        let mut fields: Vec<String> = data.joints(k * p).iter().map(|v| format!("{:?}", v.to_degrees())).collect();
+        let fields = &mut table.values;
+        fields.extend(data.joints(k * p).iter().map(|v| v.to_degrees()));
         let measured: Vec<[f64; 3]> = (0..p).map(|j| std::array::from_fn(|c| data.position(k * p + j)[c])).collect();
         if args.pose {
             let frame = tool_frame(tool_points, &measured)
@@ -347,18 +393,15 @@ fn simulate_six_points(
             let norm = quaternion.iter().map(|v| v * v).sum::<f64>().sqrt();
             let rotation = rotation_of_quaternion(quaternion.map(|v| v / norm));
             for pj in tool_points {
-                fields.extend(point_of_pose(&origin, &rotation, pj).iter().map(|v| format!("{v:?}")));
+                fields.extend(point_of_pose(&origin, &rotation, pj));
             }
-            fields.extend(origin.iter().map(|v| format!("{v:?}")));
-            fields.extend(quaternion.iter().map(|v| format!("{v:?}")));
+            fields.extend(origin);
+            fields.extend(quaternion);
         } else {
-            fields.extend(measured.iter().flatten().map(|v| format!("{v:?}")));
+            fields.extend(measured.iter().flatten());
         }
-        text.push_str(&(fields.join(",") + "\n"));
     }
-    crate::cli::write_atomically(&args.out, text.as_bytes())?;
-    errln!("wrote {poses} poses ({p} tool points each) of the simulated six-joint arm to {}", args.out.display());
-    Ok(())
+    Ok(table)
 }
 
 /// `--step` with `--sampling walk` (required there, a positive finite number of radians up to π);

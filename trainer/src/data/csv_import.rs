@@ -79,14 +79,8 @@ pub fn read_measurements(path: impl AsRef<Path>, spec: &ColumnSpec) -> Result<Im
 /// As [`read_measurements`], from any reader; `path` names the source in errors.
 pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &ColumnSpec) -> Result<ImportedMeasurements, ImportError> {
     use std::io::Read;
-    let err = CsvErrors { file: path };
-    if spec.joint_columns.len() != spec.joint_kinds.len() || spec.joint_limits.len() != spec.joint_kinds.len() {
-        return Err(err.at(
-            None,
-            None,
-            format!("{} joint columns named for a model with {} joints", spec.joint_columns.len(), spec.joint_kinds.len()),
-        ));
-    }
+    let err = Errors { source: Source::File(path) };
+    check_spec(spec, err)?;
     let mut bytes = Vec::new();
     reader
         .take(MAX_CSV_BYTES + 1)
@@ -105,19 +99,8 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         return Err(err.at(Some(1), None, "empty file: no header row".into()));
     }
     let row = RowReader::new(&header, spec, err)?;
-    let points = spec.tool_points.len().max(1);
-    let (n, columns) = (spec.joint_columns.len(), spec.position_columns.len());
-    // Task coordinates per data row: a pose's origin has 3, a point's columns come in turn.
-    let m = if spec.orientation_columns.is_some() { columns } else { columns / points };
-    let mut data = Measurements { order: spec.order, ..Measurements::with_points(n, m, points) };
-    let mut point_values = vec![0.0; m * points];
-    let mut lines = Vec::new();
-    // Joint configuration bits → row index of its first occurrence.
-    let mut seen: HashMap<Vec<u64>, usize> = HashMap::new();
-    let mut repeats: Vec<(usize, usize)> = Vec::new();
+    let mut rows = Assembler::new(row);
     let mut record = csv::StringRecord::new();
-    let (mut c, mut q, mut y) = (vec![0.0; n], vec![0.0; n], vec![0.0; columns]);
-    let mut rotation = [[0.0; 3]; 3];
     loop {
         let more = rdr.read_record(&mut record).map_err(|e| {
             let line = e.position().map(line_of);
@@ -133,44 +116,197 @@ pub fn read_measurements_from(reader: impl std::io::Read, path: &Path, spec: &Co
         if record.len() != header.len() {
             return Err(err.at(Some(line), None, format!("{} fields; the header has {}", record.len(), header.len())));
         }
-        row.convert(&record, line, &mut c, &mut q, &mut y)?;
+        rows.add(&record, line)?;
+    }
+    rows.finish()
+}
+
+/// Measurements from rows of numbers, as [`read_measurements_from`] reads a CSV file's: `q` holds
+/// `rows` rows of the spec's joint columns and `y` as many rows of its position columns (then a
+/// pose's orientation columns), row-major, each number in its column's unit — the numbers a CSV
+/// file for the same model file holds. The same conversion and checks apply, row by row, by the
+/// same code; errors name `source` and the 0-based row (`(q, y) row 3: column 'q2_deg': …`), and
+/// row r is line r + 2 in [`ImportedMeasurements::lines`] (as though a header were line 1).
+pub fn measurements_from_rows(
+    source: &str,
+    q: &[f64],
+    y: &[f64],
+    rows: usize,
+    spec: &ColumnSpec,
+) -> Result<ImportedMeasurements, ImportError> {
+    let err = Errors { source: Source::Rows(source) };
+    check_spec(spec, err)?;
+    let (n, m) = (spec.joint_columns.len(), y_width(spec));
+    if q.len() != rows * n || y.len() != rows * m {
+        return Err(err.at(
+            None,
+            None,
+            format!(
+                "{rows} rows of {n} joint and {m} other columns need {} and {} values; given {} and {}",
+                rows * n,
+                rows * m,
+                q.len(),
+                y.len()
+            ),
+        ));
+    }
+    let mut assembler = Assembler::new(RowReader::in_order(spec, err));
+    for r in 0..rows {
+        let values = Numbers { q: &q[r * n..(r + 1) * n], y: &y[r * m..(r + 1) * m] };
+        assembler.add(&values, r as u64 + 2)?;
+    }
+    assembler.finish()
+}
+
+/// Columns after the joints in a row of numbers: the positions, then a pose's orientation.
+fn y_width(spec: &ColumnSpec) -> usize {
+    spec.position_columns.len() + spec.orientation_columns.as_ref().map_or(0, |o| o.names().len())
+}
+
+/// The spec's joint columns agree with its model's joints.
+fn check_spec(spec: &ColumnSpec, err: Errors<'_>) -> Result<(), ImportError> {
+    if spec.joint_columns.len() != spec.joint_kinds.len() || spec.joint_limits.len() != spec.joint_kinds.len() {
+        return Err(err.at(
+            None,
+            None,
+            format!("{} joint columns named for a model with {} joints", spec.joint_columns.len(), spec.joint_kinds.len()),
+        ));
+    }
+    Ok(())
+}
+
+/// One row's values: a CSV record's fields (text) or numbers.
+trait Row {
+    fn field(&self, idx: usize) -> Field<'_>;
+}
+
+enum Field<'r> {
+    Text(&'r str),
+    Number(f64),
+}
+
+impl Field<'_> {
+    /// The value as given, for a message: an excerpt of the text, a number in shortest form.
+    fn quoted(&self) -> String {
+        match self {
+            Field::Text(t) => crate::error::excerpt(t),
+            Field::Number(v) => format!("{v:?}"),
+        }
+    }
+}
+
+impl Row for csv::StringRecord {
+    fn field(&self, idx: usize) -> Field<'_> {
+        Field::Text(&self[idx])
+    }
+}
+
+/// A row of numbers: the joint columns, then the others.
+struct Numbers<'r> {
+    q: &'r [f64],
+    y: &'r [f64],
+}
+
+impl Row for Numbers<'_> {
+    fn field(&self, idx: usize) -> Field<'_> {
+        Field::Number(if idx < self.q.len() { self.q[idx] } else { self.y[idx - self.q.len()] })
+    }
+}
+
+/// The rows read so far, converted and checked, as measurements: what every source of rows
+/// (a CSV file, arrays) shares.
+struct Assembler<'a> {
+    row: RowReader<'a>,
+    data: Measurements,
+    /// Task coordinates per data row and tool points per pose.
+    m: usize,
+    points: usize,
+    point_values: Vec<f64>,
+    lines: Vec<u64>,
+    /// Joint configuration bits → row index of its first occurrence.
+    seen: HashMap<Vec<u64>, usize>,
+    repeats: Vec<(usize, usize)>,
+    c: Vec<f64>,
+    q: Vec<f64>,
+    y: Vec<f64>,
+    rotation: [[f64; 3]; 3],
+}
+
+impl<'a> Assembler<'a> {
+    fn new(row: RowReader<'a>) -> Self {
+        let spec = row.spec;
+        let points = spec.tool_points.len().max(1);
+        let (n, columns) = (spec.joint_columns.len(), spec.position_columns.len());
+        // Task coordinates per data row: a pose's origin has 3, a point's columns come in turn.
+        let m = if spec.orientation_columns.is_some() { columns } else { columns / points };
+        Assembler {
+            row,
+            data: Measurements { order: spec.order, ..Measurements::with_points(n, m, points) },
+            m,
+            points,
+            point_values: vec![0.0; m * points],
+            lines: Vec::new(),
+            seen: HashMap::new(),
+            repeats: Vec::new(),
+            c: vec![0.0; n],
+            q: vec![0.0; n],
+            y: vec![0.0; columns],
+            rotation: [[0.0; 3]; 3],
+        }
+    }
+
+    /// One row, at file `line` (for arrays: row + 2).
+    fn add(&mut self, record: &dyn Row, line: u64) -> Result<(), ImportError> {
+        let spec = self.row.spec;
+        let (n, m, points) = (self.q.len(), self.m, self.points);
+        self.row.convert(record, line, &mut self.c, &mut self.q, &mut self.y)?;
         if spec.orientation_columns.is_some() {
-            row.rotation(&record, line, &mut rotation)?;
+            self.row.rotation(record, line, &mut self.rotation)?;
             // y_j = p + R p_j (the measured pose read as its tool points).
             for (j, pj) in spec.tool_points.iter().chain(spec.tool_points.is_empty().then_some(&[0.0; 3])).enumerate() {
-                point_values[3 * j..3 * j + 3].copy_from_slice(&crate::nominal::tool_points::point_of_pose(&y, &rotation, pj));
+                self.point_values[3 * j..3 * j + 3].copy_from_slice(&crate::nominal::tool_points::point_of_pose(
+                    &self.y,
+                    &self.rotation,
+                    pj,
+                ));
             }
         } else {
-            point_values.copy_from_slice(&y);
+            self.point_values.copy_from_slice(&self.y);
         }
         if let Some(frame) = &spec.planar_frame {
-            frame.move_row(&mut q, &mut point_values);
+            frame.move_row(&mut self.q, &mut self.point_values);
         }
         // A repeat is a configuration measured twice: a file of targets or seeds alone has none.
         if n > 0 && m > 0 {
-            let key: Vec<u64> = q.iter().map(|v| (v + 0.0).to_bits()).collect();
-            match seen.get(&key) {
-                Some(&first) => repeats.push((first, data.len())),
+            let key: Vec<u64> = self.q.iter().map(|v| (v + 0.0).to_bits()).collect();
+            match self.seen.get(&key) {
+                Some(&first) => self.repeats.push((first, self.data.len())),
                 None => {
-                    seen.insert(key, data.len());
+                    self.seen.insert(key, self.data.len());
                 }
             }
         }
         if m == 0 {
             // A file of joints alone (seeds, poses to measure).
-            data.push(&q, &[]);
-            lines.push(line);
+            self.data.push(&self.q, &[]);
+            self.lines.push(line);
         }
-        for point in point_values.chunks_exact(m.max(1)).take(if m == 0 { 0 } else { points }) {
-            data.push(&q, point);
-            lines.push(line);
+        for point in self.point_values.chunks_exact(m.max(1)).take(if m == 0 { 0 } else { points }) {
+            self.data.push(&self.q, point);
+            self.lines.push(line);
         }
+        Ok(())
     }
-    if data.pose_count() < spec.min_rows.max(1) {
-        return Err(err.at(None, None, format!("{} data rows; at least {} needed", data.pose_count(), spec.min_rows.max(1))));
+
+    /// The measurements, once there are enough rows and no repeat contradicts another.
+    fn finish(self) -> Result<ImportedMeasurements, ImportError> {
+        let (spec, err, data, lines) = (self.row.spec, self.row.err, self.data, self.lines);
+        if data.pose_count() < spec.min_rows.max(1) {
+            return Err(err.at(None, None, format!("{} data rows; at least {} needed", data.pose_count(), spec.min_rows.max(1))));
+        }
+        let duplicates = check_repeats(&data, &lines, &self.repeats, spec, err)?;
+        Ok(ImportedMeasurements { measurements: data, lines, duplicates })
     }
-    let duplicates = check_repeats(&data, &lines, &repeats, spec, err)?;
-    Ok(ImportedMeasurements { measurements: data, lines, duplicates })
 }
 
 /// Largest measurement file read: 10⁷ rows of ten values; more would not fit a fit's memory anyway.
@@ -183,7 +319,7 @@ pub const MAX_LINE_BYTES: usize = 64 << 10;
 /// Refuses what is not CSV text before the CSV reader holds it as fields: a NUL byte (binary data)
 /// or a line over [`MAX_LINE_BYTES`] (100 MB of NULs made one 100 MB field, 619 MB in all, and a
 /// message quoting it whole). Names the line, and the column of a NUL.
-fn check_text(bytes: &[u8], err: CsvErrors<'_>) -> Result<(), ImportError> {
+fn check_text(bytes: &[u8], err: Errors<'_>) -> Result<(), ImportError> {
     for (k, line) in bytes.split(|&b| b == b'\n').enumerate() {
         let number = k as u64 + 1;
         if let Some(column) = line.iter().position(|&b| b == 0) {
@@ -204,15 +340,37 @@ fn check_text(bytes: &[u8], err: CsvErrors<'_>) -> Result<(), ImportError> {
     Ok(())
 }
 
-/// Builds the CSV errors of one file.
+/// What rows are read from, for messages: a CSV file (its lines) or arrays (their rows).
 #[derive(Clone, Copy)]
-struct CsvErrors<'a> {
-    file: &'a Path,
+enum Source<'a> {
+    File(&'a Path),
+    Rows(&'a str),
 }
 
-impl CsvErrors<'_> {
+/// Builds the errors of one source.
+#[derive(Clone, Copy)]
+struct Errors<'a> {
+    source: Source<'a>,
+}
+
+impl Errors<'_> {
+    /// An error at file `line` (arrays: row + 2) and `column`.
     fn at(&self, line: Option<u64>, column: Option<&str>, message: String) -> ImportError {
-        ImportError::Csv { file: self.file.to_path_buf(), line, column: column.map(str::to_string), message }
+        let column = column.map(str::to_string);
+        match self.source {
+            Source::File(file) => ImportError::Csv { file: file.to_path_buf(), line, column, message },
+            Source::Rows(source) => {
+                ImportError::Rows { source: source.to_string(), row: line.map(|l| l.saturating_sub(2)), column, message }
+            }
+        }
+    }
+
+    /// Where `line` is, in a message's words: `line 4`, or for arrays `row 2`.
+    fn place(&self, line: u64) -> String {
+        match self.source {
+            Source::File(_) => format!("line {line}"),
+            Source::Rows(_) => format!("row {}", line.saturating_sub(2)),
+        }
     }
 }
 
@@ -220,7 +378,7 @@ impl CsvErrors<'_> {
 /// each value (a number, finite, in the joint's range, within [`MAX_MAGNITUDE`]).
 struct RowReader<'a> {
     spec: &'a ColumnSpec,
-    err: CsvErrors<'a>,
+    err: Errors<'a>,
     /// Record index of each joint column and each position column.
     joint_idx: Vec<usize>,
     pos_idx: Vec<usize>,
@@ -235,7 +393,7 @@ struct RowReader<'a> {
 
 impl<'a> RowReader<'a> {
     /// Finds the spec's columns in `header`: each must appear exactly once.
-    fn new(header: &csv::StringRecord, spec: &'a ColumnSpec, err: CsvErrors<'a>) -> Result<Self, ImportError> {
+    fn new(header: &csv::StringRecord, spec: &'a ColumnSpec, err: Errors<'a>) -> Result<Self, ImportError> {
         let find = |name: &str| -> Result<usize, ImportError> {
             let hits: Vec<usize> = header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
             match hits.as_slice() {
@@ -270,10 +428,28 @@ impl<'a> RowReader<'a> {
         Ok(RowReader { spec, err, joint_idx, pos_idx, orientation_idx, joint_factor, length_factor, columns })
     }
 
+    /// The spec's columns in order, joints then positions then orientation: a row of numbers.
+    fn in_order(spec: &'a ColumnSpec, err: Errors<'a>) -> Self {
+        let n = spec.joint_columns.len();
+        let p = spec.position_columns.len();
+        let o = y_width(spec) - p;
+        let columns = super::joint_columns::JointColumns::new(spec);
+        RowReader {
+            spec,
+            err,
+            joint_idx: (0..n).collect(),
+            pos_idx: (n..n + p).collect(),
+            orientation_idx: (n + p..n + p + o).collect(),
+            joint_factor: columns.factors().to_vec(),
+            length_factor: spec.length_unit.factor_to(spec.model_length_unit),
+            columns,
+        }
+    }
+
     /// The measured pose's rotation at file `line`: from a quaternion (w, x, y, z) of norm 1 within
     /// [`ROTATION_TOLERANCE`], normalised, or a rotation matrix whose rows are orthonormal within it
     /// and whose determinant is positive.
-    fn rotation(&self, record: &csv::StringRecord, line: u64, r: &mut [[f64; 3]; 3]) -> Result<(), ImportError> {
+    fn rotation(&self, record: &dyn Row, line: u64, r: &mut [[f64; 3]; 3]) -> Result<(), ImportError> {
         let Some(orientation) = &self.spec.orientation_columns else { return Ok(()) };
         let names = orientation.names();
         let mut v = [0.0; 9];
@@ -311,7 +487,7 @@ impl<'a> RowReader<'a> {
 
     /// The record at file `line` into `q` (model joints) and `y` (position); `c` holds the
     /// controller's joint values (the columns, in their units) on the way.
-    fn convert(&self, record: &csv::StringRecord, line: u64, c: &mut [f64], q: &mut [f64], y: &mut [f64]) -> Result<(), ImportError> {
+    fn convert(&self, record: &dyn Row, line: u64, c: &mut [f64], q: &mut [f64], y: &mut [f64]) -> Result<(), ImportError> {
         let spec = self.spec;
         for d in 0..q.len() {
             let unit = match spec.joint_kinds[d] {
@@ -331,7 +507,7 @@ impl<'a> RowReader<'a> {
                     Some(name),
                     format!(
                         "{} {unit} is outside the joint's range [{}, {}] {unit} (wrong unit or column? {})",
-                        crate::error::excerpt(&record[idx]),
+                        record.field(idx).quoted(),
                         short(lo / f),
                         short(hi / f),
                         spec.range_hint
@@ -358,8 +534,12 @@ impl<'a> RowReader<'a> {
 
     /// A field parsed as a number; finiteness is checked again after conversion ([`Self::bounded`]).
     /// The field's text is only copied into an error message, never per value (10⁶-row files).
-    fn raw_value(&self, record: &csv::StringRecord, line: u64, idx: usize, name: &str) -> Result<f64, ImportError> {
-        let text = &record[idx];
+    fn raw_value(&self, record: &dyn Row, line: u64, idx: usize, name: &str) -> Result<f64, ImportError> {
+        let text = match record.field(idx) {
+            Field::Number(v) if v.is_finite() => return Ok(v),
+            Field::Number(v) => return Err(self.err.at(Some(line), Some(name), format!("not a finite number: '{v:?}'"))),
+            Field::Text(text) => text,
+        };
         if text.is_empty() {
             return Err(self.err.at(Some(line), Some(name), "missing value".into()));
         }
@@ -374,15 +554,7 @@ impl<'a> RowReader<'a> {
     /// A value converted to the model's unit must be finite and within MAX_MAGNITUDE *after* the
     /// conversion (1e307 m is finite, 1e310 mm is not), so nothing non-finite gets past the reader.
     /// `units`: the file's unit and the model's, for the message.
-    fn bounded(
-        &self,
-        record: &csv::StringRecord,
-        line: u64,
-        v: f64,
-        idx: usize,
-        name: &str,
-        units: (&str, &str),
-    ) -> Result<f64, ImportError> {
+    fn bounded(&self, record: &dyn Row, line: u64, v: f64, idx: usize, name: &str, units: (&str, &str)) -> Result<f64, ImportError> {
         if v.abs() <= MAX_MAGNITUDE {
             return Ok(v);
         }
@@ -393,7 +565,7 @@ impl<'a> RowReader<'a> {
             Some(name),
             format!(
                 "'{}' {unit} is {in_model}; values must stay within ±{MAX_MAGNITUDE:e} in the model's unit (wrong unit or column?)",
-                crate::error::excerpt(&record[idx])
+                record.field(idx).quoted()
             ),
         ))
     }
@@ -406,7 +578,7 @@ fn check_repeats(
     lines: &[u64],
     repeats: &[(usize, usize)],
     spec: &ColumnSpec,
-    err: CsvErrors<'_>,
+    err: Errors<'_>,
 ) -> Result<Vec<Duplicate>, ImportError> {
     let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * bounding_box_diagonal(data));
     let mut duplicates = Vec::new();
@@ -422,7 +594,8 @@ fn check_repeats(
                 Some(line),
                 None,
                 format!(
-                    "contradictory measurements: the joint configuration repeats line {first_line} but the positions are {distance:.3e} {} apart (repeat tolerance {tolerance:.3e}; set `repeat_tolerance` in [measurements] if the robot really is that unrepeatable)",
+                    "contradictory measurements: the joint configuration repeats {} but the positions are {distance:.3e} {} apart (repeat tolerance {tolerance:.3e}; set `repeat_tolerance` in [measurements] if the robot really is that unrepeatable)",
+                    err.place(first_line),
                     spec.model_length_unit.name()
                 ),
             ));
@@ -742,6 +915,28 @@ mod tests {
         assert_eq!((line, col.as_deref()), (Some(3), Some("q1")));
         assert!(msg.starts_with("'1e308' deg is") || msg.starts_with("1e308 deg is outside"), "{msg}");
         assert!(msg.len() < 200, "{msg}");
+    }
+
+    /// Issue 52: rows of numbers are the CSV's rows — the same measurements, lines and repeats, by
+    /// the same checks — and a fault names the arrays, the row and the column.
+    #[test]
+    fn rows_of_numbers_are_read_as_the_csv() {
+        let text = "q1,s2,x,y,z\n180,500,1,2,3\n-90,-250,10,20,30\n180,500,1.001,2,3\n";
+        let q = [180.0, 500.0, -90.0, -250.0, 180.0, 500.0];
+        let y = [1.0, 2.0, 3.0, 10.0, 20.0, 30.0, 1.001, 2.0, 3.0];
+        let rows = measurements_from_rows("(q, y)", &q, &y, 3, &spec()).unwrap();
+        assert_eq!(rows, read(text).unwrap());
+        let bad = [180.0, 500.0, -90.0, f64::NAN, 180.0, 500.0];
+        let e = measurements_from_rows("(q, y)", &bad, &y, 3, &spec()).unwrap_err().to_string();
+        assert_eq!(e, "(q, y) row 1: column 's2': not a finite number: 'NaN'");
+        let far = [180.0, 500.0, 400.0, -250.0, 180.0, 500.0];
+        let e = measurements_from_rows("(q, y)", &far, &y, 3, &spec()).unwrap_err().to_string();
+        assert!(e.starts_with("(q, y) row 1: column 'q1': 400.0 deg is outside the joint's range [-360, 360] deg"), "{e}");
+        let e = measurements_from_rows("(q, y)", &q[..2], &y[..3], 1, &spec()).unwrap_err().to_string();
+        assert_eq!(e, "(q, y): 1 data rows; at least 2 needed");
+        let y_far = [1.0, 2.0, 3.0, 10.0, 20.0, 30.0, 1.5, 2.0, 3.0];
+        let e = measurements_from_rows("(q, y)", &q, &y_far, 3, &spec()).unwrap_err().to_string();
+        assert!(e.starts_with("(q, y) row 2: contradictory measurements: the joint configuration repeats row 0"), "{e}");
     }
 
     #[test]

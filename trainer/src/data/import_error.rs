@@ -21,6 +21,9 @@ pub enum ImportError {
     /// A problem in a CSV file. `line` is 1-based (the header is line 1); `column` is the
     /// column's name where one applies.
     Csv { file: PathBuf, line: Option<u64>, column: Option<String>, message: String },
+    /// A problem in rows of numbers given in memory (arrays): `source` names them (`(q, y)`),
+    /// `row` is 0-based, `column` the column's name where one applies.
+    Rows { source: String, row: Option<u64>, column: Option<String>, message: String },
 }
 
 impl fmt::Display for ImportError {
@@ -35,6 +38,16 @@ impl fmt::Display for ImportError {
                 write!(f, "{}", file.display())?;
                 if let Some(l) = line {
                     write!(f, ":{l}")?;
+                }
+                if let Some(c) = column {
+                    write!(f, ": column '{c}'")?;
+                }
+                write!(f, ": {message}")
+            }
+            ImportError::Rows { source, row, column, message } => {
+                write!(f, "{source}")?;
+                if let Some(r) = row {
+                    write!(f, " row {r}")?;
                 }
                 if let Some(c) = column {
                     write!(f, ": column '{c}'")?;

@@ -199,14 +199,26 @@ pub fn read_compare_files(
     let spec = model.column_spec()?;
     let train = read_measurements(train_csv.as_ref(), &spec)?;
     let test = read_measurements(test_csv.as_ref(), &spec)?;
-    let mut warnings = train.warnings(train_csv.as_ref());
-    warnings.extend(test.warnings(test_csv.as_ref()));
+    compare_inputs(model, (train_csv.as_ref(), train), (test_csv.as_ref(), test))
+}
+
+/// A comparison's measurements, read with `model`'s columns and each named as in messages (a
+/// file's path, or what arrays are called): their warnings, and an unknown base registered on the
+/// training rows.
+pub fn compare_inputs(
+    model: &crate::data::model_file::ModelFile,
+    (train_name, train): (&std::path::Path, crate::data::csv_import::ImportedMeasurements),
+    (test_name, test): (&std::path::Path, crate::data::csv_import::ImportedMeasurements),
+) -> Result<CompareInputs, ImportError> {
+    let mut warnings = train.warnings(train_name);
+    warnings.extend(test.warnings(test_name));
     let mut nominal = model.nominal.clone();
     let registration =
         match model.register_base {
-            true => Some(crate::parametric::base_registration::register_and_refine(&mut nominal, &train.measurements).map_err(|e| {
-                ImportError::Csv { file: train_csv.as_ref().to_path_buf(), line: None, column: None, message: e.to_string() }
-            })?),
+            true => Some(
+                crate::parametric::base_registration::register_and_refine(&mut nominal, &train.measurements)
+                    .map_err(|e| ImportError::Csv { file: train_name.to_path_buf(), line: None, column: None, message: e.to_string() })?,
+            ),
             false => None,
         };
     Ok(CompareInputs { nominal, train, test, warnings, registration })

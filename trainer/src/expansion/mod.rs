@@ -17,7 +17,7 @@ use cbd_protocol::{JointKernel, TaskKernel};
 use solve::{apply, design, posterior_weights, prior_variances, LinearProblem};
 
 /// Which representation the blob's evaluation uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Representation {
     /// The expansion when it is cheaper than the momenta, or when the momenta cancel (below).
