@@ -13,5 +13,5 @@ def test_readme_shows_the_example_and_it_runs(tmp_path):
     env = dict(os.environ, MPLBACKEND="Agg")
     done = subprocess.run([sys.executable, ROOT / "examples" / "python" / "fit_ur5.py"], cwd=tmp_path, capture_output=True, text=True, env=env)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.startswith("calibrated: mean 0.068"), done.stdout
+    assert done.stdout.startswith("calibrated: mean 0.065"), done.stdout
     assert (tmp_path / "ur5.blob").exists()
