@@ -9,6 +9,7 @@ use super::starts::DataScales;
 use super::table::{ConfigTheta, PairTable, Theta};
 use super::{evidence_rows, CbdHyperparameters, EvidenceError, EvidenceOptions};
 use crate::data::Measurements;
+use crate::numeric::likelihood_search::LikelihoodSearch;
 use cbd_protocol::{NominalModel, Normalisation};
 use std::cell::RefCell;
 
@@ -135,8 +136,8 @@ pub fn search_configuration_term(
     plain: &CbdHyperparameters,
 ) -> Result<ConfigurationEvidence, EvidenceError> {
     let start = std::time::Instant::now();
-    if data.len() < 3 {
-        return Err(EvidenceError::TooFewRows(data.len()));
+    if data.len() < crate::numeric::likelihood_search::MIN_SEARCH_ROWS {
+        return Err(EvidenceError::TooFewRows(LikelihoodSearch::CbdEvidence, data.len()));
     }
     let used = data.subset(&evidence_rows(data, options.max_unknowns));
     let table = PairTable::new(nominal, &used, norm);
@@ -200,7 +201,7 @@ pub fn search_configuration_term(
             .chain(plain_at)
             .collect();
     plain_found.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let (plain_nlml, best_plain) = plain_found.into_iter().next().ok_or(EvidenceError::NoValidSetting)?;
+    let (plain_nlml, best_plain) = plain_found.into_iter().next().ok_or(EvidenceError::NoValidSetting(LikelihoodSearch::CbdEvidence))?;
     let best_plain_theta = Theta::unpack(&best_plain, n);
     // The term's starts: on top of the plain optimum, and on top of the plain search's balanced start
     // (the basin where the joint field stays smooth and the term takes the narrow joint widths, the
@@ -290,7 +291,7 @@ pub fn search_configuration_term(
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found
     };
-    let (term_nlml, term_packed) = refined_all.into_iter().next().ok_or(EvidenceError::NoValidSetting)?;
+    let (term_nlml, term_packed) = refined_all.into_iter().next().ok_or(EvidenceError::NoValidSetting(LikelihoodSearch::CbdEvidence))?;
     let term_theta = Theta::unpack(&term_packed, n);
     let mut with_term = term_theta.to_user(&table.joint.forms, norm);
     let mut at_bounds = Vec::new();

@@ -38,6 +38,7 @@ pub(crate) use table::PairTable;
 pub use weight_space::WeightSpaceReport;
 
 use crate::data::Measurements;
+use crate::numeric::likelihood_search::{LikelihoodSearch::CbdEvidence, MIN_SEARCH_ROWS};
 use cbd_protocol::{NominalModel, Normalisation};
 use search::minimise;
 use starts::DataScales;
@@ -72,32 +73,8 @@ pub struct Evidence {
     pub geometric_parameters: usize,
 }
 
-#[derive(Debug, Clone, PartialEq)]
-pub enum EvidenceError {
-    TooFewRows(usize),
-    /// No start gave a positive-definite covariance.
-    NoValidSetting,
-}
-
-impl std::fmt::Display for EvidenceError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            EvidenceError::TooFewRows(n) => write!(f, "CbD evidence: {n} rows are too few (need at least 3)"),
-            EvidenceError::NoValidSetting => write!(
-                f,
-                "CbD evidence: no start gave a positive-definite covariance (the residual after the geometry is zero or its rows coincide: no noise to estimate σ from, measured positions are needed)"
-            ),
-        }
-    }
-}
-
-impl std::error::Error for EvidenceError {}
-
-impl From<EvidenceError> for crate::Error {
-    fn from(e: EvidenceError) -> crate::Error {
-        crate::Error::stage("evidence", e)
-    }
-}
+/// Why the evidence search found no hyperparameters (the search named: CbD's evidence).
+pub type EvidenceError = crate::numeric::likelihood_search::LikelihoodSearchError;
 
 /// Search settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -166,8 +143,8 @@ fn choose(
     geometry: Option<&GeometricBasis>,
 ) -> Result<Evidence, EvidenceError> {
     let start = std::time::Instant::now();
-    if data.len() < 3 {
-        return Err(EvidenceError::TooFewRows(data.len()));
+    if data.len() < MIN_SEARCH_ROWS {
+        return Err(EvidenceError::TooFewRows(CbdEvidence, data.len()));
     }
     let rows = evidence_rows(data, options.max_unknowns);
     let used = data.subset(&rows);
@@ -215,7 +192,7 @@ fn choose(
         found = run(&table, &best_basins(found), options.max_iterations);
     }
     let best = found.into_iter().next();
-    let Some((mut nlml, mut param)) = best else { return Err(EvidenceError::NoValidSetting) };
+    let Some((mut nlml, mut param)) = best else { return Err(EvidenceError::NoValidSetting(CbdEvidence)) };
     // Positions in data units: the density picks up 1/scale per coordinate.
     let in_data_units = |nlml: f64, rows: usize| -nlml - ((rows * m) as f64) * norm.task_scale.ln();
     let subset_log_evidence = in_data_units(nlml, used.len());

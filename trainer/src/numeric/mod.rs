@@ -2,11 +2,13 @@
 //! calibration and diagnose (a layer below all of them, docs/DESIGN.md §1): linear least squares
 //! (`least_squares`: QR and truncated SVD), the one nonlinear least-squares driver
 //! (`levenberg_marquardt`, docs/DESIGN.md §3), how much a sum of kernel columns cancels
-//! (`cancellation`) and faer's fixed work split ([`FIXED_SPLIT`]).
+//! (`cancellation`), why a type-II maximum-likelihood search failed (`likelihood_search`) and faer's
+//! fixed work split ([`FIXED_SPLIT`]).
 
 pub mod cancellation;
 pub mod least_squares;
 pub mod levenberg_marquardt;
+pub mod likelihood_search;
 
 use faer::Par;
 

@@ -20,6 +20,7 @@ use super::weight_space::{refine, KrrWeightSpaceReport};
 use crate::axis_forms::{axes_at, forms_of, AxisForm};
 use crate::data::Measurements;
 use crate::evidence::joint_pair_table::JointPairTable;
+use crate::numeric::likelihood_search::{LikelihoodSearch::KernelRidge, MIN_SEARCH_ROWS};
 use cbd_protocol::{JointKernel, NominalModel, Normalisation};
 use cbd_runtime::internals::kinematics::forward_kinematics;
 use faer::{linalg::solvers::Solve, Mat, Side};
@@ -101,29 +102,8 @@ impl Hyperparameters {
     }
 }
 
-#[derive(Debug, Clone, PartialEq)]
-pub enum HyperparameterError {
-    TooFewRows(usize),
-    /// No setting in the search box gave a positive-definite covariance.
-    NoValidSetting,
-}
-
-impl std::fmt::Display for HyperparameterError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            HyperparameterError::TooFewRows(n) => write!(f, "hyperparameter search: {n} rows are too few"),
-            HyperparameterError::NoValidSetting => write!(f, "hyperparameter search: no setting gave a positive-definite covariance"),
-        }
-    }
-}
-
-impl std::error::Error for HyperparameterError {}
-
-impl From<HyperparameterError> for crate::Error {
-    fn from(e: HyperparameterError) -> crate::Error {
-        crate::Error::stage("hyperparameters", e)
-    }
-}
+/// Why kernel ridge's hyperparameter search found none (the search named: kernel ridge's).
+pub type HyperparameterError = crate::numeric::likelihood_search::LikelihoodSearchError;
 
 /// Log marginal likelihood of independent GP coordinates `residual` (N × m) with covariance
 /// `k` (N × N, noise included): −½ Σ_c r_cᵀ K⁻¹ r_c − (m/2) log|K| − (N m/2) log 2π.
@@ -174,8 +154,8 @@ pub fn choose_kernel_ridge_hyperparameters(
     options: &SearchOptions,
 ) -> Result<Hyperparameters, HyperparameterError> {
     let count = data.len();
-    if count < 3 {
-        return Err(HyperparameterError::TooFewRows(count));
+    if count < MIN_SEARCH_ROWS {
+        return Err(HyperparameterError::TooFewRows(KernelRidge, count));
     }
     let n = data.n_joints;
     let rows = crate::data::evenly_spaced_rows(count, options.max_points);
@@ -190,7 +170,7 @@ pub fn choose_kernel_ridge_hyperparameters(
         noise: (options.noise_ratio_range.0.ln(), options.noise_ratio_range.1.ln()),
     };
     let Some(mut point) = grid_search(&gp, &init, &bounds, options.grid_half_width) else {
-        return Err(HyperparameterError::NoValidSetting);
+        return Err(HyperparameterError::NoValidSetting(KernelRidge));
     };
     pattern_search(&gp, &mut point, &bounds, options);
     let (mut theta, mut log_lambda, mut gamma, mut lml, mut rows_used) =
