@@ -252,3 +252,35 @@ fn a_planted_change_is_named_with_its_size() {
     assert_eq!(v["changes"], serde_json::json!([]));
     assert!(v["after_change"].is_null());
 }
+
+/// History (issue 50 item 6): two checks appended to one `--log` (one holds, one changed), then
+/// `cbd report --checks` draws both: the page holds the trend figure and a table row per check,
+/// with the named change; a malformed line is an error naming the log and the line.
+#[test]
+fn report_draws_the_history_of_the_check_log() {
+    let dir = scratch("history");
+    fresh(&dir, "same.csv", 1201, &[]);
+    fresh(&dir, "moved.csv", 1202, &["--effect", "joint_zero:joint=2,offset=1e-4"]);
+    assert_eq!(check(&dir, "same.csv", &["--log", "checks.jsonl"]).status.code(), Some(0));
+    assert_eq!(check(&dir, "moved.csv", &["--log", "checks.jsonl"]).status.code(), Some(3));
+    let log = std::fs::read_to_string(dir.join("checks.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 2);
+    assert!(lines[0]["floor"].as_f64().unwrap() > 0.0 && lines[0]["floor_limit"].as_f64() > lines[0]["floor"].as_f64());
+    assert_eq!(lines[1]["changes"][0]["effect"], "joint_zero:joint=2");
+    let out = cbd(&dir, &["report", "--checks", "checks.jsonl", "--out", "history.html"]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    assert!(stdout.contains("2 checks drawn"), "{stdout}");
+    let page = std::fs::read_to_string(dir.join("history.html")).unwrap();
+    assert!(page.contains("<svg") && page.contains("Checks of the calibration over time"), "no figure");
+    assert_eq!(page.matches("<tr><td class=num>").count(), 2, "one row per check");
+    for needle in ["same.csv", "moved.csv", "holds", "changed", "joint_zero:joint=2", "1 of 2 checks changed", "mean error (mm)"] {
+        assert!(page.contains(needle), "page lacks {needle:?}");
+    }
+    std::fs::write(dir.join("bad.jsonl"), format!("{}\n{{\"time\": 3}}\n", log.lines().next().unwrap())).unwrap();
+    fails_with(&cbd(&dir, &["report", "--checks", "bad.jsonl", "--out", "bad.html"]), &["bad.jsonl:2:", "time"]);
+    // One of --json and --checks is needed.
+    let out = cbd(&dir, &["report", "--out", "x.html"]);
+    assert!(!out.status.success() && text(&out.stderr).contains("--checks"), "{}", text(&out.stderr));
+}
