@@ -306,6 +306,10 @@ mod tests {
         let png = std::fs::read(&written[0]).unwrap();
         assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 5000, "{} bytes", png.len());
         assert!(std::fs::read_to_string(&written[1]).unwrap().contains("<svg"));
+        // For looking at it: CBD_HISTORY_PNG=path keeps a copy.
+        if let Some(keep) = std::env::var_os("CBD_HISTORY_PNG") {
+            std::fs::copy(&written[0], keep).unwrap();
+        }
 
         let out = dir.join("report.html");
         assert_eq!(write_checks_report(&log, &out, "length units").unwrap(), 3);
