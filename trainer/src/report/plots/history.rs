@@ -71,7 +71,8 @@ impl Figure for History<'_> {
             .margin(14)
             .x_label_area_size(50)
             .y_label_area_size(90)
-            .build_cartesian_2d(x0..x1, (y0 - 0.15)..(y1 + 0.15))
+            // Headroom above the data for the legend.
+            .build_cartesian_2d(x0..x1, (y0 - 0.15)..(y1 + 0.15 + 0.35 * (y1 - y0 + 0.3)))
             .map_err(pe)?;
         chart
             .configure_mesh()
@@ -82,6 +83,7 @@ impl Figure for History<'_> {
             .label_style((FONT, 15))
             .x_labels(6)
             .x_label_formatter(&|v| time_label(*v, span))
+            .y_labels(6)
             .y_label_formatter(&pow10_label)
             .draw()
             .map_err(pe)?;
@@ -121,18 +123,19 @@ impl Figure for History<'_> {
             .margin(14)
             .x_label_area_size(50)
             .y_label_area_size(90)
-            .build_cartesian_2d(x0..x1, (lowest - 0.3).floor()..0.2)
+            // Headroom above p = 1 for the legend (no ticks there).
+            .build_cartesian_2d(x0..x1, (lowest - 0.3).floor()..(0.25 * (0.3 - lowest).ceil()).max(1.0))
             .map_err(pe)?;
         chart
             .configure_mesh()
             .light_line_style(RGBColor(240, 240, 240))
             .x_desc("time (UTC)")
-            .y_desc("p, log scale")
+            .y_desc("p, log scale (below 1e-16 drawn at it)")
             .axis_desc_style((FONT, 18))
             .label_style((FONT, 15))
             .x_labels(6)
             .x_label_formatter(&|v| time_label(*v, span))
-            .y_label_formatter(&pow10_label)
+            .y_label_formatter(&|v| if *v > 1e-9 { String::new() } else { pow10_label(v) })
             .draw()
             .map_err(pe)?;
         if !alphas.is_empty() {
