@@ -252,3 +252,112 @@ fn a_planted_change_is_named_with_its_size() {
     assert_eq!(v["changes"], serde_json::json!([]));
     assert!(v["after_change"].is_null());
 }
+
+/// History (issue 50 item 6): two checks appended to one `--log` (one holds, one changed), then
+/// `cbd report --checks` draws both: the page holds the trend figure and a table row per check,
+/// with the named change; a malformed line is an error naming the log and the line.
+#[test]
+fn report_draws_the_history_of_the_check_log() {
+    let dir = scratch("history");
+    fresh(&dir, "same.csv", 1201, &[]);
+    fresh(&dir, "moved.csv", 1202, &["--effect", "joint_zero:joint=2,offset=1e-4"]);
+    assert_eq!(check(&dir, "same.csv", &["--log", "checks.jsonl"]).status.code(), Some(0));
+    assert_eq!(check(&dir, "moved.csv", &["--log", "checks.jsonl"]).status.code(), Some(3));
+    let log = std::fs::read_to_string(dir.join("checks.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 2);
+    assert!(lines[0]["floor"].as_f64().unwrap() > 0.0 && lines[0]["floor_limit"].as_f64() > lines[0]["floor"].as_f64());
+    assert_eq!(lines[1]["changes"][0]["effect"], "joint_zero:joint=2");
+    let out = cbd(&dir, &["report", "--checks", "checks.jsonl", "--out", "history.html"]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    assert!(stdout.contains("2 checks drawn"), "{stdout}");
+    let page = std::fs::read_to_string(dir.join("history.html")).unwrap();
+    assert!(page.contains("<svg") && page.contains("Checks of the calibration over time"), "no figure");
+    assert_eq!(page.matches("<tr><td class=num>").count(), 2, "one row per check");
+    for needle in ["same.csv", "moved.csv", "holds", "changed", "joint_zero:joint=2", "1 of 2 checks changed", "mean error (mm)"] {
+        assert!(page.contains(needle), "page lacks {needle:?}");
+    }
+    std::fs::write(dir.join("bad.jsonl"), format!("{}\n{{\"time\": 3}}\n", log.lines().next().unwrap())).unwrap();
+    fails_with(&cbd(&dir, &["report", "--checks", "bad.jsonl", "--out", "bad.html"]), &["bad.jsonl:2:", "time"]);
+    // One of --json and --checks is needed.
+    let out = cbd(&dir, &["report", "--out", "x.html"]);
+    assert!(!out.status.success() && text(&out.stderr).contains("--checks"), "{}", text(&out.stderr));
+}
+
+/// `cbd plan --check N --blob B` (issue 50 item 5): 20 poses within the model file's joint limits
+/// as `cbd plan` writes them, and for every kind of change the check names the smallest it detects
+/// at α = 0.01 with 90 % power, with 20 random and 20 planned poses. The planned ones are never
+/// worse than random in the median over the kinds; the joint zero the other tests plant (1e-4 rad)
+/// is above what they detect; a change of the planned size at the planned poses is "changed".
+#[test]
+fn plan_check_finds_poses_and_the_smallest_detectable_changes() {
+    let dir = scratch("plan");
+    let blob = fixture().join("arm.blob");
+    let m = model();
+    let args = [
+        "plan",
+        "--model",
+        m.to_str().unwrap(),
+        "--check",
+        "20",
+        "--blob",
+        blob.to_str().unwrap(),
+        "--out",
+        "poses.csv",
+        "--json",
+        "p.json",
+        "--candidates",
+        "2000",
+    ];
+    let out = cbd(&dir, &args);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    assert!(stdout.contains("smallest change the check detects at alpha = 0.01 with 90 % power (60 degrees of freedom"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.join("poses.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next().unwrap(), "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg");
+    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), 20);
+    assert!(rows.iter().flatten().all(|v| v.abs() <= 360.0));
+    let v = json(&dir.join("p.json"));
+    assert_eq!(v["dof"], 60);
+    let sizes = v["sizes"].as_array().unwrap();
+    assert!(sizes.len() >= 20, "{v}");
+    let mut ratios: Vec<f64> = Vec::new();
+    for s in sizes {
+        let (random, planned) = (s["random"].as_f64().unwrap(), s["planned"].as_f64().unwrap());
+        assert!(random > 0.0 && planned > 0.0 && random.is_finite() && planned.is_finite(), "{s}");
+        ratios.push(random / planned);
+    }
+    ratios.sort_by(f64::total_cmp);
+    assert!(ratios[ratios.len() / 2] >= 1.0 && ratios[0] > 0.9, "random / planned: {ratios:?}");
+    let zero2 = sizes.iter().find(|s| s["effect"] == "joint_zero:joint=2").unwrap();
+    let planned = zero2["planned"].as_f64().unwrap();
+    assert!(planned < 1e-4 && planned > 1e-5, "{zero2}");
+    // Twice the planned size at the planned poses: changed (power far above 0.9).
+    let plant = format!("joint_zero:joint=2,offset={:e}", 2.0 * planned);
+    let out = cbd(
+        &dir,
+        &[
+            "simulate",
+            "--robot",
+            "six",
+            "--poses",
+            "poses.csv",
+            "--noise",
+            "0.02",
+            "--seed",
+            "1301",
+            "--effect",
+            &plant,
+            "--out",
+            "moved.csv",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(check(&dir, "moved.csv", &[]).status.code(), Some(3));
+    // --check needs --blob.
+    let out = cbd(&dir, &["plan", "--model", m.to_str().unwrap(), "--check", "20", "--out", "x.csv"]);
+    assert!(!out.status.success() && text(&out.stderr).contains("--blob"), "{}", text(&out.stderr));
+}

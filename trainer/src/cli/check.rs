@@ -29,7 +29,8 @@ pub struct CheckArgs {
     /// Write the verdict and the statistics as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Append one JSON line per check here (time, p, error, verdict).
+    /// Append one JSON line per check here (time, p, error, verdict, the noise floor, the named
+    /// change); `cbd report --checks` draws the trend.
     #[arg(long)]
     pub log: Option<PathBuf>,
 }
@@ -214,13 +215,23 @@ pub fn run(args: CheckArgs) -> Result<()> {
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     if let Some(path) = &args.log {
+        // `cbd report --checks` draws these lines (report::checks): the floor and the top of its
+        // band (the largest mean error still at the floor over these rows) beside the error.
         let line = serde_json::json!({
-            "time": utc_now(),
+            "time": crate::report::checks::utc_text(now_seconds()),
             "blob": args.blob.display().to_string(),
             "data": args.data.display().to_string(),
             "p_value": s.p_value,
             "mean_error": after.mean,
             "verdict": result.verdict,
+            "statistic": s.statistic,
+            "dof": s.dof,
+            "alpha": args.alpha,
+            "rows": data.len(),
+            "unit": unit,
+            "floor": floor.mean_error,
+            "floor_limit": floor.at_floor_limit(data.len()),
+            "changes": named.as_ref().map_or_else(Vec::new, |n| n.changes.iter().map(|c| c.to_json()).collect::<Vec<_>>()),
         });
         append_line(path, &line.to_string())?;
     }
@@ -258,21 +269,9 @@ fn append_line(path: &Path, line: &str) -> Result<()> {
     writeln!(file, "{line}").map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))
 }
 
-/// The time now as ISO 8601 UTC (`2026-12-06T19:44:23Z`): days to a civil date by Hinnant's
-/// `civil_from_days`.
-fn utc_now() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs()) as i64;
-    let (days, rest) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z", rest / 3600, rest % 3600 / 60, rest % 60)
+/// Seconds since the Unix epoch, now.
+fn now_seconds() -> i64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs()) as i64
 }
 
 #[cfg(test)]

@@ -13,8 +13,19 @@ pub struct PlanArgs {
     #[command(flatten)]
     pub model: ModelArgs,
     /// Poses to plan.
-    #[arg(long)]
-    pub count: usize,
+    #[arg(long, required_unless_present = "check")]
+    pub count: Option<usize>,
+    /// Plan N poses for `cbd check` instead (issue 50 item 5, with --blob): the poses that make the
+    /// check most sensitive to the changes it names, and the smallest change of each kind it
+    /// detects at --alpha with 90 % power, with N random poses and with the N planned.
+    #[arg(long, value_name = "N", requires = "blob", conflicts_with_all = ["count", "data", "candidate_file", "criterion", "exchange"])]
+    pub check: Option<usize>,
+    /// With --check: the calibrated blob the check tests against.
+    #[arg(long, requires = "check")]
+    pub blob: Option<PathBuf>,
+    /// With --check: the check's level.
+    #[arg(long, default_value_t = 0.01)]
+    pub alpha: f64,
     /// Output CSV of the planned poses: the model file's joint columns in their units (without a
     /// model file q1, q2 in radians), ready for `cbd simulate --poses` or the robot.
     #[arg(long)]
@@ -65,11 +76,15 @@ pub struct PlanArgs {
 }
 
 pub fn run(args: PlanArgs) -> Result<()> {
+    if let Some(count) = args.check {
+        return run_check(&args, count);
+    }
+    let count = args.count.expect("clap requires --count without --check");
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--data", args.data.as_deref()), ("--candidate-file", args.candidate_file.as_deref())],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    if args.count == 0 {
+    if count == 0 {
         return Err(Error::InvalidInput("--count must be at least 1".into()));
     }
     if args.workspace == 0 {
@@ -129,7 +144,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         None => Vec::new(),
     };
     let options = PlanOptions {
-        count: args.count,
+        count,
         candidates: args.candidates,
         seed: args.seed,
         workspace: args.workspace,
@@ -147,10 +162,10 @@ pub fn run(args: PlanArgs) -> Result<()> {
     // More poses than candidates can never be planned: said before the memory estimate, which
     // would blame --candidates for what --count asks.
     let candidate_count = args.candidates + user_candidates.len() / nominal.n_joints().max(1);
-    if args.count > candidate_count {
+    if count > candidate_count {
         return Err(Error::InvalidInput(format!(
             "--count {} is more than the {candidate_count} candidate poses (--candidates {} and --candidate-file): lower --count or raise --candidates",
-            args.count, args.candidates
+            count, args.candidates
         )));
     }
     let bytes = crate::plan::memory_bytes(
@@ -164,7 +179,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     // and planned poses' (each of m coordinates).
     let measured_rows = measured.as_ref().map_or(0, |d| d.len());
     let dim = nominal.task_dim()
-        * [candidate_count, args.workspace.max(args.exchange_workspace), measured_rows + args.count].into_iter().max().unwrap_or(1);
+        * [candidate_count, args.workspace.max(args.exchange_workspace), measured_rows + count].into_iter().max().unwrap_or(1);
     // The flags that size the need: --exchange-workspace where it is the larger workspace.
     let (workspace_flag, workspace) = match args.exchange > 0 && args.exchange_workspace > args.workspace {
         true => ("--exchange-workspace", args.exchange_workspace),
@@ -172,7 +187,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     };
     crate::cli::memory::room_for(bytes, dim)
         .map_err(|e| crate::cli::memory::MemoryError(format!("{}; lower --count, --candidates or {workspace_flag}", e.0)))
-        .context(format!("--candidates {} {workspace_flag} {workspace} --count {}", args.candidates, args.count))?;
+        .context(format!("--candidates {} {workspace_flag} {workspace} --count {}", args.candidates, count))?;
     let sample: Vec<f64> = crate::plan::candidates::uniform_within(&limits, 500, args.seed.wrapping_add(2))
         .chunks_exact(limits.len())
         .flat_map(to_model)
@@ -292,6 +307,113 @@ pub fn run(args: PlanArgs) -> Result<()> {
             "plan": result,
             "criterion": options.criterion,
             "prior": if evidence_from_data { "evidence on --data" } else { "stated" },
+        });
+        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
+        crate::cli::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// `cbd plan --check N --blob B`: the check's poses and the smallest change of each kind it
+/// detects (`plan::check`).
+fn run_check(args: &PlanArgs, count: usize) -> Result<()> {
+    let blob_path = args.blob.as_ref().expect("clap requires --blob with --check");
+    crate::io::check_paths(
+        &[("--model", args.model.model.as_deref()), ("--blob", Some(blob_path))],
+        &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
+    )?;
+    if count == 0 {
+        return Err(Error::InvalidInput("--check must be at least 1".into()));
+    }
+    if !(args.alpha > 0.0 && args.alpha < 1.0) {
+        return Err(Error::InvalidInput(format!(
+            "--alpha must be a number between 0 and 1 (exclusive), got {}",
+            crate::error::number(args.alpha)
+        )));
+    }
+    let arm = ArmModel::read(&args.model)?;
+    let model_name = arm.name();
+    let (nominal, spec) = (&arm.nominal, &arm.spec);
+    let limits = spec.joint_limits.clone();
+    if let Some(d) = limits.iter().position(|[lo, hi]| !(lo.is_finite() && hi.is_finite())) {
+        return Err(Error::InvalidInput(format!(
+            "{model_name}: joint {} has no finite limits: declare `joint_limits` in its [measurements]",
+            d + 1
+        )));
+    }
+    let blob = crate::data::read_capped(blob_path, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let model = crate::cli::blob_rows::decode_fitting(&blob, blob_path, &args.model, nominal)?;
+    if crate::cli::blob_rows::recorded_sigma(&model, blob_path)?.is_none() {
+        return Err(Error::InvalidInput(format!("{}: {}", blob_path.display(), crate::evaluation::check::CheckError::NoSigma)));
+    }
+    let columns = crate::data::joint_columns::JointColumns::new(spec);
+    let joint_factor = columns.factors().to_vec();
+    let to_model = |c: &[f64]| -> Vec<f64> { columns.to_model_from_model_units(c) };
+    let mapped = spec.joint_map.is_some() || spec.planar_frame.as_ref().is_some_and(|f| f.offsets.iter().any(|o| *o != 0.0));
+    let unit = spec.model_length_unit.name();
+    let input = crate::plan::check::CheckPlanInput {
+        model: &model,
+        geometry: model.nominal != *nominal,
+        limits: &limits,
+        to_model: if mapped { Some(&to_model) } else { None },
+        count,
+        candidates: args.candidates,
+        seed: args.seed,
+        alpha: args.alpha,
+        unit,
+    };
+    let result = crate::plan::check::plan_check(&input).map_err(|e| Error::InvalidInput(format!("{}: {e}", blob_path.display())))?;
+    let n = model.n_joints();
+    let mut text = spec.joint_columns.join(",");
+    text.push('\n');
+    for pose in result.controller.chunks_exact(n) {
+        let row: Vec<String> = pose.iter().zip(&joint_factor).map(|(c, f)| format!("{:?}", c / f)).collect();
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    crate::cli::write_atomically(&args.out, text.as_bytes())?;
+    errln!(
+        "planned {count} check poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s",
+        result.candidates,
+        result.rejected_singular,
+        result.seconds
+    );
+    outln!(
+        "smallest change the check detects at alpha = {} with {:.0} % power ({} degrees of freedom, noncentrality {:.2}), {count} poses:",
+        args.alpha,
+        100.0 * result.power,
+        result.dof,
+        result.noncentrality
+    );
+    outln!("{:<26} {:>12} {:>12} {:>8}  unit", "change", "random", "planned", "ratio");
+    for s in &result.sizes {
+        outln!(
+            "{:<26} {:>12.4e} {:>12.4e} {:>8.2}  {}",
+            s.effect,
+            s.random,
+            s.planned,
+            s.random / s.planned,
+            if s.unit.is_empty() { "(ratio)" } else { &s.unit }
+        );
+    }
+    if !result.invisible.is_empty() {
+        outln!("not seen at the measured point (no size detects them): {}", result.invisible.join(", "));
+    }
+    errln!("wrote {count} poses to {}", args.out.display());
+    if let Some(path) = &args.json {
+        let json = serde_json::json!({
+            "length_unit": unit,
+            "check_poses": count,
+            "alpha": result.alpha,
+            "power": result.power,
+            "dof": result.dof,
+            "noncentrality": result.noncentrality,
+            "random_sets": crate::plan::check::RANDOM_SETS,
+            "sizes": result.sizes,
+            "not_seen": result.invisible,
+            "candidates": result.candidates,
+            "rejected_singular": result.rejected_singular,
+            "poses": result.controller.chunks_exact(n).map(|p| p.to_vec()).collect::<Vec<_>>(),
         });
         let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;

@@ -9,6 +9,7 @@
 //! here the greedy loop, then `exchange` (optional passes that revise the greedy batch).
 
 pub mod candidates;
+pub mod check;
 pub mod exchange;
 pub mod identifiability;
 pub mod posterior;

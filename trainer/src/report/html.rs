@@ -153,7 +153,7 @@ fn figure_caption(name: &str) -> &str {
     }
 }
 
-const STYLE: &str =
+pub(crate) const STYLE: &str =
     "body{font-family:system-ui,-apple-system,'DejaVu Sans',sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
 h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}\
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}\
@@ -337,7 +337,7 @@ fn convergence_section(out: &mut String, fit: &Map<String, Value>, unit: &str) -
     Ok(())
 }
 
-fn strip_xml_declaration(svg: &str) -> &str {
+pub(crate) fn strip_xml_declaration(svg: &str) -> &str {
     let s = svg.trim_start();
     if s.starts_with("<?xml") {
         s.find("?>").map(|i| &s[i + 2..]).unwrap_or(s)

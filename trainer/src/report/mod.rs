@@ -1,5 +1,6 @@
 //! Error statistics and tables.
 
+pub mod checks;
 pub mod html;
 pub mod noise_floor;
 pub mod plots;

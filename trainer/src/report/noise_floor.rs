@@ -57,6 +57,13 @@ impl NoiseFloor {
         FloorVerdict { ratio, at_floor: ratio <= 1.0 + AT_FLOOR_MARGIN + spread }
     }
 
+    /// The largest mean error over `rows` rows that [`NoiseFloor::verdict`] still calls at the
+    /// floor: the top of the floor's band (`cbd report --checks`).
+    pub fn at_floor_limit(&self, rows: usize) -> f64 {
+        let spread = 2.0 * self.relative_spread() / (rows.max(1) as f64).sqrt();
+        self.mean_error * (1.0 + AT_FLOOR_MARGIN + spread)
+    }
+
     /// Whether a root-mean-square distance over `rows` rows (a cross-validation's held-out RMS) is at
     /// the floor's, √m σ: the same margin, plus two standard errors of an RMS of `rows` Gaussian
     /// distances (1/√(2 m rows) relative).

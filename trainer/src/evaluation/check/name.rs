@@ -279,7 +279,7 @@ pub fn name_change(
 
 /// Each candidate's columns ∂prediction/∂parameter at the fresh rows, internal units per the
 /// parameter's own (lengths in the data's unit, angles in radians).
-fn candidate_columns(model: &Model, fresh: &Measurements, cands: &[Candidate]) -> Vec<Vec<Vec<f64>>> {
+pub fn candidate_columns(model: &Model, fresh: &Measurements, cands: &[Candidate]) -> Vec<Vec<Vec<f64>>> {
     let NominalModel::DhChain(chain) = &model.nominal else { unreachable!("checked by the caller") };
     let n = chain.joints.len();
     let geometric = crate::nominal::dh_parameters::parameter_count_for(chain);

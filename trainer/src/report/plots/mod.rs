@@ -15,6 +15,7 @@ mod convergence;
 mod demo;
 mod heatmaps;
 mod histograms;
+mod history;
 mod residuals;
 mod workspace;
 
@@ -25,6 +26,7 @@ pub use convergence::{convergence, convergence_svg, CONVERGENCE_SIZE};
 pub use demo::{demo_figures, DemoPlotInputs, PlanarMap};
 pub use heatmaps::{error_heatmaps, joint_grid, HEATMAP_SIZE};
 pub use histograms::{error_histograms, HISTOGRAM_SIZE};
+pub use history::{check_history, check_history_svg, HISTORY_SIZE};
 pub use residuals::{residual_vs_joint, EffectCurve, RESIDUAL_WIDTH};
 pub use workspace::{workspace_grid, WORKSPACE_SIZE};
 
