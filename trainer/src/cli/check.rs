@@ -6,6 +6,7 @@ use crate::cli::blob_rows::{decode_fitting, evaluate_rows, finite_statistics, re
 use crate::cli::{ArmModel, ModelArgs};
 use crate::error::{Context, Error, Result};
 use crate::evaluation::check::{check, CheckError, Verdict};
+use crate::report::checks::p_text;
 use crate::report::noise_floor::NoiseFloor;
 use std::path::{Path, PathBuf};
 
@@ -250,14 +251,6 @@ fn name_error(e: crate::evaluation::check::name::NameError) -> &'static str {
 }
 
 /// p as the verdict prints it: two decimals from 0.01 up, else one significant digit (3e-9).
-fn p_text(p: f64) -> String {
-    if p >= 0.01 {
-        format!("{p:.2}")
-    } else {
-        format!("{p:.0e}")
-    }
-}
-
 /// Appends `line` and a newline to `path` (made when missing).
 fn append_line(path: &Path, line: &str) -> Result<()> {
     use std::io::Write;

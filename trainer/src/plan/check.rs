@@ -16,7 +16,7 @@
 //! of its size at one average random pose. The sizes reported are computed with the full C.
 
 use crate::data::Measurements;
-use crate::evaluation::check::covariance::fresh_covariance;
+use crate::evaluation::check::covariance::{fresh_covariance, spd_inverse as inverse};
 use crate::evaluation::check::name::{candidate_columns, candidates, Candidate};
 use crate::evaluation::check::statistic::chi2_survival;
 use crate::plan::candidates as cand;
@@ -160,11 +160,6 @@ fn information(w: &Mat<f64>, f: &[Vec<f64>]) -> Mat<f64> {
     let dim = w.nrows();
     let fm = Mat::from_fn(dim, f.len(), |i, k| f[k][i]);
     fm.transpose() * (w * &fm)
-}
-
-fn inverse(c: &Mat<f64>) -> Option<Mat<f64>> {
-    let llt = c.llt(Side::Lower).ok()?;
-    Some(faer::linalg::solvers::DenseSolveCore::inverse(&llt))
 }
 
 /// The unit of a kind's size.

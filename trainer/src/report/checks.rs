@@ -161,7 +161,8 @@ fn sci(v: f64) -> String {
     format!("{v:.3e}")
 }
 
-fn p_cell(p: f64) -> String {
+/// A p-value as `cbd check` prints it: two decimals, or one significant digit below 0.01.
+pub fn p_text(p: f64) -> String {
     if p >= 0.01 {
         format!("{p:.2}")
     } else {
@@ -192,7 +193,7 @@ pub fn render_checks_report(entries: &[CheckEntry], source: &str, unit: &str) ->
             "<p class=headline>Last check {}: <b>{}</b> (p = {}), mean error {} {}{}. {} of {} checks changed.</p>",
             escape(&last.time),
             escape(&last.verdict),
-            p_cell(last.p_value),
+            p_text(last.p_value),
             sci(last.mean_error),
             escape(&unit),
             last.floor.map(|(f, _)| format!(" ({:.2} × the noise floor)", last.mean_error / f)).unwrap_or_default(),
@@ -216,7 +217,7 @@ pub fn render_checks_report(entries: &[CheckEntry], source: &str, unit: &str) ->
             i + 1,
             escape(&e.time),
             escape(&e.verdict),
-            p_cell(e.p_value),
+            p_text(e.p_value),
             e.alpha.map(|a| format!("{a}")).unwrap_or_default(),
             match (e.statistic, e.dof) {
                 (Some(s), Some(d)) => format!("{s:.2} / {d}"),

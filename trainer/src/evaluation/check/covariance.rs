@@ -57,6 +57,13 @@ pub fn cholesky(mut a: Mat<f64>) -> Option<Mat<f64>> {
     Some(a)
 }
 
+/// C⁻¹ of a symmetric positive-definite C (faer's LLᵀ); `None` when C is not positive definite.
+/// What the change's naming and `plan --check` weight the effect columns by.
+pub fn spd_inverse(c: &Mat<f64>) -> Option<Mat<f64>> {
+    let llt = c.llt(faer::Side::Lower).ok()?;
+    Some(faer::linalg::solvers::DenseSolveCore::inverse(&llt))
+}
+
 /// Bytes the check's covariance takes for `points` blob points and `fresh` rows of `m`
 /// coordinates: the joint covariance, its training block's copy and factor (3 (N m)² f64), and the
 /// evidence table's per-pair J Jᵀ and distances ((N² / 2)(m² + 1) f64).

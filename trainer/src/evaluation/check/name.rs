@@ -17,6 +17,7 @@
 //! check's statistic on the part of r the named change does not explain (`statistic::mahalanobis`
 //! with F as the tangent), on dof − rank F.
 
+use super::covariance::spd_inverse as inverse;
 use super::statistic::{mahalanobis, Statistic};
 use crate::data::Measurements;
 use crate::diagnose::library::{jacobian, Param};
@@ -321,12 +322,6 @@ pub fn candidate_columns(model: &Model, fresh: &Measurements, cands: &[Candidate
 
 fn stack<'a>(fixed: &[Vec<f64>], more: impl Iterator<Item = &'a Vec<f64>>) -> Vec<Vec<f64>> {
     fixed.iter().cloned().chain(more.cloned()).collect()
-}
-
-/// C⁻¹ of a symmetric positive-definite C.
-fn inverse(c: &Mat<f64>) -> Option<Mat<f64>> {
-    let llt = c.llt(faer::Side::Lower).ok()?;
-    Some(faer::linalg::solvers::DenseSolveCore::inverse(&llt))
 }
 
 /// C⁻¹F (dim × k) and A = FᵀC⁻¹F.
