@@ -4,17 +4,20 @@ use crate::error::{DecodeError, EncodeError, ModelError};
 use crate::expansion::FieldExpansion;
 use crate::format::*;
 use crate::limits::{MAX_JOINTS, MAX_JOINTS_ANY_BUILD};
-use crate::model::{ConfigurationKernel, Model, NominalModel, RowDrift};
+use crate::model::{ConfigurationKernel, Model, NominalModel, Provenance, RowDrift};
 use crate::tool_point_encoding;
 
 pub(crate) const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
-/// The format [`encode`] writes for `model`: 8 when it has a configuration kernel, else 7 when it
+/// The format [`encode`] writes for `model`: 9 when it has a provenance, else 8 when it has a
+/// configuration kernel or a drift, else 7 when it
 /// carries a noise σ, else 6 when it names tool points, else 5 when it has an expansion, else 4 (so
 /// a model of an older format keeps its bytes).
 pub fn format_for(model: &Model<'_>) -> u16 {
-    if model.configuration_kernel.is_some() || model.drift.is_some() {
+    if model.provenance.is_some() {
         FORMAT_VERSION
+    } else if model.configuration_kernel.is_some() || model.drift.is_some() {
+        FORMAT_WITH_CONFIGURATION_KERNEL
     } else if model.noise_sigma.is_some() {
         FORMAT_WITH_NOISE_SIGMA
     } else if !model.nominal.tool_points().is_empty() {
@@ -58,11 +61,15 @@ pub fn encode(model: &Model<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
             *tail.first_chunk_mut::<8>().ok_or(EncodeError::BufferTooSmall)? = sigma.to_le_bytes();
             written += 8;
         }
-        if version >= FORMAT_VERSION {
+        if version >= FORMAT_WITH_CONFIGURATION_KERNEL {
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += postcard::to_slice(&model.configuration_kernel, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
             let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
             written += postcard::to_slice(&model.drift, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
+        }
+        if version >= FORMAT_VERSION {
+            let tail = body.get_mut(written..).ok_or(EncodeError::BufferTooSmall)?;
+            written += postcard::to_slice(&model.provenance, tail).map_err(|_| EncodeError::BufferTooSmall)?.len();
         }
         written
     };
@@ -154,13 +161,21 @@ pub fn decode(blob: &[u8]) -> Result<Model<'_>, DecodeError> {
     } else {
         rest
     };
-    let rest = if version >= FORMAT_VERSION {
+    let rest = if version >= FORMAT_WITH_CONFIGURATION_KERNEL {
         // Format 8: the configuration kernel follows (`None` allowed, absence not).
         let (kernel, rest): (Option<ConfigurationKernel>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
         model.configuration_kernel = kernel;
         // Then the drift (`None` allowed, absence not).
         let (drift, rest): (Option<RowDrift>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
         model.drift = drift;
+        rest
+    } else {
+        rest
+    };
+    let rest = if version >= FORMAT_VERSION {
+        // Format 9: the provenance follows (`None` allowed, absence not).
+        let (provenance, rest): (Option<Provenance>, &[u8]) = postcard::take_from_bytes(rest).map_err(|_| DecodeError::Payload)?;
+        model.provenance = provenance;
         rest
     } else {
         rest

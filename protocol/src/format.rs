@@ -3,6 +3,9 @@
 /// Four bytes that open every blob.
 pub const MAGIC: [u8; 4] = *b"CBDM";
 /// Version of the payload layout; bumped on any incompatible change.
+/// Format 9 appends the provenance ([`Model::provenance`]: the import frame, the parent blob's
+/// hash), an `Option` in postcard, after the format-8 drift; [`encode`]
+/// writes it only for a model that has one.
 /// Format 8 appends the configuration-dependent task field's kernel ([`Model::configuration_kernel`])
 /// and the drift in measurement order ([`Model::drift`]), each an `Option` in postcard, after the
 /// format-7 σ; [`encode`] writes it only for a model that has either.
@@ -14,7 +17,9 @@ pub const MAGIC: [u8; 4] = *b"CBDM";
 /// format 4 adds the gravity moment effect ([`Effect::GravityMoment`]); formats 2 and 3 have
 /// the same layout without it and load unchanged. [`encode`] writes format 4 when a model has no
 /// expansion (byte-identical to the encoders before format 5), format 5 when it has one.
-pub const FORMAT_VERSION: u16 = 8;
+pub const FORMAT_VERSION: u16 = 9;
+/// The format of a model with a configuration kernel or a drift and without a provenance.
+pub const FORMAT_WITH_CONFIGURATION_KERNEL: u16 = 8;
 /// The format of a model with a noise σ and without a configuration kernel.
 pub const FORMAT_WITH_NOISE_SIGMA: u16 = 7;
 /// The format of a model with tool points and without a noise σ.

@@ -58,6 +58,40 @@ pub struct Model<'a> {
     /// noise floor, `cbd check`). Not used to evaluate. Encoded after the configuration kernel.
     #[serde(skip)]
     pub drift: Option<RowDrift>,
+    /// Where the blob came from (format 9): the import the rows were read through, the blob this
+    /// one updates. Not used to evaluate. Encoded after the drift.
+    #[serde(skip)]
+    pub provenance: Option<Provenance>,
+}
+
+/// What a calibration records about its rows and its parent (format 9); each part is optional and
+/// at least one is present (an empty record is not written: [`Model::provenance`] is then `None`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// The import the calibration's rows were read through, where it was more than units.
+    pub import_frame: Option<ImportFrame>,
+    /// SHA-256 of the blob this one updates (`cbd check --update`).
+    pub parent: Option<[u8; 32]>,
+}
+
+impl Provenance {
+    /// No part present.
+    pub fn is_empty(&self) -> bool {
+        self.import_frame.is_none() && self.parent.is_none()
+    }
+}
+
+/// Fingerprints (64 bits of a SHA-256 the trainer computes over rounded values in a fixed order) of
+/// the import beyond units that turned a file's columns into the chain's joints and frame; `None`
+/// where the import is the identity. A blob is used with a model file whose import gives the same
+/// fingerprints, or its rows would be read into another frame than it was fitted in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ImportFrame {
+    /// The joints' import as an affine map in model units (`[measurements.joint_map]`'s signs,
+    /// scales, coupling and offsets, a `[planar]` arm's joint offsets).
+    pub joints: Option<u64>,
+    /// The positions' import (a `[planar]` arm's base and yaw).
+    pub positions: Option<u64>,
 }
 
 /// A stationary process over the rows in measurement order, correlation exp(−lag / length):

@@ -23,6 +23,7 @@ pub(crate) fn sample_model<'a>(points: &'a [u8], momenta: &'a [u8]) -> Model<'a>
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     }
 }
 
@@ -500,4 +501,47 @@ fn format_8_carries_the_drift_beside_sigma_and_refuses_a_bad_one_by_name() {
     let mut no_sigma = model.clone();
     no_sigma.noise_sigma = None;
     assert!(matches!(encode_to_vec(&no_sigma), Err(EncodeError::Invalid(ModelError::OutOfRange { field: "drift (without noise_sigma)" }))));
+}
+
+#[test]
+fn format_9_carries_the_provenance_and_older_models_keep_their_format() {
+    let p = le(&[0.0, 0.1, 1.0, 1.1, 2.0, 2.1]);
+    let m = le(&[0.01, -0.02, 0.03, 0.0, -0.05, 0.5]);
+    let mut model = sample_model(&p, &m);
+    model.noise_sigma = Some(0.03);
+    model.drift = Some(RowDrift { sd: 0.043, length: 8.4 });
+    let format_8 = encode_to_vec(&model).unwrap();
+    let frame = ImportFrame { joints: Some(0x0123_4567_89ab_cdef), positions: None };
+    let parts = [
+        Provenance { import_frame: Some(frame), parent: None },
+        Provenance { import_frame: None, parent: Some([7; 32]) },
+        Provenance { import_frame: Some(ImportFrame { joints: None, positions: Some(1) }), parent: Some([0xff; 32]) },
+    ];
+    for provenance in parts {
+        let mut with = model.clone();
+        with.provenance = Some(provenance);
+        assert_eq!(format_for(&with), 9);
+        let blob = encode_to_vec(&with).unwrap();
+        assert_eq!(decode(&blob).unwrap(), with);
+        // The format-8 payload is a prefix of the format-9 one: the provenance is appended.
+        assert_eq!(blob[HEADER_LEN..format_8.len() - TRAILER_LEN], format_8[HEADER_LEN..format_8.len() - TRAILER_LEN]);
+    }
+    // Without a provenance the bytes are the format-8 encoder's.
+    assert_eq!(u16::from_le_bytes([format_8[4], format_8[5]]), 8);
+    let cases: [(&str, Provenance); 2] = [
+        ("provenance (empty: write None)", Provenance { import_frame: None, parent: None }),
+        (
+            "provenance.import_frame (empty: write None)",
+            Provenance { import_frame: Some(ImportFrame { joints: None, positions: None }), parent: None },
+        ),
+    ];
+    for (field, provenance) in cases {
+        let mut bad = model.clone();
+        bad.provenance = Some(provenance);
+        let named = match encode_to_vec(&bad).expect_err(field) {
+            EncodeError::Invalid(ModelError::NonFinite { field: f, .. } | ModelError::OutOfRange { field: f }) => f,
+            other => panic!("{field}: {other:?}"),
+        };
+        assert_eq!(named, field);
+    }
 }

@@ -25,6 +25,7 @@ fn ur5_model<'a>(tool_points: &[[f64; 3]], points: &'a [u8], momenta: &'a [u8]) 
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     }
 }
 

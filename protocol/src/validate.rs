@@ -236,6 +236,14 @@ impl Model<'_> {
                 return Err(ModelError::OutOfRange { field: "drift (without noise_sigma)" });
             }
         }
+        if let Some(p) = &self.provenance {
+            if p.is_empty() {
+                return Err(ModelError::OutOfRange { field: "provenance (empty: write None)" });
+            }
+            if p.import_frame.is_some_and(|f| f.joints.is_none() && f.positions.is_none()) {
+                return Err(ModelError::OutOfRange { field: "provenance.import_frame (empty: write None)" });
+            }
+        }
         Ok(())
     }
 }

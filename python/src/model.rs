@@ -38,8 +38,8 @@ impl Model {
         let (n_joints, task_dim, tool_points, periodic) = with_calibrator(&blob, |cal| {
             cbd_trainer::predict::check_calibrator(cal).map_err(|e| Failure(e.to_string()))?;
             let m = cal.model();
-            if let Some((file, nominal, _)) = &model {
-                cbd_trainer::evaluation::blob_match::check_blob_fits(m, nominal)
+            if let Some((file, nominal, columns)) = &model {
+                cbd_trainer::evaluation::blob_match::check_blob_fits_model_file(m, nominal, &columns.spec)
                     .map_err(|why| Failure(format!("the blob does not fit {file}: {why}")))?;
             }
             let periodic = (0..m.n_joints()).map(|d| m.nominal.is_revolute(d)).collect();

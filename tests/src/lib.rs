@@ -26,6 +26,7 @@ pub fn reference_blob() -> Vec<u8> {
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     };
     encode_to_vec(&model).expect("the reference model encodes")
 }
@@ -70,6 +71,7 @@ pub fn model_blob(nominal: NominalModel, n_points: usize, momentum: f64, integra
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     };
     encode_to_vec(&model).expect("the test model encodes")
 }

@@ -375,6 +375,7 @@ fn blobs_with_out_of_range_effects_are_rejected() {
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     };
     let expected = ModelError::OutOfRangeAt { field: "nominal.effects.list.GravityCompliance.joint", index: 0 };
     assert_eq!(encode_to_vec(&model), Err(EncodeError::Invalid(expected)));
@@ -435,6 +436,7 @@ fn random_effects_never_panic_in_the_calibrator() {
             noise_sigma: None,
             configuration_kernel: None,
             drift: None,
+            provenance: None,
         };
         let mut storage = vec![0.0; 20_000];
         match encode_to_vec(&model) {

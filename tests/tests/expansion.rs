@@ -127,6 +127,7 @@ fn an_expansion_built_from_the_momenta_reproduces_the_kernel_form() {
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     };
     let kernel_blob = encode_to_vec(&model).unwrap();
     // Truncation: e^{−b} I_h(b) < 2e-16 for h > 8 at b ≤ 0.08; (|k|/a)^{2p}/p! < 1e-21 for p > 12 at |k| ≤ 1.5, a = 5.

@@ -40,6 +40,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, method: Inte
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     }
 }
 

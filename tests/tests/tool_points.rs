@@ -50,6 +50,7 @@ fn model<'a>(nominal: NominalModel, points: &'a [u8], momenta: &'a [u8], integra
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     }
 }
 

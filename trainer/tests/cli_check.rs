@@ -361,3 +361,58 @@ fn plan_check_finds_poses_and_the_smallest_detectable_changes() {
     let out = cbd(&dir, &["plan", "--model", m.to_str().unwrap(), "--check", "20", "--out", "x.csv"]);
     assert!(!out.status.success() && text(&out.stderr).contains("--blob"), "{}", text(&out.stderr));
 }
+
+/// `--update` (issue 50 item 4): a planted joint zero is refitted into a new blob that records its
+/// parent's SHA-256; the new blob is nearer the changed arm than its parent on poses neither saw,
+/// and the check of it holds. Where the calibration holds nothing is written; `--update` without
+/// `--out` is refused.
+#[test]
+fn update_refits_the_named_change_into_a_blob_that_names_its_parent() {
+    use sha2::Digest as _;
+    let dir = scratch("update");
+    let plant = "joint_zero:joint=2,offset=1e-4";
+    fresh(&dir, "changed.csv", 1201, &["--effect", plant]);
+    fresh(&dir, "test.csv", 1202, &["--effect", plant]);
+    let out = check(&dir, "changed.csv", &["--json", "c.json", "--update", "--out", "new.blob"]);
+    let stdout = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(3), "{stdout}\n{}", text(&out.stderr));
+    assert!(stdout.contains("updated: joint_zero:joint=2 by "), "{stdout}");
+    let v = json(&dir.join("c.json"));
+    let u = &v["update"];
+    assert_eq!(u["groups"][0]["effect"], "joint_zero:joint=2", "{v}");
+    let refitted = u["groups"][0]["values"][0].as_f64().unwrap();
+    assert!((refitted - 1e-4).abs() < 3e-5, "{refitted}");
+    let (before, after) = (u["before"].as_f64().unwrap(), u["after"].as_f64().unwrap());
+    assert!(after < 0.7 * before, "held out: {before} → {after}");
+    let parent = std::fs::read(fixture().join("arm.blob")).unwrap();
+    let new = std::fs::read(dir.join("new.blob")).unwrap();
+    let hash: [u8; 32] = sha2::Sha256::digest(&parent).into();
+    let hex: String = hash.iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(u["parent_sha256"], hex.as_str());
+    let model = cbd_protocol::decode(&new).unwrap();
+    assert_eq!(model.provenance.and_then(|p| p.parent), Some(hash));
+    // On poses neither blob saw, the updated blob is nearer the changed arm, and it holds there.
+    let m = model_path();
+    let eval = |blob: &Path| {
+        let out = cbd(&dir, &["eval", "--model", &m, "--blob", blob.to_str().unwrap(), "--data", "test.csv", "--json", "e.json"]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        json(&dir.join("e.json"))["calibrated"]["mean"].as_f64().unwrap()
+    };
+    let (old, updated) = (eval(&fixture().join("arm.blob")), eval(&dir.join("new.blob")));
+    assert!(updated < 0.8 * old, "test poses: parent {old}, updated {updated}");
+    let out = cbd(&dir, &["check", "--model", &m, "--blob", "new.blob", "--data", "test.csv"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stdout));
+    // The same arm: the calibration holds, nothing is written.
+    fresh(&dir, "same.csv", 1203, &[]);
+    let out = check(&dir, "same.csv", &["--update", "--out", "unwritten.blob"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stdout));
+    assert!(text(&out.stdout).contains("the calibration holds; unwritten.blob is not written"), "{}", text(&out.stdout));
+    assert!(!dir.join("unwritten.blob").exists());
+    let out = check(&dir, "changed.csv", &["--update"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("--out"), "{}", text(&out.stderr));
+}
+
+fn model_path() -> String {
+    model().to_str().unwrap().to_string()
+}

@@ -760,3 +760,39 @@ fn too_large_for_memory_is_refused_up_front() {
         .unwrap();
     fails_with(&out, &["big.csv", "20000 measurements", "fewer training rows"]);
 }
+
+/// Issue 51 class 5: a blob fitted through a model file's import frame (a planar arm's base, yaw
+/// and joint offsets; a joint map) records it (format 9), and `eval` through a model file that
+/// reads rows into another frame is refused naming both files — not evaluated in the wrong frame.
+#[test]
+fn a_blob_is_used_only_through_the_import_frame_it_was_fitted_in() {
+    let dir = scratch("import-frame");
+    let out = cbd(&dir, &["simulate", "--grid", "4", "--out", "g4.csv"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let plain = "length_unit = \"m\"\nangle_unit = \"rad\"\n[planar]\nlengths = [1.0, 0.5]\n\
+                 [measurements]\njoints = [\"q1\", \"q2\"]\npositions = [\"x\", \"y\"]\n";
+    let framed =
+        plain.replace("lengths = [1.0, 0.5]\n", "lengths = [1.0, 0.5]\nbase = [0.01, -0.02]\nyaw = 0.01\noffsets = [0.01, 0.02]\n");
+    let mapped = format!("{plain}[measurements.joint_map]\nsign = {{ q2 = -1 }}\n");
+    write(&dir, "plain.toml", plain);
+    write(&dir, "framed.toml", &framed);
+    write(&dir, "mapped.toml", &mapped);
+    let out = cbd(&dir, &["fit", "--model", "framed.toml", "--data", "g4.csv", "--out", "framed.blob", "--max-iterations", "2", "--quiet"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let blob = cbd_protocol::decode(&std::fs::read(dir.join("framed.blob")).unwrap()).unwrap().provenance;
+    let frame = blob.and_then(|p| p.import_frame).expect("the import frame is recorded");
+    assert!(frame.joints.is_some() && frame.positions.is_some(), "{frame:?}");
+    let eval = |model: &str| cbd(&dir, &["eval", "--model", model, "--blob", "framed.blob", "--data", "g4.csv"]);
+    assert!(eval("framed.toml").status.success(), "{}", stderr(&eval("framed.toml")));
+    let err = fails_with(&eval("plain.toml"), &["framed.blob", "plain.toml", "joint import", "the model file does not have"]);
+    assert_eq!(err.lines().filter(|l| l.starts_with("error: ")).count(), 1, "{err}");
+    fails_with(&eval("mapped.toml"), &["framed.blob", "mapped.toml", "another joint import"]);
+    // Fitted without a frame through a joint map's model file, read through the plain one.
+    let out = cbd(&dir, &["fit", "--model", "mapped.toml", "--data", "g4.csv", "--out", "mapped.blob", "--max-iterations", "2", "--quiet"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = cbd(&dir, &["compensate", "--model", "plain.toml", "--blob", "mapped.blob", "--targets", "g4.csv", "--out", "c.csv"]);
+    fails_with(&out, &["mapped.blob", "plain.toml", "joint import"]);
+    let out = cbd(&dir, &["export", "--model", "plain.toml", "--blob", "mapped.blob", "--urdf", "x.urdf"]);
+    fails_with(&out, &["mapped.blob", "joint import"]);
+    assert!(!dir.join("x.urdf").exists());
+}

@@ -97,8 +97,18 @@ fn compensate_takes_targets_in_the_arms_frame_and_gives_the_arms_joints() {
     let moved_seeds: Vec<[f64; 2]> = seeds.iter().map(|s| [s[0] + 0.1, s[1] - 0.2]).collect();
     write(&dir, "tc.csv", rows("x,y\n", &moved_targets));
     write(&dir, "sc.csv", rows("q1,q2\n", &moved_seeds));
-    for (model, t, s, out) in [("framed.toml", "t.csv", "s.csv", "c1.csv"), ("plain.toml", "tc.csv", "sc.csv", "c2.csv")] {
-        succeeds(&cbd(&dir, &["compensate", "--model", model, "--blob", "a.blob", "--targets", t, "--seeds", s, "--out", out]));
+    // a.blob records its import frame (format 9) and is refused through plain.toml; the same
+    // calibration without the record (as a blob written before format 9) is read through it.
+    let refused = cbd(&dir, &["compensate", "--model", "plain.toml", "--blob", "a.blob", "--targets", "tc.csv", "--out", "c0.csv"]);
+    assert_eq!(refused.status.code(), Some(1), "{}", String::from_utf8_lossy(&refused.stderr));
+    let bytes = std::fs::read(dir.join("a.blob")).unwrap();
+    let mut unrecorded = cbd_protocol::decode(&bytes).unwrap();
+    assert!(unrecorded.provenance.take().is_some_and(|p| p.import_frame.is_some()));
+    std::fs::write(dir.join("b.blob"), cbd_protocol::encode_to_vec(&unrecorded).unwrap()).unwrap();
+    for (model, blob, t, s, out) in
+        [("framed.toml", "a.blob", "t.csv", "s.csv", "c1.csv"), ("plain.toml", "b.blob", "tc.csv", "sc.csv", "c2.csv")]
+    {
+        succeeds(&cbd(&dir, &["compensate", "--model", model, "--blob", blob, "--targets", t, "--seeds", s, "--out", out]));
     }
     let read = |name: &str| -> Vec<Vec<f64>> {
         let text = std::fs::read_to_string(dir.join(name)).unwrap();

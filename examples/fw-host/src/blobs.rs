@@ -26,6 +26,7 @@ fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: 
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     }
 }
 
@@ -189,6 +190,7 @@ pub fn six_tool_points_blob() -> Vec<u8> {
         noise_sigma: None,
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     };
     encode_to_vec(&model).expect("encode the tool-points blob")
 }
@@ -227,6 +229,7 @@ fn dh_chain_blob(
         noise_sigma: configuration.as_ref().map(|_| 0.05),
         configuration_kernel: configuration,
         drift: None,
+        provenance: None,
     };
     encode_to_vec(&model).expect("encode a DH-chain blob")
 }

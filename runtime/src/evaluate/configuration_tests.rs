@@ -116,6 +116,7 @@ impl Case {
                 task_width,
             }),
             drift: None,
+            provenance: None,
         }
     }
 

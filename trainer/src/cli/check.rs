@@ -34,6 +34,14 @@ pub struct CheckArgs {
     /// change); `cbd report --checks` draws the trend.
     #[arg(long)]
     pub log: Option<PathBuf>,
+    /// When the calibration changed and the change is named: refit only the named change on the
+    /// fresh poses (the fields kept) and write the new blob to --out (it records its parent's hash);
+    /// its error is reported on fresh poses held out of the update.
+    #[arg(long, requires = "out")]
+    pub update: bool,
+    /// Where --update writes the new blob.
+    #[arg(long, requires = "update")]
+    pub out: Option<PathBuf>,
 }
 
 pub fn run(args: CheckArgs) -> Result<()> {
@@ -45,7 +53,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
     }
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
-        &[("--json", args.json.as_deref()), ("--log", args.log.as_deref())],
+        &[("--json", args.json.as_deref()), ("--log", args.log.as_deref()), ("--out", args.out.as_deref())],
     )?;
     let arm = ArmModel::read(&args.model)?;
     let register = args.register || arm.register_base();
@@ -53,7 +61,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
-    let model = decode_fitting(&blob, &args.blob, &args.model, &nominal)?;
+    let model = decode_fitting(&blob, &args.blob, &args.model, &nominal, &spec)?;
     if model.n_joints() != data.n_joints || model.task_dim() != data.task_dim {
         return Err(Error::InvalidInput(format!(
             "{}: {} joints and {}-D positions, but {} has {} joints and {}-D positions",
@@ -179,6 +187,31 @@ pub fn run(args: CheckArgs) -> Result<()> {
             );
         }
     }
+    let updated = match (&args.out, &named) {
+        (Some(out), _) if result.verdict == Verdict::Holds => {
+            outln!("--update: the calibration holds; {} is not written", out.display());
+            None
+        }
+        (Some(out), Some(named)) => {
+            let groups: Vec<_> = named.changes.iter().map(|c| c.candidate).collect();
+            let updated = crate::evaluation::check::update::update(
+                &model,
+                &blob,
+                &data,
+                &result.measured,
+                &result.covariance,
+                result.tangent.as_ref(),
+                &groups,
+            )
+            .map_err(|e| Error::InvalidInput(format!("--update: {e}")))?;
+            print_update(&updated, unit);
+            crate::cli::write_atomically(out, &updated.blob)?;
+            outln!("wrote {} ({} bytes; parent {})", out.display(), updated.blob.len(), &updated.parent[..16]);
+            Some(updated)
+        }
+        (Some(_), None) => return Err(Error::InvalidInput("--update: the change is not named, so there is nothing to update".into())),
+        (None, _) => None,
+    };
     if far > 0 {
         errln!(
             "warning: {far} of {} configurations are far from every measured configuration (kernel support < 0.05): extrapolation",
@@ -211,6 +244,9 @@ pub fn run(args: CheckArgs) -> Result<()> {
                 "loo_log_density_after": named.evidence_after,
                 "not_offered": named.excluded.iter().map(|(w, why)| serde_json::json!({"effect": w, "why": why})).collect::<Vec<_>>(),
             });
+        }
+        if let Some(u) = &updated {
+            v["update"] = update_json(u, args.out.as_deref());
         }
         let text = serde_json::to_string_pretty(&v).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
@@ -250,7 +286,33 @@ fn name_error(e: crate::evaluation::check::name::NameError) -> &'static str {
     }
 }
 
-/// p as the verdict prints it: two decimals from 0.01 up, else one significant digit (3e-9).
+/// The update's lines: each group refitted, and the error before and after on held-out poses.
+fn print_update(u: &crate::evaluation::check::update::Updated, unit: &str) {
+    for (group, values) in &u.changes {
+        let shown: Vec<String> = values.iter().map(|v| format!("{v:.4e}")).collect();
+        outln!("updated: {} by {}", group.spelling(), shown.join(", "));
+    }
+    outln!(
+        "update, mean error at the fresh poses held out of it ({} contiguous blocks): {:.4e} → {:.4e} {unit} (in sample {:.4e})",
+        u.blocks,
+        u.before,
+        u.held_out,
+        u.in_sample
+    );
+}
+
+fn update_json(u: &crate::evaluation::check::update::Updated, out: Option<&Path>) -> serde_json::Value {
+    serde_json::json!({
+        "out": out.map(|p| p.display().to_string()),
+        "parent_sha256": u.parent,
+        "groups": u.changes.iter().map(|(g, v)| serde_json::json!({"effect": g.spelling(), "values": v})).collect::<Vec<_>>(),
+        "before": u.before,
+        "after": u.held_out,
+        "after_in_sample": u.in_sample,
+        "held_out_blocks": u.blocks,
+    })
+}
+
 /// Appends `line` and a newline to `path` (made when missing).
 fn append_line(path: &Path, line: &str) -> Result<()> {
     use std::io::Write;

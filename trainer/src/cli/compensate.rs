@@ -151,7 +151,7 @@ pub fn run(args: CompensateArgs) -> Result<()> {
     let arm = ArmModel::read(&args.model)?;
     let (nominal, spec) = (arm.nominal.clone(), arm.spec.clone());
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
-    let model = crate::cli::blob_rows::decode_fitting(&blob, &args.blob, &args.model, &nominal)?;
+    let model = crate::cli::blob_rows::decode_fitting(&blob, &args.blob, &args.model, &nominal, &spec)?;
     let periodic = periodic_joints(&model);
     let length = spec.length_unit.factor_to(spec.model_length_unit);
     if spec.tool_points.len() >= 3 {

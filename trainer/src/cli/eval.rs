@@ -46,7 +46,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let imported = crate::data::csv_import::read_measurements(&args.data, spec)?;
     let (data, lines) = (imported.measurements, imported.lines);
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
-    let model = decode_fitting(&blob, &args.blob, &args.model, &nominal)?;
+    let model = decode_fitting(&blob, &args.blob, &args.model, &nominal, spec)?;
     take_registered_base(&args, &arm, &mut nominal, &model.nominal, &data)?;
     if model.nominal != nominal {
         errln!(

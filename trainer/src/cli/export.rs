@@ -43,6 +43,13 @@ pub fn run(args: ExportArgs) -> Result<()> {
     let file = load_model_file(&args.model)?;
     let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
     let model = cbd_protocol::decode(&blob).context(args.blob.display())?;
+    if model.provenance.is_some_and(|p| p.import_frame.is_some()) {
+        // The same rule as the model file's joint map below, for a blob that records one (format 9).
+        return Err(Error::InvalidInput(format!(
+            "{}: fitted to rows read through a joint import or frame ([measurements.joint_map], [planar]): its chain moves with the model's joints, not the controller's (not supported: export a blob fitted without one)",
+            args.blob.display()
+        )));
+    }
     let calibrated = calibrated_chain(&file, &model.nominal, &args)?;
     let to_metres = file.length_unit.factor_to(crate::data::model_file::LengthUnit::M);
     let comment = vec![

@@ -196,11 +196,11 @@ pub fn fit_measurements(args: &FitArgs, arm: &ArmModel, imported: crate::data::c
         None => crate::parametric::calibrate_dh(&nominal, &data, &Default::default()).map_or(calibration.base.clone(), |f| f.model),
     };
     let drift = crate::diagnose::drift::drift_of_chain(&chain, &data, &Default::default());
-    let mut blob = calibration.fit.blob;
+    let found = drift.as_ref().filter(|d| d.detected);
+    let blob = with_record(&calibration.fit.blob, found, crate::data::import_frame::import_frame(&arm.spec))?;
     if let Some(d) = &drift {
         report["drift"] = serde_json::to_value(d).map_err(Error::JsonOutput)?;
         if d.detected {
-            blob = with_drift(&blob, d)?;
             noise_floor += &format!(
                 "\ndrift in measurement order: sd {:.3e} {unit} per coordinate over {:.1} poses ({:.0} % of the variance a model of \
                  the configuration calls noise; {:.0} nats), recorded in the blob — {}",
@@ -217,10 +217,16 @@ pub fn fit_measurements(args: &FitArgs, arm: &ArmModel, imported: crate::data::c
     Ok(Fitted { blob, report, summary, noise_floor, memory })
 }
 
-/// `blob` with the drift `d` recorded beside σ (format 8); every other byte of its model unchanged.
-fn with_drift(blob: &[u8], d: &crate::diagnose::drift::Drift) -> Result<Vec<u8>> {
-    let internal = |e: String| Error::Internal(format!("recording the drift in the blob: {e}"));
+/// `blob` with what the calibration found about its rows recorded, every other byte of its model
+/// unchanged: the drift `d` beside σ (format 8), and the import `frame` the rows were read through
+/// (format 9, `cbd_protocol::Provenance`). Nothing to record: `blob` as it is.
+fn with_record(blob: &[u8], d: Option<&crate::diagnose::drift::Drift>, frame: Option<cbd_protocol::ImportFrame>) -> Result<Vec<u8>> {
+    if d.is_none() && frame.is_none() {
+        return Ok(blob.to_vec());
+    }
+    let internal = |e: String| Error::Internal(format!("recording the drift and the import frame in the blob: {e}"));
     let mut model = cbd_protocol::decode(blob).map_err(|e| internal(e.to_string()))?;
-    model.drift = Some(cbd_protocol::RowDrift { sd: d.sd, length: d.length });
+    model.drift = d.map(|d| cbd_protocol::RowDrift { sd: d.sd, length: d.length });
+    model.provenance = frame.map(|f| cbd_protocol::Provenance { import_frame: Some(f), parent: None });
     cbd_protocol::encode_to_vec(&model).map_err(|e| internal(e.to_string()))
 }

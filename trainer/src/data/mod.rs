@@ -176,6 +176,7 @@ pub mod effects_section;
 mod evenly_spaced;
 pub use evenly_spaced::evenly_spaced_rows;
 pub mod import_error;
+pub mod import_frame;
 pub mod joint_columns;
 pub mod joint_map;
 pub mod model_file;

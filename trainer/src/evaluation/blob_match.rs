@@ -9,6 +9,18 @@
 use cbd_protocol::{Model, NominalModel};
 use cbd_runtime::internals::kinematics::forward_kinematics_at;
 
+/// [`check_blob_fits`], then the import frame: a blob that records the frame its rows were read
+/// into (format 9) is used only through a model file whose `spec` reads rows into the same one.
+pub fn check_blob_fits_model_file(
+    blob: &Model<'_>,
+    nominal: &NominalModel,
+    spec: &crate::data::column_spec::ColumnSpec,
+) -> Result<(), String> {
+    check_blob_fits(blob, nominal)?;
+    let provenance = blob.provenance.as_ref();
+    crate::data::import_frame::check_import_frame(provenance.and_then(|p| p.import_frame), provenance.is_some(), spec)
+}
+
 /// Most of the blob's training configurations the size comparison evaluates.
 const COMPARED: usize = 64;
 
@@ -100,6 +112,7 @@ mod tests {
             noise_sigma: None,
             configuration_kernel: None,
             drift: None,
+            provenance: None,
         }
     }
 

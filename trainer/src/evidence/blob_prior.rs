@@ -103,6 +103,7 @@ pub(crate) fn model_for_tests(nominal: cbd_protocol::NominalModel, points: &[f64
         noise_sigma: Some(0.01),
         configuration_kernel: None,
         drift: None,
+        provenance: None,
     }
 }
 

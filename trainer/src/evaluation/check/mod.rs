@@ -7,6 +7,7 @@ pub mod covariance;
 pub mod name;
 pub mod register;
 pub mod statistic;
+pub mod update;
 
 use crate::data::Measurements;
 use cbd_protocol::Model;

@@ -278,6 +278,36 @@ pub fn name_change(
     Ok(Named { changes, after, evidence_before: before, evidence_after: best, excluded })
 }
 
+/// Each candidate's columns as changes of the diagnose library's parameters (`Param`): one list of
+/// (parameter, coefficient) per column, at `chain`. What the columns differentiate along and what
+/// `--update` writes into the chain (`update`), so both read the same mapping.
+pub fn directions(chain: &cbd_protocol::DhChain, cand: Candidate) -> Vec<Vec<(Param, f64)>> {
+    let n = chain.joints.len();
+    let o = 4 * n;
+    let one = |k: usize| vec![(Param::Geometric(k), 1.0)];
+    match cand {
+        Candidate::JointZero(j) => vec![one(4 * j + 3)],
+        Candidate::LinkLength(l) => vec![one(4 * l)],
+        Candidate::LinkTwist(l) => vec![one(4 * l + 1)],
+        Candidate::EncoderScale(j) => {
+            vec![vec![(Param::Effect { kind: crate::effects::encoder_scale::KIND, site: Site::at(j), component: 0 }, 1.0)]]
+        }
+        Candidate::BaseShift => (0..3).map(|a| one(o + a)).collect(),
+        Candidate::ToolShift => (0..3).map(|a| one(o + 6 + a)).collect(),
+        Candidate::LengthScale => {
+            // d/ds of every length × s at s = 1: Σ length_k ∂/∂length_k.
+            let mut lengths: Vec<(Param, f64)> = Vec::new();
+            for (j, joint) in chain.joints.iter().enumerate() {
+                lengths.push((Param::Geometric(4 * j), joint.a));
+                lengths.push((Param::Geometric(4 * j + 2), joint.d));
+            }
+            lengths.extend((0..3).map(|a| (Param::Geometric(o + a), chain.base.translation[a])));
+            lengths.extend((0..3).map(|a| (Param::Geometric(o + 6 + a), chain.tool.translation[a])));
+            vec![lengths]
+        }
+    }
+}
+
 /// Each candidate's columns ∂prediction/∂parameter at the fresh rows, internal units per the
 /// parameter's own (lengths in the data's unit, angles in radians).
 pub fn candidate_columns(model: &Model, fresh: &Measurements, cands: &[Candidate]) -> Vec<Vec<Vec<f64>>> {
@@ -288,39 +318,28 @@ pub fn candidate_columns(model: &Model, fresh: &Measurements, cands: &[Candidate
     params.extend((0..n).map(|j| Param::Effect { kind: crate::effects::encoder_scale::KIND, site: Site::at(j), component: 0 }));
     let jac = jacobian(&model.nominal, fresh, &params);
     let norm = &model.normalisation;
-    let col = |k: usize| -> Vec<f64> { (0..jac.nrows()).map(|i| norm.length_to_internal(jac[(i, k)])).collect() };
-    let o = 4 * n;
-    cands
-        .iter()
-        .map(|c| match *c {
-            Candidate::JointZero(j) => vec![col(4 * j + 3)],
-            Candidate::LinkLength(l) => vec![col(4 * l)],
-            Candidate::LinkTwist(l) => vec![col(4 * l + 1)],
-            Candidate::EncoderScale(j) => vec![col(geometric + j)],
-            Candidate::BaseShift => (0..3).map(|a| col(o + a)).collect(),
-            Candidate::ToolShift => (0..3).map(|a| col(o + 6 + a)).collect(),
-            Candidate::LengthScale => {
-                // d/ds of every length × s at s = 1: Σ length_k ∂/∂length_k.
-                let mut lengths: Vec<(usize, f64)> = Vec::new();
-                for (j, joint) in chain.joints.iter().enumerate() {
-                    lengths.push((4 * j, joint.a));
-                    lengths.push((4 * j + 2, joint.d));
-                }
-                lengths.extend((0..3).map(|a| (o + a, chain.base.translation[a])));
-                lengths.extend((0..3).map(|a| (o + 6 + a, chain.tool.translation[a])));
+    let index = |p: &Param| match *p {
+        Param::Geometric(k) => k,
+        Param::Effect { site, .. } => geometric + site.index,
+    };
+    let column = |terms: &[(Param, f64)]| -> Vec<f64> {
+        match terms {
+            [(p, c)] if *c == 1.0 => (0..jac.nrows()).map(|i| norm.length_to_internal(jac[(i, index(p))])).collect(),
+            _ => {
                 let mut v = vec![0.0; jac.nrows()];
-                for (k, len) in lengths {
+                for (p, c) in terms {
                     for (i, x) in v.iter_mut().enumerate() {
-                        *x += len * norm.length_to_internal(jac[(i, k)]);
+                        *x += c * norm.length_to_internal(jac[(i, index(p))]);
                     }
                 }
-                vec![v]
+                v
             }
-        })
-        .collect()
+        }
+    };
+    cands.iter().map(|c| directions(chain, *c).iter().map(|terms| column(terms)).collect()).collect()
 }
 
-fn stack<'a>(fixed: &[Vec<f64>], more: impl Iterator<Item = &'a Vec<f64>>) -> Vec<Vec<f64>> {
+pub(super) fn stack<'a>(fixed: &[Vec<f64>], more: impl Iterator<Item = &'a Vec<f64>>) -> Vec<Vec<f64>> {
     fixed.iter().cloned().chain(more.cloned()).collect()
 }
 
@@ -350,7 +369,7 @@ fn identifiable(cinv: &Mat<f64>, f: &[Vec<f64>]) -> bool {
 }
 
 /// The GLS estimate β = (FᵀC⁻¹F)⁻¹FᵀC⁻¹r and its covariance (FᵀC⁻¹F)⁻¹.
-fn gls(cinv: &Mat<f64>, r: &[f64], f: &[Vec<f64>]) -> Option<(Vec<f64>, Mat<f64>)> {
+pub(super) fn gls(cinv: &Mat<f64>, r: &[f64], f: &[Vec<f64>]) -> Option<(Vec<f64>, Mat<f64>)> {
     if f.is_empty() {
         return Some((Vec::new(), Mat::zeros(0, 0)));
     }

@@ -41,6 +41,7 @@ pub(super) fn encode_checked(
         noise_sigma: opts.noise_sigma,
         configuration_kernel: opts.configuration_kernel.clone(),
         drift: None,
+        provenance: None,
     };
     let blob = cbd_protocol::encode_to_vec(&model).map_err(FitError::Encode)?;
     // Never hand out a blob the runtime does not reproduce.
