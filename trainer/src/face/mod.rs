@@ -5,10 +5,13 @@
 //! (`errln!`, which a program redirects with `crate::io::set_message_sink`), as every stage's do.
 
 mod arm;
+pub(crate) mod blob_rows;
+mod evaluate;
 mod fit;
 mod settings;
 
 pub use arm::{register_base_if_unknown, ArmModel};
+pub use evaluate::{evaluate, DecodedBlob, Evaluation};
 pub use fit::{fit, print_calibration, Calibration, FitSettings};
 pub use settings::PipelineOptions;
 
