@@ -150,14 +150,14 @@ impl PipelineOptions {
     /// The pipeline's settings for these flags.
     pub fn settings(&self) -> Result<crate::calibrate::Settings> {
         self.validate()?;
-        let mut s = crate::calibrate::Settings::default();
-        s.overrides = crate::calibrate::Overrides {
+        let overrides = crate::calibrate::Overrides {
             sigma: self.sigma,
             task_width: self.task_width,
             task_gamma: self.task_gamma,
             joint_b: self.joint_b,
             joint_gamma: self.gamma,
         };
+        let mut s = crate::calibrate::Settings { overrides, ..Default::default() };
         if let Some(method) = &self.integrator {
             s.integrator = Some(parse_integrator(method)?);
         }
