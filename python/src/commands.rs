@@ -105,7 +105,7 @@ fn run<T: Send>(py: Python<'_>, sources: &[(&str, &str)], work: impl FnOnce() ->
     py.detach(|| {
         guarded(|| {
             let _one = one_at_a_time();
-            let threads = cbd_trainer::cli::memory::workers_for_memory(cbd_trainer::cli::memory::available_bytes());
+            let threads = cbd_trainer::memory::workers_for_memory(cbd_trainer::memory::available_bytes());
             cbd_trainer::workers::run_in_pool(threads, || cbd_trainer::io::with_staged_outputs(work))
                 .map_err(cbd_trainer::Error::from)?
                 .map_err(Failure::from)
@@ -228,8 +228,8 @@ pub fn diagnose<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
     let arm = match &model {
-        Some(m) => cbd_trainer::cli::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string()))?,
-        None => cbd_trainer::cli::ArmModel::builtin_rr(),
+        Some(m) => cbd_trainer::face::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string()))?,
+        None => cbd_trainer::face::ArmModel::builtin_rr(),
     };
     let data = Data::of(&arm.spec, data, "data", "data (q, y)")?;
     let test = test.map(|t| Data::of(&arm.spec, t, "test", "test (q, y)")).transpose()?;

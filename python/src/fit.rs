@@ -1,8 +1,9 @@
-//! `cbd.fit`: the fit `cbd fit` runs (`cli::fit::fit_measurements`), with the data as arrays made
-//! measurements in memory (`csv_import::measurements_from_rows`) and the command's own arguments
-//! (`FitArgs`) read from the keywords — so the same data and flags give the same blob bytes.
+//! `cbd.fit`: the library's fit (`cbd_trainer::face::fit`, the one `cbd fit` calls), with the data
+//! as arrays made measurements in memory (`csv_import::measurements_from_rows`) and its settings
+//! (`FitSettings`, the command's flags) read from the keywords — so the same data and flags give the
+//! same blob bytes.
 
-use crate::commands::{text, typed_args};
+use crate::commands::typed_args;
 use crate::errors::{guarded, one_at_a_time, Failure};
 use crate::model::Model;
 use crate::model_file::{arrays_of, measurements, spec_of, ModelFile, ARRAYS};
@@ -27,19 +28,15 @@ pub fn fit(
     y: &Bound<'_, PyAny>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Model> {
-    // The data are the arrays (named so in messages), the blob is returned: neither is a file.
-    let mut given = vec![("data", text(py, ARRAYS)), ("out", text(py, "-"))];
-    if let Some(m) = &model {
-        given.push(("model", text(py, m.path.display().to_string())));
-    }
-    let fit_args: cbd_trainer::cli::fit::FitArgs = typed_args(py, "fit", options, &["model", "json"], &given)?;
+    // The data are the arrays and the blob is returned: neither is a file, nor an option here.
+    let settings: cbd_trainer::face::FitSettings = typed_args(py, "fit", options, &["model", "json", "data", "out"], &[])?;
     let (nominal, spec) = spec_of(model.as_deref())?;
     let (q, y) = arrays_of(&spec, q, Some(y))?;
     // The model answers in the arrays' units: the model file's columns (the built-in RR arm's are
     // the blob's own, radians and metres).
     let columns = model.as_ref().map(|m| (m.path.display().to_string(), nominal.clone(), crate::units::Columns { spec: spec.clone() }));
     // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
-    let arm = cbd_trainer::cli::ArmModel {
+    let arm = cbd_trainer::face::ArmModel {
         path: model.as_ref().map(|m| m.path.clone()),
         file: model.as_ref().map(|m| m.file.clone()),
         nominal,
@@ -49,10 +46,10 @@ pub fn fit(
         .detach(|| {
             guarded(|| {
                 let _one = one_at_a_time();
-                let threads = cbd_trainer::cli::memory::workers_for_memory(cbd_trainer::cli::memory::available_bytes());
+                let threads = cbd_trainer::memory::workers_for_memory(cbd_trainer::memory::available_bytes());
                 let fitted = cbd_trainer::workers::run_in_pool(threads, || {
                     let imported = measurements(ARRAYS, &spec, &q, y.as_ref())?;
-                    cbd_trainer::cli::fit::fit_measurements(&fit_args, &arm, imported)
+                    cbd_trainer::face::fit(&arm, &cbd_trainer::face::Dataset { source: ARRAYS.into(), imported }, &settings)
                 })
                 .map_err(cbd_trainer::Error::from)??;
                 Ok::<_, Failure>(fitted)

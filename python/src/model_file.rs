@@ -118,7 +118,7 @@ impl ModelFile {
 /// units; the built-in RR arm (q1, q2 in radians; x, y) for `None`.
 pub fn spec_of(model: Option<&ModelFile>) -> PyResult<(NominalModel, ColumnSpec)> {
     let Some(m) = model else {
-        let arm = cbd_trainer::cli::ArmModel::builtin_rr();
+        let arm = cbd_trainer::face::ArmModel::builtin_rr();
         return Ok((arm.nominal, arm.spec));
     };
     let spec = match m.file.measurements {

@@ -4,7 +4,8 @@
 //! (least squares, the Levenberg–Marquardt driver) → nominal models and memory → data import →
 //! simulation, flow (primal + tangent), reports → the kernels' expansions, the solver, parametric (DH)
 //! calibration → CbD's evidence → calibrate (the one pipeline) → diagnosis, planning, evaluation
-//! harnesses → the peers (kernel ridge) → the `cbd` CLI.
+//! harnesses → the peers (kernel ridge) → the library's face (`face`: a calibration's operations on
+//! parsed values) → the `cbd` CLI.
 
 /// `eprintln!` that never panics: a line to a closed or broken stderr (`cbd … 2>&1 | head -1`) is
 /// dropped, as `cli::print_line` ends quietly on a closed stdout. Every diagnostic of the crate and
@@ -41,6 +42,8 @@ pub mod evaluation;
 pub mod evidence;
 /// The fields in the kernels' own basis (docs/DESIGN.md §11).
 pub mod expansion;
+/// The library's face: fit, and what a front needs around it, on parsed values (issue 52).
+pub mod face;
 /// The control points' flow and its tangent (eq. 17, 19).
 pub mod flow;
 /// Reading inputs and writing outputs safely (atomic writes, no writes through links).

@@ -1,7 +1,7 @@
-//! What several commands share: their argument groups (the model file, CbD's hyperparameters and
-//! scheme) and the helpers behind them (CbD's fit for those flags, what a fit chose, a blob that
-//! does not fit its model). Commands import from here, from `blob_rows` (a blob read and evaluated on
-//! rows) and from `cli` itself, never from each other.
+//! What several commands share: their argument groups (the model file; the pipeline's options are
+//! the face's, `crate::face::PipelineOptions`) and the helpers behind them (the model file read from
+//! its flag, CbD's fit for those options, a blob that does not fit its model). Commands import from
+//! here, from `blob_rows` (a blob read and evaluated on rows) and from `cli` itself, never from each other.
 
 use crate::error::{Error, Result};
 
@@ -14,60 +14,15 @@ pub struct ModelArgs {
     pub model: Option<std::path::PathBuf>,
 }
 
-/// Hyperparameters and scheme; anything left unset is chosen by the pipeline (`crate::calibrate`):
-/// CbD's own evidence on the training rows, then the scheme by cross-validation. Every length is in
-/// the data's unit and means the same in `fit`, `compare`, `diagnose` and `demo`; a value given
-/// replaces that one hyperparameter of the search's result.
-#[derive(Debug, Clone, clap::Args, serde::Deserialize)]
-pub struct SolverArgs {
-    /// The configuration-dependent task field γ_C exp(Σ_d c_d (cos(q_d − q'_d) − 1)) exp(−|x − x'|²/2a_C²) I
-    /// beside CbD's two fields (docs/DESIGN.md §16): auto keeps it when CbD's evidence gains more than
-    /// ½ ln(N m) nats per added hyperparameter, searched after the geometry choice; on always adds it,
-    /// off never. With it the blob is Euler × 1 in the kernel form (no scheme choice, no expansion).
-    #[arg(long, value_enum, default_value_t = defaults::configuration_field())]
-    #[serde(default = "defaults::configuration_field")]
-    pub configuration_field: crate::calibrate::ConfigurationField,
-    /// Measurement noise σ per coordinate, in the data's length unit.
-    #[arg(long)]
-    pub sigma: Option<f64>,
-    /// Task-space kernel width a, in the data's length unit.
-    #[arg(long)]
-    pub task_width: Option<f64>,
-    /// Task-space field variance γ_W, in the data's length unit squared.
-    #[arg(long)]
-    pub task_gamma: Option<f64>,
-    /// Joint kernel b of every revolute joint (periodic kernel exp(b (cos Δ − 1))).
-    #[arg(long)]
-    pub joint_b: Option<f64>,
-    /// Joint-space field variance γ_V (rad² for revolute joints).
-    #[arg(long)]
-    pub gamma: Option<f64>,
-    /// euler, heun or rk4 (default euler).
-    #[arg(long)]
-    pub integrator: Option<String>,
-    /// Integration steps; training optimises exactly this discrete flow (default: 1 or 2, chosen
-    /// by cross-validation on the training rows).
-    #[arg(long)]
-    pub steps: Option<u16>,
-    #[arg(long, default_value_t = defaults::max_iterations())]
-    #[serde(default = "defaults::max_iterations")]
-    pub max_iterations: usize,
-    /// Drop the −(div v) P term from the momentum law.
-    #[arg(long)]
-    #[serde(default)]
-    pub no_divergence: bool,
-    /// auto, dense or eigenspace: search all N·m momenta (O(N³) per iteration), or K_lin's dominant
-    /// eigenspace (O(N² r), r independent of N for smooth kernels); auto picks by problem size and spectrum.
-    #[arg(long)]
-    pub solver: Option<String>,
-    /// How the runtime evaluates the fields: auto (the kernels' own expansion when it is shorter
-    /// than the momenta or the momenta cancel), kernel (points and momenta only) or expansion.
-    #[arg(long, value_enum, default_value_t = crate::expansion::Representation::default())]
-    #[serde(default)]
-    pub representation: crate::expansion::Representation,
-    #[arg(long)]
-    #[serde(default)]
-    pub quiet: bool,
+impl crate::face::ArmModel {
+    /// Reads `args.model` (the command's one parse of its model file), or takes the built-in RR arm.
+    /// Reading the file is the command's part: the face's own functions take the arm parsed.
+    pub fn read(args: &ModelArgs) -> Result<Self> {
+        match &args.model {
+            Some(path) => Self::from_file(path, crate::data::model_file::load_model_file(path)?),
+            None => Ok(Self::builtin_rr()),
+        }
+    }
 }
 
 /// A list flag given as one value or as a list (`effect="…"` or `effect=["…", "…"]`).
@@ -87,18 +42,6 @@ pub fn one_or_many<'de, D: serde::Deserializer<'de>>(deserializer: D) -> std::re
 /// The flags' defaults, one source for the command line (clap) and the Python package's keyword
 /// arguments (serde): `cli::settings_tests` checks that both read the same arguments from nothing.
 pub mod defaults {
-    pub fn configuration_field() -> crate::calibrate::ConfigurationField {
-        crate::calibrate::ConfigurationField::Auto
-    }
-
-    pub fn max_iterations() -> usize {
-        30
-    }
-
-    pub fn geometry() -> crate::calibrate::Geometry {
-        crate::calibrate::Geometry::Auto
-    }
-
     pub fn harmonics() -> u8 {
         3
     }
@@ -132,152 +75,6 @@ pub mod defaults {
     }
 }
 
-/// `--solver` values.
-pub fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod> {
-    use crate::solver::SolverMethod;
-    match name {
-        "auto" => Ok(SolverMethod::Auto),
-        "dense" => Ok(SolverMethod::Dense),
-        "eigenspace" => Ok(SolverMethod::Eigenspace),
-        other => Err(Error::InvalidInput(format!("--solver must be auto, dense or eigenspace, got {other:?}"))),
-    }
-}
-
-/// Largest `--sigma` accepted, relative to the training positions' spread ([`SolverArgs::check_against`]).
-pub const MAX_SIGMA_PER_EXTENT: f64 = 1e3;
-
-impl SolverArgs {
-    /// Rejects out-of-range values before any work, naming the flag.
-    pub fn validate(&self) -> Result<()> {
-        for (flag, value) in [
-            ("--sigma", self.sigma),
-            ("--task-width", self.task_width),
-            ("--task-gamma", self.task_gamma),
-            ("--joint-b", self.joint_b),
-            ("--gamma", self.gamma),
-        ] {
-            if let Some(v) = value {
-                // Squares and products of two such values must stay finite (σ², γ |Dk0|², a²).
-                if let Some(refusal) = crate::limits::positive_scale_out_of_bounds(flag, v) {
-                    return Err(Error::InvalidInput(refusal));
-                }
-            }
-        }
-        if let Some(steps) = self.steps {
-            if steps == 0 || steps > cbd_protocol::MAX_STEPS {
-                return Err(Error::InvalidInput(format!("--steps must be between 1 and {}, got {steps}", cbd_protocol::MAX_STEPS)));
-            }
-        }
-        if let Some(method) = &self.integrator {
-            parse_integrator(method)?;
-        }
-        if let Some(solver) = &self.solver {
-            parse_solver(solver)?;
-        }
-        if self.max_iterations == 0 {
-            return Err(Error::InvalidInput("--max-iterations must be at least 1".into()));
-        }
-        Ok(())
-    }
-
-    /// `--sigma` against the training rows at `path`: a noise σ over [`MAX_SIGMA_PER_EXTENT`] ×
-    /// the positions' spread (RMS distance from their mean) would swamp every measurement — a σ
-    /// given in another unit — and the fit would fail later with a message about diverging flows.
-    pub fn check_against(&self, data: &crate::data::Measurements, path: &std::path::Path) -> Result<()> {
-        let (Some(sigma), m) = (self.sigma, data.task_dim) else { return Ok(()) };
-        let n = data.len();
-        if n == 0 || m == 0 {
-            return Ok(());
-        }
-        let mean: Vec<f64> = (0..m).map(|c| (0..n).map(|i| data.position(i)[c]).sum::<f64>() / n as f64).collect();
-        let spread = ((0..n).map(|i| data.position(i).iter().zip(&mean).map(|(p, c)| (p - c) * (p - c)).sum::<f64>()).sum::<f64>()
-            / n as f64)
-            .sqrt();
-        if spread > 0.0 && sigma > MAX_SIGMA_PER_EXTENT * spread {
-            return Err(Error::InvalidInput(format!(
-                "--sigma {} is over {MAX_SIGMA_PER_EXTENT} × the spread of {}'s positions (RMS {} from their mean): a noise that size would swamp every measurement; give σ in the data's length unit",
-                crate::error::as_written(sigma),
-                path.display(),
-                crate::error::number(spread)
-            )));
-        }
-        Ok(())
-    }
-
-    /// The pipeline's settings for these flags.
-    pub fn settings(&self) -> Result<crate::calibrate::Settings> {
-        self.validate()?;
-        let mut s = crate::calibrate::Settings::default();
-        s.overrides = crate::calibrate::Overrides {
-            sigma: self.sigma,
-            task_width: self.task_width,
-            task_gamma: self.task_gamma,
-            joint_b: self.joint_b,
-            joint_gamma: self.gamma,
-        };
-        if let Some(method) = &self.integrator {
-            s.integrator = Some(parse_integrator(method)?);
-        }
-        s.steps = self.steps;
-        s.configuration = self.configuration_field;
-        s.solver.max_iterations = self.max_iterations;
-        if let Some(solver) = &self.solver {
-            s.solver.method = parse_solver(solver)?;
-        }
-        s.solver.verbose = !self.quiet;
-        s.solver.representation = self.representation;
-        if self.no_divergence {
-            s.solver.law = cbd_protocol::MomentumLaw::HamiltonianWithoutDivergence;
-        }
-        Ok(s)
-    }
-}
-
-/// The integrator a command-line name stands for.
-pub fn parse_integrator(name: &str) -> Result<cbd_protocol::IntegratorMethod> {
-    match name.to_ascii_lowercase().as_str() {
-        "euler" => Ok(cbd_protocol::IntegratorMethod::Euler),
-        "heun" => Ok(cbd_protocol::IntegratorMethod::Heun),
-        "rk4" => Ok(cbd_protocol::IntegratorMethod::Rk4),
-        other => Err(Error::InvalidInput(format!("unknown integrator `{other}` (expected euler, heun or rk4)"))),
-    }
-}
-
-/// Prints what the pipeline chose (stderr) and its warnings.
-pub fn print_calibration(c: &crate::calibrate::Calibration, quiet: bool) {
-    if let Some(dh) = &c.dh {
-        errln!("DH calibration: {} iterations, rank {}/{}, training RMS {:.4e}", dh.iterations, dh.rank, dh.n_parameters, dh.final_rms);
-    }
-    if !quiet {
-        errln!("{}", c.geometry.describe());
-        if let Some(f) = &c.configuration {
-            errln!("{}", f.describe());
-        }
-        match &c.evidence {
-            Some(e) => errln!(
-                "hyperparameters (CbD evidence {:.2} on {} rows, {} evaluations, {:.2} s): {}",
-                e.log_evidence,
-                e.rows_used,
-                e.evaluations,
-                e.seconds,
-                c.describe_hyperparameters()
-            ),
-            None => errln!("hyperparameters: {}", c.describe_hyperparameters()),
-        }
-        let cv: Vec<String> =
-            c.scheme.cross_validation.iter().map(|(i, e)| format!("{} {e:.3e}", crate::calibrate::scheme::label(*i))).collect();
-        errln!(
-            "scheme: {} ({}{})",
-            c.scheme.label(),
-            c.scheme.chosen_by,
-            if cv.is_empty() { String::new() } else { format!(": held-out RMS {}", cv.join(", ")) }
-        );
-    }
-    for w in &c.warnings {
-        errln!("warning: {w}");
-    }
-}
-
 /// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
 /// gives (nominal, DH-calibrated, with effects), deformed as given (`--geometry nominal`): the blob
 /// `cbd fit --geometry nominal` writes for that model, data and flags.
@@ -289,7 +86,7 @@ pub fn cbd_fitter(
           data: &crate::data::Measurements|
           -> crate::Result<crate::evaluation::correction::FittedCorrection> {
         let calibration = crate::calibrate::calibrate(nominal, data, &settings)?;
-        print_calibration(&calibration, !settings.solver.verbose);
+        crate::face::print_calibration(&calibration, !settings.solver.verbose);
         let mut note = calibration.describe_hyperparameters();
         if let Some(e) = &calibration.evidence {
             note += &format!("; evidence {:.2} on {} rows ({:.2} s)", e.log_evidence, e.rows_used, e.seconds);

@@ -35,7 +35,7 @@ pub struct CompareArgs {
     /// CbD's hyperparameters and scheme, as in `cbd fit` (chosen by the pipeline when unset).
     #[command(flatten)]
     #[serde(flatten)]
-    pub solver: crate::cli::args::SolverArgs,
+    pub solver: crate::face::PipelineOptions,
 }
 
 /// The floor of a table's rows: σ of the `row` `cbd fit` writes (its evidence's, on the training

@@ -32,7 +32,7 @@ pub struct DemoArgs {
     #[arg(long, default_value = "evidence")]
     pub hyperparameters: String,
     #[command(flatten)]
-    pub solver: crate::cli::args::SolverArgs,
+    pub solver: crate::face::PipelineOptions,
 }
 
 #[derive(Debug, Serialize)]
@@ -156,7 +156,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
     settings.solver.threads = threads;
     let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings))?;
-    crate::cli::args::print_calibration(&calibration, args.solver.quiet);
+    crate::face::print_calibration(&calibration, args.solver.quiet);
     let (opts, fit) = (&calibration.options, &calibration.fit);
     crate::cli::write_atomically(&args.out, &fit.blob)?;
 

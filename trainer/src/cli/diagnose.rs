@@ -50,7 +50,7 @@ pub struct DiagnoseArgs {
     /// CbD's hyperparameters and scheme for the CbD rows, as in `cbd fit`.
     #[command(flatten)]
     #[serde(flatten)]
-    pub solver: crate::cli::args::SolverArgs,
+    pub solver: crate::face::PipelineOptions,
 }
 
 /// The flags' values, before any work.

@@ -29,7 +29,7 @@ pub mod simulate;
 
 pub use args::ModelArgs;
 
-use crate::error::{Context, Result};
+use crate::error::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Debug, Parser)]
@@ -67,98 +67,6 @@ pub enum Command {
     /// Where to measure next: poses within the joint limits chosen for identifiability and CbD's
     /// posterior variance, with the predicted RMS error after each (learning curve).
     Plan(plan::PlanArgs),
-}
-
-/// The arm a command works on, read once (issue 52: one parse of the model file per command): the
-/// model file as parsed — or, without `--model`, the built-in RR arm — with its nominal model and
-/// how to read its measurement CSV files. Every command reads it from its `ModelArgs` first and
-/// takes everything else it needs from it (units, `register = true`), never from the file again.
-#[derive(Debug, Clone)]
-pub struct ArmModel {
-    /// The model file's path as given (`None`: the built-in arm).
-    pub path: Option<std::path::PathBuf>,
-    /// The parsed model file (`None`: the built-in arm).
-    pub file: Option<crate::data::model_file::ModelFile>,
-    pub nominal: cbd_protocol::NominalModel,
-    pub spec: crate::data::csv_import::ColumnSpec,
-}
-
-impl ArmModel {
-    /// Reads `args.model` (the one parse), or takes the built-in RR arm.
-    pub fn read(args: &ModelArgs) -> Result<ArmModel> {
-        match &args.model {
-            Some(path) => ArmModel::from_file(path, crate::data::model_file::load_model_file(path)?),
-            None => Ok(ArmModel::builtin_rr()),
-        }
-    }
-
-    /// A model file already parsed (the Python package's `ModelFile`).
-    pub fn from_file(path: &std::path::Path, file: crate::data::model_file::ModelFile) -> Result<ArmModel> {
-        let spec = file.column_spec()?;
-        Ok(ArmModel { path: Some(path.to_path_buf()), nominal: file.nominal.clone(), spec, file: Some(file) })
-    }
-
-    /// The paper's planar RR arm (columns q1, q2 in radians, x, y in metres; rows unordered).
-    pub fn builtin_rr() -> ArmModel {
-        use crate::data::model_file::{AngleUnit, LengthUnit};
-        ArmModel {
-            path: None,
-            file: None,
-            nominal: crate::simulate::rr::nominal(),
-            spec: crate::data::csv_import::ColumnSpec {
-                joint_columns: vec!["q1".into(), "q2".into()],
-                position_columns: vec!["x".into(), "y".into()],
-                joint_kinds: vec![cbd_protocol::JointKind::Revolute; 2],
-                angle_unit: AngleUnit::Rad,
-                length_unit: LengthUnit::M,
-                model_length_unit: LengthUnit::M,
-                min_rows: 2,
-                joint_limits: crate::data::csv_import::default_joint_limits(&[cbd_protocol::JointKind::Revolute; 2]),
-                repeat_tolerance: None,
-                joint_map: None,
-                planar_frame: None,
-                tool_points: Vec::new(),
-                orientation_columns: None,
-                // The paper's benchmark is a grid: its rows carry no time order.
-                order: crate::data::RowOrder::Unordered,
-                range_hint:
-                    "the built-in arm's joints are read within one turn each way; a model file (--model) may declare `joint_limits`",
-            },
-        }
-    }
-
-    /// Whether the model file declares its base unknown (`base = { register = true }`): the
-    /// nominal is then in the frame registered on the training data.
-    pub fn register_base(&self) -> bool {
-        self.file.as_ref().is_some_and(|f| f.register_base)
-    }
-
-    /// The model's length unit's name (the data are read into it).
-    pub fn length_unit(&self) -> &'static str {
-        self.spec.model_length_unit.name()
-    }
-
-    /// The model file's name for messages, or "the built-in RR arm".
-    pub fn name(&self) -> String {
-        self.path.as_ref().map_or("the built-in RR arm".to_string(), |p| p.display().to_string())
-    }
-}
-
-/// Registers the nominal's base on the training `data` when `arm`'s model file declares it unknown
-/// (`[chain] base = { register = true }`), and says so on stderr: from here on "nominal" is the
-/// nominal in the registered frame.
-pub fn register_base_if_unknown(
-    arm: &ArmModel,
-    nominal: &mut cbd_protocol::NominalModel,
-    data: &crate::data::Measurements,
-    data_path: &std::path::Path,
-) -> Result<Option<crate::parametric::base_registration::Registration>> {
-    if !arm.register_base() {
-        return Ok(None);
-    }
-    let r = crate::parametric::base_registration::register_and_refine(nominal, data).context(data_path.display())?;
-    errln!("{}: {}", data_path.display(), r.describe(arm.length_unit()));
-    Ok(Some(r))
 }
 
 /// Chooses how glibc malloc keeps freed memory for this process (`crate::solver::allocator`):
@@ -219,7 +127,8 @@ pub fn exit_code() -> i32 {
 }
 
 // Output files (atomic writes, `-` for standard output) live in `crate::io`, the memory estimates
-// in `crate::memory`; the commands reach them here.
+// in `crate::memory`, the arm a command works on in `crate::face`; the commands reach them here.
+pub use crate::face::{register_base_if_unknown, ArmModel};
 pub use crate::io::{check_output, is_stdout, write_atomically, STDOUT};
 pub use crate::memory;
 
@@ -262,8 +171,8 @@ mod settings_tests {
     fn keyword_defaults_are_the_flags_defaults() {
         use serde_json::json;
         let Command::Fit(flags) = parsed(&["fit", "--data", "d.csv", "--out", "o.blob"]) else { unreachable!() };
-        let named: fit::FitArgs = keywords(json!({"data": "d.csv", "out": "o.blob"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::FitSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
         let Command::Compare(flags) = parsed(&["compare", "--model", "m.toml", "--train", "a.csv", "--test", "b.csv"]) else {
             unreachable!()
         };
@@ -301,12 +210,11 @@ mod settings_tests {
         ]) else {
             unreachable!()
         };
-        let named: fit::FitArgs = keywords(json!({
-            "data": "d.csv", "out": "o.blob", "model": "m.toml", "dh_first": true, "max_rows": 500, "sigma": 1e-3,
-            "configuration_field": "off", "representation": "kernel", "quiet": true,
+        let named: crate::face::FitSettings = keywords(json!({
+            "dh_first": true, "max_rows": 500, "sigma": 1e-3, "configuration_field": "off", "representation": "kernel", "quiet": true,
         }))
         .unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
         let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv", "--effect", "backlash", "--robot", "six"]) else {
             unreachable!()
         };
@@ -319,13 +227,13 @@ mod settings_tests {
     #[test]
     fn unknown_or_mistyped_keywords_are_refused() {
         use serde_json::json;
-        let e = keywords::<fit::FitArgs>(json!({"data": "d", "out": "o", "max_rowz": 3})).unwrap_err();
+        let e = keywords::<crate::face::FitSettings>(json!({"max_rowz": 3})).unwrap_err();
         assert!(e.contains("max_rowz"), "{e}");
         let e = keywords::<diagnose::DiagnoseArgs>(json!({"data": "d", "harmonic": 3})).unwrap_err();
         assert!(e.contains("harmonic"), "{e}");
         let e = keywords::<simulate::SimulateArgs>(json!({"out": "o", "out_dir": "x"})).unwrap_err();
         assert!(e.contains("out_dir"), "{e}");
-        assert!(keywords::<fit::FitArgs>(json!({"data": "d", "out": "o", "max_rows": "many"})).is_err());
-        assert!(keywords::<fit::FitArgs>(json!({"data": "d", "out": "o", "sigma": "small"})).is_err());
+        assert!(keywords::<crate::face::FitSettings>(json!({"max_rows": "many"})).is_err());
+        assert!(keywords::<crate::face::FitSettings>(json!({"sigma": "small"})).is_err());
     }
 }
