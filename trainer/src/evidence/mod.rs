@@ -169,7 +169,11 @@ fn choose(
         .then(|| table_of(&used.subset(&coarse_rows), geometry_used.as_ref().map(|g| g.subset(&coarse_rows)).as_ref()));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {
-        let mut found: Vec<_> = from.iter().filter_map(|(_, p)| minimise(table, &lower, &upper, p, iterations, &evaluations)).collect();
+        let mut found: Vec<_> =
+            search::from_each(from, &evaluations, |(_, p), counted| minimise(table, &lower, &upper, p, iterations, counted))
+                .into_iter()
+                .flatten()
+                .collect();
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found
     };
