@@ -305,4 +305,31 @@ mod tests {
         }
         assert!(found > 0);
     }
+
+    /// The starts searched on the workers give a serial loop's results, in the starts' order, and
+    /// its evaluation count, bit for bit, on one worker or two.
+    #[test]
+    fn starts_on_the_workers_are_a_serial_loops_search() {
+        let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 40, seed: 5 }, 2));
+        let norm = crate::evidence::normalisation_of(&data);
+        let table = PairTable::new(&rr::nominal(), &data, &norm);
+        let scales = DataScales::of(&table);
+        let (lower, upper) = scales.bounds(&table);
+        let starts: Vec<Vec<f64>> = scales.starts(&table).iter().map(Theta::pack).collect();
+        let serial_count = RefCell::new(0usize);
+        let serial: Vec<_> = starts.iter().map(|p| minimise(&table, &lower, &upper, p, 30, &serial_count)).collect();
+        for threads in [1, 2] {
+            let (found, count) = crate::workers::run_in_pool(threads, || {
+                search::counted(|c| search::from_each(&starts, c, |p, counted| minimise(&table, &lower, &upper, p, 30, counted)))
+            })
+            .unwrap();
+            assert_eq!(count, serial_count.borrow().to_owned(), "{threads} worker(s)");
+            for (a, b) in found.iter().zip(&serial) {
+                let bits =
+                    |r: &Option<(f64, Vec<f64>)>| r.as_ref().map(|(v, p)| (v.to_bits(), p.iter().map(|x| x.to_bits()).collect::<Vec<_>>()));
+                assert_eq!(bits(a), bits(b), "{threads} worker(s)");
+            }
+            assert_eq!(found.len(), serial.len());
+        }
+    }
 }
