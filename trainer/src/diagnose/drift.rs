@@ -27,7 +27,7 @@
 //! Drift is a nuisance of the measurement: it never enters a model the runtime evaluates.
 
 use crate::data::Measurements;
-use crate::evidence::search::{minimise, Criterion};
+use crate::evidence::search::{from_each, minimise, Criterion};
 use faer::linalg::solvers::{DenseSolveCore, Solve};
 use faer::{Mat, MatRef, Side};
 use serde::Serialize;
@@ -461,14 +461,19 @@ pub fn drift_test(
     // each restarted from where it stopped until a restart gains less
     // than RESTART_GAIN: L-BFGS stops on a small change of the value, which a backtracked step
     // along a curved valley of the widths also gives, well before the optimum.
+    // The starts, and the continued ones, each on the command's workers (`from_each`: a serial
+    // loop's results, bit for bit; the test's likelihood runs on one thread).
     let best = |criterion: &Likelihood, lower: &[f64], upper: &[f64], starts: &[Vec<f64>], keep: usize| {
-        let run = |start: &[f64], iterations: u64| minimise(criterion, lower, upper, start, iterations, &evaluations);
-        let mut screened: Vec<(f64, Vec<f64>)> = starts.iter().filter_map(|start| run(start, SCREEN_ITERATIONS)).collect();
+        let run = |start: &[f64], iterations: u64, counted: &RefCell<usize>| minimise(criterion, lower, upper, start, iterations, counted);
+        let mut screened: Vec<(f64, Vec<f64>)> =
+            from_each(starts, &evaluations, |start, counted| run(start, SCREEN_ITERATIONS, counted)).into_iter().flatten().collect();
         screened.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut found = screened.first()?.clone();
-        for (mut value, mut at) in screened.into_iter().take(keep) {
+        screened.truncate(keep);
+        let continued = from_each(&screened, &evaluations, |(value, at), counted| {
+            let (mut value, mut at) = (*value, at.clone());
             for _ in 0..RESTARTS {
-                match run(&at, SEARCH_ITERATIONS) {
+                match run(&at, SEARCH_ITERATIONS, counted) {
                     Some(next) if next.0 < value - RESTART_GAIN => (value, at) = next,
                     Some(next) if next.0 < value => {
                         (value, at) = next;
@@ -477,6 +482,9 @@ pub fn drift_test(
                     _ => break,
                 }
             }
+            (value, at)
+        });
+        for (value, at) in continued {
             if value < found.0 {
                 found = (value, at);
             }

@@ -4,7 +4,7 @@
 //! it gains more than ½ ln(N m) nats per added hyperparameter (the BIC's price: the plain model is
 //! the term's γ_C → 0, so the richer family never scores lower at its optimum).
 
-use super::search::{minimise, Criterion};
+use super::search::{counted, from_each, minimise, Criterion};
 use super::starts::DataScales;
 use super::table::{ConfigTheta, PairTable, Theta};
 use super::{evidence_rows, CbdHyperparameters, EvidenceError, EvidenceOptions};
@@ -176,30 +176,40 @@ pub fn search_configuration_term(
     // start on the evidence's rows. A start far from its optimum spends most of its evaluations
     // climbing (UR5: 100–250 on every row for a plain start, 80–390 for a term's), which the medium
     // rows do at an eighth of the cost; the evidence's rows then only finish it (30–70).
-    let staged = |from: &[Vec<f64>], keep: usize, lower: &[f64], upper: &[f64]| -> Vec<(f64, Vec<f64>)> {
+    // Each start's searches run on the command's workers (`from_each`), the results in the starts'
+    // order, as a serial loop's.
+    let staged = |from: &[Vec<f64>], keep: usize, lower: &[f64], upper: &[f64], evaluations: &RefCell<usize>| -> Vec<(f64, Vec<f64>)> {
         let full = Tight(&table);
+        let to_the_end = |from: &[Vec<f64>]| -> Vec<(f64, Vec<f64>)> {
+            from_each(from, evaluations, |p, counted| minimise_restarted(&full, lower, upper, p, long, counted))
+                .into_iter()
+                .flatten()
+                .collect()
+        };
         let Some(medium) = &medium else {
-            return from.iter().filter_map(|p| minimise_restarted(&full, lower, upper, p, long, &evaluations)).collect();
+            return to_the_end(from);
         };
         let medium = Tight(medium);
-        let mut scored: Vec<(f64, Vec<f64>)> = from
-            .iter()
-            .filter_map(|p| minimise_restarted(&medium, lower, upper, p, long, &evaluations))
-            .filter_map(|(_, p)| {
-                *evaluations.borrow_mut() += 1;
-                table.nlml_and_gradient(&p).map(|(v, _)| (v, p))
-            })
-            .collect();
+        let mut scored: Vec<(f64, Vec<f64>)> = from_each(from, evaluations, |p, counted| {
+            let (_, p) = minimise_restarted(&medium, lower, upper, p, long, counted)?;
+            *counted.borrow_mut() += 1;
+            table.nlml_and_gradient(&p).map(|(v, _)| (v, p))
+        })
+        .into_iter()
+        .flatten()
+        .collect();
         scored.sort_by(|a, b| a.0.total_cmp(&b.0));
-        scored.into_iter().take(keep).filter_map(|(_, p)| minimise_restarted(&full, lower, upper, &p, long, &evaluations)).collect()
+        let kept: Vec<Vec<f64>> = scored.into_iter().take(keep).map(|(_, p)| p).collect();
+        to_the_end(&kept)
     };
     let scale_starts: Vec<Vec<f64>> = plain_starts[1..].to_vec();
-    let mut plain_found: Vec<(f64, Vec<f64>)> =
-        minimise_restarted(&plain_tight, &plain_lower, &plain_upper, &plain_starts[0], long, &evaluations)
-            .into_iter()
-            .chain(staged(&scale_starts, PLAIN_CONTINUED, &plain_lower, &plain_upper))
-            .chain(plain_at)
-            .collect();
+    // The plain θ given refined beside the scale starts' stages.
+    let ((from_given, given_count), (from_scales, scales_count)) = rayon::join(
+        || counted(|c| minimise_restarted(&plain_tight, &plain_lower, &plain_upper, &plain_starts[0], long, c)),
+        || counted(|c| staged(&scale_starts, PLAIN_CONTINUED, &plain_lower, &plain_upper, c)),
+    );
+    *evaluations.borrow_mut() += given_count + scales_count;
+    let mut plain_found: Vec<(f64, Vec<f64>)> = from_given.into_iter().chain(from_scales).chain(plain_at).collect();
     plain_found.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (plain_nlml, best_plain) = plain_found.into_iter().next().ok_or(EvidenceError::NoValidSetting(LikelihoodSearch::CbdEvidence))?;
     let best_plain_theta = Theta::unpack(&best_plain, n);
@@ -248,18 +258,19 @@ pub fn search_configuration_term(
         );
     }
     // Screening runs each start once; refinement restarts L-BFGS while it gains.
-    let run = |table: &PairTable, from: &[Vec<f64>], iterations: u64, restarted: bool| -> Vec<(f64, Vec<f64>)> {
-        let table = Tight(table);
-        let mut found: Vec<_> = from
-            .iter()
-            .filter_map(|p| match restarted {
-                true => minimise_restarted(&table, &lower, &upper, p, iterations, &evaluations),
-                false => minimise(&table, &lower, &upper, p, iterations, &evaluations),
+    let run =
+        |table: &PairTable, from: &[Vec<f64>], iterations: u64, restarted: bool, evaluations: &RefCell<usize>| -> Vec<(f64, Vec<f64>)> {
+            let table = Tight(table);
+            let mut found: Vec<_> = from_each(from, evaluations, |p, counted| match restarted {
+                true => minimise_restarted(&table, &lower, &upper, p, iterations, counted),
+                false => minimise(&table, &lower, &upper, p, iterations, counted),
             })
+            .into_iter()
+            .flatten()
             .collect();
-        found.sort_by(|a, b| a.0.total_cmp(&b.0));
-        found
-    };
+            found.sort_by(|a, b| a.0.total_cmp(&b.0));
+            found
+        };
     // Screened on the coarse rows; the screened starts run to the end on the medium rows and the best
     // two (scored on the evidence's rows) refined to the end there (issue 49 item 4: the UR5's basins
     // are close, so more than one goes on).
@@ -274,7 +285,7 @@ pub fn search_configuration_term(
     let screened: Vec<Vec<f64>> = match &coarse {
         Some(c) => {
             let best = |group: &[Vec<f64>], keep: usize| -> Vec<Vec<f64>> {
-                run(c, group, options.screening_iterations, false).into_iter().take(keep).map(|(_, p)| p).collect()
+                run(c, group, options.screening_iterations, false, &evaluations).into_iter().take(keep).map(|(_, p)| p).collect()
             };
             let mut screened = best(&given_group, REFINED);
             screened.extend(best(&optimum_group, REFINED_ON_THE_OPTIMUM));
@@ -286,8 +297,13 @@ pub fn search_configuration_term(
     // on the plain θ given it is the plain member searched again, which the plain search above did).
     let nested_on_full: Vec<Vec<f64>> = if coarse.is_some() { vec![nested] } else { Vec::new() };
     let refined_all: Vec<(f64, Vec<f64>)> = {
-        let mut found = staged(&screened, TERM_CONTINUED, &lower, &upper);
-        found.extend(run(&table, &nested_on_full, long, true));
+        // The nested model's refinement beside the screened starts' stages.
+        let ((mut found, staged_count), (nested, nested_count)) = rayon::join(
+            || counted(|c| staged(&screened, TERM_CONTINUED, &lower, &upper, c)),
+            || counted(|c| run(&table, &nested_on_full, long, true, c)),
+        );
+        *evaluations.borrow_mut() += staged_count + nested_count;
+        found.extend(nested);
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found
     };

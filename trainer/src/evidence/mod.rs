@@ -169,7 +169,11 @@ fn choose(
         .then(|| table_of(&used.subset(&coarse_rows), geometry_used.as_ref().map(|g| g.subset(&coarse_rows)).as_ref()));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {
-        let mut found: Vec<_> = from.iter().filter_map(|(_, p)| minimise(table, &lower, &upper, p, iterations, &evaluations)).collect();
+        let mut found: Vec<_> =
+            search::from_each(from, &evaluations, |(_, p), counted| minimise(table, &lower, &upper, p, iterations, counted))
+                .into_iter()
+                .flatten()
+                .collect();
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found
     };
@@ -300,5 +304,32 @@ mod tests {
             found += 1;
         }
         assert!(found > 0);
+    }
+
+    /// The starts searched on the workers give a serial loop's results, in the starts' order, and
+    /// its evaluation count, bit for bit, on one worker or two.
+    #[test]
+    fn starts_on_the_workers_are_a_serial_loops_search() {
+        let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 40, seed: 5 }, 2));
+        let norm = crate::evidence::normalisation_of(&data);
+        let table = PairTable::new(&rr::nominal(), &data, &norm);
+        let scales = DataScales::of(&table);
+        let (lower, upper) = scales.bounds(&table);
+        let starts: Vec<Vec<f64>> = scales.starts(&table).iter().map(Theta::pack).collect();
+        let serial_count = RefCell::new(0usize);
+        let serial: Vec<_> = starts.iter().map(|p| minimise(&table, &lower, &upper, p, 30, &serial_count)).collect();
+        for threads in [1, 2] {
+            let (found, count) = crate::workers::run_in_pool(threads, || {
+                search::counted(|c| search::from_each(&starts, c, |p, counted| minimise(&table, &lower, &upper, p, 30, counted)))
+            })
+            .unwrap();
+            assert_eq!(count, serial_count.borrow().to_owned(), "{threads} worker(s)");
+            for (a, b) in found.iter().zip(&serial) {
+                let bits =
+                    |r: &Option<(f64, Vec<f64>)>| r.as_ref().map(|(v, p)| (v.to_bits(), p.iter().map(|x| x.to_bits()).collect::<Vec<_>>()));
+                assert_eq!(bits(a), bits(b), "{threads} worker(s)");
+            }
+            assert_eq!(found.len(), serial.len());
+        }
     }
 }

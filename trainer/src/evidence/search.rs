@@ -134,6 +134,30 @@ pub(crate) fn minimise(
     (value < INFEASIBLE).then_some((value * table.observations() as f64, param))
 }
 
+/// `search` from each of `starts` on the command's workers, the results in `starts`' order, their
+/// likelihood evaluations added to `evaluations`. The searches share nothing else (each has its own
+/// L-BFGS state and cache; the likelihoods' factorisations split in fixed pieces), so the results
+/// are a serial loop's, bit for bit, on one worker or two; the starts of a search are what it spends
+/// its time on, and one search keeps a second core only partly busy.
+pub(crate) fn from_each<T: Sync, R: Send>(
+    starts: &[T],
+    evaluations: &RefCell<usize>,
+    search: impl Fn(&T, &RefCell<usize>) -> R + Sync,
+) -> Vec<R> {
+    use rayon::prelude::*;
+    let found: Vec<(R, usize)> = starts.par_iter().with_max_len(1).map(|start| counted(|evaluations| search(start, evaluations))).collect();
+    *evaluations.borrow_mut() += found.iter().map(|(_, count)| count).sum::<usize>();
+    found.into_iter().map(|(result, _)| result).collect()
+}
+
+/// `search`'s result and the likelihood evaluations it counted: a search run beside others (on
+/// another worker) counts on its own, and the caller adds the counts.
+pub(crate) fn counted<R>(search: impl FnOnce(&RefCell<usize>) -> R) -> (R, usize) {
+    let evaluations = RefCell::new(0);
+    let result = search(&evaluations);
+    (result, evaluations.into_inner())
+}
+
 /// Test helper: `criterion`'s analytic gradient at `p` against central differences (step 1e-5 in each
 /// log parameter), within `relative` of max(|difference quotient|, 1).
 #[cfg(test)]
