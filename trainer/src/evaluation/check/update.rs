@@ -85,23 +85,25 @@ pub fn update(
     if !matches!(model.nominal, NominalModel::DhChain(_)) || fresh.task_dim != 3 {
         return Err(UpdateError::NotDhChain);
     }
+    let rows = FreshRows { model, fresh, measured, c, tangent };
     let poses = fresh.len() / fresh.points_per_pose.max(1);
     let everything: Vec<usize> = (0..poses).collect();
-    let all = refit(model, fresh, measured, c, tangent, groups, &everything)?;
-    let before = mean_error(&model.nominal, model, fresh, measured, c, tangent, &everything, &everything)?;
+    let mean = |e: Vec<f64>| e.iter().sum::<f64>() / e.len().max(1) as f64;
+    let all = rows.refit(groups, &everything)?;
+    let before = mean(rows.pose_errors(&model.nominal, &everything, &everything)?);
     // Held out: contiguous blocks of poses, each predicted by the update fitted on the others.
     let blocks = poses.min(BLOCKS);
     let mut errors = vec![0.0; poses];
     for b in 0..blocks {
         let held: Vec<usize> = (b * poses / blocks..(b + 1) * poses / blocks).collect();
         let kept: Vec<usize> = (0..poses).filter(|p| !held.contains(p)).collect();
-        let fold = refit(model, fresh, measured, c, tangent, groups, &kept)?;
-        for (p, e) in held.iter().zip(pose_errors(&fold.nominal, model, fresh, measured, c, tangent, &kept, &held)?) {
+        let fold = rows.refit(groups, &kept)?;
+        for (p, e) in held.iter().zip(rows.pose_errors(&fold.nominal, &kept, &held)?) {
             errors[*p] = e;
         }
     }
-    let held_out = errors.iter().sum::<f64>() / poses.max(1) as f64;
-    let in_sample = mean_error(&all.nominal, model, fresh, measured, c, tangent, &everything, &everything)?;
+    let held_out = mean(errors);
+    let in_sample = mean(rows.pose_errors(&all.nominal, &everything, &everything)?);
     let parent_hash: [u8; 32] = Sha256::digest(parent).into();
     let mut updated = model.clone();
     updated.nominal = all.nominal;
@@ -113,106 +115,83 @@ pub fn update(
     Ok(Updated { blob, parent, changes: all.changes, before, held_out, in_sample, blocks })
 }
 
-/// The groups refitted on `poses`.
+/// The groups refitted on some poses.
 struct Refit {
     nominal: NominalModel,
     changes: Vec<(Candidate, Vec<f64>)>,
 }
 
-fn refit(
-    model: &Model<'_>,
-    fresh: &Measurements,
-    measured: &[f64],
-    c: &Mat<f64>,
-    tangent: Option<&Mat<f64>>,
-    groups: &[Candidate],
-    poses: &[usize],
-) -> Result<Refit, UpdateError> {
-    let mut nominal = model.nominal.clone();
-    let mut changes: Vec<(Candidate, Vec<f64>)> = groups.iter().map(|g| (*g, Vec::new())).collect();
-    let rows = selected_rows(fresh, poses);
-    let cinv = spd_inverse(&sub_matrix(c, &rows)).ok_or(UpdateError::NotDefined)?;
-    let fixed = tangent.map_or(0, |t| t.ncols());
-    for _ in 0..STEPS {
-        let at = with_nominal(model, &nominal);
-        let r = residual(&at, fresh, measured)?;
-        let columns: Vec<Vec<f64>> = candidate_columns(&at, fresh, groups).into_iter().flatten().collect();
-        let f = stack(&tangent_columns(tangent), columns.iter());
-        let f_rows: Vec<Vec<f64>> = f.iter().map(|col| rows.iter().map(|&i| col[i]).collect()).collect();
-        let r_rows: Vec<f64> = rows.iter().map(|&i| r[i]).collect();
-        let (beta, _) = gls(&cinv, &r_rows, &f_rows).ok_or(UpdateError::NotDefined)?;
-        let NominalModel::DhChain(chain) = &nominal else { return Err(UpdateError::NotDhChain) };
-        let (mut params, mut values): (Vec<Param>, Vec<f64>) = (Vec::new(), Vec::new());
-        let mut k = fixed;
-        for (group, total) in changes.iter_mut() {
-            let dirs = directions(chain, *group);
-            total.resize(dirs.len(), 0.0);
-            for (column, terms) in dirs.iter().enumerate() {
-                total[column] += beta[k];
-                for (p, coefficient) in terms {
-                    params.push(*p);
-                    values.push(coefficient * beta[k]);
+/// The fresh rows and what the check found at them: every fit and error below reads these.
+struct FreshRows<'a, 'b> {
+    model: &'a Model<'b>,
+    fresh: &'a Measurements,
+    measured: &'a [f64],
+    c: &'a Mat<f64>,
+    tangent: Option<&'a Mat<f64>>,
+}
+
+impl FreshRows<'_, '_> {
+    /// `groups` refitted on `poses` by Gauss–Newton on the blob (the frame's tangent a nuisance).
+    fn refit(&self, groups: &[Candidate], poses: &[usize]) -> Result<Refit, UpdateError> {
+        let mut nominal = self.model.nominal.clone();
+        let mut changes: Vec<(Candidate, Vec<f64>)> = groups.iter().map(|g| (*g, Vec::new())).collect();
+        let fixed = self.tangent.map_or(0, |t| t.ncols());
+        for _ in 0..STEPS {
+            let at = with_nominal(self.model, &nominal);
+            let r = residual(&at, self.fresh, self.measured)?;
+            let columns: Vec<Vec<f64>> = candidate_columns(&at, self.fresh, groups).into_iter().flatten().collect();
+            let beta = self.gls_on(poses, &r, &stack(&tangent_columns(self.tangent), columns.iter()))?;
+            let NominalModel::DhChain(chain) = &nominal else { return Err(UpdateError::NotDhChain) };
+            let (mut params, mut values): (Vec<Param>, Vec<f64>) = (Vec::new(), Vec::new());
+            let mut k = fixed;
+            for (group, total) in changes.iter_mut() {
+                let dirs = directions(chain, *group);
+                total.resize(dirs.len(), 0.0);
+                for (column, terms) in dirs.iter().enumerate() {
+                    total[column] += beta[k];
+                    for (p, coefficient) in terms {
+                        params.push(*p);
+                        values.push(coefficient * beta[k]);
+                    }
+                    k += 1;
                 }
-                k += 1;
+            }
+            nominal = apply(&nominal, &params, &values).map_err(|e| UpdateError::Evaluation(e.to_string()))?;
+        }
+        Ok(Refit { nominal, changes })
+    }
+
+    /// Each of the `judged` poses' mean error per row (the data's length unit) of the blob with
+    /// `nominal`, after the frame's tangent fitted by GLS on the `fitted` poses.
+    fn pose_errors(&self, nominal: &NominalModel, fitted: &[usize], judged: &[usize]) -> Result<Vec<f64>, UpdateError> {
+        let at = with_nominal(self.model, nominal);
+        let mut r = residual(&at, self.fresh, self.measured)?;
+        if self.tangent.is_some() {
+            let f = tangent_columns(self.tangent);
+            let beta = self.gls_on(fitted, &r, &f)?;
+            for (i, v) in r.iter_mut().enumerate() {
+                *v -= f.iter().zip(&beta).map(|(col, b)| col[i] * b).sum::<f64>();
             }
         }
-        nominal = apply(&nominal, &params, &values).map_err(|e| UpdateError::Evaluation(e.to_string()))?;
-    }
-    Ok(Refit { nominal, changes })
-}
-
-/// Mean error per row at `judged` poses of the blob with `nominal`, the registered frame refitted
-/// (linearly, through the tangent) on `fitted` poses.
-#[allow(clippy::too_many_arguments)]
-fn mean_error(
-    nominal: &NominalModel,
-    model: &Model<'_>,
-    fresh: &Measurements,
-    measured: &[f64],
-    c: &Mat<f64>,
-    tangent: Option<&Mat<f64>>,
-    fitted: &[usize],
-    judged: &[usize],
-) -> Result<f64, UpdateError> {
-    let e = pose_errors(nominal, model, fresh, measured, c, tangent, fitted, judged)?;
-    Ok(e.iter().sum::<f64>() / e.len().max(1) as f64)
-}
-
-/// Each of the `judged` poses' mean error per row (the data's length unit) of the blob with
-/// `nominal`, after the frame's tangent fitted by GLS on the `fitted` poses.
-#[allow(clippy::too_many_arguments)]
-fn pose_errors(
-    nominal: &NominalModel,
-    model: &Model<'_>,
-    fresh: &Measurements,
-    measured: &[f64],
-    c: &Mat<f64>,
-    tangent: Option<&Mat<f64>>,
-    fitted: &[usize],
-    judged: &[usize],
-) -> Result<Vec<f64>, UpdateError> {
-    let at = with_nominal(model, nominal);
-    let mut r = residual(&at, fresh, measured)?;
-    if let Some(t) = tangent {
-        let rows = selected_rows(fresh, fitted);
-        let cinv = spd_inverse(&sub_matrix(c, &rows)).ok_or(UpdateError::NotDefined)?;
-        let f = tangent_columns(Some(t));
-        let f_rows: Vec<Vec<f64>> = f.iter().map(|col| rows.iter().map(|&i| col[i]).collect()).collect();
-        let r_rows: Vec<f64> = rows.iter().map(|&i| r[i]).collect();
-        let (beta, _) = gls(&cinv, &r_rows, &f_rows).ok_or(UpdateError::NotDefined)?;
-        for (i, v) in r.iter_mut().enumerate() {
-            *v -= f.iter().zip(&beta).map(|(col, b)| col[i] * b).sum::<f64>();
-        }
-    }
-    let (m, per_pose) = (fresh.task_dim, fresh.points_per_pose.max(1));
-    let norm = &model.normalisation;
-    Ok(judged
-        .iter()
-        .map(|&p| {
+        let (m, per_pose) = (self.fresh.task_dim, self.fresh.points_per_pose.max(1));
+        let norm = &self.model.normalisation;
+        let pose = |p: usize| {
             let rows = p * per_pose..(p + 1) * per_pose;
             rows.map(|row| norm.length_to_user((0..m).map(|a| r[row * m + a].powi(2)).sum::<f64>().sqrt())).sum::<f64>() / per_pose as f64
-        })
-        .collect())
+        };
+        Ok(judged.iter().map(|&p| pose(p)).collect())
+    }
+
+    /// The GLS estimate on the coordinates of `poses` (C restricted to them) of r against `f`.
+    fn gls_on(&self, poses: &[usize], r: &[f64], f: &[Vec<f64>]) -> Result<Vec<f64>, UpdateError> {
+        let block = self.fresh.points_per_pose.max(1) * self.fresh.task_dim;
+        let rows: Vec<usize> = poses.iter().flat_map(|p| p * block..(p + 1) * block).collect();
+        let c = Mat::from_fn(rows.len(), rows.len(), |i, j| self.c[(rows[i], rows[j])]);
+        let cinv = spd_inverse(&c).ok_or(UpdateError::NotDefined)?;
+        let f_rows: Vec<Vec<f64>> = f.iter().map(|col| rows.iter().map(|&i| col[i]).collect()).collect();
+        let r_rows: Vec<f64> = rows.iter().map(|&i| r[i]).collect();
+        gls(&cinv, &r_rows, &f_rows).map(|(beta, _)| beta).ok_or(UpdateError::NotDefined)
+    }
 }
 
 /// The model with its chain replaced.
@@ -236,16 +215,6 @@ fn residual(model: &Model<'_>, fresh: &Measurements, measured: &[f64]) -> Result
         }
     }
     Ok(r)
-}
-
-/// The coordinates (rows of r and C) of `poses`.
-fn selected_rows(fresh: &Measurements, poses: &[usize]) -> Vec<usize> {
-    let block = fresh.points_per_pose.max(1) * fresh.task_dim;
-    poses.iter().flat_map(|p| p * block..(p + 1) * block).collect()
-}
-
-fn sub_matrix(c: &Mat<f64>, rows: &[usize]) -> Mat<f64> {
-    Mat::from_fn(rows.len(), rows.len(), |i, j| c[(rows[i], rows[j])])
 }
 
 fn tangent_columns(tangent: Option<&Mat<f64>>) -> Vec<Vec<f64>> {
