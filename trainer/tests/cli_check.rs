@@ -357,6 +357,33 @@ fn plan_check_finds_poses_and_the_smallest_detectable_changes() {
     );
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(check(&dir, "moved.csv", &[]).status.code(), Some(3));
+    // Planned for a registered check: 6 degrees of freedom fewer, no base shift offered, and a
+    // joint zero (which the frame cannot take up) still detected at about the same size.
+    let mut registered = args.to_vec();
+    registered.extend(["--register"]);
+    registered[8] = "reg.csv";
+    registered[10] = "reg.json";
+    let out = cbd(&dir, &registered);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let r = json(&dir.join("reg.json"));
+    assert_eq!(r["dof"], 54);
+    let effects: Vec<&str> = r["sizes"].as_array().unwrap().iter().map(|s| s["effect"].as_str().unwrap()).collect();
+    assert!(!effects.contains(&"base_shift") && effects.contains(&"tool_shift"), "{effects:?}");
+    // Joint 1's zero turns the arm about the base's axis, as the frame does: the registered check
+    // cannot see it, and the plan says so instead of printing a size.
+    assert_eq!(r["taken_up_by_the_frame"], serde_json::json!(["joint_zero:joint=1"]), "{r}");
+    for s in r["sizes"].as_array().unwrap() {
+        assert!(s["random"].as_f64().is_some_and(f64::is_finite) && s["planned"].as_f64().is_some_and(f64::is_finite), "{s}");
+    }
+    let zero2r = r["sizes"].as_array().unwrap().iter().find(|s| s["effect"] == "joint_zero:joint=2").unwrap();
+    let (free, framed) = (zero2["random"].as_f64().unwrap(), zero2r["random"].as_f64().unwrap());
+    assert!(framed >= free * 0.99 && framed < 3.0 * free, "joint 2 zero, random poses: {free} free, {framed} registered");
+    let out = cbd(
+        &dir,
+        &["plan", "--model", m.to_str().unwrap(), "--check", "2", "--blob", blob.to_str().unwrap(), "--out", "y.csv", "--register"],
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("at least 3"), "{}", text(&out.stderr));
     // --check needs --blob.
     let out = cbd(&dir, &["plan", "--model", m.to_str().unwrap(), "--check", "20", "--out", "x.csv"]);
     assert!(!out.status.success() && text(&out.stderr).contains("--blob"), "{}", text(&out.stderr));

@@ -26,6 +26,11 @@ pub struct PlanArgs {
     /// With --check: the check's level.
     #[arg(long, default_value_t = 0.01)]
     pub alpha: f64,
+    /// With --check: plan for a check that registers the fresh rows' frame (`cbd check
+    /// --register`; also when the model file's base is `register = true`): the frame's 6 degrees
+    /// of freedom are projected out of the sizes, and a base shift is not offered.
+    #[arg(long, requires = "check")]
+    pub register: bool,
     /// Output CSV of the planned poses: the model file's joint columns in their units (without a
     /// model file q1, q2 in radians), ready for `cbd simulate --poses` or the robot.
     #[arg(long)]
@@ -360,6 +365,7 @@ fn run_check(args: &PlanArgs, count: usize) -> Result<()> {
         candidates: args.candidates,
         seed: args.seed,
         alpha: args.alpha,
+        register: args.register || arm.register_base(),
         unit,
     };
     let result = crate::plan::check::plan_check(&input).map_err(|e| Error::InvalidInput(format!("{}: {e}", blob_path.display())))?;
@@ -396,6 +402,9 @@ fn run_check(args: &PlanArgs, count: usize) -> Result<()> {
             if s.unit.is_empty() { "(ratio)" } else { &s.unit }
         );
     }
+    if !result.framed.is_empty() {
+        outln!("taken up by the registered frame (no size detects them): {}", result.framed.join(", "));
+    }
     if !result.invisible.is_empty() {
         outln!("not seen at the measured point (no size detects them): {}", result.invisible.join(", "));
     }
@@ -411,6 +420,7 @@ fn run_check(args: &PlanArgs, count: usize) -> Result<()> {
             "random_sets": crate::plan::check::RANDOM_SETS,
             "sizes": result.sizes,
             "not_seen": result.invisible,
+            "taken_up_by_the_frame": result.framed,
             "candidates": result.candidates,
             "rejected_singular": result.rejected_singular,
             "poses": result.controller.chunks_exact(n).map(|p| p.to_vec()).collect::<Vec<_>>(),

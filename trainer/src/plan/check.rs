@@ -103,6 +103,8 @@ pub struct CheckPlan {
     pub sizes: Vec<DetectableSize>,
     /// Kinds the measured point does not see (no detectable size): spelling.
     pub invisible: Vec<String>,
+    /// Kinds the registered frame takes up (with `register`; no size detects them): spelling.
+    pub framed: Vec<String>,
     pub dof: usize,
     pub alpha: f64,
     pub power: f64,
@@ -122,6 +124,8 @@ pub enum PlanCheckError {
     TooFewCandidates { count: usize, available: usize },
     #[error("the check's covariance at the candidate poses is not positive definite")]
     NotPositiveDefinite,
+    #[error("{count} poses for a check with the frame registered: it needs at least 3 (the frame takes 6 of their degrees of freedom)")]
+    TooFewForFrame { count: usize },
 }
 
 /// What plan_check needs.
@@ -136,6 +140,9 @@ pub struct CheckPlanInput<'a> {
     pub candidates: usize,
     pub seed: u64,
     pub alpha: f64,
+    /// The check registers the fresh rows' frame (`cbd check --register`): its tangent is projected
+    /// out of every size (6 degrees of freedom fewer) and `base_shift` is not offered.
+    pub register: bool,
     /// The data's length unit (the unit of a length's size).
     pub unit: &'a str,
 }
@@ -177,16 +184,32 @@ fn sizes_at(input: &CheckPlanInput, kinds: &[Candidate], joints: &[f64], lambda:
     let n = input.model.n_joints();
     let fresh = rows(n, joints.to_vec());
     let c = fresh_covariance(input.model, &fresh, input.geometry).ok_or(PlanCheckError::NotPositiveDefinite)?;
-    let cinv = inverse(&c).ok_or(PlanCheckError::NotPositiveDefinite)?;
+    let free = inverse(&c).ok_or(PlanCheckError::NotPositiveDefinite)?;
+    let mut cinv = free.clone();
+    if input.register {
+        // The registered check's statistic is on the part of r the frame's tangent T does not
+        // explain: its information is Fᵀ P F, P = C⁻¹ − C⁻¹T (TᵀC⁻¹T)⁻¹ TᵀC⁻¹ (the tangent at the
+        // nominal positions: the frame moves them, the millimetres between k0 and k1 do not matter).
+        let norm = &input.model.normalisation;
+        let positions: Vec<f64> =
+            crate::nominal::positions(&input.model.nominal, joints, 3).iter().map(|v| norm.length_to_internal(*v)).collect();
+        let t = crate::evaluation::check::register::tangent(&positions);
+        let ct = &cinv * &t;
+        let a = inverse(&(t.transpose() * &ct)).ok_or(PlanCheckError::NotPositiveDefinite)?;
+        cinv = &cinv - &ct * &a * ct.transpose();
+    }
     let columns = candidate_columns(input.model, &fresh, kinds);
     Ok(columns
         .iter()
-        .zip(kinds)
-        .map(|(f, k)| {
+        .map(|f| {
             let info = smallest_eigenvalue(&information(&cinv, f));
+            // A kind the registered frame takes up (joint 1's zero turns the arm about the base's
+            // axis, as the frame does): no size detects it.
+            if input.register && !(info > 1e-9 * smallest_eigenvalue(&information(&free, f))) {
+                return f64::INFINITY;
+            }
             // The columns are per unit of the parameter (a length in the data's unit, an angle in
             // radians): s is in those units.
-            let _ = k;
             (lambda / info).sqrt()
         })
         .collect())
@@ -204,6 +227,9 @@ pub fn plan_check(input: &CheckPlanInput) -> Result<CheckPlan, PlanCheckError> {
     let NominalModel::DhChain(_) = &model.nominal else { return Err(PlanCheckError::NotDhChain) };
     if model.task_dim() != 3 || model.nominal.tool_point_count() > 1 {
         return Err(PlanCheckError::NotDhChain);
+    }
+    if input.register && 3 * input.count <= crate::evaluation::check::register::FRAME_DOF {
+        return Err(PlanCheckError::TooFewForFrame { count: input.count });
     }
     let n = model.n_joints();
     let to_model = |c: &[f64]| -> Vec<f64> {
@@ -229,7 +255,7 @@ pub fn plan_check(input: &CheckPlanInput) -> Result<CheckPlan, PlanCheckError> {
     if available < input.count.max(1) * RANDOM_SETS.min(2) {
         return Err(PlanCheckError::TooFewCandidates { count: input.count, available });
     }
-    let kinds_all = candidates(n, false);
+    let kinds_all = candidates(n, input.register);
     let pool_rows = rows(n, joints.clone());
     let columns = candidate_columns(model, &pool_rows, &kinds_all);
 
@@ -332,7 +358,7 @@ pub fn plan_check(input: &CheckPlanInput) -> Result<CheckPlan, PlanCheckError> {
         chosen.push(p);
     }
 
-    let k = 3 * input.count;
+    let k = 3 * input.count - if input.register { crate::evaluation::check::register::FRAME_DOF } else { 0 };
     let lambda = detectable_noncentrality(input.alpha, k as f64, POWER);
     let pick = |set: &[usize]| -> Vec<f64> { set.iter().flat_map(|&p| joints[p * n..(p + 1) * n].iter().copied()).collect() };
     let planned = sizes_at(input, &kinds, &pick(&chosen), lambda)?;
@@ -343,21 +369,22 @@ pub fn plan_check(input: &CheckPlanInput) -> Result<CheckPlan, PlanCheckError> {
         let set: Vec<usize> = (s * input.count..(s + 1) * input.count).collect();
         random.push(sizes_at(input, &kinds, &pick(&set), lambda)?);
     }
-    let sizes = kinds
-        .iter()
-        .enumerate()
-        .map(|(i, kind)| DetectableSize {
-            effect: kind.spelling(),
-            unit: unit_of(*kind, input.unit),
-            random: median(random.iter().map(|r| r[i]).collect()),
-            planned: planned[i],
-        })
-        .collect();
+    let mut framed = Vec::new();
+    let mut sizes = Vec::new();
+    for (i, kind) in kinds.iter().enumerate() {
+        if planned[i].is_infinite() {
+            framed.push(kind.spelling());
+            continue;
+        }
+        let random = median(random.iter().map(|r| r[i]).collect());
+        sizes.push(DetectableSize { effect: kind.spelling(), unit: unit_of(*kind, input.unit), random, planned: planned[i] });
+    }
     Ok(CheckPlan {
         poses: pick(&chosen),
         controller: chosen.iter().flat_map(|&p| controller[p * n..(p + 1) * n].iter().copied()).collect(),
         sizes,
         invisible,
+        framed,
         dof: k,
         alpha: input.alpha,
         power: POWER,
