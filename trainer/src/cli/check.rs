@@ -197,6 +197,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
             let updated = crate::evaluation::check::update::update(
                 &model,
                 &blob,
+                crate::data::import_frame::import_frame(&spec),
                 &data,
                 &result.measured,
                 &result.covariance,

@@ -69,10 +69,14 @@ impl std::fmt::Display for UpdateError {
 
 /// Refits `groups` (the named change) on the fresh rows `fresh` with `measured` positions (the
 /// data's length unit, in the blob's frame when registered), the check's covariance `c` and the
-/// registered frame's `tangent`; `parent` is the blob's bytes (its hash is recorded).
+/// registered frame's `tangent`; `parent` is the blob's bytes (its hash is recorded). `frame`: the
+/// import the fresh rows were read through (the check's model file's), which the new blob records —
+/// not its parent's record, which a blob older than format 9 does not have.
+#[allow(clippy::too_many_arguments)]
 pub fn update(
     model: &Model<'_>,
     parent: &[u8],
+    frame: Option<cbd_protocol::ImportFrame>,
     fresh: &Measurements,
     measured: &[f64],
     c: &Mat<f64>,
@@ -107,9 +111,7 @@ pub fn update(
     let parent_hash: [u8; 32] = Sha256::digest(parent).into();
     let mut updated = model.clone();
     updated.nominal = all.nominal;
-    let mut provenance = model.provenance.unwrap_or(cbd_protocol::Provenance { import_frame: None, parent: None });
-    provenance.parent = Some(parent_hash);
-    updated.provenance = Some(provenance);
+    updated.provenance = Some(cbd_protocol::Provenance { import_frame: frame, parent: Some(parent_hash) });
     let blob = cbd_protocol::encode_to_vec(&updated).map_err(|e| UpdateError::Evaluation(e.to_string()))?;
     let parent = parent_hash.iter().map(|b| format!("{b:02x}")).collect();
     Ok(Updated { blob, parent, changes: all.changes, before, held_out, in_sample, blocks })
@@ -248,7 +250,8 @@ mod tests {
         fresh.positions = measured.clone();
         let s = sigma / 500.0;
         let c = Mat::from_fn(measured.len(), measured.len(), |i, j| if i == j { s * s } else { 0.0 });
-        let u = update(&model, &parent, &fresh, &measured, &c, None, &[Candidate::JointZero(1)]).unwrap();
+        let frame = cbd_protocol::ImportFrame { joints: Some(42), positions: None };
+        let u = update(&model, &parent, Some(frame), &fresh, &measured, &c, None, &[Candidate::JointZero(1)]).unwrap();
         let new = cbd_protocol::decode(&u.blob).unwrap();
         let NominalModel::DhChain(fitted) = &new.nominal else { panic!("a DH chain") };
         // se of one joint zero from 60 coordinates at 0.02 mm on a ~0.5 m lever: ~1e-5 rad.
@@ -263,9 +266,10 @@ mod tests {
         assert!(u.before > 0.05, "the change is seen: {}", u.before);
         assert!(u.held_out < 0.05 && u.in_sample <= u.held_out, "{} → {} (in sample {})", u.before, u.held_out, u.in_sample);
         let expected: [u8; 32] = Sha256::digest(&parent).into();
-        assert_eq!(new.provenance.and_then(|p| p.parent), Some(expected));
+        // The parent and the import the fresh rows were read through are recorded.
+        assert_eq!(new.provenance, Some(cbd_protocol::Provenance { import_frame: Some(frame), parent: Some(expected) }));
         assert_eq!(u.parent.len(), 64);
         // Nothing named: nothing to update.
-        assert_eq!(update(&model, &parent, &fresh, &measured, &c, None, &[]).unwrap_err(), UpdateError::NothingNamed);
+        assert_eq!(update(&model, &parent, None, &fresh, &measured, &c, None, &[]).unwrap_err(), UpdateError::NothingNamed);
     }
 }
