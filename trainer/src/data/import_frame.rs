@@ -10,7 +10,7 @@
 
 use super::column_spec::ColumnSpec;
 use super::joint_columns::JointColumns;
-use cbd_protocol::ImportFrame;
+use cbd_protocol::{ImportFrame, Provenance};
 use sha2::{Digest, Sha256};
 
 /// Significant digits a value is rounded to before it is fingerprinted: the same map written two
@@ -23,26 +23,22 @@ pub fn import_frame(spec: &ColumnSpec) -> Option<ImportFrame> {
     (frame.joints.is_some() || frame.positions.is_some()).then_some(frame)
 }
 
-/// Why a blob that records `fitted` (`None`: fitted through units only, or an older format that
-/// records nothing, `recorded == false`) does not fit a model file whose import is `spec`'s, or
-/// `Ok`. The caller names both files.
-pub fn check_import_frame(fitted: Option<ImportFrame>, recorded: bool, spec: &ColumnSpec) -> Result<(), String> {
-    if !recorded {
-        // Format 8 or older: nothing to check against (the blob predates the record).
-        return Ok(());
-    }
-    let ours = import_frame(spec);
+/// Why a blob with `provenance` (format 9; `None`: an older format, which records nothing, so
+/// nothing is checked) does not fit a model file whose import is `spec`'s, or `Ok`. A format-9 blob
+/// without an import frame was fitted through units alone. The caller names both files.
+pub fn check_import_frame(provenance: Option<&Provenance>, spec: &ColumnSpec) -> Result<(), String> {
+    let Some(provenance) = provenance else { return Ok(()) };
+    let (fitted, ours) = (provenance.import_frame, import_frame(spec));
     let parts: [(Part, &str, &str); 2] = [
-        (|f| f.joints, "joints", "a joint import ([measurements.joint_map], [planar] offsets)"),
-        (|f| f.positions, "positions", "a [planar] frame (base, yaw)"),
+        (|f| f.joints, "joints", "joint import ([measurements.joint_map], [planar] offsets)"),
+        (|f| f.positions, "positions", "[planar] frame (base, yaw)"),
     ];
     for (get, rows, what) in parts {
-        let (blob, file) = (fitted.as_ref().and_then(get), ours.as_ref().and_then(get));
-        let why = match (blob, file) {
+        let why = match (fitted.as_ref().and_then(get), ours.as_ref().and_then(get)) {
             (a, b) if a == b => continue,
-            (Some(_), None) => format!("the blob was fitted to {rows} read through {what} the model file does not have"),
-            (None, Some(_)) => format!("the model file reads {rows} through {what} the blob was not fitted with"),
-            _ => format!("the blob was fitted to {rows} read through another {} than the model file's", &what[2..]),
+            (Some(_), None) => format!("the blob was fitted to {rows} read through a {what} the model file does not have"),
+            (None, Some(_)) => format!("the model file reads {rows} through a {what} the blob was not fitted with"),
+            _ => format!("the blob was fitted to {rows} read through another {what} than the model file's"),
         };
         return Err(format!("{why}: its rows would be read in another frame than the blob's"));
     }
@@ -105,6 +101,11 @@ mod tests {
     use crate::data::model_file::parse_model_file;
     use std::path::Path;
 
+    /// A format-9 record of `frame` (a blob updated from a parent: the record exists either way).
+    fn recorded(frame: Option<ImportFrame>) -> Option<Provenance> {
+        Some(Provenance { import_frame: frame, parent: Some([1; 32]) })
+    }
+
     fn spec(text: &str) -> ColumnSpec {
         parse_model_file(text, Path::new("m.toml")).unwrap().column_spec().unwrap()
     }
@@ -142,20 +143,20 @@ mod tests {
         let plain = spec(&format!("{PLANAR}{MEASURED}"));
         let framed = spec(&format!("{}base = [30.0, -20.0]\nyaw = 0.5\noffsets = [1.0, -2.0]\n{MEASURED}", PLANAR));
         let fitted = import_frame(&framed);
-        assert_eq!(check_import_frame(fitted, true, &framed), Ok(()));
-        let e = check_import_frame(fitted, true, &plain).unwrap_err();
+        assert_eq!(check_import_frame(recorded(fitted).as_ref(), &framed), Ok(()));
+        let e = check_import_frame(recorded(fitted).as_ref(), &plain).unwrap_err();
         assert!(e.starts_with("the blob was fitted to joints read through a joint import ([measurements.joint_map], [planar] offsets) the model file does not have"), "{e}");
         // Fitted without a frame (a format-9 blob records none), read with one.
-        let e = check_import_frame(None, true, &framed).unwrap_err();
+        let e = check_import_frame(recorded(None).as_ref(), &framed).unwrap_err();
         assert!(e.starts_with("the model file reads joints through a joint import"), "{e}");
         // Only the positions differ.
         let yawed = spec(&format!("{}base = [30.0, -20.0]\nyaw = 0.6\noffsets = [1.0, -2.0]\n{MEASURED}", PLANAR));
-        let e = check_import_frame(fitted, true, &yawed).unwrap_err();
+        let e = check_import_frame(recorded(fitted).as_ref(), &yawed).unwrap_err();
         assert!(
             e.starts_with("the blob was fitted to positions read through another [planar] frame (base, yaw) than the model file's"),
             "{e}"
         );
         // An older blob records nothing: nothing to check.
-        assert_eq!(check_import_frame(None, false, &framed), Ok(()));
+        assert_eq!(check_import_frame(None, &framed), Ok(()));
     }
 }

@@ -17,8 +17,7 @@ pub fn check_blob_fits_model_file(
     spec: &crate::data::column_spec::ColumnSpec,
 ) -> Result<(), String> {
     check_blob_fits(blob, nominal)?;
-    let provenance = blob.provenance.as_ref();
-    crate::data::import_frame::check_import_frame(provenance.and_then(|p| p.import_frame), provenance.is_some(), spec)
+    crate::data::import_frame::check_import_frame(blob.provenance.as_ref(), spec)
 }
 
 /// Most of the blob's training configurations the size comparison evaluates.

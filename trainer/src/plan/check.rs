@@ -17,7 +17,7 @@
 
 use crate::data::Measurements;
 use crate::evaluation::check::covariance::{fresh_covariance, spd_inverse as inverse};
-use crate::evaluation::check::name::{candidate_columns, candidates, Candidate};
+use crate::evaluation::check::name::{candidate_columns, candidates, projected_precision, tangent_columns, Candidate};
 use crate::evaluation::check::statistic::chi2_survival;
 use crate::plan::candidates as cand;
 use cbd_protocol::{Model, NominalModel};
@@ -185,24 +185,24 @@ fn sizes_at(input: &CheckPlanInput, kinds: &[Candidate], joints: &[f64], lambda:
     let fresh = rows(n, joints.to_vec());
     let c = fresh_covariance(input.model, &fresh, input.geometry).ok_or(PlanCheckError::NotPositiveDefinite)?;
     let free = inverse(&c).ok_or(PlanCheckError::NotPositiveDefinite)?;
-    let mut cinv = free.clone();
-    if input.register {
-        // The registered check's statistic is on the part of r the frame's tangent T does not
-        // explain: its information is Fᵀ P F, P = C⁻¹ − C⁻¹T (TᵀC⁻¹T)⁻¹ TᵀC⁻¹ (the tangent at the
-        // nominal positions: the frame moves them, the millimetres between k0 and k1 do not matter).
+    // The registered check's statistic is on the part of r the frame's tangent T does not explain:
+    // its information is Fᵀ P F (the tangent at the nominal positions: the frame moves them, the
+    // millimetres between k0 and k1 do not matter).
+    let projected = if input.register {
         let norm = &input.model.normalisation;
         let positions: Vec<f64> =
             crate::nominal::positions(&input.model.nominal, joints, 3).iter().map(|v| norm.length_to_internal(*v)).collect();
         let t = crate::evaluation::check::register::tangent(&positions);
-        let ct = &cinv * &t;
-        let a = inverse(&(t.transpose() * &ct)).ok_or(PlanCheckError::NotPositiveDefinite)?;
-        cinv = &cinv - &ct * &a * ct.transpose();
-    }
+        Some(projected_precision(&free, &tangent_columns(Some(&t))).ok_or(PlanCheckError::NotPositiveDefinite)?)
+    } else {
+        None
+    };
+    let cinv = projected.as_ref().unwrap_or(&free);
     let columns = candidate_columns(input.model, &fresh, kinds);
     Ok(columns
         .iter()
         .map(|f| {
-            let info = smallest_eigenvalue(&information(&cinv, f));
+            let info = smallest_eigenvalue(&information(cinv, f));
             // A kind the registered frame takes up (joint 1's zero turns the arm about the base's
             // axis, as the frame does): no size detects it.
             if input.register && !(info > 1e-9 * smallest_eigenvalue(&information(&free, f))) {

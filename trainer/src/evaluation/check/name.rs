@@ -211,7 +211,7 @@ pub fn name_change(
     let columns = candidate_columns(model, fresh, &cands);
     let cinv = inverse(c).ok_or(NameError::NotPositiveDefinite)?;
     let block = fresh.points_per_pose.max(1) * fresh.task_dim;
-    let fixed: Vec<Vec<f64>> = tangent.map_or_else(Vec::new, |t| (0..t.ncols()).map(|k| (0..dim).map(|i| t[(i, k)]).collect()).collect());
+    let fixed = tangent_columns(tangent);
     let score = |chosen: &[usize]| -> Option<f64> {
         let f = stack(&fixed, chosen.iter().flat_map(|&g| columns[g].iter()));
         loo_log_density(&cinv, r, &f, block)
@@ -343,6 +343,24 @@ pub(super) fn stack<'a>(fixed: &[Vec<f64>], more: impl Iterator<Item = &'a Vec<f
     fixed.iter().cloned().chain(more.cloned()).collect()
 }
 
+/// P = C⁻¹ − C⁻¹F(FᵀC⁻¹F)⁻¹FᵀC⁻¹: the precision of the part of r the columns F do not explain
+/// (C⁻¹ itself without columns); `None` when FᵀC⁻¹F is not positive definite. What the
+/// leave-one-out density scores with, and `plan --check` sizes a registered check with (F the
+/// frame's tangent).
+pub fn projected_precision(cinv: &Mat<f64>, f: &[Vec<f64>]) -> Option<Mat<f64>> {
+    if f.is_empty() {
+        return Some(cinv.clone());
+    }
+    let (cf, a) = weighted(cinv, f);
+    let ainv = inverse(&a)?;
+    Some(cinv - &cf * &ainv * cf.transpose())
+}
+
+/// A registered frame's tangent (dim × k) as its k columns, the form the fits here take.
+pub fn tangent_columns(tangent: Option<&Mat<f64>>) -> Vec<Vec<f64>> {
+    tangent.map_or_else(Vec::new, |t| (0..t.ncols()).map(|k| (0..t.nrows()).map(|i| t[(i, k)]).collect()).collect())
+}
+
 /// C⁻¹F (dim × k) and A = FᵀC⁻¹F.
 fn weighted(cinv: &Mat<f64>, f: &[Vec<f64>]) -> (Mat<f64>, Mat<f64>) {
     let dim = cinv.nrows();
@@ -385,13 +403,7 @@ pub(super) fn gls(cinv: &Mat<f64>, r: &[f64], f: &[Vec<f64>]) -> Option<(Vec<f64
 /// Σ_i −½ (Pr)_iᵀ P_ii⁻¹ (Pr)_i + ½ log det P_ii − (block/2) log 2π.
 pub fn loo_log_density(cinv: &Mat<f64>, r: &[f64], f: &[Vec<f64>], block: usize) -> Option<f64> {
     let dim = r.len();
-    let p = if f.is_empty() {
-        cinv.clone()
-    } else {
-        let (cf, a) = weighted(cinv, f);
-        let ainv = inverse(&a)?;
-        cinv - &cf * &ainv * cf.transpose()
-    };
+    let p = projected_precision(cinv, f)?;
     let rm = Mat::from_fn(dim, 1, |i, _| r[i]);
     let pr = &p * &rm;
     let mut total = 0.0;

@@ -11,7 +11,7 @@
 //! predicted by the update fitted on the others; the blob written is fitted on every pose.
 
 use super::covariance::spd_inverse;
-use super::name::{candidate_columns, directions, gls, stack, Candidate};
+use super::name::{candidate_columns, directions, gls, stack, tangent_columns, Candidate};
 use crate::data::Measurements;
 use crate::diagnose::library::{apply, Param};
 use cbd_protocol::{Model, NominalModel};
@@ -217,10 +217,6 @@ fn residual(model: &Model<'_>, fresh: &Measurements, measured: &[f64]) -> Result
         }
     }
     Ok(r)
-}
-
-fn tangent_columns(tangent: Option<&Mat<f64>>) -> Vec<Vec<f64>> {
-    tangent.map_or_else(Vec::new, |t| (0..t.ncols()).map(|k| (0..t.nrows()).map(|i| t[(i, k)]).collect()).collect())
 }
 
 #[cfg(test)]
