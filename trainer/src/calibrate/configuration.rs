@@ -4,7 +4,8 @@
 //! model on the same rows ([`crate::evidence::search_configuration_term`]), and, when kept, fitted as
 //! the blob format allows it: Euler × 1, the kernel form (no scheme choice, no expansion).
 
-use super::{options_for, scheme::SchemeChoice, ConfigurationField, Settings};
+use super::hyperparameters::options_for;
+use super::{scheme::SchemeChoice, ConfigurationField, Settings};
 use crate::data::Measurements;
 use crate::evidence::{search_configuration_term, CbdHyperparameters, ConfigurationEvidence};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions};

@@ -4,7 +4,8 @@
 //! basis functions with a broad prior (`evidence::GeometricBasis`, docs/DESIGN.md §3) — or, where no
 //! evidence runs (the paper's hyperparameters, every value given), by k-fold cross-validation.
 
-use super::{choose_cbd_hyperparameters_with_overrides, options_for, Settings};
+use super::hyperparameters::{choose_cbd_hyperparameters_with_overrides, normalisation, options_for};
+use super::Settings;
 use crate::data::Measurements;
 use crate::evidence::{CbdHyperparameters, Evidence, GeometricBasis};
 use crate::parametric::{calibrate_dh, linearised_group, DhCalibration, DhCalibrationOptions, DhFitStats};
@@ -121,24 +122,27 @@ fn calibrated_hypothesis(
     Ok(Hypothesis { dh: Some(fitted.stats), ..nominal_hypothesis(&fitted.model, data, norm, settings)? })
 }
 
-/// The hypothesis `settings.geometry` asks for, or for `Auto` the better of the two.
+/// The hypothesis `settings.geometry` asks for, or for `Auto` the better of the two; and the
+/// DH-calibrated chain when it was fitted on the way (the drift test's chain, `super::drift`).
 pub fn choose_geometry(
     nominal: &NominalModel,
     data: &Measurements,
     norm: &Normalisation,
     settings: &Settings,
-) -> crate::Result<(Hypothesis, GeometryChoice)> {
+) -> crate::Result<(Hypothesis, GeometryChoice, Option<NominalModel>)> {
     let given = |chosen| GeometryChoice { chosen, by: "given".into(), scores: None };
     match settings.geometry {
-        Geometry::Nominal => Ok((nominal_hypothesis(nominal, data, norm, settings)?, given(Geometry::Nominal))),
+        Geometry::Nominal => Ok((nominal_hypothesis(nominal, data, norm, settings)?, given(Geometry::Nominal), None)),
         Geometry::Calibrated => {
-            Ok((calibrated_hypothesis(calibrated_chain(nominal, data)?, data, norm, settings)?, given(Geometry::Calibrated)))
+            let fitted = calibrated_chain(nominal, data)?;
+            let chain = fitted.model.clone();
+            Ok((calibrated_hypothesis(fitted, data, norm, settings)?, given(Geometry::Calibrated), Some(chain)))
         }
         Geometry::Auto => {
-            let (plain, calibrated, choice) = decide(nominal, data, norm, settings, true)?;
+            let (plain, calibrated, choice, chain) = decide(nominal, data, norm, settings, true)?;
             match calibrated {
-                Some(h) if choice.chosen == Geometry::Calibrated => Ok((h, choice)),
-                _ => Ok((plain, choice)),
+                Some(h) if choice.chosen == Geometry::Calibrated => Ok((h, choice, chain)),
+                _ => Ok((plain, choice, chain)),
             }
         }
     }
@@ -147,7 +151,7 @@ pub fn choose_geometry(
 /// What `Auto` chooses on these rows, without the calibrated hypothesis' own hyperparameters (what
 /// `cbd compare` marks as the row `cbd fit` writes by default).
 pub fn geometry_choice(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<GeometryChoice> {
-    let norm = super::normalisation(data, settings);
+    let norm = normalisation(data, settings);
     Ok(decide(nominal, data, &norm, &Settings { geometry: Geometry::Auto, ..settings.clone() }, false)?.2)
 }
 
@@ -157,6 +161,8 @@ pub fn geometry_choice(nominal: &NominalModel, data: &Measurements, settings: &S
 struct CalibratedSide {
     score: Option<Evidence>,
     hypothesis: Option<Hypothesis>,
+    /// The fitted chain.
+    chain: NominalModel,
 }
 
 /// The calibrated side, or why the geometric group cannot be calibrated here.
@@ -187,21 +193,22 @@ fn calibrated_side(
         },
         || with_hypothesis.then(|| calibrated_hypothesis(fitted.clone(), data, norm, settings)).transpose(),
     );
-    Ok(Ok(CalibratedSide { score: score?, hypothesis: hypothesis? }))
+    Ok(Ok(CalibratedSide { score: score?, hypothesis: hypothesis?, chain: fitted.model }))
 }
 
 /// Both hypotheses scored: the nominal one, the calibrated one when `with_hypothesis` (`None`
-/// otherwise, or when the group cannot be calibrated here: the choice then says why) and the
-/// choice. The two sides are independent and run side by side on the command's workers (the
-/// calibrated hypothesis then before it is known to win: `cbd fit`'s time is the longer side's,
-/// not the sum); each gives the same bits on one worker or two.
+/// otherwise, or when the group cannot be calibrated here: the choice then says why), the
+/// choice and the fitted chain (`None` where the group cannot be calibrated here). The two sides
+/// are independent and run side by side on the command's workers (the calibrated hypothesis then
+/// before it is known to win: `cbd fit`'s time is the longer side's, not the sum); each gives the
+/// same bits on one worker or two.
 fn decide(
     nominal: &NominalModel,
     data: &Measurements,
     norm: &Normalisation,
     settings: &Settings,
     with_hypothesis: bool,
-) -> crate::Result<(Hypothesis, Option<Hypothesis>, GeometryChoice)> {
+) -> crate::Result<(Hypothesis, Option<Hypothesis>, GeometryChoice, Option<NominalModel>)> {
     let (plain, calibrated) = rayon::join(
         || nominal_hypothesis(nominal, data, norm, settings),
         || calibrated_side(nominal, data, norm, settings, with_hypothesis),
@@ -209,7 +216,7 @@ fn decide(
     let plain = plain?;
     let calibrated = match calibrated? {
         Ok(side) => side,
-        Err(by) => return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None })),
+        Err(by) => return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }, None)),
     };
     let (scores, by) = match (&plain.evidence, &calibrated.score) {
         (Some(a), Some(b)) => (evidence_scores(a, b, b.geometric_parameters), "evidence".to_string()),
@@ -219,7 +226,7 @@ fn decide(
             // "4-fold cross-validation … on 3 rows" beside the scheme's "too few rows").
             if let Some(why) = super::scheme::too_few_to_cross_validate(data, folds) {
                 let by = format!("{why}: the nominal kept, as without evidence the calibrated geometry cannot be scored");
-                return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }));
+                return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }, Some(calibrated.chain)));
             }
             (cross_validated_scores(nominal, data, norm, settings, &plain, folds)?, format!("{folds}-fold cross-validation"))
         }
@@ -229,7 +236,7 @@ fn decide(
         _ => scores.calibrated < scores.nominal,
     };
     let chosen = if calibrated_wins { Geometry::Calibrated } else { Geometry::Nominal };
-    Ok((plain, calibrated.hypothesis, GeometryChoice { chosen, by, scores: Some(scores) }))
+    Ok((plain, calibrated.hypothesis, GeometryChoice { chosen, by, scores: Some(scores) }, Some(calibrated.chain)))
 }
 
 /// The two evidences where they are comparable: on every row when both were computed there, else

@@ -8,23 +8,27 @@
 //! 3. The scheme (Euler × 1 = the linearised model, Euler × 2): k-fold cross-validation on the
 //!    training rows ([`scheme`]) unless given.
 //! 4. The fit of the discrete flow, and a warning when it stalls.
+//! 5. When asked, the drift test in measurement order on the DH-calibrated chain ([`drift`]).
 //!
 //! Every length a user gives or reads here is in the data's unit.
 
 pub mod configuration;
+pub mod drift;
 pub mod geometry;
+pub mod hyperparameters;
 pub mod scheme;
 pub mod settings;
 
 pub use geometry::{Geometry, GeometryChoice};
+pub use hyperparameters::{normalisation, options_for, paper_rr_hyperparameters};
 pub use settings::{ConfigurationField, HyperparameterSource, Overrides, Settings};
 
 use crate::data::Measurements;
-use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_with_geometry, CbdHyperparameters, Evidence, GeometricBasis};
+use crate::evidence::{CbdHyperparameters, Evidence};
 use crate::parametric::DhFitStats;
 use crate::report::noise_floor::{FloorVerdict, NoiseFloor};
-use crate::solver::{fit_cbd, CbdFit, CbdOptions, SolverSettings};
-use cbd_protocol::{Integrator, NominalModel, Normalisation};
+use crate::solver::{fit_cbd, CbdFit, CbdOptions};
+use cbd_protocol::{NominalModel, Normalisation};
 
 /// A calibrated model and how it was chosen.
 #[derive(Debug, Clone)]
@@ -44,75 +48,8 @@ pub struct Calibration {
     pub fit: CbdFit,
     /// Stalled fits and the like: printed by the CLI, in the JSON.
     pub warnings: Vec<String>,
-}
-
-/// The paper's RR hyperparameters (docs/DESIGN.md §6) in data units: lengths in units of l1 = 1,
-/// task kernel with unit amplitude, σ = 1e-6.
-pub fn paper_rr_hyperparameters() -> CbdHyperparameters {
-    CbdHyperparameters {
-        joint_axes: cbd_protocol::paper_rr::joint_kernel().axes.to_vec(),
-        joint_gamma: cbd_protocol::paper_rr::JOINT_GAMMA,
-        task_width: cbd_protocol::paper_rr::TASK_WIDTH,
-        task_gamma: 1.0,
-        sigma: 1e-6,
-        configuration: None,
-    }
-}
-
-/// The fit's options for hyperparameters `h`, normalisation `norm` and scheme `integrator`.
-pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Integrator, settings: &Settings) -> CbdOptions {
-    let mut opts = CbdOptions::new(h.to_internal(norm), integrator, norm.clone());
-    // The paper's reproduction keeps the paper's form, momenta, unless asked otherwise.
-    let representation = match (settings.source, settings.solver.representation) {
-        (HyperparameterSource::PaperRr, crate::expansion::Representation::Auto) => crate::expansion::Representation::Kernel,
-        (_, r) => r,
-    };
-    // The configuration field is evaluated in the kernel form only (blob format 8).
-    let representation = if h.configuration.is_some() { crate::expansion::Representation::Kernel } else { representation };
-    opts.solver = SolverSettings { representation, ..settings.solver };
-    // Recorded in the blob (format 7): what `cbd eval` sets a table's noise floor by.
-    opts.noise_sigma = Some(h.sigma);
-    opts
-}
-
-/// CbD's hyperparameters for `base` on `data`: the source's (its own evidence — with the geometric
-/// group `geometry` marginalised when given —, or the paper's), then the hand-given values.
-pub fn choose_cbd_hyperparameters_with_overrides(
-    base: &NominalModel,
-    data: &Measurements,
-    norm: &Normalisation,
-    settings: &Settings,
-    geometry: Option<&GeometricBasis>,
-) -> crate::Result<(CbdHyperparameters, Option<Evidence>)> {
-    let (mut h, evidence) = match settings.source {
-        HyperparameterSource::PaperRr => (paper_rr_hyperparameters(), None),
-        // Every value is given: no search (the placeholder's fields are all replaced below).
-        HyperparameterSource::Evidence if settings.overrides.is_complete(base) => (placeholder_hyperparameters(base), None),
-        HyperparameterSource::Evidence => {
-            let e = match geometry {
-                Some(g) => choose_cbd_hyperparameters_with_geometry(base, data, norm, &settings.evidence, g)?,
-                None => choose_cbd_hyperparameters(base, data, norm, &settings.evidence)?,
-            };
-            (e.hyperparameters.clone(), Some(e))
-        }
-    };
-    h = settings.overrides.apply(base, h);
-    Ok((h, evidence))
-}
-
-/// One axis per joint of `base`, for overrides that replace every field.
-fn placeholder_hyperparameters(base: &NominalModel) -> CbdHyperparameters {
-    let mut h = paper_rr_hyperparameters();
-    h.joint_axes = crate::axis_forms::default_axes(base);
-    h
-}
-
-/// The task-space normalisation for `settings`: the data's (RMS radius) or none (the paper's units).
-pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation {
-    match settings.source {
-        HyperparameterSource::PaperRr => Normalisation::IDENTITY,
-        HyperparameterSource::Evidence => crate::evidence::normalisation_of(data),
-    }
+    /// The drift test in measurement order, when asked for and the rows allow it ([`drift`]).
+    pub drift: Option<crate::diagnose::drift::Drift>,
 }
 
 /// Calibrates `nominal` on `data` (training rows only).
@@ -128,7 +65,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
         }
     }
     let norm = normalisation(data, settings);
-    let (chosen, geometry) = geometry::choose_geometry(nominal, data, &norm, settings)?;
+    let (chosen, geometry, fitted_chain) = geometry::choose_geometry(nominal, data, &norm, settings)?;
     let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
     // The geometry is decided with the plain prior; the configuration field is then searched on the
     // chosen base's residual (the final hypothesis' rows) and kept by its own comparison.
@@ -181,7 +118,8 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
     }
-    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, configuration, scheme, options, fit, warnings })
+    let drift = settings.drift.as_ref().and_then(|o| drift::drift_stage(nominal, data, &base, dh.is_some(), fitted_chain, o));
+    Ok(Calibration { base, dh, hyperparameters, evidence, geometry, configuration, scheme, options, fit, warnings, drift })
 }
 
 /// The model without the configuration field: the scheme by cross-validation, then the fit.

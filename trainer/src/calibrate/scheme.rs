@@ -2,7 +2,8 @@
 //! (Euler × 1, the linearised model, and Euler × 2) on the training rows, with the chosen
 //! hyperparameters held fixed.
 
-use super::{options_for, Settings};
+use super::hyperparameters::options_for;
+use super::Settings;
 use crate::data::Measurements;
 use crate::evidence::CbdHyperparameters;
 use crate::solver::{fit_cbd, DENSE_MAX_UNKNOWNS};

@@ -95,6 +95,8 @@ pub struct Settings {
     /// verbosity): the fit's own options take it whole (`options_for`), but for the paper's
     /// reproduction, which keeps the momenta when the representation is `Auto`.
     pub solver: SolverSettings,
+    /// The drift test in measurement order after the fit (`cbd fit`'s), or none.
+    pub drift: Option<crate::diagnose::drift::DriftOptions>,
 }
 
 impl Settings {
@@ -117,6 +119,7 @@ impl Default for Settings {
             geometry: super::Geometry::Auto,
             configuration: ConfigurationField::Auto,
             solver: SolverSettings::default(),
+            drift: None,
         }
     }
 }

@@ -580,7 +580,7 @@ fn check_repeats(
     spec: &ColumnSpec,
     err: Errors<'_>,
 ) -> Result<Vec<Duplicate>, ImportError> {
-    let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * bounding_box_diagonal(data));
+    let tolerance = spec.repeat_tolerance.unwrap_or_else(|| 1e-3 * data.bounding_box_diagonal());
     let mut duplicates = Vec::new();
     let points = data.points_per_pose.max(1);
     for &(first, row) in repeats {
@@ -656,19 +656,6 @@ fn short(v: f64) -> String {
     } else {
         text.into()
     }
-}
-
-pub(crate) fn bounding_box_diagonal(data: &Measurements) -> f64 {
-    let m = data.task_dim;
-    let mut lo = vec![f64::INFINITY; m];
-    let mut hi = vec![f64::NEG_INFINITY; m];
-    for i in 0..data.len() {
-        for (c, y) in data.position(i).iter().enumerate() {
-            lo[c] = lo[c].min(*y);
-            hi[c] = hi[c].max(*y);
-        }
-    }
-    lo.iter().zip(&hi).map(|(l, h)| (h - l) * (h - l)).sum::<f64>().sqrt()
 }
 
 #[cfg(test)]

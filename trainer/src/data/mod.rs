@@ -68,6 +68,16 @@ pub fn with_gap(held: std::ops::Range<usize>, poses: usize) -> std::ops::Range<u
     held.start.saturating_sub(gap)..(held.end + gap).min(poses)
 }
 
+/// The indices of at most `limit` of `count` rows, evenly spaced through them (all of them when
+/// `count ≤ limit`).
+pub fn evenly_spaced_rows(count: usize, limit: usize) -> Vec<usize> {
+    if count > limit {
+        (0..limit).map(|i| i * count / limit).collect()
+    } else {
+        (0..count).collect()
+    }
+}
+
 impl Measurements {
     pub fn new(n_joints: usize, task_dim: usize) -> Self {
         Measurements { n_joints, task_dim, points_per_pose: 1, joints: Vec::new(), positions: Vec::new(), order: RowOrder::Measured }
@@ -133,6 +143,19 @@ impl Measurements {
         };
         (self.subset(&rest), self.subset(&held))
     }
+    /// The diagonal of the positions' bounding box: the rows' extent (0 for one row).
+    pub fn bounding_box_diagonal(&self) -> f64 {
+        let m = self.task_dim;
+        let mut lo = vec![f64::INFINITY; m];
+        let mut hi = vec![f64::NEG_INFINITY; m];
+        for i in 0..self.len() {
+            for (c, y) in self.position(i).iter().enumerate() {
+                lo[c] = lo[c].min(*y);
+                hi[c] = hi[c].max(*y);
+            }
+        }
+        lo.iter().zip(&hi).map(|(l, h)| (h - l) * (h - l)).sum::<f64>().sqrt()
+    }
     /// The rows at `indices`, in that order (with several points per pose: whole poses, e.g.
     /// [`Measurements::pose_rows`], or the result's points no longer match its rows).
     pub fn subset(&self, indices: &[usize]) -> Measurements {
@@ -173,14 +196,13 @@ pub fn read_capped(path: &std::path::Path, cap: u64, what: &str) -> crate::Resul
 pub mod column_spec;
 pub mod csv_import;
 pub mod effects_section;
-mod evenly_spaced;
-pub use evenly_spaced::evenly_spaced_rows;
 pub mod import_error;
 pub mod import_frame;
 pub mod joint_columns;
 pub mod joint_map;
 pub mod model_file;
 pub mod nominal_check;
+pub mod preparation;
 pub mod units;
 
 #[cfg(test)]
@@ -235,5 +257,12 @@ mod tests {
         assert_eq!(read_capped(&f, 1025, "blob").unwrap().len(), 1025);
         assert!(read_capped(&f, 1024, "URDF").unwrap_err().to_string().contains("the most a URDF may be"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn rows_are_spread_from_the_first_and_all_kept_under_the_limit() {
+        assert_eq!(evenly_spaced_rows(10, 4), vec![0, 2, 5, 7]);
+        assert_eq!(evenly_spaced_rows(3, 4), vec![0, 1, 2]);
+        assert_eq!(evenly_spaced_rows(5, 0), Vec::<usize>::new());
     }
 }

@@ -3,7 +3,6 @@
 //! are far outside the measured ones (a DH length of −1e30, planar lengths [0, 0], a unit mistake),
 //! is fitted anyway but with a warning saying so — CbD only corrects small deformations.
 
-use super::csv_import::bounding_box_diagonal;
 use super::Measurements;
 use crate::limits::MAX_MAGNITUDE;
 use cbd_protocol::NominalModel;
@@ -49,9 +48,9 @@ pub fn nominal_warnings(
         predicted.push(data.joints(i), p);
     }
     let rms = (squared / data.len().max(1) as f64).sqrt();
-    let measured_extent = bounding_box_diagonal(data);
+    let measured_extent = data.bounding_box_diagonal();
     let measured_size = data.positions.iter().fold(measured_extent, |s, v| s.max(v.abs()));
-    let nominal_extent = bounding_box_diagonal(&predicted);
+    let nominal_extent = predicted.bounding_box_diagonal();
     let mut warnings = Vec::new();
     if data.len() > 1 && measured_extent > 0.0 && nominal_extent <= STILL_FRACTION * measured_extent {
         warnings.push(format!(

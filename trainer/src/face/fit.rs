@@ -71,13 +71,8 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
         errln!("warning: {w}");
     }
     let registration = super::register_base_if_unknown(arm, &mut nominal, &imported.measurements, source)?;
-    for w in
-        crate::data::nominal_check::nominal_warnings(&nominal, &imported.measurements, &imported.lines, source, registration.is_some())?
-    {
-        errln!("warning: {w}");
-    }
-    let data = evenly_spaced_rows(&imported.measurements, settings.max_rows);
-    settings.pipeline.check_against(&data, source)?;
+    let data =
+        crate::data::preparation::fit_rows(&nominal, imported, source, registration.is_some(), settings.max_rows, settings.pipeline.sigma)?;
     let mut pipeline = settings.pipeline.settings()?;
     // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
     // the solver checks only if it falls back to the kernel form (against what the workers leave).
@@ -90,6 +85,7 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     pipeline.solver.memory_budget = crate::memory::kernel_form_budget(threads, data.len() * data.task_dim);
     pipeline.geometry = if settings.dh_first { crate::calibrate::Geometry::Calibrated } else { settings.geometry };
     pipeline.solver.threads = threads;
+    pipeline.drift = Some(Default::default());
     let calibration =
         crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &pipeline)).context(source.display())?;
     print_calibration(&calibration, settings.pipeline.quiet);
@@ -110,18 +106,11 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     // The model's length unit (the data are read into it): the floor's line names it.
     let unit = arm.length_unit();
     let mut noise_floor = describe_noise_floor(&calibration, unit);
-    // Drift in measurement order (issue 49 item 2), on the residual of the DH-calibrated chain (the
-    // one CbD deforms, or fitted for the test where the nominal was kept: a nominal chain's error
-    // of millimetres leaves second-order shape the test's joint kernel must carry, and the UR5
-    // rows' drift went unseen there): beside the floor, and recorded in the blob when found.
-    let chain = match &calibration.dh {
-        Some(_) => calibration.base.clone(),
-        None => crate::parametric::calibrate_dh(&nominal, &data, &Default::default()).map_or(calibration.base.clone(), |f| f.model),
-    };
-    let drift = crate::diagnose::drift::drift_of_chain(&chain, &data, &Default::default());
+    // Drift in measurement order (`calibrate::drift`): beside the floor, and recorded in the blob when found.
+    let drift = &calibration.drift;
     let found = drift.as_ref().filter(|d| d.detected);
     let blob = with_record(&calibration.fit.blob, found, crate::data::import_frame::import_frame(&arm.spec))?;
-    if let Some(d) = &drift {
+    if let Some(d) = drift {
         report["drift"] = serde_json::to_value(d).map_err(Error::JsonOutput)?;
         if d.detected {
             noise_floor += &format!(
@@ -152,14 +141,6 @@ fn with_record(blob: &[u8], d: Option<&crate::diagnose::drift::Drift>, frame: Op
     model.drift = d.map(|d| cbd_protocol::RowDrift { sd: d.sd, length: d.length });
     model.provenance = frame.map(|f| cbd_protocol::Provenance { import_frame: Some(f), parent: None });
     cbd_protocol::encode_to_vec(&model).map_err(|e| internal(e.to_string()))
-}
-
-/// At most `max_rows` of `data`'s rows, evenly spaced (all of them without a limit).
-fn evenly_spaced_rows(data: &crate::data::Measurements, max_rows: Option<usize>) -> crate::data::Measurements {
-    match max_rows {
-        Some(k) if k < data.len() => data.subset(&data.evenly_spaced_pose_rows(k)),
-        _ => data.clone(),
-    }
 }
 
 /// The noise floor of the chosen σ and where the cross-validated held-out error stands against it.

@@ -86,9 +86,6 @@ fn parse_solver(name: &str) -> Result<crate::solver::SolverMethod> {
     }
 }
 
-/// Largest `--sigma` accepted, relative to the training positions' spread ([`PipelineOptions::check_against`]).
-const MAX_SIGMA_PER_EXTENT: f64 = 1e3;
-
 impl PipelineOptions {
     /// Rejects out-of-range values before any work, naming the flag.
     pub fn validate(&self) -> Result<()> {
@@ -119,30 +116,6 @@ impl PipelineOptions {
         }
         if self.max_iterations == 0 {
             return Err(Error::InvalidInput("--max-iterations must be at least 1".into()));
-        }
-        Ok(())
-    }
-
-    /// `--sigma` against the training rows at `path`: a noise σ over [`MAX_SIGMA_PER_EXTENT`] ×
-    /// the positions' spread (RMS distance from their mean) would swamp every measurement — a σ
-    /// given in another unit — and the fit would fail later with a message about diverging flows.
-    pub fn check_against(&self, data: &crate::data::Measurements, path: &std::path::Path) -> Result<()> {
-        let (Some(sigma), m) = (self.sigma, data.task_dim) else { return Ok(()) };
-        let n = data.len();
-        if n == 0 || m == 0 {
-            return Ok(());
-        }
-        let mean: Vec<f64> = (0..m).map(|c| (0..n).map(|i| data.position(i)[c]).sum::<f64>() / n as f64).collect();
-        let spread = ((0..n).map(|i| data.position(i).iter().zip(&mean).map(|(p, c)| (p - c) * (p - c)).sum::<f64>()).sum::<f64>()
-            / n as f64)
-            .sqrt();
-        if spread > 0.0 && sigma > MAX_SIGMA_PER_EXTENT * spread {
-            return Err(Error::InvalidInput(format!(
-                "--sigma {} is over {MAX_SIGMA_PER_EXTENT} × the spread of {}'s positions (RMS {} from their mean): a noise that size would swamp every measurement; give σ in the data's length unit",
-                crate::error::as_written(sigma),
-                path.display(),
-                crate::error::number(spread)
-            )));
         }
         Ok(())
     }

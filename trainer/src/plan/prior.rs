@@ -50,6 +50,6 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
 pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> crate::Result<(CbdHyperparameters, GeometryChoice)> {
     let settings = Settings { geometry: Geometry::Auto, ..Settings::default() };
     let norm = crate::evidence::normalisation_of(data);
-    let (hypothesis, choice) = crate::calibrate::geometry::choose_geometry(nominal, data, &norm, &settings)?;
+    let (hypothesis, choice, _) = crate::calibrate::geometry::choose_geometry(nominal, data, &norm, &settings)?;
     Ok((hypothesis.hyperparameters, choice))
 }
