@@ -8,7 +8,8 @@
 //! 3. The scheme (Euler × 1 = the linearised model, Euler × 2): k-fold cross-validation on the
 //!    training rows ([`scheme`]) unless given.
 //! 4. The fit of the discrete flow, and a warning when it stalls.
-//! 5. When asked, the drift test in measurement order on the DH-calibrated chain ([`drift`]).
+//! 5. When asked, the drift test in measurement order on the DH-calibrated chain ([`drift`]), beside
+//!    the field's search (it needs only the chain).
 //!
 //! Every length a user gives or reads here is in the data's unit.
 
@@ -69,7 +70,13 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
     // The geometry is decided with the plain prior; the configuration field is then searched on the
     // chosen base's residual (the final hypothesis' rows) and kept by its own comparison.
-    let mut configuration = configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some())?;
+    // The drift test needs only the chain: it runs beside the field's search (each search's starts
+    // share the command's workers; the same bits in either order), not after the fit.
+    let (configuration, drift) = rayon::join(
+        || configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some()),
+        || settings.drift.as_ref().and_then(|o| drift::drift_stage(nominal, data, &base, dh.is_some(), fitted_chain, o)),
+    );
+    let mut configuration = configuration?;
     let with_term = configuration.clone().filter(|c| c.chosen || settings.configuration == ConfigurationField::On);
     let mut early_warnings = Vec::new();
     let (hyperparameters, scheme, options, fit) = match with_term {
@@ -118,7 +125,6 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
     }
-    let drift = settings.drift.as_ref().and_then(|o| drift::drift_stage(nominal, data, &base, dh.is_some(), fitted_chain, o));
     Ok(Calibration { base, dh, hyperparameters, evidence, geometry, configuration, scheme, options, fit, warnings, drift })
 }
 
