@@ -4,10 +4,10 @@
 
 use cbd_protocol::NominalModel;
 use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
-use cbd_trainer::cli::peers::{CBD, KRR};
 use cbd_trainer::data::model_file::{load_model_file, parse_model_file};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::evaluation::compare::{compare_peers, Comparison};
+use cbd_trainer::face::peers::{CBD, KRR};
 use cbd_trainer::nominal::rigid_fit::axis_angle;
 use cbd_trainer::nominal::{rotation_about, Frame};
 use cbd_trainer::parametric::base_registration::{folded_base, register_and_refine, register_base};

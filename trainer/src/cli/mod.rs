@@ -22,7 +22,6 @@ pub mod diagnose;
 pub mod eval;
 pub mod export;
 pub mod fit;
-pub mod peers;
 pub mod plan;
 pub mod report;
 pub mod simulate;
@@ -176,14 +175,14 @@ mod settings_tests {
         let Command::Compare(flags) = parsed(&["compare", "--model", "m.toml", "--train", "a.csv", "--test", "b.csv"]) else {
             unreachable!()
         };
-        let named: compare::CompareArgs = keywords(json!({"model": "m.toml", "train": "a.csv", "test": "b.csv"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::CompareSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
         let Command::Diagnose(flags) = parsed(&["diagnose", "--data", "d.csv"]) else { unreachable!() };
-        let named: diagnose::DiagnoseArgs = keywords(json!({"data": "d.csv"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::DiagnoseSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
         let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv"]) else { unreachable!() };
-        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::SimulateSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
     }
 
     #[test]
@@ -218,10 +217,10 @@ mod settings_tests {
         let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv", "--effect", "backlash", "--robot", "six"]) else {
             unreachable!()
         };
-        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv", "effect": "backlash", "robot": "six"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
-        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv", "effect": ["backlash"], "robot": "six"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::SimulateSettings = keywords(json!({"effect": "backlash", "robot": "six"})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
+        let named: crate::face::SimulateSettings = keywords(json!({"effect": ["backlash"], "robot": "six"})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
     }
 
     #[test]
@@ -229,9 +228,9 @@ mod settings_tests {
         use serde_json::json;
         let e = keywords::<crate::face::FitSettings>(json!({"max_rowz": 3})).unwrap_err();
         assert!(e.contains("max_rowz"), "{e}");
-        let e = keywords::<diagnose::DiagnoseArgs>(json!({"data": "d", "harmonic": 3})).unwrap_err();
+        let e = keywords::<crate::face::DiagnoseSettings>(json!({"harmonic": 3})).unwrap_err();
         assert!(e.contains("harmonic"), "{e}");
-        let e = keywords::<simulate::SimulateArgs>(json!({"out": "o", "out_dir": "x"})).unwrap_err();
+        let e = keywords::<crate::face::SimulateSettings>(json!({"out_dir": "x"})).unwrap_err();
         assert!(e.contains("out_dir"), "{e}");
         assert!(keywords::<crate::face::FitSettings>(json!({"max_rows": "many"})).is_err());
         assert!(keywords::<crate::face::FitSettings>(json!({"sigma": "small"})).is_err());
