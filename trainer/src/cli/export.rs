@@ -37,7 +37,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         &[("--urdf", args.urdf.as_deref()), ("--ur-kinematics", args.ur_kinematics.as_deref())],
     )?;
     let arm = ArmModel::from_file(&args.model, crate::data::model_file::load_model_file(&args.model)?)?;
-    let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let blob = crate::face::read_blob(&args.blob)?;
     // A `[urdf]` model's URDF is the file rewritten (and its link frames the ones read back).
     let urdf_text = match arm.file.as_ref().and_then(|f| f.urdf.as_ref()) {
         Some(source) => {

@@ -81,17 +81,10 @@ pub fn configure_allocator() {
     }
 }
 
-/// Runs a parsed command on the process's worker threads (`crate::workers`: as many as the memory
-/// allows, at most two); errors are printed by `main` with exit code 1.
+/// Runs a parsed command as every front does (`crate::face::run`: worker pool, staged outputs);
+/// errors are printed by `main` with exit code 1.
 pub fn run(cli: Cli) -> Result<()> {
-    let threads = memory::workers_for_memory(memory::available_bytes());
-    crate::workers::run_in_pool(threads, move || dispatch(cli))?
-}
-
-/// Runs one command with its outputs staged (`crate::io::with_staged_outputs`): they reach their
-/// paths only if it succeeds, so a command that fails leaves every output path as it found it.
-fn dispatch(cli: Cli) -> Result<()> {
-    crate::io::with_staged_outputs(|| command(cli))
+    crate::face::run(move || command(cli))
 }
 
 fn command(cli: Cli) -> Result<()> {

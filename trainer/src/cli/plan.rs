@@ -161,7 +161,7 @@ fn run_check(args: &PlanArgs, count: usize) -> Result<()> {
             d + 1
         )));
     }
-    let blob = crate::data::read_capped(blob_path, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let blob = crate::face::read_blob(blob_path)?;
     let model = crate::cli::blob_rows::decode_fitting(&blob, blob_path, &args.model, nominal, spec)?;
     if crate::cli::blob_rows::recorded_sigma(&model, blob_path)?.is_none() {
         return Err(Error::InvalidInput(format!("{}: {}", blob_path.display(), crate::evaluation::check::CheckError::NoSigma)));
