@@ -12,7 +12,6 @@ use crate::face::MAX_ITERATIONS;
 use cbd_protocol::NominalModel;
 use std::path::{Path, PathBuf};
 
-
 #[derive(Debug, clap::Args)]
 pub struct CompensateArgs {
     #[command(flatten)]

@@ -9,7 +9,7 @@
 //! measurements from a CSV file or from arrays), [`read_blob`], and the types its inputs are made
 //! of, re-exported here so that a front imports the face alone.
 
-use crate::error::Result;
+pub use crate::error::{Error, Result};
 
 mod arm;
 pub(crate) mod blob_rows;
