@@ -89,7 +89,7 @@ fn compare(nominal: &NominalModel, train: &Measurements, test: &Measurements) ->
         integrator: Some(cbd_protocol::IntegratorMethod::Euler),
         ..Default::default()
     };
-    let fitter = cbd_trainer::cli::args::cbd_fitter(&settings);
+    let fitter = cbd_trainer::face::peers::cbd_correction(&settings);
     let search = SearchOptions::default();
     let krr = kernel_ridge_correction(&search);
     compare_peers(nominal, train, test, &[KRR.with(&krr), CBD.with(&fitter)])

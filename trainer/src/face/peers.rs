@@ -223,7 +223,7 @@ mod tests {
 /// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
 /// gives (nominal, DH-calibrated, with effects), deformed as given (`--geometry nominal`): the blob
 /// `cbd fit --geometry nominal` writes for that model, data and flags.
-pub(crate) fn cbd_correction(
+pub fn cbd_correction(
     settings: &crate::calibrate::Settings,
 ) -> impl Fn(&cbd_protocol::NominalModel, &crate::data::Measurements) -> crate::Result<crate::evaluation::correction::FittedCorrection> {
     let settings = crate::calibrate::Settings { geometry: crate::calibrate::Geometry::Nominal, ..settings.clone() };
