@@ -1,7 +1,7 @@
 //! What several commands share: their argument groups (the model file; the pipeline's options are
 //! the face's, `crate::face::PipelineOptions`) and the helpers behind them (the model file read from
-//! its flag, a blob that does not fit its model). Commands import from
-//! here, from `blob_rows` (a blob read and evaluated on rows) and from `cli` itself, never from each other.
+//! its flag, a blob that does not fit its model). Commands import from here, from `blob_rows` (a
+//! blob read and evaluated on rows) and from `cli` itself, never from each other.
 
 use crate::error::{Error, Result};
 

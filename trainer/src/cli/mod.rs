@@ -120,7 +120,7 @@ pub fn exit_code() -> i32 {
 
 // Output files (atomic writes, `-` for standard output) live in `crate::io`, the memory estimates
 // in `crate::memory`, the arm a command works on in `crate::face`; the commands reach them here.
-pub use crate::face::{register_base_if_unknown, ArmModel};
+pub use crate::face::ArmModel;
 pub use crate::io::{check_output, is_stdout, write_atomically, STDOUT};
 pub use crate::memory;
 

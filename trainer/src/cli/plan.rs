@@ -135,107 +135,28 @@ fn write_poses<'p>(out: &std::path::Path, columns: &[String], poses: impl Iterat
 }
 
 /// `cbd plan --check N --blob B`: the check's poses and the smallest change of each kind it
-/// detects (`plan::check`).
+/// detects (`crate::face::plan_check`).
 fn run_check(args: &PlanArgs, count: usize) -> Result<()> {
     let blob_path = args.blob.as_ref().expect("clap requires --blob with --check");
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--blob", Some(blob_path))],
         &[("--out", Some(&args.out)), ("--json", args.json.as_deref())],
     )?;
-    if count == 0 {
-        return Err(Error::InvalidInput("--check must be at least 1".into()));
-    }
-    if !(args.alpha > 0.0 && args.alpha < 1.0) {
-        return Err(Error::InvalidInput(format!(
-            "--alpha must be a number between 0 and 1 (exclusive), got {}",
-            crate::error::number(args.alpha)
-        )));
-    }
+    let settings =
+        crate::face::CheckPlanSettings { count, candidates: args.candidates, seed: args.seed, alpha: args.alpha, register: args.register };
+    settings.validate()?;
     let arm = ArmModel::read(&args.model)?;
-    let model_name = arm.name();
-    let (nominal, spec) = (&arm.nominal, &arm.spec);
-    let limits = spec.joint_limits.clone();
-    if let Some(d) = limits.iter().position(|[lo, hi]| !(lo.is_finite() && hi.is_finite())) {
-        return Err(Error::InvalidInput(format!(
-            "{model_name}: joint {} has no finite limits: declare `joint_limits` in its [measurements]",
-            d + 1
-        )));
-    }
     let blob = crate::face::read_blob(blob_path)?;
-    let model = crate::cli::blob_rows::decode_fitting(&blob, blob_path, &args.model, nominal, spec)?;
-    if crate::cli::blob_rows::recorded_sigma(&model, blob_path)?.is_none() {
-        return Err(Error::InvalidInput(format!("{}: {}", blob_path.display(), crate::evaluation::check::CheckError::NoSigma)));
-    }
-    let columns = crate::data::joint_columns::JointColumns::new(spec);
-    let joint_factor = columns.factors().to_vec();
-    let to_model = |c: &[f64]| -> Vec<f64> { columns.to_model_from_model_units(c) };
-    let mapped = spec.joint_map.is_some() || spec.planar_frame.as_ref().is_some_and(|f| f.offsets.iter().any(|o| *o != 0.0));
-    let unit = spec.model_length_unit.name();
-    let input = crate::plan::check::CheckPlanInput {
-        model: &model,
-        geometry: model.nominal != *nominal,
-        limits: &limits,
-        to_model: if mapped { Some(&to_model) } else { None },
-        count,
-        candidates: args.candidates,
-        seed: args.seed,
-        alpha: args.alpha,
-        register: args.register || arm.register_base(),
-        unit,
-    };
-    let result = crate::plan::check::plan_check(&input).map_err(|e| Error::InvalidInput(format!("{}: {e}", blob_path.display())))?;
-    let n = model.n_joints();
-    let poses = result.controller.chunks_exact(n).map(|pose| pose.iter().zip(&joint_factor).map(|(c, f)| c / f).collect::<Vec<f64>>());
-    let poses: Vec<Vec<f64>> = poses.collect();
-    write_poses(&args.out, &spec.joint_columns, poses.iter().map(Vec::as_slice))?;
-    errln!(
-        "planned {count} check poses from {} candidates ({} within 1° of a singular configuration left out) in {:.2} s",
-        result.candidates,
-        result.rejected_singular,
-        result.seconds
-    );
-    outln!(
-        "smallest change the check detects at alpha = {} with {:.0} % power ({} degrees of freedom, noncentrality {:.2}), {count} poses:",
-        args.alpha,
-        100.0 * result.power,
-        result.dof,
-        result.noncentrality
-    );
-    outln!("{:<26} {:>12} {:>12} {:>8}  unit", "change", "random", "planned", "ratio");
-    for s in &result.sizes {
-        outln!(
-            "{:<26} {:>12.4e} {:>12.4e} {:>8.2}  {}",
-            s.effect,
-            s.random,
-            s.planned,
-            s.random / s.planned,
-            if s.unit.is_empty() { "(ratio)" } else { &s.unit }
-        );
-    }
-    if !result.framed.is_empty() {
-        outln!("taken up by the registered frame (no size detects them): {}", result.framed.join(", "));
-    }
-    if !result.invisible.is_empty() {
-        outln!("not seen at the measured point (no size detects them): {}", result.invisible.join(", "));
+    let model = crate::cli::blob_rows::decode_fitting(&blob, blob_path, &args.model, &arm.nominal, &arm.spec)?;
+    let plan = crate::face::plan_check(&arm, crate::face::DecodedBlob { model, source: blob_path }, &settings)?;
+    let poses = plan.poses_in_file_units();
+    write_poses(&args.out, &arm.spec.joint_columns, poses.iter().map(Vec::as_slice))?;
+    for line in plan.table() {
+        outln!("{line}");
     }
     errln!("wrote {count} poses to {}", args.out.display());
     if let Some(path) = &args.json {
-        let json = serde_json::json!({
-            "length_unit": unit,
-            "check_poses": count,
-            "alpha": result.alpha,
-            "power": result.power,
-            "dof": result.dof,
-            "noncentrality": result.noncentrality,
-            "random_sets": crate::plan::check::RANDOM_SETS,
-            "sizes": result.sizes,
-            "not_seen": result.invisible,
-            "taken_up_by_the_frame": result.framed,
-            "candidates": result.candidates,
-            "rejected_singular": result.rejected_singular,
-            "poses": result.controller.chunks_exact(n).map(|p| p.to_vec()).collect::<Vec<_>>(),
-        });
-        let text = serde_json::to_string_pretty(&json).map_err(Error::JsonOutput)?;
+        let text = serde_json::to_string_pretty(&plan.to_json()).map_err(Error::JsonOutput)?;
         crate::cli::write_atomically(path, text.as_bytes())?;
     }
     Ok(())

@@ -21,10 +21,12 @@ mod export;
 mod fit;
 pub mod peers;
 mod plan;
+mod plan_check;
 mod settings;
 mod simulate;
 
-pub use arm::{register_base_if_unknown, ArmModel};
+pub(crate) use arm::register_base_if_unknown;
+pub use arm::ArmModel;
 pub use compare::{compare, CompareSettings, Comparison};
 pub use compensate::{compensate, CompensatedCommand, MAX_ITERATIONS};
 pub use diagnose::{diagnose, DiagnoseSettings, Diagnosis};
@@ -32,6 +34,7 @@ pub use evaluate::{evaluate, DecodedBlob, Evaluation};
 pub use export::{export, ExportTargets, ExportedGeometry};
 pub use fit::{fit, print_calibration, Calibration, FitSettings};
 pub use plan::{candidates_spec, check_plannable, plan, Plan, PlanSettings};
+pub use plan_check::{plan_check, CheckPlan, CheckPlanSettings};
 pub use settings::PipelineOptions;
 pub use simulate::{poses_spec, simulate, SimulateSettings, Simulated};
 

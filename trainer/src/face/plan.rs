@@ -43,17 +43,28 @@ impl PlanSettings {
 /// Whether `arm` can be planned for: one tool point, finite joint limits (before a front reads
 /// any poses, so that the arm's fault is named first).
 pub fn check_plannable(arm: &ArmModel) -> Result<()> {
-    let model_name = arm.name();
     if arm.nominal.tool_point_count() > 1 {
-        return Err(crate::plan::PlanError::ToolPoints { points: arm.nominal.tool_point_count() }).context(&model_name);
+        return Err(crate::plan::PlanError::ToolPoints { points: arm.nominal.tool_point_count() }).context(arm.name());
     }
+    check_finite_limits(arm)
+}
+
+/// Poses are drawn within the joint limits: every joint needs finite ones.
+pub(super) fn check_finite_limits(arm: &ArmModel) -> Result<()> {
     if let Some(d) = arm.spec.joint_limits.iter().position(|[lo, hi]| !(lo.is_finite() && hi.is_finite())) {
         return Err(Error::InvalidInput(format!(
-            "{model_name}: joint {} has no finite limits: declare `joint_limits` in its [measurements]",
+            "{}: joint {} has no finite limits: declare `joint_limits` in its [measurements]",
+            arm.name(),
             d + 1
         )));
     }
     Ok(())
+}
+
+/// Whether the import maps the controller's values to other model joints (a joint map, a planar
+/// frame's offsets): then a plan's candidates, drawn as the controller's values, are mapped.
+pub(super) fn maps_joints(spec: &ColumnSpec) -> bool {
+    spec.joint_map.is_some() || spec.planar_frame.as_ref().is_some_and(|f| f.offsets.iter().any(|o| *o != 0.0))
 }
 
 /// The columns a file of candidate poses is read with: `spec`'s joint columns, read as the
@@ -134,7 +145,7 @@ pub fn plan(arm: &ArmModel, measured: Option<&Dataset>, candidates: Vec<f64>, se
     let columns = crate::data::joint_columns::JointColumns::new(spec);
     let joint_factor = columns.factors().to_vec();
     let to_model = |c: &[f64]| -> Vec<f64> { columns.to_model_from_model_units(c) };
-    let mapped = spec.joint_map.is_some() || spec.planar_frame.as_ref().is_some_and(|f| f.offsets.iter().any(|o| *o != 0.0));
+    let mapped = maps_joints(spec);
     let options = settings.options.clone();
     let count = options.count;
     if options.criterion == Criterion::Maximin && options.exchange > 0 {
