@@ -60,7 +60,7 @@ pub fn run<T: Send>(work: impl FnOnce() -> Result<T> + Send) -> Result<T> {
 
 /// The bytes of the blob file at `path` (refused beyond the largest blob the format allows).
 pub fn read_blob(path: &std::path::Path) -> Result<Vec<u8>> {
-    Ok(crate::data::read_capped(path, crate::data::MAX_BLOB_BYTES, "blob")?)
+    crate::data::read_capped(path, crate::data::MAX_BLOB_BYTES, "blob")
 }
 
 /// Measurements as a front read them, with what messages call them.
