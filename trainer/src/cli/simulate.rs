@@ -4,17 +4,18 @@ use crate::error::Result;
 use crate::face::SimulateSettings;
 use std::path::PathBuf;
 
+// The files' flags keep their places in `--help` among the settings' (after --noise and --effect).
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
     #[command(flatten)]
     pub settings: SimulateSettings,
     /// Output CSV (columns q1, q2 in radians, x, y in length units).
-    #[arg(long)]
+    #[arg(long, display_order = 6)]
     pub out: PathBuf,
     /// Measure at these poses instead of sampling (`cbd plan --out`): a CSV with the robot's joint
     /// columns (rr: q1, q2 in radians; six: q1_deg … q6_deg), one pose per row; --sampling, --grid and
     /// --count are then ignored.
-    #[arg(long)]
+    #[arg(long, display_order = 7)]
     pub poses: Option<PathBuf>,
 }
 

@@ -142,7 +142,7 @@ pub fn compare(arm: &ArmModel, train: &Dataset, test: &Dataset, settings: &Compa
         errln!("warning: {w}");
     }
     let commanded = match &settings.commanded {
-        Some(robot) => Some(crate::workers::on_workers(threads, || commanded_table(robot, &inputs.nominal, rows, &context))?),
+        Some(robot) => Some(crate::workers::on_workers(threads, || commanded_peers(robot, &inputs.nominal, rows, &context))?),
         None => None,
     };
     Ok(Comparison { methods, commanded, registration: inputs.registration, unit })
@@ -164,9 +164,9 @@ fn noise_floor(
     }
 }
 
-/// `cbd compare --commanded <robot>`: the table for the arm `cbd simulate --robot <robot>`
-/// measures, the peers of the list fitted again for it with `context`.
-fn commanded_table(robot: &str, nominal: &NominalModel, train: &Measurements, context: &PeerContext) -> Result<CommandedAccuracy> {
+/// `cbd compare --commanded <robot>`: the accuracy of the arm `cbd simulate --robot <robot>`
+/// measures commanded by each peer of the list, fitted again for it with `context`.
+fn commanded_peers(robot: &str, nominal: &NominalModel, train: &Measurements, context: &PeerContext) -> Result<CommandedAccuracy> {
     let arm = commanded_arm(robot, nominal)?;
     if let Some(note) = not_the_arms_data(robot, &arm, nominal, train) {
         errln!("warning: {note}");

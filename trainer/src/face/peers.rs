@@ -18,9 +18,9 @@ pub struct PeerContext {
 }
 
 /// A peer's correction, built for a context.
-pub type Fitter<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> + 'c>;
+pub type Fitter<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::error::Result<FittedCorrection> + 'c>;
 /// A peer's blob fit, built for a context.
-pub type BlobFit<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::Result<Vec<u8>> + 'c>;
+pub type BlobFit<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::error::Result<Vec<u8>> + 'c>;
 
 /// How the commanded tables command a peer (`evaluation::peers::Command`).
 #[derive(Clone, Copy)]
@@ -225,11 +225,12 @@ mod tests {
 /// `cbd fit --geometry nominal` writes for that model, data and flags.
 pub fn cbd_correction(
     settings: &crate::calibrate::Settings,
-) -> impl Fn(&cbd_protocol::NominalModel, &crate::data::Measurements) -> crate::Result<crate::evaluation::correction::FittedCorrection> {
+) -> impl Fn(&cbd_protocol::NominalModel, &crate::data::Measurements) -> crate::error::Result<crate::evaluation::correction::FittedCorrection>
+{
     let settings = crate::calibrate::Settings { geometry: crate::calibrate::Geometry::Nominal, ..settings.clone() };
     move |nominal: &cbd_protocol::NominalModel,
           data: &crate::data::Measurements|
-          -> crate::Result<crate::evaluation::correction::FittedCorrection> {
+          -> crate::error::Result<crate::evaluation::correction::FittedCorrection> {
         let calibration = crate::calibrate::calibrate(nominal, data, &settings)?;
         crate::face::print_calibration(&calibration, !settings.solver.verbose);
         let mut note = calibration.describe_hyperparameters();
