@@ -105,11 +105,18 @@ def fit(model: Optional[ModelFile], q: Array, y: Array, **options: Option) -> Mo
     raises CbdError naming it). The arrays become measurements in memory, by the CSV import's own
     conversion and checks. The GIL is released while it runs; progress goes to the ``cbd`` logger."""
 
-def compare(model: ModelFile, train: Data, test: Data, **options: Option) -> dict[str, Any]:
-    """Every method side by side (``cbd compare``'s own function, in memory); its JSON value as a dict."""
+def compare(model: ModelFile, train: Data, test: Data, plots: Optional[PathLike] = None, **options: Option) -> dict[str, Any]:
+    """Every method side by side (the face's ``compare``, the one ``cbd compare`` calls, in memory); its JSON value as a dict."""
 
-def diagnose(model: Optional[ModelFile], data: Data, test: Optional[Data] = None, **options: Option) -> dict[str, Any]:
-    """Traces the residual to physical effects (``cbd diagnose``'s own function, in memory); its JSON value as a dict."""
+def diagnose(
+    model: Optional[ModelFile],
+    data: Data,
+    test: Optional[Data] = None,
+    plots: Optional[PathLike] = None,
+    write_model: Optional[PathLike] = None,
+    **options: Option,
+) -> dict[str, Any]:
+    """Traces the residual to physical effects (the face's ``diagnose``, the one ``cbd diagnose`` calls, in memory); its JSON value as a dict."""
 
-def simulate(**options: Option) -> Tuple[Array, Array]:
-    """Simulated measurements (``cbd simulate``'s flags by name): ``(q, y)``, the rows the command's CSV holds."""
+def simulate(poses: Optional[PathLike] = None, **options: Option) -> Tuple[Array, Array]:
+    """Simulated measurements (``cbd simulate``'s flags by name; ``poses`` a CSV of poses to measure at): ``(q, y)``, the rows the command's CSV holds."""

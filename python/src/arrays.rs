@@ -47,7 +47,7 @@ pub fn matrix(name: &str, value: &Bound<'_, PyAny>, cols: usize, what: &str, ans
     }
     // The copy (and a row-vector copy of it where a call needs one) and the answer.
     let bytes = shape[0] as f64 * (2.0 * 8.0 * cols as f64 + answer_bytes_per_row as f64);
-    cbd_trainer::memory::room_for(bytes, 0).map_err(|e| {
+    cbd_trainer::face::room_for(bytes, 0).map_err(|e| {
         crate::errors::memory_error(
             value.py(),
             format!(

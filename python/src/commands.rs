@@ -1,28 +1,26 @@
-//! `cbd.compare`, `cbd.diagnose`, `cbd.simulate`: the commands' own library functions (the ones
-//! their `run` calls after reading files), in this process, on their own flags (keyword
-//! arguments); data given as arrays become measurements directly, and results come back as values
-//! — no file or text between them.
+//! `cbd.compare`, `cbd.diagnose`, `cbd.simulate`: the library face's operations the commands call
+//! after reading their files (`cbd_trainer::face`), in this process, on their settings (keyword
+//! arguments by the flags' names); data given as arrays become measurements directly, and results
+//! come back as values — no file or text between them.
 
 use crate::arrays::{out2, Rows};
 use crate::errors::{cbd_error, guarded, one_at_a_time, Failure};
 use crate::model_file::{arrays_of, measurements, ModelFile};
-use cbd_trainer::data::csv_import::ColumnSpec;
+use cbd_trainer::face::{ColumnSpec, Dataset};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::path::PathBuf;
 
-/// Keyword arguments as `cbd <command>`'s typed arguments `T` (its clap `Args` struct, which is
+/// Keyword arguments as `cbd <command>`'s typed settings `T` (the face's clap `Args` struct, which is
 /// also serde's): `dh_first=True`, `max_rows=500`, `sigma=1e-3`, `effect=[…]` by the flags' own
 /// names, each the type the flag reads; `None` is left out (the flag's default) and a path-like
-/// object is its path. `given` are what the function takes itself (the data, the model file's
-/// path): a name among them or in `reserved` is refused as a keyword. An unknown keyword or a value
-/// of the wrong type is a CbdError naming the keyword.
+/// object is its path. A name in `reserved` (what the function takes itself or returns) is refused
+/// as a keyword. An unknown keyword or a value of the wrong type is a CbdError naming the keyword.
 pub fn typed_args<'py, T: serde::de::DeserializeOwned + clap::Args>(
     py: Python<'py>,
     command: &str,
     options: Option<&Bound<'py, PyDict>>,
     reserved: &[&str],
-    given: &[(&str, Bound<'py, PyAny>)],
 ) -> PyResult<T> {
     // The command's flags by name (`--max-rows` → max_rows), for unknown keywords.
     let names: Vec<String> =
@@ -31,16 +29,13 @@ pub fn typed_args<'py, T: serde::de::DeserializeOwned + clap::Args>(
     if let Some(options) = options {
         for (key, value) in options.iter() {
             let key: String = key.extract()?;
-            if reserved.contains(&key.as_str()) || given.iter().any(|(k, _)| *k == key) {
+            if reserved.contains(&key.as_str()) {
                 return Err(cbd_error(format!(
                     "{command}(): `{key}` is not an option here (the function takes it as an argument, or returns it)"
                 )));
             }
             if !names.contains(&key) {
-                let near = names
-                    .iter()
-                    .filter(|n| !reserved.contains(&n.as_str()) && !given.iter().any(|(g, _)| g == n))
-                    .min_by_key(|n| distance(n, &key));
+                let near = names.iter().filter(|n| !reserved.contains(&n.as_str())).min_by_key(|n| distance(n, &key));
                 let tip = match near {
                     Some(n) if distance(n, &key) <= 2.max(key.len() / 3) => format!(" (did you mean `{n}`?)"),
                     _ => String::new(),
@@ -56,9 +51,6 @@ pub fn typed_args<'py, T: serde::de::DeserializeOwned + clap::Args>(
     }
     let read = |keywords: &[(String, Bound<'py, PyAny>)]| -> PyResult<Result<T, pythonize::PythonizeError>> {
         let dict = PyDict::new(py);
-        for (key, value) in given {
-            dict.set_item(*key, value)?;
-        }
         for (key, value) in keywords {
             dict.set_item(key, value)?;
         }
@@ -94,21 +86,13 @@ fn distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// A Python string (a path or a label given to the command as its argument).
-pub fn text<'py>(py: Python<'py>, value: impl AsRef<str>) -> Bound<'py, PyAny> {
-    pyo3::types::PyString::new(py, value.as_ref()).into_any()
-}
-
-/// Runs `work` as the binary runs a command (worker pool sized for the memory, outputs staged:
-/// written only if it succeeds), GIL released; a failure's messages name `sources`' arrays.
-fn run<T: Send>(py: Python<'_>, sources: &[(&str, &str)], work: impl FnOnce() -> cbd_trainer::Result<T> + Send) -> PyResult<T> {
+/// Runs `work` as the binary runs a command (`face::run`: worker pool sized for the memory, outputs
+/// staged: written only if it succeeds), GIL released; a failure's messages name `sources`' arrays.
+pub fn run<T: Send>(py: Python<'_>, sources: &[(&str, &str)], work: impl FnOnce() -> cbd_trainer::face::Result<T> + Send) -> PyResult<T> {
     py.detach(|| {
         guarded(|| {
             let _one = one_at_a_time();
-            let threads = cbd_trainer::memory::workers_for_memory(cbd_trainer::memory::available_bytes());
-            cbd_trainer::workers::run_in_pool(threads, || cbd_trainer::io::with_staged_outputs(work))
-                .map_err(cbd_trainer::Error::from)?
-                .map_err(Failure::from)
+            cbd_trainer::face::run(work).map_err(Failure::from)
         })
     })
     .map_err(|e| e.into_py(sources))
@@ -136,14 +120,6 @@ impl Data {
         Ok(Data::File(path))
     }
 
-    /// What the data go by in messages: the file's path, or the arrays' label.
-    fn name(&self) -> PathBuf {
-        match self {
-            Data::File(path) => path.clone(),
-            Data::Arrays { label, .. } => PathBuf::from(label),
-        }
-    }
-
     /// The file, where the data are one (an input the command's outputs must not overwrite).
     fn file(&self) -> Option<&std::path::Path> {
         match self {
@@ -160,11 +136,11 @@ impl Data {
         }
     }
 
-    fn read(&self, spec: &ColumnSpec) -> cbd_trainer::Result<cbd_trainer::data::csv_import::ImportedMeasurements> {
-        Ok(match self {
-            Data::File(path) => cbd_trainer::data::csv_import::read_measurements(path, spec)?,
-            Data::Arrays { label, q, y } => measurements(label, spec, q, Some(y))?,
-        })
+    fn read(&self, spec: &ColumnSpec) -> cbd_trainer::face::Result<Dataset> {
+        match self {
+            Data::File(path) => Dataset::read(path, spec),
+            Data::Arrays { label, q, y } => measurements(label, spec, q, Some(y)),
+        }
     }
 }
 
@@ -180,50 +156,65 @@ fn json_dict<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<
 }
 
 /// Every method side by side on the same data, as `cbd compare`: `train` and `test` are CSV paths
-/// or `(q, y)` arrays in the model file's columns; `options` are `cbd compare`'s flags by name.
-/// Returns the command's JSON (`--json`) as a dict, keys as the command writes them.
+/// or `(q, y)` arrays in the model file's columns; `plots` a folder for its figure; `options` are
+/// `cbd compare`'s other flags by name. Returns the command's JSON (`--json`) as a dict, keys as
+/// the command writes them.
 #[pyfunction]
-#[pyo3(signature = (model, train, test, **options))]
+#[pyo3(signature = (model, train, test, plots=None, **options))]
 pub fn compare<'py>(
     py: Python<'py>,
     model: PyRef<'py, ModelFile>,
     train: &Bound<'py, PyAny>,
     test: &Bound<'py, PyAny>,
+    plots: Option<PathBuf>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let spec = model.file.column_spec().map_err(|e| cbd_error(e.to_string()))?;
-    let train = Data::of(&spec, train, "train", "train (q, y)")?;
-    let test = Data::of(&spec, test, "test", "test (q, y)")?;
-    let given = [
-        ("model", text(py, model.path.display().to_string())),
-        ("train", text(py, train.name().display().to_string())),
-        ("test", text(py, test.name().display().to_string())),
-    ];
-    let args: cbd_trainer::cli::compare::CompareArgs = typed_args(py, "compare", options, &["json"], &given)?;
-    let (file, model_path) = (&model.file, model.path.as_path());
+    // The arm as the command reads it, from the file this ModelFile parsed (not parsed again).
+    let arm = cbd_trainer::face::ArmModel::from_file(&model.path, model.file.clone()).map_err(|e| cbd_error(e.to_string()))?;
+    let train = Data::of(&arm.spec, train, "train", "train (q, y)")?;
+    let test = Data::of(&arm.spec, test, "test", "test (q, y)")?;
+    let settings: cbd_trainer::face::CompareSettings = typed_args(py, "compare", options, &["json"])?;
     let json = run(py, &sources([&train, &test]), || {
         // The command's checks of its paths before any work (its outputs here: the figures).
-        let inputs = [("--model", Some(model_path)), ("--train", train.file()), ("--test", test.file())];
-        cbd_trainer::io::check_paths(&inputs, &[])?;
-        if let Some(dir) = &args.plots {
-            cbd_trainer::io::check_output_dir("--plots", dir)?;
+        let inputs = [("--model", arm.path.as_deref()), ("--train", train.file()), ("--test", test.file())];
+        cbd_trainer::face::check_paths(&inputs, &[])?;
+        if let Some(dir) = &plots {
+            cbd_trainer::face::check_output_dir("--plots", dir)?;
         }
-        let (train, test) = (train.read(&spec)?, test.read(&spec)?);
-        cbd_trainer::cli::compare::compare_measurements(&args, file, train, test)
+        settings.check(&arm)?;
+        let (train, test) = (train.read(&arm.spec)?, test.read(&arm.spec)?);
+        let c = cbd_trainer::face::compare(&arm, &train, &test, &settings)?;
+        // The lines the command prints, as messages.
+        cbd_trainer::errln!("{}", c.table());
+        for note in c.notes() {
+            cbd_trainer::errln!("{note}");
+        }
+        if let Some(dir) = &plots {
+            let files = c.write_figures(dir)?;
+            cbd_trainer::errln!("figures written to {} ({files} files)", dir.display());
+        }
+        if let Some(table) = c.commanded_table() {
+            cbd_trainer::errln!("{table}");
+        }
+        Ok(c.to_json())
     })?;
     json_dict(py, &json)
 }
 
 /// Traces the residual to physical effects, as `cbd diagnose`: `data` (and `test`) CSV paths or
-/// `(q, y)` arrays; `options` are its flags by name (`harmonics=3`, `no_cbd=True`, `write_model=…`).
+/// `(q, y)` arrays; `plots` a folder for its figures, `write_model` a path for the model file with
+/// the corrections found; `options` are its other flags by name (`harmonics=3`, `no_cbd=True`).
 /// Returns its JSON as a dict.
 #[pyfunction]
-#[pyo3(signature = (model, data, test=None, **options))]
+#[pyo3(signature = (model, data, test=None, plots=None, write_model=None, **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn diagnose<'py>(
     py: Python<'py>,
     model: Option<PyRef<'py, ModelFile>>,
     data: &Bound<'py, PyAny>,
     test: Option<&Bound<'py, PyAny>>,
+    plots: Option<PathBuf>,
+    write_model: Option<PathBuf>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
@@ -233,25 +224,38 @@ pub fn diagnose<'py>(
     };
     let data = Data::of(&arm.spec, data, "data", "data (q, y)")?;
     let test = test.map(|t| Data::of(&arm.spec, t, "test", "test (q, y)")).transpose()?;
-    let mut given = vec![("data", text(py, data.name().display().to_string()))];
-    if let Some(m) = &model {
-        given.push(("model", text(py, m.path.display().to_string())));
-    }
-    if let Some(test) = &test {
-        given.push(("test", text(py, test.name().display().to_string())));
-    }
-    let args: cbd_trainer::cli::diagnose::DiagnoseArgs = typed_args(py, "diagnose", options, &["model", "test", "json"], &given)?;
+    let settings: cbd_trainer::face::DiagnoseSettings = typed_args(py, "diagnose", options, &["json"])?;
+    let with_file = model.is_some();
     let json = run(py, &sources(std::iter::once(&data).chain(&test)), || {
+        settings.validate()?;
+        if write_model.is_some() && !with_file {
+            return Err(cbd_trainer::face::Error::InvalidInput(
+                "--write-model needs --model (the file the corrections are written into)".into(),
+            ));
+        }
         // The command's checks of its paths before any work (its outputs here: the model file
         // written and the figures).
         let inputs = [("--model", arm.path.as_deref()), ("--data", data.file()), ("--test", test.as_ref().and_then(Data::file))];
-        cbd_trainer::io::check_paths(&inputs, &[("--write-model", args.write_model.as_deref())])?;
-        if let Some(dir) = &args.plots {
-            cbd_trainer::io::check_output_dir("--plots", dir)?;
+        cbd_trainer::face::check_paths(&inputs, &[("--write-model", write_model.as_deref())])?;
+        if let Some(dir) = &plots {
+            cbd_trainer::face::check_output_dir("--plots", dir)?;
         }
         let measured = data.read(&arm.spec)?;
         let test = test.as_ref().map(|t| t.read(&arm.spec)).transpose()?;
-        cbd_trainer::cli::diagnose::diagnose_measurements(&args, &arm, measured, test)
+        let d = cbd_trainer::face::diagnose(&arm, &measured, test.as_ref(), &settings)?;
+        // The lines the command prints, as messages.
+        cbd_trainer::errln!("{}", d.text());
+        if let Some(dir) = &plots {
+            let files = d.write_figures(dir)?;
+            cbd_trainer::errln!("figures written to {} ({files} files)", dir.display());
+        }
+        if let Some(path) = &write_model {
+            if let Some(text) = d.model_file(&arm, path)? {
+                cbd_trainer::face::write_atomically(path, text.as_bytes())?;
+                cbd_trainer::errln!("model with the found effects written to {}", path.display());
+            }
+        }
+        Ok(d.to_json())
     })?;
     json_dict(py, &json)
 }
@@ -260,13 +264,22 @@ pub fn diagnose<'py>(
 /// `count=300`, `seed=1`, `noise=0.02`, `effect=[…]`, …). Returns `(q, y)`: the CSV's joint columns
 /// and its other columns (positions, per tool point; with `pose=True` then the quaternion), in the
 /// CSV's units — what `fit` takes with the matching model file (rr: none; six:
-/// examples/ur5/simulated-six.toml).
+/// examples/ur5/simulated-six.toml). `poses`: a CSV of poses to measure at instead of sampling
+/// (`cbd simulate --poses`).
 #[pyfunction]
-#[pyo3(signature = (**options))]
-pub fn simulate<'py>(py: Python<'py>, options: Option<&Bound<'py, PyDict>>) -> PyResult<Bound<'py, PyTuple>> {
+#[pyo3(signature = (poses=None, **options))]
+pub fn simulate<'py>(py: Python<'py>, poses: Option<PathBuf>, options: Option<&Bound<'py, PyDict>>) -> PyResult<Bound<'py, PyTuple>> {
     // The rows come back as arrays: `out` is not written.
-    let args: cbd_trainer::cli::simulate::SimulateArgs = typed_args(py, "simulate", options, &[], &[("out", text(py, "-"))])?;
-    let simulated = run(py, &[], || cbd_trainer::cli::simulate::simulate(args))?;
+    let settings: cbd_trainer::face::SimulateSettings = typed_args(py, "simulate", options, &["out"])?;
+    let simulated = run(py, &[], || {
+        // The flags are checked before the poses are read: a wrong flag is named first.
+        settings.check(poses.is_some())?;
+        let poses = match &poses {
+            Some(path) => Some(Dataset::read(path, &cbd_trainer::face::poses_spec(&settings.robot))?.imported.measurements.joints),
+            None => None,
+        };
+        cbd_trainer::face::simulate(&settings, poses)
+    })?;
     // Joint columns: q1, q2 (rr) or q1_deg … (six); the quaternion's are qw, qx, ….
     let header = &simulated.header;
     let n = header.iter().take_while(|h| h.strip_prefix('q').is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit()))).count();

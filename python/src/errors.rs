@@ -28,8 +28,8 @@ pub fn memory_error(py: Python<'_>, message: String) -> PyErr {
 /// A failure carried out of a detached call (the GIL released): only its message.
 pub struct Failure(pub String);
 
-impl From<cbd_trainer::Error> for Failure {
-    fn from(e: cbd_trainer::Error) -> Failure {
+impl From<cbd_trainer::face::Error> for Failure {
+    fn from(e: cbd_trainer::face::Error) -> Failure {
         Failure(e.to_string())
     }
 }
@@ -88,7 +88,6 @@ pub fn guarded<T>(work: impl FnOnce() -> Result<T, Failure>) -> Result<T, Failur
 /// the files a run reads are the process's.
 pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     static RUNS: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let guard = RUNS.lock().unwrap_or_else(|e| e.into_inner());
-    cbd_trainer::io::forget_inputs();
-    guard
+    // `face::run` starts the record of the files a run reads afresh.
+    RUNS.lock().unwrap_or_else(|e| e.into_inner())
 }

@@ -1,10 +1,9 @@
 //! `cbd.fit`: the library's fit (`cbd_trainer::face::fit`, the one `cbd fit` calls), with the data
-//! as arrays made measurements in memory (`csv_import::measurements_from_rows`) and its settings
+//! as arrays made measurements in memory (`face::Dataset::from_rows`) and its settings
 //! (`FitSettings`, the command's flags) read from the keywords — so the same data and flags give the
 //! same blob bytes.
 
-use crate::commands::typed_args;
-use crate::errors::{guarded, one_at_a_time, Failure};
+use crate::commands::{run, typed_args};
 use crate::model::Model;
 use crate::model_file::{arrays_of, measurements, spec_of, ModelFile, ARRAYS};
 use pyo3::prelude::*;
@@ -29,7 +28,7 @@ pub fn fit(
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Model> {
     // The data are the arrays and the blob is returned: neither is a file, nor an option here.
-    let settings: cbd_trainer::face::FitSettings = typed_args(py, "fit", options, &["model", "json", "data", "out"], &[])?;
+    let settings: cbd_trainer::face::FitSettings = typed_args(py, "fit", options, &["model", "json", "data", "out"])?;
     let (nominal, spec) = spec_of(model.as_deref())?;
     let (q, y) = arrays_of(&spec, q, Some(y))?;
     // The model answers in the arrays' units: the model file's columns (the built-in RR arm's are
@@ -42,23 +41,12 @@ pub fn fit(
         nominal,
         spec: spec.clone(),
     };
-    let fitted = py
-        .detach(|| {
-            guarded(|| {
-                let _one = one_at_a_time();
-                let threads = cbd_trainer::memory::workers_for_memory(cbd_trainer::memory::available_bytes());
-                let fitted = cbd_trainer::workers::run_in_pool(threads, || {
-                    let imported = measurements(ARRAYS, &spec, &q, y.as_ref())?;
-                    cbd_trainer::face::fit(&arm, &cbd_trainer::face::Dataset { source: ARRAYS.into(), imported }, &settings)
-                })
-                .map_err(cbd_trainer::Error::from)??;
-                Ok::<_, Failure>(fitted)
-            })
-        })
-        .map_err(|e| e.into_py(&[(ARRAYS, ARRAYS)]))?;
+    let fitted = run(py, &[(ARRAYS, ARRAYS)], || cbd_trainer::face::fit(&arm, &measurements(ARRAYS, &spec, &q, y.as_ref())?, &settings))?;
     cbd_trainer::errln!("{}", fitted.summary);
     cbd_trainer::errln!("{}", fitted.noise_floor);
     let report = serde_json::to_string(&fitted.report).map_err(|e| crate::errors::cbd_error(e.to_string()))?;
-    py.detach(|| guarded(|| Model::new(fitted.blob, Some(report), columns.as_ref().map(|(f, n, c)| (f.clone(), n, c.clone())))))
-        .map_err(|e| e.into_py(&[]))
+    py.detach(|| {
+        crate::errors::guarded(|| Model::new(fitted.blob, Some(report), columns.as_ref().map(|(f, n, c)| (f.clone(), n, c.clone()))))
+    })
+    .map_err(|e| e.into_py(&[]))
 }

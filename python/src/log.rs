@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 
 /// Installs the trainer's message sink for this process.
 pub fn route_messages_to_logging() {
-    cbd_trainer::io::set_message_sink(Some(Box::new(|_stream, line| {
+    cbd_trainer::face::set_message_sink(Some(Box::new(|_stream, line| {
         // Fits run with the GIL released, on worker threads: each line takes it for its record.
         Python::attach(|py| {
             if let Err(e) = emit(py, line) {

@@ -36,10 +36,10 @@ impl Model {
     /// it as `cbd eval` checks a blob against `--model`, and arrays are then in its columns' units.
     pub fn new(blob: Vec<u8>, report: Option<String>, model: Option<(String, &NominalModel, Columns)>) -> Result<Model, Failure> {
         let (n_joints, task_dim, tool_points, periodic) = with_calibrator(&blob, |cal| {
-            cbd_trainer::predict::check_calibrator(cal).map_err(|e| Failure(e.to_string()))?;
+            cbd_trainer::face::check_calibrator(cal).map_err(|e| Failure(e.to_string()))?;
             let m = cal.model();
             if let Some((file, nominal, columns)) = &model {
-                cbd_trainer::evaluation::blob_match::check_blob_fits_model_file(m, nominal, &columns.spec)
+                cbd_trainer::face::check_blob_fits_model_file(m, nominal, &columns.spec)
                     .map_err(|why| Failure(format!("the blob does not fit {file}: {why}")))?;
             }
             let periodic = (0..m.n_joints()).map(|d| m.nominal.is_revolute(d)).collect();
@@ -131,8 +131,7 @@ impl Model {
     #[pyo3(signature = (path, model=None))]
     fn load(py: Python<'_>, path: PathBuf, model: Option<PyRef<'_, ModelFile>>) -> PyResult<Model> {
         let with = with_file(model.as_deref())?;
-        let blob =
-            cbd_trainer::data::read_capped(&path, cbd_trainer::data::MAX_BLOB_BYTES, "blob").map_err(|e| cbd_error(e.to_string()))?;
+        let blob = cbd_trainer::face::read_blob(&path).map_err(|e| cbd_error(e.to_string()))?;
         py.detach(|| guarded(|| Model::new(blob, None, with.as_ref().map(|(f, n, c)| (f.clone(), n, c.clone())))))
             .map_err(|e| cbd_error(format!("{}: {}", path.display(), e.0)))
     }
@@ -153,7 +152,7 @@ impl Model {
 
     /// Writes the blob to `path` (atomically: a reader never sees a part-written file).
     fn save(&self, path: PathBuf) -> PyResult<()> {
-        cbd_trainer::io::write_atomically(&path, &self.blob).map_err(|e| cbd_error(e.to_string()))
+        cbd_trainer::face::write_atomically(&path, &self.blob).map_err(|e| cbd_error(e.to_string()))
     }
 
     /// The fit's report (`cbd fit --json`: hyperparameters, evidence, scheme, the fit, warnings) as
@@ -275,7 +274,7 @@ impl Model {
     ) -> PyResult<Bound<'py, PyTuple>> {
         // The CLI's bound (`cbd compensate --iterations`), checked before any work; a negative or
         // huge int is this error too, never an OverflowError without the argument's name.
-        let max = cbd_trainer::cli::compensate::MAX_ITERATIONS;
+        let max = cbd_trainer::face::MAX_ITERATIONS;
         let Some(iterations) = usize::try_from(iterations).ok().filter(|k| (1..=max).contains(k)) else {
             return Err(cbd_error(format!("iterations must be between 1 and {max} (as `cbd compensate --iterations`), got {iterations}")));
         };
@@ -293,40 +292,20 @@ impl Model {
             }
         }
         let (targets, seeds) = (t.to_vecs(), s.map(|s| s.to_vecs()));
+        // The commands in model units, flagged as `cbd compensate` flags its rows (a blob alone knows
+        // no joint limits, so `outside_limits` is a value that is not finite).
         let rows = py
             .detach(|| {
                 guarded(|| {
-                    cbd_trainer::evaluation::compensation::compensate_all(&self.blob, &targets, seeds.as_deref(), iterations, None).map_err(
-                        |e| match e {
-                            cbd_trainer::evaluation::compensation::CompensateError::Row { row, message } => {
-                                Failure(format!("targets row {row}: {message}"))
-                            }
-                            other => Failure(other.to_string()),
-                        },
-                    )
+                    cbd_trainer::face::compensate(&self.blob, &targets, seeds.as_deref(), iterations).map_err(|e| match e {
+                        cbd_trainer::face::CompensateError::Row { row, message } => Failure(format!("targets row {row}: {message}")),
+                        other => Failure(other.to_string()),
+                    })
                 })
             })
             .map_err(|e| e.into_py(&[]))?;
         let n = self.n_joints;
-        // The contract `cbd compensate` checks, on the commands as returned (model units: a blob
-        // alone knows no joint limits, so `outside_limits` is a value that is not finite).
-        let returned: Vec<Vec<f64>> = rows.iter().map(|r| r.joints.clone()).collect();
-        let checks = cbd_trainer::evaluation::command_check::check_positions(&self.blob, &returned, &targets, None)
-            .map_err(|e| cbd_error(e.to_string()))?;
-        let flags: Vec<String> = rows
-            .iter()
-            .zip(&checks)
-            .map(|(r, check)| {
-                cbd_trainer::evaluation::command_check::RowFlags {
-                    not_reached: !check.reached,
-                    outside_limits: r.joints.iter().any(|v| !v.is_finite()),
-                    singular: r.compensation.singular,
-                    extrapolating: r.compensation.extrapolating,
-                    ..Default::default()
-                }
-                .text()
-            })
-            .collect();
+        let flags: Vec<String> = rows.iter().map(|r| r.flags.clone()).collect();
         let commands: Vec<f64> = match &self.columns {
             Some(c) => rows.iter().flat_map(|r| c.joints_out(&r.joints, &self.periodic)).collect(),
             None => rows.into_iter().flat_map(|r| r.joints).collect(),

@@ -4,8 +4,7 @@
 use crate::arrays::{matrix, out2, Rows};
 use crate::errors::{cbd_error, Failure};
 use cbd_protocol::NominalModel;
-use cbd_trainer::data::csv_import::{ColumnSpec, OrientationColumns};
-use cbd_trainer::data::model_file::ModelFile as File;
+use cbd_trainer::face::{ColumnSpec, Dataset, ModelFile as File, OrientationColumns};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
@@ -25,7 +24,7 @@ impl ModelFile {
     /// CSV columns). Raises CbdError naming the file, line, column or field of a fault.
     #[staticmethod]
     fn load(path: PathBuf) -> PyResult<ModelFile> {
-        let file = cbd_trainer::data::model_file::load_model_file(&path).map_err(|e| cbd_error(e.to_string()))?;
+        let file = cbd_trainer::face::load_model_file(&path).map_err(|e| cbd_error(e.to_string()))?;
         Ok(ModelFile { path, file })
     }
 
@@ -95,8 +94,7 @@ impl ModelFile {
             spec.tool_points.clear();
         }
         let (q, y) = arrays_of(&spec, q, y)?;
-        let imported = measurements(ARRAYS, &spec, &q, y.as_ref()).map_err(|e| Failure(e.to_string()).into_py(&[]))?;
-        let d = imported.measurements;
+        let d = measurements(ARRAYS, &spec, &q, y.as_ref()).map_err(|e| Failure(e.to_string()).into_py(&[]))?.imported.measurements;
         let n = d.len();
         let q = out2(py, d.joints, n, d.n_joints);
         let y = out2(py, d.positions, n, d.task_dim);
@@ -169,14 +167,9 @@ pub fn arrays_of(spec: &ColumnSpec, q: &Bound<'_, PyAny>, y: Option<&Bound<'_, P
 }
 
 /// Measurements from arrays [`arrays_of`] checked, by the CSV import's own conversion and checks
-/// (`cbd_trainer::data::csv_import::measurements_from_rows`): no text between them. `source`
-/// names the arrays in messages (`(q, y) row 3: column 'q3_deg': …`).
-pub fn measurements(
-    source: &str,
-    spec: &ColumnSpec,
-    q: &Rows,
-    y: Option<&Rows>,
-) -> Result<cbd_trainer::data::csv_import::ImportedMeasurements, cbd_trainer::data::import_error::ImportError> {
+/// (`face::Dataset::from_rows`): no text between them. `source` names the arrays in messages
+/// (`(q, y) row 3: column 'q3_deg': …`).
+pub fn measurements(source: &str, spec: &ColumnSpec, q: &Rows, y: Option<&Rows>) -> cbd_trainer::face::Result<Dataset> {
     let y = y.map_or(&[][..], |y| &y.values[..]);
-    cbd_trainer::data::csv_import::measurements_from_rows(source, &q.values, y, q.rows, spec)
+    Dataset::from_rows(source, spec, &q.values, y, q.rows)
 }

@@ -6,8 +6,7 @@
 //! A model without one (a blob alone, or the built-in RR arm's) is in the blob's units: radians and
 //! the model's length unit.
 
-use cbd_trainer::data::column_spec::ColumnSpec;
-use cbd_trainer::data::joint_columns::JointColumns;
+use cbd_trainer::face::{ColumnSpec, JointColumns};
 
 /// The columns of the model file a model came with.
 #[derive(Debug, Clone)]

@@ -35,6 +35,27 @@ def test_compare_and_diagnose_give_the_commands_json(rr_dir, cbd_bin, tmp_path):
     assert got.keys() == want.keys()
 
 
+def test_poses_and_written_model_files_are_the_commands(rr_dir, cbd_bin, tmp_path):
+    poses = tmp_path / "poses.csv"
+    poses.write_text("q1,q2\n0.1,0.2\n0.3,-0.4\n")
+    q, y = cbd.simulate(poses=poses, noise=0.01, seed=4)
+    run(cbd_bin, "simulate", "--poses", poses, "--noise", "0.01", "--seed", "4", "--out", tmp_path / "s.csv")
+    data = read_csv(tmp_path / "s.csv")
+    assert np.array_equal(q, data[:, :2]) and np.array_equal(y, data[:, 2:])
+    rr = cbd.ModelFile.load(rr_dir / "rr.toml")
+    written = {}
+    for front in ["python", "cli"]:
+        (tmp_path / front).mkdir()
+        path = tmp_path / front / "corrected.toml"
+        if front == "python":
+            cbd.diagnose(rr, rr_dir / "train.csv", rr_dir / "test.csv", no_cbd=True, write_model=path)
+        else:
+            run(cbd_bin, "diagnose", "--no-cbd", "--model", rr_dir / "rr.toml", "--data", rr_dir / "train.csv", "--test", rr_dir / "test.csv", "--write-model", path)
+        # The header names the path written; the rest is the corrected model.
+        written[front] = path.read_text().replace(str(path), "PATH")
+    assert written["python"] == written["cli"]
+
+
 def test_messages_go_to_logging_never_to_stdout(rr_dir, capfd, caplog):
     data = read_csv(rr_dir / "train.csv")
     with caplog.at_level(logging.INFO, logger="cbd"):

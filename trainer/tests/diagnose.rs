@@ -164,7 +164,7 @@ fn an_effect_outside_the_library_is_unexplained_structure_absorbed_by_cbd() {
     let test = arm.measure(&configurations(Sampling::Uniform { count: 500, seed: 9 }, 2), 1e-5, 8);
     let nominal = cbd_trainer::simulate::rr::nominal();
     let settings = cbd_trainer::calibrate::Settings { steps: Some(1), ..Default::default() };
-    let fitter = cbd_trainer::cli::args::cbd_fitter(&settings);
+    let fitter = cbd_trainer::face::peers::cbd_correction(&settings);
     let d = diagnose(&nominal, &train, Some(&test), Some(&fitter), &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", summary(&d));
     assert!(d.unexplained_structure, "{}", summary(&d));
@@ -187,7 +187,7 @@ fn cbd_runs_on_top_of_the_effects_found() {
     let test = arm.measure(&configurations(Sampling::Uniform { count: 500, seed: 9 }, 2), 1e-5, 8);
     let nominal = cbd_trainer::simulate::rr::nominal();
     let settings = cbd_trainer::calibrate::Settings { steps: Some(1), ..Default::default() };
-    let fitter = cbd_trainer::cli::args::cbd_fitter(&settings);
+    let fitter = cbd_trainer::face::peers::cbd_correction(&settings);
     let d = diagnose(&nominal, &train, Some(&test), Some(&fitter), &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", summary(&d));
     assert!(

@@ -1,7 +1,7 @@
 //! On the simulated 6-joint arm (geometric errors + gravity joint compliance + 0.01 mm noise),
 //! DH calibration followed by CbD generalises to fresh random configurations at the noise level.
 
-use cbd_trainer::cli::args::cbd_fitter;
+use cbd_trainer::face::peers::cbd_correction as cbd_fitter;
 use cbd_trainer::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_trainer::report::stats::ErrorStats;
 use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};

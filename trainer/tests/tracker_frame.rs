@@ -4,10 +4,10 @@
 
 use cbd_protocol::NominalModel;
 use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
-use cbd_trainer::cli::peers::{CBD, KRR};
 use cbd_trainer::data::model_file::{load_model_file, parse_model_file};
 use cbd_trainer::data::Measurements;
 use cbd_trainer::evaluation::compare::{compare_peers, Comparison};
+use cbd_trainer::face::peers::{CBD, KRR};
 use cbd_trainer::nominal::rigid_fit::axis_angle;
 use cbd_trainer::nominal::{rotation_about, Frame};
 use cbd_trainer::parametric::base_registration::{folded_base, register_and_refine, register_base};
@@ -89,7 +89,7 @@ fn compare(nominal: &NominalModel, train: &Measurements, test: &Measurements) ->
         integrator: Some(cbd_protocol::IntegratorMethod::Euler),
         ..Default::default()
     };
-    let fitter = cbd_trainer::cli::args::cbd_fitter(&settings);
+    let fitter = cbd_trainer::face::peers::cbd_correction(&settings);
     let search = SearchOptions::default();
     let krr = kernel_ridge_correction(&search);
     compare_peers(nominal, train, test, &[KRR.with(&krr), CBD.with(&fitter)])

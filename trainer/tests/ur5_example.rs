@@ -69,8 +69,8 @@ fn ur5_dh_calibration_reaches_the_reference_accuracy() {
 #[ignore]
 fn ur5_compare_peers() {
     use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
-    use cbd_trainer::cli::peers::KRR;
     use cbd_trainer::evaluation::compare::compare_files;
+    use cbd_trainer::face::peers::KRR;
     let d = ur5_dir();
     let search = SearchOptions::default();
     let krr = kernel_ridge_correction(&search);
@@ -93,10 +93,10 @@ fn ur5_compare_peers() {
 #[ignore]
 fn cbd_hook_on_the_simulated_six_joint_arm() {
     use cbd_trainer::baselines::kernel_ridge::{kernel_ridge_correction, SearchOptions};
-    use cbd_trainer::cli::peers::{CBD, KRR};
     use cbd_trainer::data::Measurements;
     use cbd_trainer::evaluation::compare::compare_peers;
     use cbd_trainer::evaluation::correction::{FittedCorrection, Predictor};
+    use cbd_trainer::face::peers::{CBD, KRR};
     use cbd_trainer::simulate::six_joint::{random_configurations, SixJointRobot};
     use cbd_trainer::solver::{fit_cbd, CbdOptions};
     let robot = SixJointRobot::ur5_like(21);

@@ -60,7 +60,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let (nominal, spec) = (arm.nominal, arm.spec);
     let imported = crate::data::csv_import::read_measurements(&args.data, &spec)?;
     let (data, lines) = (imported.measurements, imported.lines);
-    let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let blob = crate::face::read_blob(&args.blob)?;
     let model = decode_fitting(&blob, &args.blob, &args.model, &nominal, &spec)?;
     if model.n_joints() != data.n_joints || model.task_dim() != data.task_dim {
         return Err(Error::InvalidInput(format!(

@@ -8,11 +8,9 @@ use crate::data::joint_columns::JointColumns;
 use crate::error::{Context, Error, Result};
 use crate::evaluation::command_check::{check_poses, check_positions, periodic_joints, RowFlags};
 use crate::evaluation::compensation::{compensate_all, compensate_all_poses, CompensateError};
+use crate::face::MAX_ITERATIONS;
 use cbd_protocol::NominalModel;
 use std::path::{Path, PathBuf};
-
-/// Most Gauss–Newton steps a compensation takes (`--iterations`; the Python package's `iterations`).
-pub const MAX_ITERATIONS: usize = 64;
 
 #[derive(Debug, clap::Args)]
 pub struct CompensateArgs {
@@ -150,7 +148,7 @@ pub fn run(args: CompensateArgs) -> Result<()> {
     }
     let arm = ArmModel::read(&args.model)?;
     let (nominal, spec) = (arm.nominal.clone(), arm.spec.clone());
-    let blob = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let blob = crate::face::read_blob(&args.blob)?;
     let model = crate::cli::blob_rows::decode_fitting(&blob, &args.blob, &args.model, &nominal, &spec)?;
     let periodic = periodic_joints(&model);
     let length = spec.length_unit.factor_to(spec.model_length_unit);

@@ -43,7 +43,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let arm = ArmModel::read(&args.model)?;
     let imported = crate::data::csv_import::read_measurements(&args.data, &arm.spec)?;
     let data = crate::face::Dataset { source: args.data.clone(), imported };
-    let bytes = crate::data::read_capped(&args.blob, crate::data::MAX_BLOB_BYTES, "blob")?;
+    let bytes = crate::face::read_blob(&args.blob)?;
     let model = decode_fitting(&bytes, &args.blob, &args.model, &arm.nominal, &arm.spec)?;
     let blob = crate::face::DecodedBlob { model, source: &args.blob };
     let e = crate::face::evaluate(&arm, blob, &data, args.extrapolation_threshold)?;

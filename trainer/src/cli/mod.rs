@@ -22,7 +22,6 @@ pub mod diagnose;
 pub mod eval;
 pub mod export;
 pub mod fit;
-pub mod peers;
 pub mod plan;
 pub mod report;
 pub mod simulate;
@@ -82,17 +81,10 @@ pub fn configure_allocator() {
     }
 }
 
-/// Runs a parsed command on the process's worker threads (`crate::workers`: as many as the memory
-/// allows, at most two); errors are printed by `main` with exit code 1.
+/// Runs a parsed command as every front does (`crate::face::run`: worker pool, staged outputs);
+/// errors are printed by `main` with exit code 1.
 pub fn run(cli: Cli) -> Result<()> {
-    let threads = memory::workers_for_memory(memory::available_bytes());
-    crate::workers::run_in_pool(threads, move || dispatch(cli))?
-}
-
-/// Runs one command with its outputs staged (`crate::io::with_staged_outputs`): they reach their
-/// paths only if it succeeds, so a command that fails leaves every output path as it found it.
-fn dispatch(cli: Cli) -> Result<()> {
-    crate::io::with_staged_outputs(|| command(cli))
+    crate::face::run(move || command(cli))
 }
 
 fn command(cli: Cli) -> Result<()> {
@@ -128,7 +120,7 @@ pub fn exit_code() -> i32 {
 
 // Output files (atomic writes, `-` for standard output) live in `crate::io`, the memory estimates
 // in `crate::memory`, the arm a command works on in `crate::face`; the commands reach them here.
-pub use crate::face::{register_base_if_unknown, ArmModel};
+pub use crate::face::ArmModel;
 pub use crate::io::{check_output, is_stdout, write_atomically, STDOUT};
 pub use crate::memory;
 
@@ -176,14 +168,14 @@ mod settings_tests {
         let Command::Compare(flags) = parsed(&["compare", "--model", "m.toml", "--train", "a.csv", "--test", "b.csv"]) else {
             unreachable!()
         };
-        let named: compare::CompareArgs = keywords(json!({"model": "m.toml", "train": "a.csv", "test": "b.csv"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::CompareSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
         let Command::Diagnose(flags) = parsed(&["diagnose", "--data", "d.csv"]) else { unreachable!() };
-        let named: diagnose::DiagnoseArgs = keywords(json!({"data": "d.csv"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::DiagnoseSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
         let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv"]) else { unreachable!() };
-        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::SimulateSettings = keywords(json!({})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
     }
 
     #[test]
@@ -218,10 +210,10 @@ mod settings_tests {
         let Command::Simulate(flags) = parsed(&["simulate", "--out", "s.csv", "--effect", "backlash", "--robot", "six"]) else {
             unreachable!()
         };
-        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv", "effect": "backlash", "robot": "six"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
-        let named: simulate::SimulateArgs = keywords(json!({"out": "s.csv", "effect": ["backlash"], "robot": "six"})).unwrap();
-        assert_eq!(format!("{flags:?}"), format!("{named:?}"));
+        let named: crate::face::SimulateSettings = keywords(json!({"effect": "backlash", "robot": "six"})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
+        let named: crate::face::SimulateSettings = keywords(json!({"effect": ["backlash"], "robot": "six"})).unwrap();
+        assert_eq!(format!("{:?}", flags.settings), format!("{named:?}"));
     }
 
     #[test]
@@ -229,9 +221,9 @@ mod settings_tests {
         use serde_json::json;
         let e = keywords::<crate::face::FitSettings>(json!({"max_rowz": 3})).unwrap_err();
         assert!(e.contains("max_rowz"), "{e}");
-        let e = keywords::<diagnose::DiagnoseArgs>(json!({"data": "d", "harmonic": 3})).unwrap_err();
+        let e = keywords::<crate::face::DiagnoseSettings>(json!({"harmonic": 3})).unwrap_err();
         assert!(e.contains("harmonic"), "{e}");
-        let e = keywords::<simulate::SimulateArgs>(json!({"out": "o", "out_dir": "x"})).unwrap_err();
+        let e = keywords::<crate::face::SimulateSettings>(json!({"out_dir": "x"})).unwrap_err();
         assert!(e.contains("out_dir"), "{e}");
         assert!(keywords::<crate::face::FitSettings>(json!({"max_rows": "many"})).is_err());
         assert!(keywords::<crate::face::FitSettings>(json!({"sigma": "small"})).is_err());

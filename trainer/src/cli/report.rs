@@ -34,7 +34,7 @@ pub fn run(args: ReportArgs) -> crate::Result<()> {
     }
     let json = args.json.as_ref().expect("clap requires --json or --checks");
     crate::io::check_paths(&[("--json", Some(json))], &[("--out", Some(&args.out))])?;
-    let labels = crate::cli::peers::labels(crate::cli::peers::PEERS);
+    let labels = crate::face::peers::labels(crate::face::peers::PEERS);
     let figures = crate::report::html::write_report(json, args.plots.as_deref(), &args.out, &args.unit, &labels)?;
     outln!("report written to {} ({figures} figures embedded)", args.out.display());
     Ok(())

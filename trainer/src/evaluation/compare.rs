@@ -1,5 +1,5 @@
 //! Every method on the same data: nominal, parametric DH calibration, and — from the list of
-//! [`Peer`]s the caller gives (`cli::peers`: the kernel-ridge peer of the residual, Calibration by
+//! [`Peer`]s the caller gives (`face::peers`: the kernel-ridge peer of the residual, Calibration by
 //! Diffeomorphisms) — each peer on the nominal model and on the DH-calibrated chain (`dh+<name>`).
 
 use super::correction::{FittedCorrection, Predictor};

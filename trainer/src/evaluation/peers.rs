@@ -1,7 +1,7 @@
 //! A peer as the harnesses see it ([`compare`](super::compare), [`commanded`](super::commanded),
 //! [`commanded_pose`](super::commanded_pose)): its row name, whether it is also fitted on the
 //! DH-calibrated chain (`dh+<name>`), how its correction is fitted, and how the commanded tables
-//! turn a target into a joint command with it. The list itself is the CLI's (`cli::peers`); no
+//! turn a target into a joint command with it. The list itself is the CLI's (`face::peers`); no
 //! harness names a peer.
 
 use super::correction::{fit_on, fit_per_tool_point, CorrectionFitter, FittedCorrection};

@@ -80,7 +80,7 @@ fn is_stats(v: &Value) -> bool {
     ["mean", "median", "p99", "max"].iter().all(|k| field(v, k).is_some())
 }
 
-/// Reader-facing names of the peers' rows by key (`cli::peers::labels`: `krr`, `dh+krr`, …).
+/// Reader-facing names of the peers' rows by key (`face::peers::labels`: `krr`, `dh+krr`, …).
 pub type MethodLabels<'a> = &'a [(String, &'a str)];
 
 /// Reader-facing names of the statistics keys: the bases' and the demo's here, the peers' from `labels`.
@@ -399,7 +399,7 @@ mod tests {
     use super::*;
 
     fn labels() -> Vec<(String, &'static str)> {
-        crate::cli::peers::labels(crate::cli::peers::PEERS)
+        crate::face::peers::labels(crate::face::peers::PEERS)
     }
 
     #[test]

@@ -70,8 +70,8 @@ pub fn to_json(h: &Hyperparameters) -> serde_json::Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::peers::{CBD, KRR};
     use crate::evaluation::compare::compare_peers;
+    use crate::face::peers::{CBD, KRR};
     use crate::simulate::six_joint::{random_configurations, SixJointRobot};
 
     #[test]

@@ -18,9 +18,9 @@ pub struct PeerContext {
 }
 
 /// A peer's correction, built for a context.
-pub type Fitter<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::Result<FittedCorrection> + 'c>;
+pub type Fitter<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::error::Result<FittedCorrection> + 'c>;
 /// A peer's blob fit, built for a context.
-pub type BlobFit<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::Result<Vec<u8>> + 'c>;
+pub type BlobFit<'c> = Box<dyn Fn(&NominalModel, &Measurements) -> crate::error::Result<Vec<u8>> + 'c>;
 
 /// How the commanded tables command a peer (`evaluation::peers::Command`).
 #[derive(Clone, Copy)]
@@ -54,7 +54,7 @@ fn krr_fitter(c: &PeerContext) -> Fitter<'_> {
 }
 
 fn cbd_fitter(c: &PeerContext) -> Fitter<'_> {
-    Box::new(super::args::cbd_fitter(&c.settings))
+    Box::new(cbd_correction(&c.settings))
 }
 
 fn cbd_blob(c: &PeerContext) -> BlobFit<'_> {
@@ -217,5 +217,48 @@ mod tests {
         let commanded = fit_and_command(&arm, &nominal, &train, &peers, commanded_accuracy, 100, 7).unwrap();
         let names: Vec<&str> = commanded.rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(names, ["nominal", "dh", "krr", "dh+krr", "cbd", "offset"]);
+    }
+}
+
+/// CbD through the one calibration pipeline (`crate::calibrate`) on whatever base model the caller
+/// gives (nominal, DH-calibrated, with effects), deformed as given (`--geometry nominal`): the blob
+/// `cbd fit --geometry nominal` writes for that model, data and flags.
+pub fn cbd_correction(
+    settings: &crate::calibrate::Settings,
+) -> impl Fn(&cbd_protocol::NominalModel, &crate::data::Measurements) -> crate::error::Result<crate::evaluation::correction::FittedCorrection>
+{
+    let settings = crate::calibrate::Settings { geometry: crate::calibrate::Geometry::Nominal, ..settings.clone() };
+    move |nominal: &cbd_protocol::NominalModel,
+          data: &crate::data::Measurements|
+          -> crate::error::Result<crate::evaluation::correction::FittedCorrection> {
+        let calibration = crate::calibrate::calibrate(nominal, data, &settings)?;
+        crate::face::print_calibration(&calibration, !settings.solver.verbose);
+        let mut note = calibration.describe_hyperparameters();
+        if let Some(e) = &calibration.evidence {
+            note += &format!("; evidence {:.2} on {} rows ({:.2} s)", e.log_evidence, e.rows_used, e.seconds);
+        }
+        // Which member of the prior family the row used (docs/DESIGN.md §16).
+        let member = if calibration.hyperparameters.configuration.is_some() { "with the configuration field" } else { "CbD's two fields" };
+        note += &match &calibration.configuration {
+            Some(f) => format!(
+                "; prior: {member} (configuration field {} by evidence: {:.1} → {:.1}, margin {:.1})",
+                if f.chosen { "chosen" } else { "not chosen" },
+                f.plain_log_evidence,
+                f.with_term_log_evidence,
+                f.margin
+            ),
+            None => format!("; prior: {member}"),
+        };
+        note += &format!("; {} ({})", calibration.scheme.label(), calibration.scheme.chosen_by);
+        for w in &calibration.warnings {
+            note += &format!("; warning: {w}");
+        }
+        let blob = calibration.fit.blob;
+        let predictor: crate::evaluation::correction::Predictor =
+            Box::new(move |joints: &[f64]| crate::predict::evaluate_blob(&blob, joints).unwrap_or_else(|_| vec![f64::NAN; joints.len()]));
+        Ok(crate::evaluation::correction::FittedCorrection {
+            noise_sigma: Some(calibration.hyperparameters.sigma),
+            ..crate::evaluation::correction::FittedCorrection::new(predictor, note)
+        })
     }
 }
