@@ -4,8 +4,8 @@
 //! millimetres leaves second-order shape the test's joint kernel must carry, and the UR5 rows'
 //! drift went unseen there). The chain is fitted here only where no stage fitted it already.
 
+use super::drift_test::{drift_of_chain, Drift, DriftOptions};
 use crate::data::{Measurements, RowOrder};
-use crate::diagnose::drift::{drift_of_chain, Drift, DriftOptions};
 use crate::parametric::DhCalibrationOptions;
 use cbd_protocol::NominalModel;
 

@@ -15,6 +15,7 @@
 
 pub mod configuration;
 pub mod drift;
+pub mod drift_test;
 pub mod geometry;
 pub mod hyperparameters;
 pub mod scheme;
@@ -50,7 +51,7 @@ pub struct Calibration {
     /// Stalled fits and the like: printed by the CLI, in the JSON.
     pub warnings: Vec<String>,
     /// The drift test in measurement order, when asked for and the rows allow it ([`drift`]).
-    pub drift: Option<crate::diagnose::drift::Drift>,
+    pub drift: Option<drift_test::Drift>,
 }
 
 /// Calibrates `nominal` on `data` (training rows only).

@@ -96,7 +96,7 @@ pub struct Settings {
     /// reproduction, which keeps the momenta when the representation is `Auto`.
     pub solver: SolverSettings,
     /// The drift test in measurement order after the fit (`cbd fit`'s), or none.
-    pub drift: Option<crate::diagnose::drift::DriftOptions>,
+    pub drift: Option<super::drift_test::DriftOptions>,
 }
 
 impl Settings {

@@ -143,6 +143,10 @@ impl Measurements {
         };
         (self.subset(&rest), self.subset(&held))
     }
+    /// What `model` leaves of the measured positions (measured − predicted, m per row, row-major).
+    pub fn residual_of(&self, model: &cbd_protocol::NominalModel) -> Vec<f64> {
+        crate::nominal::positions(model, &self.joints, self.task_dim).iter().zip(&self.positions).map(|(k, y)| y - k).collect()
+    }
     /// The diagonal of the positions' bounding box: the rows' extent (0 for one row).
     pub fn bounding_box_diagonal(&self) -> f64 {
         let m = self.task_dim;

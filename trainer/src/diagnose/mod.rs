@@ -7,7 +7,6 @@
 //! place → held-out comparison and report (`report`); beside them, whether what is left follows
 //! the order of measurement (`drift`).
 
-pub mod drift;
 pub mod error;
 pub mod f_test;
 pub mod kinematics;
@@ -19,6 +18,7 @@ pub mod structure;
 #[cfg(test)]
 mod test_effect;
 
+use crate::calibrate::drift_test as drift;
 use crate::data::Measurements;
 use crate::evaluation::correction::{fit_on, CorrectionFitter};
 use crate::nominal::positions;
@@ -249,7 +249,7 @@ fn shape_outside_library(
     if !kept.iter().any(is_joint_deflection) {
         return None;
     }
-    let tests = structure_tests(&refined.model, train, &residual(&refined.model, train), options);
+    let tests = structure_tests(&refined.model, train, &train.residual_of(&refined.model), options);
     kept.iter().filter(|g| is_joint_deflection(g)).find_map(|&g| {
         let shape = tests.iter().find(|t| t.family == "joint shape" && t.joint == groups[g].joint && t.significant)?;
         Some(DroppedEffect {
@@ -289,10 +289,6 @@ pub fn holdout_split(data: &Measurements, fraction: f64, seed: u64) -> (Measurem
         }
     };
     (data.subset(&data.pose_rows(&train)), data.subset(&data.pose_rows(&test)))
-}
-
-fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    positions(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// Columns of each group that enter the selection: geometric pruned to an identifiable set, a
@@ -367,7 +363,7 @@ pub fn diagnose(
     let dh_form = crate::nominal::planar::as_dh(given);
     let model = &dh_form;
     // 1. Residuals of the current model and 2. their structure.
-    let r0 = residual(model, &train);
+    let r0 = train.residual_of(model);
     let structure_before = structure_tests(model, &train, &r0, &options.structure);
     // 3. The library's columns at the current model.
     let groups = candidate_groups(model, &options.library, m);
@@ -423,7 +419,7 @@ pub fn diagnose(
         })
         .collect();
     // 6. Structure left after the effects.
-    let r1 = residual(&refined.model, &train);
+    let r1 = train.residual_of(&refined.model);
     let structure_after = structure_tests(&refined.model, &train, &r1, &options.structure);
     let unexplained_structure = structure_after.iter().any(|t| t.significant);
     // Drift: the first rows of the data in file order (the held-out split is a random subset),
@@ -431,7 +427,7 @@ pub fn diagnose(
     let revolute: Vec<bool> = (0..model.n_joints()).map(|d| model.is_revolute(d)).collect();
     let tested = data.subset(&(0..data.len().min(options.drift.window.saturating_mul(data.points_per_pose.max(1)))).collect::<Vec<_>>());
     let fitted = jacobian(&refined.model, &tested, &chosen_params);
-    let drift = drift::drift_test(&tested, &revolute, &residual(&refined.model, &tested), Some(fitted.as_ref()), &options.drift);
+    let drift = drift::drift_test(&tested, &revolute, &tested.residual_of(&refined.model), Some(fitted.as_ref()), &options.drift);
     // 7. Held-out table and the recommendation.
     let geometric_only = geometric_only_model(model, &found, &refined, &chosen_params, &start, &train, options)?;
     let (table, cbd_sigma) = held_out_table(given, model, &geometric_only, &refined.model, &train, &test, cbd)?;

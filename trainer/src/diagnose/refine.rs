@@ -5,7 +5,6 @@
 
 use super::library::{apply, jacobian, Param};
 use crate::data::Measurements;
-use crate::nominal::positions;
 use crate::numeric::least_squares::TruncatedSvd;
 use crate::numeric::levenberg_marquardt as lm;
 use cbd_protocol::NominalModel;
@@ -24,10 +23,6 @@ pub struct Refined {
     pub dof: f64,
     pub sse: f64,
     pub iterations: usize,
-}
-
-fn residual(model: &NominalModel, data: &Measurements) -> Vec<f64> {
-    positions(model, &data.joints, data.task_dim).iter().zip(&data.positions).map(|(k, y)| y - k).collect()
 }
 
 /// The Gauss–Newton step (truncated least squares, directions with σ² below 1e-12 σ_max² of the
@@ -65,7 +60,7 @@ impl crate::numeric::levenberg_marquardt::Problem for Refinement<'_> {
 
     fn evaluate(&mut self, trial: &[f64], _delta: &[f64]) -> Result<Option<Self::Eval>, Self::Error> {
         let model = apply(self.base, self.params, trial)?;
-        let r = residual(&model, self.data);
+        let r = self.data.residual_of(&model);
         let sse = r.iter().map(|v| v * v).sum();
         Ok(Some((model, r, sse)))
     }
@@ -84,7 +79,7 @@ pub fn refine(
     max_iterations: usize,
 ) -> Result<Refined, super::DiagnoseError> {
     let model = apply(base, params, start)?;
-    let r = residual(&model, data);
+    let r = data.residual_of(&model);
     let sse: f64 = r.iter().map(|v| v * v).sum();
     // Gauss–Newton with step halving (t = 1, ½, … while above 1e-4), a step taken when it does not
     // raise the sum of squares, until one lowers it by at most 1e-12 of it or none lowers it.

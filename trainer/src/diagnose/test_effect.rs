@@ -140,7 +140,7 @@ fn the_library_offers_and_finds_it() {
     let jac = jacobian(&model, &data, &params);
     let group_cols = super::usable_columns(&groups, &offsets, &jac, 1e-5);
     assert!(!group_cols[2].is_empty(), "the step's column is independent of the geometric ones");
-    let residual = super::residual(&model, &data);
+    let residual = data.residual_of(&model);
     let options = SelectionOptions::default();
     let problem = LinearProblem::new(&jac, &residual, 2, 1, data.order, options.folds, options.seed);
     let selection = forward_select(&problem, &group_cols, &options);

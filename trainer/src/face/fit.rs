@@ -132,7 +132,7 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
 /// `blob` with what the calibration found about its rows recorded, every other byte of its model
 /// unchanged: the drift `d` beside σ (format 8), and the import `frame` the rows were read through
 /// (format 9, `cbd_protocol::Provenance`). Nothing to record: `blob` as it is.
-fn with_record(blob: &[u8], d: Option<&crate::diagnose::drift::Drift>, frame: Option<cbd_protocol::ImportFrame>) -> Result<Vec<u8>> {
+fn with_record(blob: &[u8], d: Option<&crate::calibrate::drift_test::Drift>, frame: Option<cbd_protocol::ImportFrame>) -> Result<Vec<u8>> {
     if d.is_none() && frame.is_none() {
         return Ok(blob.to_vec());
     }

@@ -1,5 +1,7 @@
 //! Drift: is the residual correlated in the order the rows were measured, beyond what the
 //! configuration explains? (docs/DESIGN.md "Drift in measurement order", issue 49.)
+//! Here, in the calibrate layer, because the fit runs it as a stage ([`super::drift`]); `cbd diagnose`
+//! and `cbd check` read it from above.
 //!
 //! On a contiguous window of the poses in file order, the residual r (one pose per row, the mean of
 //! its points, m coordinates sharing one covariance) is compared under two Gaussian-process priors
@@ -402,7 +404,7 @@ pub fn drift_of_chain(chain: &cbd_protocol::NominalModel, data: &Measurements, o
     }
     let rows: Vec<usize> = (0..data.len().min(options.window.saturating_mul(data.points_per_pose.max(1)))).collect();
     let tested = data.subset(&rows);
-    let residual = super::residual(chain, &tested);
+    let residual = tested.residual_of(chain);
     let revolute: Vec<bool> = (0..chain.n_joints()).map(|d| chain.is_revolute(d)).collect();
     let fitted = crate::parametric::identifiable::identification_jacobian(chain, &tested.joints).map(|(jac, _)| jac);
     drift_test(&tested, &revolute, &residual, fitted.as_ref().map(|j| j.as_ref()), options)
