@@ -1,4 +1,4 @@
-//! The pipeline's last stage, when asked (`Settings::drift`; `cbd fit` asks): drift in measurement
+//! The pipeline's drift stage, when asked (`Settings::drift`; `cbd fit` asks): drift in measurement
 //! order (issue 49 item 2) on the residual of the DH-calibrated chain — the chain CbD deforms, or
 //! where the nominal was kept the chain the geometry choice fitted (a nominal chain's error of
 //! millimetres leaves second-order shape the test's joint kernel must carry, and the UR5 rows'
@@ -9,25 +9,16 @@ use crate::data::{Measurements, RowOrder};
 use crate::parametric::DhCalibrationOptions;
 use cbd_protocol::NominalModel;
 
-/// The drift test of `data` for `nominal`: `base` the chain CbD deforms, `calibrated` whether it is
-/// the DH-calibrated one, `fitted` the DH-calibrated chain the geometry choice fitted (if any).
-pub fn drift_stage(
-    nominal: &NominalModel,
-    data: &Measurements,
-    base: &NominalModel,
-    calibrated: bool,
-    fitted: Option<NominalModel>,
-    options: &DriftOptions,
-) -> Option<Drift> {
+/// The drift test of `data` for `nominal`, on `fitted`, the DH-calibrated chain the geometry choice
+/// fitted (the chain CbD deforms when it chose it); without one, the chain fitted here, or
+/// `nominal` as it stands where the DH fit cannot calibrate it.
+pub fn drift_stage(nominal: &NominalModel, data: &Measurements, fitted: Option<NominalModel>, options: &DriftOptions) -> Option<Drift> {
     // Rows without a time of measurement are not tested: no chain to fit for them.
     if data.order == RowOrder::Unordered {
         return None;
     }
-    let chain = match (calibrated, fitted) {
-        (true, _) => base.clone(),
-        (false, Some(chain)) => chain,
-        // A chain the DH fit cannot calibrate is tested as it stands.
-        (false, None) => crate::parametric::calibrate_dh(nominal, data, &DhCalibrationOptions::default()).map_or(base.clone(), |f| f.model),
-    };
+    let chain = fitted.unwrap_or_else(|| {
+        crate::parametric::calibrate_dh(nominal, data, &DhCalibrationOptions::default()).map_or(nominal.clone(), |f| f.model)
+    });
     drift_of_chain(&chain, data, options)
 }

@@ -75,7 +75,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     // share the command's workers; the same bits in either order), not after the fit.
     let (configuration, drift) = rayon::join(
         || configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some()),
-        || settings.drift.as_ref().and_then(|o| drift::drift_stage(nominal, data, &base, dh.is_some(), fitted_chain, o)),
+        || settings.drift.as_ref().and_then(|o| drift::drift_stage(nominal, data, fitted_chain, o)),
     );
     let mut configuration = configuration?;
     let with_term = configuration.clone().filter(|c| c.chosen || settings.configuration == ConfigurationField::On);

@@ -95,7 +95,7 @@ pub struct Settings {
     /// verbosity): the fit's own options take it whole (`options_for`), but for the paper's
     /// reproduction, which keeps the momenta when the representation is `Auto`.
     pub solver: SolverSettings,
-    /// The drift test in measurement order after the fit (`cbd fit`'s), or none.
+    /// The drift test in measurement order, beside the field's search (`cbd fit`'s), or none.
     pub drift: Option<super::drift_test::DriftOptions>,
 }
 
