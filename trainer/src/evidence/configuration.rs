@@ -4,7 +4,7 @@
 //! it gains more than ½ ln(N m) nats per added hyperparameter (the BIC's price: the plain model is
 //! the term's γ_C → 0, so the richer family never scores lower at its optimum).
 
-use super::search::{counted, from_each, minimise, Criterion};
+use super::search::{counted, from_each, minimise, Criterion, Partial};
 use super::starts::DataScales;
 use super::table::{ConfigTheta, PairTable, Theta};
 use super::{evidence_rows, CbdHyperparameters, EvidenceError, EvidenceOptions};
@@ -68,6 +68,12 @@ impl Criterion for Tight<'_> {
     }
     fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)> {
         self.0.nlml_and_gradient(packed)
+    }
+    fn nlml(&self, packed: &[f64]) -> Option<(f64, Partial)> {
+        self.0.nlml(packed)
+    }
+    fn gradient_from(&self, packed: &[f64], partial: Partial) -> Option<Vec<f64>> {
+        self.0.gradient_from(packed, partial)
     }
     fn tolerances(&self) -> (f64, f64) {
         (1e-7, 1e-6)

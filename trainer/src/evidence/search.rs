@@ -12,6 +12,20 @@ pub(crate) trait Criterion {
     fn observations(&self) -> usize;
     /// Value and gradient; `None` where the covariance is not positive definite.
     fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)>;
+    /// The value alone, and what [`Criterion::gradient_from`] at the same point reuses: a line
+    /// search's trial points need no gradient, and most are rejected (the kernel form then skips
+    /// K⁻¹, two thirds of an evaluation's flops). Default: the gradient too, carried along.
+    fn nlml(&self, packed: &[f64]) -> Option<(f64, Partial)> {
+        self.nlml_and_gradient(packed).map(|(value, gradient)| (value, Box::new(gradient) as Partial))
+    }
+    /// The gradient at the point [`Criterion::nlml`] left `partial` for (the same bits as
+    /// [`Criterion::nlml_and_gradient`]'s).
+    fn gradient_from(&self, packed: &[f64], partial: Partial) -> Option<Vec<f64>> {
+        match partial.downcast::<Vec<f64>>() {
+            Ok(gradient) => Some(*gradient),
+            Err(_) => self.nlml_and_gradient(packed).map(|(_, gradient)| gradient),
+        }
+    }
     /// Where L-BFGS stops, per unknown: (change of the value, gradient). Default TOLERANCE for
     /// both, the kernel form's own rounding.
     fn tolerances(&self) -> (f64, f64) {
@@ -19,14 +33,18 @@ pub(crate) trait Criterion {
     }
 }
 
-/// The objective argmin sees: nlml plus a quadratic wall outside the bounds; value and gradient
-/// computed together and cached (L-BFGS asks for both at the same point).
+/// What a [`Criterion::nlml`] evaluation leaves for the gradient at the same point.
+pub(crate) type Partial = Box<dyn std::any::Any>;
+
+/// The objective argmin sees: nlml plus a quadratic wall outside the bounds. The last point is
+/// cached: the line search asks for its value, L-BFGS for the accepted point's gradient next, which
+/// is computed then from what the value left.
 struct Objective<'a> {
     table: &'a dyn Criterion,
     lower: Vec<f64>,
     upper: Vec<f64>,
     wall: f64,
-    cache: RefCell<Option<(Vec<f64>, f64, Vec<f64>)>>,
+    cache: RefCell<Option<Evaluated>>,
     /// Likelihood evaluations, counted across every run that shares it.
     evaluations: &'a RefCell<usize>,
 }
@@ -40,35 +58,78 @@ const TOLERANCE: f64 = 1e-4;
 /// Value returned where K is not positive definite: finite, so that the line search backtracks.
 const INFEASIBLE: f64 = 1e300;
 
+/// The objective at one point: its value, and its gradient once asked for (until then, what the
+/// value left for it).
+struct Evaluated {
+    at: Vec<f64>,
+    value: f64,
+    gradient: Option<Vec<f64>>,
+    partial: Option<Partial>,
+}
+
 impl Objective<'_> {
-    fn both(&self, p: &[f64]) -> (f64, Vec<f64>) {
-        if let Some((at, v, g)) = self.cache.borrow().as_ref() {
-            if at.as_slice() == p {
-                return (*v, g.clone());
-            }
+    fn clamped(&self, p: &[f64]) -> Vec<f64> {
+        p.iter().zip(self.lower.iter().zip(&self.upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect()
+    }
+
+    /// Per unknown: a first L-BFGS step of −g is then of order one in log space, and the
+    /// tolerances scale with the evaluation's own rounding (which grows with N m).
+    fn per_unknown(&self) -> f64 {
+        1.0 / self.table.observations() as f64
+    }
+
+    /// The objective's value at `p`, evaluated (and cached) unless `p` is the cached point.
+    fn value(&self, p: &[f64]) -> f64 {
+        if let Some(e) = self.cache.borrow().as_ref().filter(|e| e.at.as_slice() == p) {
+            return e.value;
         }
         // A non-finite trial point (an L-BFGS update from a vanishing step) is rejected, never evaluated.
         if p.iter().any(|v| !v.is_finite()) {
-            return (INFEASIBLE, vec![0.0; p.len()]);
+            *self.cache.borrow_mut() =
+                Some(Evaluated { at: p.to_vec(), value: INFEASIBLE, gradient: Some(vec![0.0; p.len()]), partial: None });
+            return INFEASIBLE;
         }
         *self.evaluations.borrow_mut() += 1;
-        let clamped: Vec<f64> = p.iter().zip(self.lower.iter().zip(&self.upper)).map(|(v, (lo, hi))| v.clamp(*lo, *hi)).collect();
-        // Per unknown: a first L-BFGS step of −g is then of order one in log space, and the
-        // tolerances scale with the evaluation's own rounding (which grows with N m).
-        let per_unknown = 1.0 / self.table.observations() as f64;
-        let (mut v, mut g) = match self.table.nlml_and_gradient(&clamped) {
-            Some((v, g)) => (v * per_unknown, g.iter().map(|x| x * per_unknown).collect()),
-            None => (INFEASIBLE, vec![0.0; p.len()]),
+        let (mut value, partial) = match self.table.nlml(&self.clamped(p)) {
+            Some((v, partial)) => (v * self.per_unknown(), Some(partial)),
+            None => (INFEASIBLE, None),
         };
-        for (k, x) in p.iter().enumerate() {
-            let over = (x - self.upper[k]).max(0.0) - (self.lower[k] - x).max(0.0);
-            if over != 0.0 && v < INFEASIBLE {
-                v += self.wall * over * over;
-                g[k] = 2.0 * self.wall * over;
+        if value < INFEASIBLE {
+            for (k, x) in p.iter().enumerate() {
+                let over = (x - self.upper[k]).max(0.0) - (self.lower[k] - x).max(0.0);
+                if over != 0.0 {
+                    value += self.wall * over * over;
+                }
             }
         }
-        *self.cache.borrow_mut() = Some((p.to_vec(), v, g.clone()));
-        (v, g)
+        let gradient = partial.is_none().then(|| vec![0.0; p.len()]);
+        *self.cache.borrow_mut() = Some(Evaluated { at: p.to_vec(), value, gradient, partial });
+        value
+    }
+
+    /// Value and gradient at `p`.
+    fn both(&self, p: &[f64]) -> (f64, Vec<f64>) {
+        let value = self.value(p);
+        let mut cache = self.cache.borrow_mut();
+        let Some(e) = cache.as_mut() else { return (INFEASIBLE, vec![0.0; p.len()]) };
+        if e.gradient.is_none() {
+            let partial = e.partial.take();
+            let from_table = partial.and_then(|partial| self.table.gradient_from(&self.clamped(p), partial));
+            let mut g: Vec<f64> = match from_table {
+                Some(g) => g.iter().map(|x| x * self.per_unknown()).collect(),
+                None => vec![0.0; p.len()],
+            };
+            if value < INFEASIBLE {
+                for (k, x) in p.iter().enumerate() {
+                    let over = (x - self.upper[k]).max(0.0) - (self.lower[k] - x).max(0.0);
+                    if over != 0.0 {
+                        g[k] = 2.0 * self.wall * over;
+                    }
+                }
+            }
+            e.gradient = Some(g);
+        }
+        (value, e.gradient.clone().unwrap_or_else(|| vec![0.0; p.len()]))
     }
 }
 
@@ -76,7 +137,7 @@ impl CostFunction for &Objective<'_> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, p: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        Ok(self.both(p).0)
+        Ok(self.value(p))
     }
 }
 
@@ -103,13 +164,13 @@ pub(crate) fn minimise(
     // A start where K is not positive definite to working precision (a σ that was fine on fewer
     // rows) moves up in σ until it is.
     let sigma_at = init.len() - 1;
-    let mut feasible = objective.both(&init).0 < INFEASIBLE;
+    let mut feasible = objective.value(&init) < INFEASIBLE;
     for _ in 0..12 {
         if feasible || init[sigma_at] >= upper[sigma_at] {
             break;
         }
         init[sigma_at] = (init[sigma_at] + 0.5 * 10f64.ln()).min(upper[sigma_at]);
-        feasible = objective.both(&init).0 < INFEASIBLE;
+        feasible = objective.value(&init) < INFEASIBLE;
     }
     let mut param = init.clone();
     if feasible {
@@ -130,7 +191,7 @@ pub(crate) fn minimise(
         return None;
     }
     // The last point L-BFGS evaluated is usually the best one: the cache answers.
-    let value = objective.both(&param).0;
+    let value = objective.value(&param);
     (value < INFEASIBLE).then_some((value * table.observations() as f64, param))
 }
 

@@ -121,8 +121,9 @@ impl PairTable {
         (k, kv_all, kw_all, kc_all)
     }
 
-    /// K = K_lin + σ² I at θ factored: L, α = K⁻¹ r and K⁻¹ (lower triangle), on the solver's fixed
-    /// split (the result never depends on the thread count). None when K is not positive definite.
+    /// K = K_lin + σ² I at θ factored: L and α = K⁻¹ r, on the solver's fixed split (the result
+    /// never depends on the thread count). None when K is not positive definite. K⁻¹, which only the
+    /// gradient needs, is [`Factored::inverse`]: twice the factorisation's flops again.
     pub(super) fn factor(&self, theta: &Theta) -> Option<Factored> {
         let dim = self.dim();
         let (k, kv, kw, kc) = self.covariance(theta);
@@ -136,11 +137,7 @@ impl PairTable {
         // rᵀ K⁻¹ r = |L⁻¹ r|², before the second solve.
         let quad: f64 = (0..dim).map(|i| alpha[(i, 0)] * alpha[(i, 0)]).sum();
         solve_upper_triangular_in_place(lower.transpose(), alpha.as_mut(), par);
-        // K⁻¹ = L⁻ᵀ L⁻¹, lower triangle only (faer's triangular inverse and product: n³ flops).
-        let mut inv = Mat::<f64>::zeros(dim, dim);
-        let mut mem = MemBuffer::new(llt_inverse_scratch::<f64>(dim, par));
-        llt_inverse(inv.as_mut(), lower, par, MemStack::new(&mut mem));
-        Some(Factored { l, alpha, quad, inv, kv, kw, kc })
+        Some(Factored { l, alpha, quad, kv, kw, kc })
     }
 
     /// ½ tr(Q ∂K/∂θ) for every θ component, Q symmetric (given by its entries), accumulated over
@@ -212,8 +209,6 @@ pub(super) struct Factored {
     pub alpha: Mat<f64>,
     /// rᵀ K⁻¹ r.
     pub quad: f64,
-    /// K⁻¹, lower triangle.
-    pub inv: Mat<f64>,
     /// Per pair, the unit kernels K̃_V and K̃_W.
     pub kv: Vec<f64>,
     pub kw: Vec<f64>,
@@ -222,9 +217,24 @@ pub(super) struct Factored {
 }
 
 impl Factored {
+    /// K⁻¹ = L⁻ᵀ L⁻¹, lower triangle only (faer's triangular inverse and product: n³ flops).
+    pub fn inverse(&self) -> Inverse {
+        let dim = self.l.nrows();
+        let par = crate::numeric::FIXED_SPLIT;
+        let mut inv = Mat::<f64>::zeros(dim, dim);
+        let mut mem = MemBuffer::new(llt_inverse_scratch::<f64>(dim, par));
+        llt_inverse(inv.as_mut(), self.l.as_ref(), par, MemStack::new(&mut mem));
+        Inverse(inv)
+    }
+}
+
+/// K⁻¹, lower triangle.
+pub(super) struct Inverse(Mat<f64>);
+
+impl Inverse {
     /// (K⁻¹)_rc from the lower triangle.
-    pub fn inv_at(&self, r: usize, c: usize) -> f64 {
-        self.inv[(r.max(c), r.min(c))]
+    pub fn at(&self, r: usize, c: usize) -> f64 {
+        self.0[(r.max(c), r.min(c))]
     }
 }
 
