@@ -68,6 +68,9 @@ const SEARCH_ITERATIONS: u64 = 400;
 const RESTARTS: usize = 4;
 const RESTART_GAIN: f64 = 0.01;
 
+/// A log correlation length within this of its upper bound is "at the bound".
+const AT_BOUND: f64 = 1e-2;
+
 /// Shared joint widths b the searches start from (b = 20: about 13° per joint).
 const START_WIDTHS: [f64; 3] = [0.5, 5.0, 20.0];
 
@@ -83,6 +86,11 @@ pub struct Drift {
     pub sd: f64,
     /// Its correlation length in rows (poses): correlation exp(−lag / length).
     pub length: f64,
+    /// The longest length the search resolves (half its longest block of poses), and whether
+    /// `length` ended there: then the row term is a trend over the whole window (warm-up, a slow
+    /// thermal change) and `length` is only a lower bound.
+    pub length_bound: f64,
+    pub length_at_bound: bool,
     /// White noise per coordinate under H1.
     pub noise_sd: f64,
     /// White noise per coordinate under H0 (what a model without the row term calls noise).
@@ -104,9 +112,27 @@ pub struct Drift {
 }
 
 impl Drift {
+    /// The correlation length for a sentence: "8.3 poses", or at the search's bound "≥ 300 poses
+    /// (…)", which says that it is a lower bound and what it means.
+    pub fn length_text(&self) -> String {
+        if self.length_at_bound {
+            format!(
+                "≥ {:.0} poses (the longest the test resolves in its {} poses: a trend over the campaign, such as warm-up or a slow \
+                 thermal change, more than a drift between neighbouring poses)",
+                self.length_bound, self.poses
+            )
+        } else {
+            format!("{:.1} poses", self.length)
+        }
+    }
+
     /// One line of advice.
     pub fn advice(&self) -> &'static str {
-        if self.detected {
+        if self.detected && self.length_at_bound {
+            "part of the residual changes slowly over the campaign, not with the pose: warm the arm up before measuring and \
+             keep its temperature steady, or measure the poses in shuffled order so that the trend averages out as noise \
+             instead of posing as a shape of the configuration"
+        } else if self.detected {
             "part of the residual follows the order of measurement, not the pose: let the arm settle before each \
              measurement (settle time), warm it up before the campaign, or measure the poses in shuffled order so that \
              drift averages out as noise instead of posing as a shape of the configuration"
@@ -533,11 +559,15 @@ pub fn drift_test(
         (nlml1, p1) = (nlml0, from_null(&p0, 0.0, 3.0));
     }
     let ratio = (nlml0 - nlml1).max(0.0);
+    // A search ended at L's upper bound reports it (a longer L is not resolved in the blocks).
+    let length_at_bound = p1[n + 2] >= l_hi - AT_BOUND;
     let (sd, noise_sd) = (p1[n + 1].exp().sqrt() * scale, p1[n + 3].exp() * scale);
     Some(Drift {
         detected: ratio > options.threshold,
         sd,
         length: p1[n + 2].exp(),
+        length_bound: l_hi.exp(),
+        length_at_bound,
         noise_sd,
         noise_sd_without_drift: p0[n + 1].exp() * scale,
         joint_sd: p1[n].exp().sqrt() * scale,
@@ -625,6 +655,33 @@ mod tests {
                 "seed {seed}: planted Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4} ({ta:.1} s, {} evaluations) | shuffled Δ {:.2} sd {:.4} L {:.2} | none (compliance) Δ {:.2} sd {:.4} L {:.2}",
                 a.log_likelihood_ratio, a.sd, a.length, a.noise_sd, a.joint_sd, a.evaluations, b.log_likelihood_ratio, b.sd, b.length, c.log_likelihood_ratio, c.sd, c.length
             );
+        }
+    }
+
+    /// A row process far slower than the window (a trend over the campaign) ends H1's search at L's
+    /// upper bound, half the block: the test says so and gives the length as a lower bound; a
+    /// drift of a few rows does not.
+    #[test]
+    fn a_length_at_the_searchs_bound_is_reported_as_a_lower_bound() {
+        let rows = 200;
+        for (length, at_bound) in [(400.0, true), (3.0, false)] {
+            let q = crate::simulate::six_joint::walk_configurations(rows, 0.1, 5);
+            let mut r = row_drift(rows, 3, 0.1, length, 5);
+            crate::simulate::add_noise(&mut r, 0.02, 105);
+            let data = Measurements {
+                n_joints: 6,
+                task_dim: 3,
+                points_per_pose: 1,
+                joints: q,
+                positions: vec![0.0; r.len()],
+                order: crate::data::RowOrder::Measured,
+            };
+            let d = drift_test(&data, &[true; 6], &r, None, &DriftOptions::default()).unwrap();
+            errln!("planted length {length}: found {:.1} (Δ {:.1} nats): over {}", d.length, d.log_likelihood_ratio, d.length_text());
+            assert!(d.detected, "planted length {length}: {d:?}");
+            assert!((d.length_bound - 100.0).abs() < 1e-9, "{}", d.length_bound);
+            assert_eq!(d.length_at_bound, at_bound, "planted length {length}: found {}", d.length);
+            assert_eq!(d.length_text().starts_with("≥ 100 poses"), at_bound, "{}", d.length_text());
         }
     }
 

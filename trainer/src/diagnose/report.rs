@@ -159,10 +159,10 @@ fn drift_text(d: &Diagnosis, unit: &str) -> String {
     );
     if x.detected {
         format!(
-            "\ndrift in measurement order: found ({test})\n  sd {:.4e} {unit} per coordinate over {:.1} poses (correlation exp(−lag/length)); \
+            "\ndrift in measurement order: found ({test})\n  sd {:.4e} {unit} per coordinate over {} (correlation exp(−lag/length)); \
              white noise {:.4e} {unit}; drift is {} of the noise floor's variance\n  => {}\n",
             x.sd,
-            x.length,
+            x.length_text(),
             x.noise_sd,
             percent(x.share_of_floor),
             x.advice()

@@ -114,10 +114,10 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
         report["drift"] = serde_json::to_value(d).map_err(Error::JsonOutput)?;
         if d.detected {
             noise_floor += &format!(
-                "\ndrift in measurement order: sd {:.3e} {unit} per coordinate over {:.1} poses ({:.0} % of the variance a model of \
+                "\ndrift in measurement order: sd {:.3e} {unit} per coordinate over {} ({:.0} % of the variance a model of \
                  the configuration calls noise; {:.0} nats), recorded in the blob — {}",
                 d.sd,
-                d.length,
+                d.length_text(),
                 100.0 * d.share_of_floor,
                 d.log_likelihood_ratio,
                 d.advice()
