@@ -78,16 +78,16 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     pipeline.drift = Some(Default::default());
     // Every subset a stage takes (the evidence's rows, the folds, the drift test's window), cut once here.
     let data = crate::data::stage_rows::StageRows::new(data, &pipeline.cuts());
-    let (rows, task_dim) = (data.len(), data.rows.task_dim);
+    let unknowns = data.len() * data.rows.task_dim;
     // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
     // the solver checks only if it falls back to the kernel form (against what the workers leave).
     // The workers' own memory (faer's multiply workspace, stacks) is checked either way.
     let threads = if pipeline.solver.representation == crate::expansion::Representation::Kernel {
-        crate::memory::check_fit_of(source, &data.rows, "--max-rows N fits an evenly spaced subset of N rows")?
+        crate::memory::check_fit_of(source, data.len(), data.rows.task_dim, "--max-rows N fits an evenly spaced subset of N rows")?
     } else {
-        crate::memory::check_workers_of(source, rows * task_dim, "--max-rows N fits an evenly spaced subset of N rows")?
+        crate::memory::check_workers_of(source, unknowns, "--max-rows N fits an evenly spaced subset of N rows")?
     };
-    pipeline.solver.memory_budget = crate::memory::kernel_form_budget(threads, rows * task_dim);
+    pipeline.solver.memory_budget = crate::memory::kernel_form_budget(threads, unknowns);
     pipeline.solver.threads = threads;
     let calibration =
         crate::workers::on_workers(threads, || crate::calibrate::calibrate_rows(&nominal, &data, &pipeline)).context(source.display())?;
@@ -100,7 +100,11 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     let last = r.log.last().map(|l| l.train_rms).unwrap_or(f64::NAN);
     let summary = format!(
         "fitted {} measurements in {:.2} s: {} iterations ({}), training RMS error {:.3e}",
-        rows, r.seconds, r.iterations, r.stop_reason, last
+        data.len(),
+        r.seconds,
+        r.iterations,
+        r.stop_reason,
+        last
     );
     // The model's length unit (the data are read into it): the floor's line names it.
     let unit = arm.length_unit();
