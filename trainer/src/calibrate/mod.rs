@@ -84,7 +84,7 @@ pub fn calibrate_rows(nominal: &NominalModel, data: &StageRows, settings: &Setti
     // The drift test needs only the chain: it runs beside the field's search (each search's starts
     // share the command's workers; the same bits in either order), not after the fit.
     let (configuration, drift) = rayon::join(
-        || configuration::choose(&base, &data.rows, &norm, settings, &hyperparameters, evidence.is_some()),
+        || configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some()),
         || settings.drift.as_ref().and_then(|o| drift::drift_stage(data, fitted_chain, o)),
     );
     let mut configuration = configuration?;

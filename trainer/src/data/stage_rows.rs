@@ -37,7 +37,8 @@ pub struct StageRows {
 }
 
 /// The evidence's rows: all, or evenly spaced whole poses within its unknowns ([`evidence_rows`]),
-/// and of those the coarse rows its starts are screened on.
+/// and of those the coarse rows its starts are screened on and the medium rows the configuration
+/// field's search climbs on.
 #[derive(Debug, Clone)]
 pub struct EvidenceRows {
     /// The rows' indices among the training rows.
@@ -47,6 +48,9 @@ pub struct EvidenceRows {
     pub coarse_indices: Vec<usize>,
     /// The coarse rows, when fewer than `used`.
     pub coarse: Option<Measurements>,
+    /// Half the evidence's unknowns, evenly spaced through `used`: when there are coarse rows and
+    /// these are fewer than `used` and more than the coarse.
+    pub medium: Option<Measurements>,
 }
 
 impl StageRows {
@@ -75,13 +79,17 @@ impl StageRows {
 }
 
 impl EvidenceRows {
-    /// The evidence's rows of `data` within `max_unknowns`, and their coarse rows within `coarse_unknowns`.
+    /// The evidence's rows of `data` within `max_unknowns`, their coarse rows within
+    /// `coarse_unknowns` and their medium rows within `max_unknowns / 2`.
     pub fn new(data: &Measurements, max_unknowns: usize, coarse_unknowns: usize) -> EvidenceRows {
         let indices = evidence_rows(data, max_unknowns);
         let used = data.subset(&indices);
         let coarse_indices = evidence_rows(&used, coarse_unknowns);
         let coarse = (coarse_indices.len() < used.len()).then(|| used.subset(&coarse_indices));
-        EvidenceRows { indices, used, coarse_indices, coarse }
+        let medium_indices = evidence_rows(&used, max_unknowns / 2);
+        let medium = (coarse.is_some() && medium_indices.len() < used.len() && medium_indices.len() > coarse_indices.len())
+            .then(|| used.subset(&medium_indices));
+        EvidenceRows { indices, used, coarse_indices, coarse, medium }
     }
 }
 
