@@ -535,10 +535,11 @@ fn workers_text(caches: &CacheSizes, threads: usize, dim: usize) -> String {
     )
 }
 
-/// [`check_fit`] for all rows of `data`, read from `file`, against what this process may use; the
-/// error names the file. Returns the worker threads to fit on (`crate::workers::on_workers`).
-pub fn check_fit_of(file: &std::path::Path, data: &crate::data::Measurements, remedy: &str) -> crate::Result<usize> {
-    check_fit(data.len(), data.task_dim, available_bytes(), remedy).context(file.display())
+/// [`check_fit`] for `rows` rows of `task_dim` coordinates, read from `file`, against what this
+/// process may use; the error names the file. Returns the worker threads to fit on
+/// (`crate::workers::on_workers`). Sizes only: the memory's estimates need no rows.
+pub fn check_fit_of(file: &std::path::Path, rows: usize, task_dim: usize, remedy: &str) -> crate::Result<usize> {
+    check_fit(rows, task_dim, available_bytes(), remedy).context(file.display())
 }
 
 /// The number of workers for a command: [`crate::workers::MAX_WORKERS`] on a machine with the

@@ -6,6 +6,7 @@
 
 use super::hyperparameters::options_for;
 use super::{scheme::SchemeChoice, ConfigurationField, Settings};
+use crate::data::stage_rows::StageRows;
 use crate::data::Measurements;
 use crate::evidence::{search_configuration_term, CbdHyperparameters, ConfigurationEvidence};
 use crate::solver::{fit_cbd, CbdFit, CbdOptions};
@@ -14,7 +15,7 @@ use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
 /// The comparison, when it runs: with `auto` and `on` wherever CbD's evidence chose `plain`.
 pub fn choose(
     base: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     norm: &Normalisation,
     settings: &Settings,
     plain: &CbdHyperparameters,
@@ -30,7 +31,7 @@ pub fn choose(
         (ConfigurationField::On, false) => Err(crate::Error::InvalidInput(
             "--configuration-field on: the field's hyperparameters come from CbD's evidence, which does not run here (the paper's values, or every value given)".into(),
         )),
-        (_, true) => Ok(Some(search_configuration_term(base, data, norm, &settings.evidence, plain)?)),
+        (_, true) => Ok(Some(search_configuration_term(base, &data.rows, &data.evidence, norm, &settings.evidence, plain)?)),
     }
 }
 

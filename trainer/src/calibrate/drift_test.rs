@@ -420,20 +420,15 @@ impl Poses {
 }
 
 /// The drift test of a calibration's rows (the fit's noise-floor line and the blob, issue 49 item 2):
-/// the residual of `chain` — the nominal or DH-calibrated chain CbD deforms — at the first
-/// `options.window` poses of `data` in file order, the chain's geometric group marginalised through
-/// its identification Jacobian (as `cbd diagnose` marginalises what it refined). `None` for rows
-/// declared unordered (a grid has no time of measurement) or too few poses.
-pub fn drift_of_chain(chain: &cbd_protocol::NominalModel, data: &Measurements, options: &DriftOptions) -> Option<Drift> {
-    if data.order == crate::data::RowOrder::Unordered {
-        return None;
-    }
-    let rows: Vec<usize> = (0..data.len().min(options.window.saturating_mul(data.points_per_pose.max(1)))).collect();
-    let tested = data.subset(&rows);
+/// the residual of `chain` — the nominal or DH-calibrated chain CbD deforms — at `tested`, the first
+/// `options.window` poses of the rows in file order (`data::stage_rows::StageRows::drift`), the
+/// chain's geometric group marginalised through its identification Jacobian (as `cbd diagnose`
+/// marginalises what it refined). `None` with too few poses.
+pub fn drift_of_chain(chain: &cbd_protocol::NominalModel, tested: &Measurements, options: &DriftOptions) -> Option<Drift> {
     let residual = tested.residual_of(chain);
     let revolute: Vec<bool> = (0..chain.n_joints()).map(|d| chain.is_revolute(d)).collect();
     let fitted = crate::parametric::identifiable::identification_jacobian(chain, &tested.joints).map(|(jac, _)| jac);
-    drift_test(&tested, &revolute, &residual, fitted.as_ref().map(|j| j.as_ref()), options)
+    drift_test(tested, &revolute, &residual, fitted.as_ref().map(|j| j.as_ref()), options)
 }
 
 /// The drift test on `residual` (m coordinates per row of `data`, in file order) of a model fitted

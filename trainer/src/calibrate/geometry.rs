@@ -4,8 +4,9 @@
 //! basis functions with a broad prior (`evidence::GeometricBasis`, docs/DESIGN.md §3) — or, where no
 //! evidence runs (the paper's hyperparameters, every value given), by k-fold cross-validation.
 
-use super::hyperparameters::{choose_cbd_hyperparameters_with_overrides, normalisation, options_for};
+use super::hyperparameters::{choose_cbd_hyperparameters_with_overrides, normalisation_for, options_for};
 use super::Settings;
+use crate::data::stage_rows::StageRows;
 use crate::data::Measurements;
 use crate::evidence::{CbdHyperparameters, Evidence, GeometricBasis};
 use crate::parametric::{calibrate_dh, linearised_group, DhCalibration, DhCalibrationOptions, DhFitStats};
@@ -90,7 +91,7 @@ fn short(v: f64) -> String {
 /// The hypothesis "CbD on the nominal".
 pub fn nominal_hypothesis(
     nominal: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     norm: &Normalisation,
     settings: &Settings,
 ) -> crate::Result<Hypothesis> {
@@ -113,46 +114,52 @@ pub fn calibrated_chain(nominal: &NominalModel, data: &Measurements) -> crate::R
 /// hyperparameters by its evidence on the fitted chain's residual — the residual the fields are
 /// fitted to (with the group marginalised instead, the six-joint arm's task field came out
 /// near-affine and the test error 3.50e-2 mm against 3.33e-2).
-fn calibrated_hypothesis(
-    fitted: DhCalibration,
-    data: &Measurements,
-    norm: &Normalisation,
-    settings: &Settings,
-) -> crate::Result<Hypothesis> {
+fn calibrated_hypothesis(fitted: DhCalibration, data: &StageRows, norm: &Normalisation, settings: &Settings) -> crate::Result<Hypothesis> {
     Ok(Hypothesis { dh: Some(fitted.stats), ..nominal_hypothesis(&fitted.model, data, norm, settings)? })
 }
 
 /// The hypothesis `settings.geometry` asks for, or for `Auto` the better of the two; and the
-/// DH-calibrated chain when it was fitted on the way (the drift test's chain, `super::drift`).
+/// DH-calibrated chain when it was fitted on the way, or, where none was and `with_chain`, the chain
+/// fitted here (`nominal` as it stands where the DH fit cannot calibrate it): the drift test's chain
+/// (`super::drift`), so that the chain is fitted once, in this stage.
 pub fn choose_geometry(
     nominal: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     norm: &Normalisation,
     settings: &Settings,
+    with_chain: bool,
 ) -> crate::Result<(Hypothesis, GeometryChoice, Option<NominalModel>)> {
     let given = |chosen| GeometryChoice { chosen, by: "given".into(), scores: None };
-    match settings.geometry {
-        Geometry::Nominal => Ok((nominal_hypothesis(nominal, data, norm, settings)?, given(Geometry::Nominal), None)),
+    let (hypothesis, choice, chain) = match settings.geometry {
+        Geometry::Nominal => (nominal_hypothesis(nominal, data, norm, settings)?, given(Geometry::Nominal), None),
         Geometry::Calibrated => {
-            let fitted = calibrated_chain(nominal, data)?;
+            let fitted = calibrated_chain(nominal, &data.rows)?;
             let chain = fitted.model.clone();
-            Ok((calibrated_hypothesis(fitted, data, norm, settings)?, given(Geometry::Calibrated), Some(chain)))
+            (calibrated_hypothesis(fitted, data, norm, settings)?, given(Geometry::Calibrated), Some(chain))
         }
         Geometry::Auto => {
             let (plain, calibrated, choice, chain) = decide(nominal, data, norm, settings, true)?;
             match calibrated {
-                Some(h) if choice.chosen == Geometry::Calibrated => Ok((h, choice, chain)),
-                _ => Ok((plain, choice, chain)),
+                Some(h) if choice.chosen == Geometry::Calibrated => (h, choice, chain),
+                _ => (plain, choice, chain),
             }
         }
-    }
+    };
+    let chain = match chain {
+        None if with_chain => {
+            Some(calibrate_dh(nominal, &data.rows, &DhCalibrationOptions::default()).map_or(nominal.clone(), |f| f.model))
+        }
+        chain => chain,
+    };
+    Ok((hypothesis, choice, chain))
 }
 
 /// What `Auto` chooses on these rows, without the calibrated hypothesis' own hyperparameters (what
 /// `cbd compare` marks as the row `cbd fit` writes by default).
 pub fn geometry_choice(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<GeometryChoice> {
-    let norm = normalisation(data, settings);
-    Ok(decide(nominal, data, &norm, &Settings { geometry: Geometry::Auto, ..settings.clone() }, false)?.2)
+    let data = StageRows::new(data.clone(), &settings.cuts());
+    let norm = normalisation_for(&data.normalisation, settings);
+    Ok(decide(nominal, &data, &norm, &Settings { geometry: Geometry::Auto, ..settings.clone() }, false)?.2)
 }
 
 /// The calibrated side of the choice: the fitted chain's evidence with the group marginalised (the
@@ -168,12 +175,12 @@ struct CalibratedSide {
 /// The calibrated side, or why the geometric group cannot be calibrated here.
 fn calibrated_side(
     nominal: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     norm: &Normalisation,
     settings: &Settings,
     with_hypothesis: bool,
 ) -> crate::Result<Result<CalibratedSide, String>> {
-    let fitted = match calibrated_chain(nominal, data) {
+    let fitted = match calibrated_chain(nominal, &data.rows) {
         Ok(f) => f,
         Err(e) => return Ok(Err(format!("the geometric group cannot be calibrated here: {e}"))),
     };
@@ -183,9 +190,9 @@ fn calibrated_side(
     // The score and the hypothesis are independent searches: side by side too.
     let (score, hypothesis) = rayon::join(
         || -> crate::Result<Option<Evidence>> {
-            match linearised_group(nominal, &fitted.stats, data).filter(|_| searched) {
+            match linearised_group(nominal, &fitted.stats, &data.rows).filter(|_| searched) {
                 Some(group) => {
-                    let basis = GeometricBasis::new(&group, data, norm);
+                    let basis = GeometricBasis::new(&group, &data.rows, norm);
                     Ok(choose_cbd_hyperparameters_with_overrides(&fitted.model, data, norm, settings, Some(&basis))?.1)
                 }
                 None => Ok(None),
@@ -204,7 +211,7 @@ fn calibrated_side(
 /// same bits on one worker or two.
 fn decide(
     nominal: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     norm: &Normalisation,
     settings: &Settings,
     with_hypothesis: bool,
@@ -221,14 +228,16 @@ fn decide(
     let (scores, by) = match (&plain.evidence, &calibrated.score) {
         (Some(a), Some(b)) => (evidence_scores(a, b, b.geometric_parameters), "evidence".to_string()),
         _ => {
-            let folds = settings.scheme_folds.max(2);
             // Too few poses for the folds: the nominal kept, and the line says so (it claimed
             // "4-fold cross-validation … on 3 rows" beside the scheme's "too few rows").
-            if let Some(why) = super::scheme::too_few_to_cross_validate(data, folds) {
-                let by = format!("{why}: the nominal kept, as without evidence the calibrated geometry cannot be scored");
-                return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }, Some(calibrated.chain)));
-            }
-            (cross_validated_scores(nominal, data, norm, settings, &plain, folds)?, format!("{folds}-fold cross-validation"))
+            let folds = match &data.folds {
+                Ok(folds) => folds,
+                Err(why) => {
+                    let by = format!("{why}: the nominal kept, as without evidence the calibrated geometry cannot be scored");
+                    return Ok((plain, None, GeometryChoice { chosen: Geometry::Nominal, by, scores: None }, Some(calibrated.chain)));
+                }
+            };
+            (cross_validated_scores(nominal, data, folds, norm, settings, &plain)?, format!("{}-fold cross-validation", folds.len()))
         }
     };
     let calibrated_wins = match scores.criterion {
@@ -250,26 +259,25 @@ fn evidence_scores(nominal: &Evidence, calibrated: &Evidence, parameters: usize)
     GeometryScores { criterion: "log evidence", nominal: a, calibrated: b, rows, parameters }
 }
 
-/// Held-out RMS of both hypotheses (each fold: the DH fit on its training rows, then CbD with the
-/// given hyperparameters, Euler × 1), when no evidence was computed.
+/// Held-out RMS of both hypotheses on `folds` of `data` (each fold: the DH fit on its training rows,
+/// then CbD with the given hyperparameters, Euler × 1), when no evidence was computed.
 fn cross_validated_scores(
     nominal: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
+    folds: &[(Measurements, Measurements)],
     norm: &Normalisation,
     settings: &Settings,
     plain: &Hypothesis,
-    folds: usize,
 ) -> crate::Result<GeometryScores> {
     let mut quiet = settings.clone();
     quiet.solver.verbose = false;
     let opts = options_for(&plain.hyperparameters, norm, Integrator { method: IntegratorMethod::Euler, steps: 1 }, &quiet);
     let (mut sse, mut count, mut parameters) = ([0.0; 2], 0usize, 0);
-    for fold in 0..folds {
-        let (train, held) = data.fold(folds, fold);
-        let dh = calibrate_dh(nominal, &train, &DhCalibrationOptions::default())?;
+    for (train, held) in folds {
+        let dh = calibrate_dh(nominal, train, &DhCalibrationOptions::default())?;
         parameters = dh.stats.rank;
         for (k, base) in [nominal, &dh.model].into_iter().enumerate() {
-            let fit = crate::solver::fit_cbd(base, &train, &opts)?;
+            let fit = crate::solver::fit_cbd(base, train, &opts)?;
             let predicted = crate::predict::evaluate_blob(&fit.blob, &held.joints)?;
             sse[k] += predicted.iter().zip(&held.positions).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         }

@@ -4,8 +4,9 @@
 //! (geometry, configuration field, scheme) call these; none calls back into the orchestrator.
 
 use super::{HyperparameterSource, Settings};
+use crate::data::stage_rows::StageRows;
 use crate::data::Measurements;
-use crate::evidence::{choose_cbd_hyperparameters, choose_cbd_hyperparameters_with_geometry, CbdHyperparameters, Evidence, GeometricBasis};
+use crate::evidence::{choose_on_rows, CbdHyperparameters, Evidence, GeometricBasis};
 use crate::solver::{CbdOptions, SolverSettings};
 use cbd_protocol::{Integrator, NominalModel, Normalisation};
 
@@ -38,11 +39,12 @@ pub fn options_for(h: &CbdHyperparameters, norm: &Normalisation, integrator: Int
     opts
 }
 
-/// CbD's hyperparameters for `base` on `data`: the source's (its own evidence — with the geometric
-/// group `geometry` marginalised when given —, or the paper's), then the hand-given values.
+/// CbD's hyperparameters for `base` on `data`: the source's (its own evidence on the evidence's rows
+/// — with the geometric group `geometry` marginalised when given —, or the paper's), then the
+/// hand-given values.
 pub fn choose_cbd_hyperparameters_with_overrides(
     base: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     norm: &Normalisation,
     settings: &Settings,
     geometry: Option<&GeometricBasis>,
@@ -52,10 +54,7 @@ pub fn choose_cbd_hyperparameters_with_overrides(
         // Every value is given: no search (the placeholder's fields are all replaced below).
         HyperparameterSource::Evidence if settings.overrides.is_complete(base) => (placeholder_hyperparameters(base), None),
         HyperparameterSource::Evidence => {
-            let e = match geometry {
-                Some(g) => choose_cbd_hyperparameters_with_geometry(base, data, norm, &settings.evidence, g)?,
-                None => choose_cbd_hyperparameters(base, data, norm, &settings.evidence)?,
-            };
+            let e = choose_on_rows(base, &data.rows, &data.evidence, norm, &settings.evidence, geometry)?;
             (e.hyperparameters.clone(), Some(e))
         }
     };
@@ -72,8 +71,13 @@ fn placeholder_hyperparameters(base: &NominalModel) -> CbdHyperparameters {
 
 /// The task-space normalisation for `settings`: the data's (RMS radius) or none (the paper's units).
 pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation {
+    normalisation_for(&data.normalisation(), settings)
+}
+
+/// The same for rows whose own normalisation is `rows` ([`StageRows::normalisation`]).
+pub fn normalisation_for(rows: &Normalisation, settings: &Settings) -> Normalisation {
     match settings.source {
         HyperparameterSource::PaperRr => Normalisation::IDENTITY,
-        HyperparameterSource::Evidence => crate::evidence::normalisation_of(data),
+        HyperparameterSource::Evidence => rows.clone(),
     }
 }

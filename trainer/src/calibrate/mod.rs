@@ -22,9 +22,10 @@ pub mod scheme;
 pub mod settings;
 
 pub use geometry::{Geometry, GeometryChoice};
-pub use hyperparameters::{normalisation, options_for, paper_rr_hyperparameters};
+pub use hyperparameters::{normalisation, normalisation_for, options_for, paper_rr_hyperparameters};
 pub use settings::{ConfigurationField, HyperparameterSource, Overrides, Settings};
 
+use crate::data::stage_rows::StageRows;
 use crate::data::Measurements;
 use crate::evidence::{CbdHyperparameters, Evidence};
 use crate::parametric::DhFitStats;
@@ -56,18 +57,27 @@ pub struct Calibration {
 
 /// Calibrates `nominal` on `data` (training rows only).
 pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Settings) -> crate::Result<Calibration> {
+    calibrate_rows(nominal, &StageRows::new(data.clone(), &settings.cuts()), settings)
+}
+
+/// Calibrates `nominal` on `data`, the training rows with the cuts its stages take
+/// (`settings.cuts()`: `StageRows::new`): each stage takes its pieces, none cuts the rows again.
+pub fn calibrate_rows(nominal: &NominalModel, data: &StageRows, settings: &Settings) -> crate::Result<Calibration> {
+    debug_assert!(data.folds.as_ref().map_or(true, |f| f.len() == settings.cuts().folds), "the rows were cut for other settings");
     // The evidence needs three rows (a covariance and something to predict), the fit two.
     let needed = if settings.searches_evidence(nominal) { 3 } else { 2 };
     if data.len() < needed {
         return Err(crate::solver::FitError::TooFewMeasurements { got: data.len(), needed }.into());
     }
     if settings.searches_evidence(nominal) {
-        if let Some(why) = exact_nominal(nominal, data) {
+        if let Some(why) = exact_nominal(nominal, &data.rows) {
             return Err(crate::Error::InvalidInput(why));
         }
     }
-    let norm = normalisation(data, settings);
-    let (chosen, geometry, fitted_chain) = geometry::choose_geometry(nominal, data, &norm, settings)?;
+    let norm = normalisation_for(&data.normalisation, settings);
+    // The DH-calibrated chain is fitted by the geometry stage, for the drift test too when it runs.
+    let with_chain = settings.drift.is_some() && data.drift.is_some();
+    let (chosen, geometry, fitted_chain) = geometry::choose_geometry(nominal, data, &norm, settings, with_chain)?;
     let geometry::Hypothesis { base, dh, hyperparameters, evidence, .. } = chosen;
     // The geometry is decided with the plain prior; the configuration field is then searched on the
     // chosen base's residual (the final hypothesis' rows) and kept by its own comparison.
@@ -75,7 +85,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
     // share the command's workers; the same bits in either order), not after the fit.
     let (configuration, drift) = rayon::join(
         || configuration::choose(&base, data, &norm, settings, &hyperparameters, evidence.is_some()),
-        || settings.drift.as_ref().and_then(|o| drift::drift_stage(nominal, data, fitted_chain, o)),
+        || settings.drift.as_ref().and_then(|o| drift::drift_stage(data, fitted_chain, o)),
     );
     let mut configuration = configuration?;
     let with_term = configuration.clone().filter(|c| c.chosen || settings.configuration == ConfigurationField::On);
@@ -91,7 +101,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
             let with = if configuration::needs_expansion(&plain.3) {
                 Err("the plain model's fields need the kernels' own basis, which the field lacks".to_string())
             } else {
-                match configuration::fit(&base, data, &h, &norm, settings) {
+                match configuration::fit(&base, &data.rows, &h, &norm, settings) {
                     Ok(fitted) => Ok(fitted),
                     Err(e) if matches!(e.stage_error(), Some(crate::solver::FitError::RuntimeMismatch(_))) => {
                         Err(format!("its kernel form cancels beyond what the runtime reproduces ({e})"))
@@ -116,12 +126,12 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
         }
         Some(c) => {
             let h = settings.overrides.apply(&base, c.with_term.clone());
-            let (scheme, options, fit) = configuration::fit(&base, data, &h, &norm, settings)?;
+            let (scheme, options, fit) = configuration::fit(&base, &data.rows, &h, &norm, settings)?;
             (h, scheme, options, fit)
         }
         None => plain_fit(&base, data, &hyperparameters, &norm, settings)?,
     };
-    let mut warnings = stall_warnings(&fit, &hyperparameters, data.task_dim, settings.solver.max_iterations);
+    let mut warnings = stall_warnings(&fit, &hyperparameters, data.rows.task_dim, settings.solver.max_iterations);
     warnings.splice(0..0, early_warnings);
     if let Some(d) = dh.as_ref().filter(|d| !d.converged) {
         warnings.insert(0, dh_not_converged(d));
@@ -132,7 +142,7 @@ pub fn calibrate(nominal: &NominalModel, data: &Measurements, settings: &Setting
 /// The model without the configuration field: the scheme by cross-validation, then the fit.
 fn plain_fit(
     base: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     h: &CbdHyperparameters,
     norm: &Normalisation,
     settings: &Settings,
@@ -140,7 +150,7 @@ fn plain_fit(
     let h = CbdHyperparameters { configuration: None, ..h.clone() };
     let scheme = scheme::choose_scheme(base, data, &h, norm, settings)?;
     let options = options_for(&h, norm, scheme.integrator, settings);
-    let fit = fit_cbd(base, data, &options)?;
+    let fit = fit_cbd(base, &data.rows, &options)?;
     Ok((h, scheme, options, fit))
 }
 
@@ -342,12 +352,12 @@ mod readable_tests {
         for i in 0..3 {
             three.push(&[i as f64, 0.0], &[0.0, i as f64]);
         }
-        let why = scheme::too_few_to_cross_validate(&three, 4).unwrap();
+        let why = crate::data::stage_rows::too_few_to_cross_validate(&three, 4).unwrap();
         assert_eq!(why, "too few poses to cross-validate: 3, where 4 folds need at least 8");
         let mut eight = three.clone();
         for i in 3..8 {
             eight.push(&[i as f64, 0.0], &[0.0, i as f64]);
         }
-        assert_eq!(scheme::too_few_to_cross_validate(&eight, 4), None);
+        assert_eq!(crate::data::stage_rows::too_few_to_cross_validate(&eight, 4), None);
     }
 }

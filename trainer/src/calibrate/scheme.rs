@@ -4,7 +4,7 @@
 
 use super::hyperparameters::options_for;
 use super::Settings;
-use crate::data::Measurements;
+use crate::data::stage_rows::StageRows;
 use crate::evidence::CbdHyperparameters;
 use crate::solver::{fit_cbd, DENSE_MAX_UNKNOWNS};
 use cbd_protocol::{Integrator, IntegratorMethod, NominalModel, Normalisation};
@@ -42,19 +42,11 @@ pub fn label(i: Integrator) -> String {
     format!("{} × {}", format!("{:?}", i.method).to_lowercase(), i.steps)
 }
 
-/// Why `data` is too few poses for `folds`-fold cross-validation (each fold holds out at least one
-/// pose and trains on the rest: at least two poses a fold), or `None`. One rule for every choice
-/// the fit makes by cross-validation (the scheme's, the geometry's), so that no line claims a
-/// k-fold cross-validation the rows could not give.
-pub fn too_few_to_cross_validate(data: &Measurements, folds: usize) -> Option<String> {
-    let poses = data.pose_count();
-    (poses < 2 * folds).then(|| format!("too few poses to cross-validate: {poses}, where {folds} folds need at least {}", 2 * folds))
-}
-
-/// The scheme for `settings`: as given, or the candidate with the least cross-validated error.
+/// The scheme for `settings`: as given, or the candidate with the least cross-validated error on
+/// the folds cut already (`data.folds`, `settings.scheme_folds` of them: `Settings::cuts`).
 pub fn choose_scheme(
     base: &NominalModel,
-    data: &Measurements,
+    data: &StageRows,
     h: &CbdHyperparameters,
     norm: &Normalisation,
     settings: &Settings,
@@ -65,14 +57,16 @@ pub fn choose_scheme(
     }
     let candidates = [Integrator { method, steps: 1 }, Integrator { method, steps: 2 }];
     let folds = settings.scheme_folds;
-    let too_few = match folds {
-        0 | 1 => Some(format!("cross-validation off ({folds} folds)")),
-        _ => too_few_to_cross_validate(data, folds),
+    let folds = match (folds, &data.folds) {
+        (0 | 1, _) => Err(format!("cross-validation off ({folds} folds)")),
+        (_, Ok(cut)) => Ok(cut),
+        (_, Err(why)) => Err(why.clone()),
     };
-    if let Some(why) = too_few {
-        return Ok(SchemeChoice { integrator: candidates[0], chosen_by: why, cross_validation: vec![] });
-    }
-    if data.len() * data.task_dim > DENSE_MAX_UNKNOWNS {
+    let folds = match folds {
+        Ok(folds) => folds,
+        Err(why) => return Ok(SchemeChoice { integrator: candidates[0], chosen_by: why, cross_validation: vec![] }),
+    };
+    if data.len() * data.rows.task_dim > DENSE_MAX_UNKNOWNS {
         return Ok(SchemeChoice {
             integrator: candidates[0],
             chosen_by: format!("N·m > {DENSE_MAX_UNKNOWNS}: cross-validation skipped (its fits would dominate); --steps chooses"),
@@ -85,9 +79,8 @@ pub fn choose_scheme(
     for integrator in candidates {
         let opts = options_for(h, norm, integrator, &quiet);
         let (mut sse, mut count) = (0.0, 0usize);
-        for fold in 0..folds {
-            let (train, held) = data.fold(folds, fold);
-            let predicted = fit_cbd(base, &train, &opts)
+        for (train, held) in folds {
+            let predicted = fit_cbd(base, train, &opts)
                 .map_err(crate::Error::from)
                 .and_then(|fit| crate::predict::evaluate_blob(&fit.blob, &held.joints));
             match predicted {
@@ -120,5 +113,5 @@ pub fn choose_scheme(
         _ => Some((i, e)),
     });
     let integrator = best.map_or(candidates[0], |(i, _)| i);
-    Ok(SchemeChoice { integrator, chosen_by: format!("{folds}-fold cross-validation"), cross_validation })
+    Ok(SchemeChoice { integrator, chosen_by: format!("{}-fold cross-validation", folds.len()), cross_validation })
 }

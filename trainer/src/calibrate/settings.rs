@@ -100,6 +100,16 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// The cuts of the rows the stages take with these settings (`data::stage_rows`).
+    pub fn cuts(&self) -> crate::data::stage_rows::Cuts {
+        crate::data::stage_rows::Cuts {
+            evidence_unknowns: self.evidence.max_unknowns,
+            coarse_unknowns: self.evidence.coarse_unknowns,
+            folds: self.scheme_folds.max(2),
+            drift_window: self.drift.map(|d| d.window),
+        }
+    }
+
     /// Whether CbD's hyperparameters for `base` come from a search of its evidence (not the
     /// paper's values, nor every value given).
     pub fn searches_evidence(&self, base: &NominalModel) -> bool {

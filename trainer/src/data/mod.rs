@@ -147,6 +147,20 @@ impl Measurements {
     pub fn residual_of(&self, model: &cbd_protocol::NominalModel) -> Vec<f64> {
         crate::nominal::positions(model, &self.joints, self.task_dim).iter().zip(&self.positions).map(|(k, y)| y - k).collect()
     }
+    /// Task-space normalisation of the positions: offset = their mean, scale = RMS distance to it.
+    pub fn normalisation(&self) -> cbd_protocol::Normalisation {
+        let m = self.task_dim;
+        let count = self.len().max(1) as f64;
+        let mut offset = [0.0; 3];
+        for y in self.positions.chunks_exact(m) {
+            for c in 0..m {
+                offset[c] += y[c] / count;
+            }
+        }
+        let r2: f64 = self.positions.chunks_exact(m).map(|y| (0..m).map(|c| (y[c] - offset[c]).powi(2)).sum::<f64>()).sum::<f64>() / count;
+        let scale = if r2 > 0.0 && r2.is_finite() { r2.sqrt() } else { 1.0 };
+        cbd_protocol::Normalisation { task_offset: offset, task_scale: scale }
+    }
     /// The diagonal of the positions' bounding box: the rows' extent (0 for one row).
     pub fn bounding_box_diagonal(&self) -> f64 {
         let m = self.task_dim;
@@ -207,6 +221,7 @@ pub mod joint_map;
 pub mod model_file;
 pub mod nominal_check;
 pub mod preparation;
+pub mod stage_rows;
 pub mod units;
 
 #[cfg(test)]

@@ -7,7 +7,8 @@
 use super::search::{counted, from_each, minimise, Criterion, Partial};
 use super::starts::DataScales;
 use super::table::{ConfigTheta, PairTable, Theta};
-use super::{evidence_rows, CbdHyperparameters, EvidenceError, EvidenceOptions};
+use super::{CbdHyperparameters, EvidenceError, EvidenceOptions};
+use crate::data::stage_rows::EvidenceRows;
 use crate::data::Measurements;
 use crate::numeric::likelihood_search::LikelihoodSearch;
 use cbd_protocol::{NominalModel, Normalisation};
@@ -136,10 +137,12 @@ const REFINE_ITERATIONS: u64 = 300;
 const AT_BOUND: f64 = 1e-2;
 
 /// Searches the term on top of `plain` (CbD's hyperparameters for `nominal` on `data`, the fields
-/// alone) and compares the two on the kernel form's evenly spaced rows.
+/// alone) and compares the two on the kernel form's evenly spaced rows, `rows` (the evidence's rows
+/// of `data` for `options`: [`EvidenceRows::new`]).
 pub fn search_configuration_term(
     nominal: &NominalModel,
     data: &Measurements,
+    rows: &EvidenceRows,
     norm: &Normalisation,
     options: &EvidenceOptions,
     plain: &CbdHyperparameters,
@@ -148,16 +151,13 @@ pub fn search_configuration_term(
     if data.len() < crate::numeric::likelihood_search::MIN_SEARCH_ROWS {
         return Err(EvidenceError::TooFewRows(LikelihoodSearch::CbdEvidence, data.len()));
     }
-    let used = data.subset(&evidence_rows(data, options.max_unknowns));
-    let table = PairTable::new(nominal, &used, norm);
-    let coarse_rows = evidence_rows(&used, options.coarse_unknowns);
-    let coarse = (coarse_rows.len() < used.len()).then(|| PairTable::new(nominal, &used.subset(&coarse_rows), norm));
+    let used = &rows.used;
+    let table = PairTable::new(nominal, used, norm);
+    let coarse = rows.coarse.as_ref().map(|coarse| PairTable::new(nominal, coarse, norm));
     // The medium rows (half the evidence's unknowns, evenly spaced: each evaluation about an eighth of
     // the cost): starts far from their optimum climb there, and only the best go on on every row.
     // Data with no coarse rows (or medium rows no fewer than the coarse) search on every row.
-    let medium_rows = evidence_rows(&used, options.max_unknowns / 2);
-    let medium = (coarse.is_some() && medium_rows.len() < used.len() && medium_rows.len() > coarse_rows.len())
-        .then(|| PairTable::new(nominal, &used.subset(&medium_rows), norm));
+    let medium = rows.medium.as_ref().map(|medium| PairTable::new(nominal, medium, norm));
     let n = table.n;
     let scales = DataScales::of(&table);
     let (lower, upper) = configuration_bounds(&scales, &table);
@@ -481,7 +481,8 @@ mod choice_tests {
             let data = measure(planted, &mut gauss);
             let norm = crate::evidence::normalisation_of(&data);
             let plain = crate::evidence::choose_cbd_hyperparameters(&robot.nominal, &data, &norm, &options).unwrap();
-            let found = search_configuration_term(&robot.nominal, &data, &norm, &options, &plain.hyperparameters).unwrap();
+            let rows = EvidenceRows::new(&data, options.max_unknowns, options.coarse_unknowns);
+            let found = search_configuration_term(&robot.nominal, &data, &rows, &norm, &options, &plain.hyperparameters).unwrap();
             errln!("planted {planted}: {}", found.describe());
             assert_eq!(found.chosen, expect, "{}", found.describe());
         }

@@ -4,19 +4,10 @@
 use crate::data::Measurements;
 use cbd_protocol::{JointKernel, NominalModel, Normalisation};
 
-/// Task-space normalisation from data: offset = mean position, scale = RMS distance to it.
+/// Task-space normalisation from data: offset = mean position, scale = RMS distance to it
+/// ([`Measurements::normalisation`]).
 pub fn normalisation_of(data: &Measurements) -> Normalisation {
-    let m = data.task_dim;
-    let count = data.len().max(1) as f64;
-    let mut offset = [0.0; 3];
-    for y in data.positions.chunks_exact(m) {
-        for c in 0..m {
-            offset[c] += y[c] / count;
-        }
-    }
-    let r2: f64 = data.positions.chunks_exact(m).map(|y| (0..m).map(|c| (y[c] - offset[c]).powi(2)).sum::<f64>()).sum::<f64>() / count;
-    let scale = if r2 > 0.0 && r2.is_finite() { r2.sqrt() } else { 1.0 };
-    Normalisation { task_offset: offset, task_scale: scale }
+    data.normalisation()
 }
 
 /// One axis per joint: periodic (b = 1) for revolute joints, Gaussian (width 1) for prismatic ones.

@@ -37,6 +37,7 @@ pub use hyperparameters::{CbdHyperparameters, ConfigurationHyperparameters};
 pub(crate) use table::PairTable;
 pub use weight_space::WeightSpaceReport;
 
+use crate::data::stage_rows::EvidenceRows;
 use crate::data::Measurements;
 use crate::numeric::likelihood_search::{LikelihoodSearch::CbdEvidence, MIN_SEARCH_ROWS};
 use cbd_protocol::{NominalModel, Normalisation};
@@ -106,9 +107,10 @@ impl Default for EvidenceOptions {
     }
 }
 
-/// The rows used: all, or evenly spaced whole poses when N m exceeds `max_unknowns`.
+/// The rows used: all, or evenly spaced whole poses when N m exceeds `max_unknowns`
+/// ([`crate::data::stage_rows::evidence_rows`]).
 pub fn evidence_rows(data: &Measurements, max_unknowns: usize) -> Vec<usize> {
-    data.evenly_spaced_pose_rows((max_unknowns / data.task_dim.max(1)).max(3))
+    crate::data::stage_rows::evidence_rows(data, max_unknowns)
 }
 
 /// Chooses CbD's hyperparameters for `nominal` on `data` (training rows only), with the task space
@@ -119,25 +121,18 @@ pub fn choose_cbd_hyperparameters(
     norm: &Normalisation,
     options: &EvidenceOptions,
 ) -> Result<Evidence, EvidenceError> {
-    choose(nominal, data, norm, options, None)
+    let rows = EvidenceRows::new(data, options.max_unknowns, options.coarse_unknowns);
+    choose_on_rows(nominal, data, &rows, norm, options, None)
 }
 
-/// The same for "CbD with the geometry calibrated": `base` the fitted chain, the geometric group
-/// linearised there marginalised with its broad prior ([`GeometricBasis`], on `data`'s rows), the
-/// evidence comparable with [`choose_cbd_hyperparameters`]'s on the nominal (the same rows).
-pub fn choose_cbd_hyperparameters_with_geometry(
-    base: &NominalModel,
-    data: &Measurements,
-    norm: &Normalisation,
-    options: &EvidenceOptions,
-    geometry: &GeometricBasis,
-) -> Result<Evidence, EvidenceError> {
-    choose(base, data, norm, options, Some(geometry))
-}
-
-fn choose(
+/// The same on rows cut already: `rows` the evidence's rows of `data` for `options`
+/// ([`EvidenceRows::new`]); with `geometry`, for "CbD with the geometry calibrated" — `nominal` the
+/// fitted chain, the geometric group linearised there marginalised with its broad prior
+/// ([`GeometricBasis`], on `data`'s rows), the evidence comparable with the nominal's (the same rows).
+pub fn choose_on_rows(
     nominal: &NominalModel,
     data: &Measurements,
+    rows: &EvidenceRows,
     norm: &Normalisation,
     options: &EvidenceOptions,
     geometry: Option<&GeometricBasis>,
@@ -146,9 +141,8 @@ fn choose(
     if data.len() < MIN_SEARCH_ROWS {
         return Err(EvidenceError::TooFewRows(CbdEvidence, data.len()));
     }
-    let rows = evidence_rows(data, options.max_unknowns);
-    let used = data.subset(&rows);
-    let geometry_used = geometry.map(|g| g.subset(&rows));
+    let used = &rows.used;
+    let geometry_used = geometry.map(|g| g.subset(&rows.indices));
     let table_of = |rows: &Measurements, geometry: Option<&GeometricBasis>| {
         let table = PairTable::new(nominal, rows, norm);
         match geometry {
@@ -156,7 +150,7 @@ fn choose(
             None => table,
         }
     };
-    let table = table_of(&used, geometry_used.as_ref());
+    let table = table_of(used, geometry_used.as_ref());
     let (n, m) = (table.n, table.m);
     let scales = DataScales::of(&table);
     let starts = scales.starts(&table);
@@ -164,9 +158,8 @@ fn choose(
     // Every start on a coarse subset of the rows (each evaluation there is cheap), then the best
     // refined on all the evidence rows.
     let evaluations = RefCell::new(0usize);
-    let coarse_rows = evidence_rows(&used, options.coarse_unknowns);
-    let coarse_table = (coarse_rows.len() < used.len())
-        .then(|| table_of(&used.subset(&coarse_rows), geometry_used.as_ref().map(|g| g.subset(&coarse_rows)).as_ref()));
+    let coarse_table =
+        rows.coarse.as_ref().map(|coarse| table_of(coarse, geometry_used.as_ref().map(|g| g.subset(&rows.coarse_indices)).as_ref()));
     let search_table = coarse_table.as_ref().unwrap_or(&table);
     let run = |table: &PairTable, from: &[(f64, Vec<f64>)], iterations: u64| -> Vec<(f64, Vec<f64>)> {
         let mut found: Vec<_> =

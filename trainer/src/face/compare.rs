@@ -123,8 +123,12 @@ pub fn compare(arm: &ArmModel, train: &Dataset, test: &Dataset, settings: &Compa
     }
     // CbD and the hybrids fit all training rows: refuse up front what cannot fit in memory.
     let rows = &inputs.train.measurements;
-    let threads =
-        crate::memory::check_fit_of(&train.source, rows, "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)")?;
+    let threads = crate::memory::check_fit_of(
+        &train.source,
+        rows.len(),
+        rows.task_dim,
+        "use fewer training rows (cbd fit --max-rows N fits an evenly spaced subset)",
+    )?;
     pipeline.solver.threads = threads;
     let context = PeerContext { settings: pipeline.clone(), search: Default::default() };
     let mut methods = crate::workers::on_workers(threads, || {

@@ -110,7 +110,7 @@ pub fn diagnose(arm: &ArmModel, data: &Dataset, test: Option<&Dataset>, settings
     let (source, data) = (data.source.clone(), data.imported.measurements.clone());
     // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
     let threads = match settings.no_cbd {
-        false => crate::memory::check_fit_of(&source, &data, "--no-cbd skips the CbD rows")?,
+        false => crate::memory::check_fit_of(&source, data.len(), data.task_dim, "--no-cbd skips the CbD rows")?,
         true => crate::workers::worker_threads(),
     };
     let test = match test {

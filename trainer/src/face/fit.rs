@@ -74,20 +74,23 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     let data =
         crate::data::preparation::fit_rows(&nominal, imported, source, registration.is_some(), settings.max_rows, settings.pipeline.sigma)?;
     let mut pipeline = settings.pipeline.settings()?;
+    pipeline.geometry = if settings.dh_first { crate::calibrate::Geometry::Calibrated } else { settings.geometry };
+    pipeline.drift = Some(Default::default());
+    // Every subset a stage takes (the evidence's rows, the folds, the drift test's window), cut once here.
+    let data = crate::data::stage_rows::StageRows::new(data, &pipeline.cuts());
+    let unknowns = data.len() * data.rows.task_dim;
     // The kernel form's (N m)² matrices are checked up front; the expansion needs none, so with it
     // the solver checks only if it falls back to the kernel form (against what the workers leave).
     // The workers' own memory (faer's multiply workspace, stacks) is checked either way.
     let threads = if pipeline.solver.representation == crate::expansion::Representation::Kernel {
-        crate::memory::check_fit_of(source, &data, "--max-rows N fits an evenly spaced subset of N rows")?
+        crate::memory::check_fit_of(source, data.len(), data.rows.task_dim, "--max-rows N fits an evenly spaced subset of N rows")?
     } else {
-        crate::memory::check_workers_of(source, data.len() * data.task_dim, "--max-rows N fits an evenly spaced subset of N rows")?
+        crate::memory::check_workers_of(source, unknowns, "--max-rows N fits an evenly spaced subset of N rows")?
     };
-    pipeline.solver.memory_budget = crate::memory::kernel_form_budget(threads, data.len() * data.task_dim);
-    pipeline.geometry = if settings.dh_first { crate::calibrate::Geometry::Calibrated } else { settings.geometry };
+    pipeline.solver.memory_budget = crate::memory::kernel_form_budget(threads, unknowns);
     pipeline.solver.threads = threads;
-    pipeline.drift = Some(Default::default());
     let calibration =
-        crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &data, &pipeline)).context(source.display())?;
+        crate::workers::on_workers(threads, || crate::calibrate::calibrate_rows(&nominal, &data, &pipeline)).context(source.display())?;
     print_calibration(&calibration, settings.pipeline.quiet);
     let mut report = calibration.to_json();
     if let Some(r) = &registration {

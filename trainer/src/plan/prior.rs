@@ -49,7 +49,7 @@ pub fn stated(nominal: &NominalModel, joints: &[f64], reach: f64, prior: StatedP
 /// nominal, y − (k_dh(q) − k0(q)), the residual the posterior's geometric basis starts from.
 pub fn from_measurements(nominal: &NominalModel, data: &Measurements) -> crate::Result<(CbdHyperparameters, GeometryChoice)> {
     let settings = Settings { geometry: Geometry::Auto, ..Settings::default() };
-    let norm = crate::evidence::normalisation_of(data);
-    let (hypothesis, choice, _) = crate::calibrate::geometry::choose_geometry(nominal, data, &norm, &settings)?;
+    let data = crate::data::stage_rows::StageRows::new(data.clone(), &settings.cuts());
+    let (hypothesis, choice, _) = crate::calibrate::geometry::choose_geometry(nominal, &data, &data.normalisation, &settings, false)?;
     Ok((hypothesis.hyperparameters, choice))
 }
