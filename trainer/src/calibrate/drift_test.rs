@@ -653,6 +653,23 @@ mod tests {
         }
     }
 
+    /// The test on a six-joint walk of `rows` poses (steps 0.1 rad) whose residual is drift (`sd` over
+    /// `length` rows) plus 0.02 noise, nothing fitted before it.
+    fn unfitted_walk(rows: usize, sd: f64, length: f64, seed: u64) -> Drift {
+        let q = crate::simulate::six_joint::walk_configurations(rows, 0.1, seed);
+        let mut r = row_drift(rows, 3, sd, length, seed);
+        crate::simulate::add_noise(&mut r, 0.02, seed + 100);
+        let data = Measurements {
+            n_joints: 6,
+            task_dim: 3,
+            points_per_pose: 1,
+            joints: q,
+            positions: vec![0.0; r.len()],
+            order: crate::data::RowOrder::Measured,
+        };
+        drift_test(&data, &[true; 6], &r, None, &DriftOptions::default()).unwrap()
+    }
+
     /// A row process far slower than the window (a trend over the campaign) ends H1's search at L's
     /// upper bound, half the block: the test says so and gives the length as a lower bound; a
     /// drift of a few rows does not.
@@ -660,18 +677,7 @@ mod tests {
     fn a_length_at_the_searchs_bound_is_reported_as_a_lower_bound() {
         let rows = 200;
         for (length, at_bound) in [(400.0, true), (3.0, false)] {
-            let q = crate::simulate::six_joint::walk_configurations(rows, 0.1, 5);
-            let mut r = row_drift(rows, 3, 0.1, length, 5);
-            crate::simulate::add_noise(&mut r, 0.02, 105);
-            let data = Measurements {
-                n_joints: 6,
-                task_dim: 3,
-                points_per_pose: 1,
-                joints: q,
-                positions: vec![0.0; r.len()],
-                order: crate::data::RowOrder::Measured,
-            };
-            let d = drift_test(&data, &[true; 6], &r, None, &DriftOptions::default()).unwrap();
+            let d = unfitted_walk(rows, 0.1, length, 5);
             errln!("planted length {length}: found {:.1} (Δ {:.1} nats): over {}", d.length, d.log_likelihood_ratio, d.length_text());
             assert!(d.detected, "planted length {length}: {d:?}");
             assert!((d.length_bound - 100.0).abs() < 1e-9, "{}", d.length_bound);
@@ -685,18 +691,7 @@ mod tests {
     #[ignore]
     fn probe_no_fit() {
         for seed in 1..=6u64 {
-            let q = crate::simulate::six_joint::walk_configurations(600, 0.1, seed);
-            let mut r = row_drift(600, 3, 0.03, 5.0, seed);
-            crate::simulate::add_noise(&mut r, 0.02, seed + 100);
-            let data = Measurements {
-                n_joints: 6,
-                task_dim: 3,
-                points_per_pose: 1,
-                joints: q,
-                positions: vec![0.0; r.len()],
-                order: crate::data::RowOrder::Measured,
-            };
-            let d = drift_test(&data, &[true; 6], &r, None, &DriftOptions::default()).unwrap();
+            let d = unfitted_walk(600, 0.03, 5.0, seed);
             println!(
                 "seed {seed}: Δ {:.1} sd {:.4} L {:.2} noise {:.4} joint {:.4}",
                 d.log_likelihood_ratio, d.sd, d.length, d.noise_sd, d.joint_sd
