@@ -56,15 +56,11 @@ pub fn choose_scheme(
         return Ok(SchemeChoice { integrator: Integrator { method, steps }, chosen_by: "given".into(), cross_validation: vec![] });
     }
     let candidates = [Integrator { method, steps: 1 }, Integrator { method, steps: 2 }];
-    let folds = settings.scheme_folds;
-    let folds = match (folds, &data.folds) {
-        (0 | 1, _) => Err(format!("cross-validation off ({folds} folds)")),
-        (_, Ok(cut)) => Ok(cut),
-        (_, Err(why)) => Err(why.clone()),
-    };
-    let folds = match folds {
-        Ok(folds) => folds,
-        Err(why) => return Ok(SchemeChoice { integrator: candidates[0], chosen_by: why, cross_validation: vec![] }),
+    let without = |why: String| Ok(SchemeChoice { integrator: candidates[0], chosen_by: why, cross_validation: vec![] });
+    let folds = match (settings.scheme_folds, &data.folds) {
+        (folds @ (0 | 1), _) => return without(format!("cross-validation off ({folds} folds)")),
+        (_, Err(why)) => return without(why.clone()),
+        (_, Ok(cut)) => cut,
     };
     if data.len() * data.rows.task_dim > DENSE_MAX_UNKNOWNS {
         return Ok(SchemeChoice {

@@ -78,6 +78,12 @@ impl Objective<'_> {
         1.0 / self.table.observations() as f64
     }
 
+    /// How far `x`, coordinate `k` of a point, lies outside the box (signed: above the upper bound
+    /// positive, below the lower negative; 0 inside): the wall's distance.
+    fn over(&self, k: usize, x: f64) -> f64 {
+        (x - self.upper[k]).max(0.0) - (self.lower[k] - x).max(0.0)
+    }
+
     /// The objective's value at `p`, evaluated (and cached) unless `p` is the cached point.
     fn value(&self, p: &[f64]) -> f64 {
         if let Some(e) = self.cache.borrow().as_ref().filter(|e| e.at.as_slice() == p) {
@@ -96,7 +102,7 @@ impl Objective<'_> {
         };
         if value < INFEASIBLE {
             for (k, x) in p.iter().enumerate() {
-                let over = (x - self.upper[k]).max(0.0) - (self.lower[k] - x).max(0.0);
+                let over = self.over(k, *x);
                 if over != 0.0 {
                     value += self.wall * over * over;
                 }
@@ -115,13 +121,14 @@ impl Objective<'_> {
         if e.gradient.is_none() {
             let partial = e.partial.take();
             let from_table = partial.and_then(|partial| self.table.gradient_from(&self.clamped(p), partial));
+            let per_unknown = self.per_unknown();
             let mut g: Vec<f64> = match from_table {
-                Some(g) => g.iter().map(|x| x * self.per_unknown()).collect(),
+                Some(g) => g.iter().map(|x| x * per_unknown).collect(),
                 None => vec![0.0; p.len()],
             };
             if value < INFEASIBLE {
                 for (k, x) in p.iter().enumerate() {
-                    let over = (x - self.upper[k]).max(0.0) - (self.lower[k] - x).max(0.0);
+                    let over = self.over(k, *x);
                     if over != 0.0 {
                         g[k] = 2.0 * self.wall * over;
                     }
