@@ -92,7 +92,7 @@ fn ur5_blob_is_identical_across_thread_counts() {
     let data = cbd_trainer::data::csv_import::read_measurements_from(head.as_bytes(), Path::new("train.csv"), &spec).unwrap().measurements;
     // `cbd fit`'s defaults for a spatial arm (SolverArgs::options): data-scaled normalisation.
     let mut base = CbdOptions::paper_rr();
-    base.normalisation = cbd_trainer::evidence::normalisation_of(&data);
+    base.normalisation = data.normalisation();
     base.joint_kernel = cbd_trainer::evidence::default_joint_kernel(&model.nominal);
     base.joint_kernel.gamma = 1.0;
     base.task_kernel.width = 1.0;

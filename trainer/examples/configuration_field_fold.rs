@@ -7,7 +7,7 @@
 //!     cargo run --release -p cbd-trainer --example configuration_field_fold -- MODEL.toml|- TRAIN.csv TEST.csv
 
 use cbd_protocol::{Integrator, IntegratorMethod};
-use cbd_trainer::calibrate::{calibrate, normalisation, options_for, Settings};
+use cbd_trainer::calibrate::{calibrate, normalisation_for, options_for, Settings};
 use cbd_trainer::data::csv_import::read_measurements;
 use cbd_trainer::data::Measurements;
 
@@ -35,7 +35,7 @@ fn main() {
     let plain = cbd_trainer::predict::evaluate_blob(&c.fit.blob, &test.joints).unwrap_or_else(|e| panic!("{e}"));
     let plain_error = mean_error(&plain, &test);
     let Some(f) = &c.configuration else { panic!("no configuration search ran") };
-    let norm = normalisation(&train, &settings);
+    let norm = normalisation_for(&train.normalisation(), &settings);
     let opts = options_for(&f.with_term, &norm, Integrator { method: IntegratorMethod::Euler, steps: 1 }, &settings);
     let t1 = std::time::Instant::now();
     let momenta = cbd_trainer::solver::solve_with_configuration(&c.base, &train, &opts).unwrap_or_else(|e| panic!("{e}"));

@@ -35,7 +35,7 @@ fn main() {
     let kernel_form_too = args.get(4).is_some_and(|s| s == "kernel");
     let (_, noisy, test) = rr_prior::benchmark(per_axis, noise_seed);
     let nominal = rr::nominal();
-    let scale = cbd_trainer::evidence::normalisation_of(&noisy).task_scale;
+    let scale = noisy.normalisation().task_scale;
     let residual = normalised_residual(&nominal, &noisy, scale);
     // The kernel form's profiled log marginal likelihood on every row at (ln b_d, ln ν).
     let every_row = |p: &[f64]| {

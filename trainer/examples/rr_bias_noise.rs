@@ -47,7 +47,7 @@ fn cbd_at(
     h: &CbdHyperparameters,
     tol_factor: f64,
 ) -> Option<Cbd> {
-    let norm = cbd_trainer::evidence::normalisation_of(noisy);
+    let norm = noisy.normalisation();
     let cbd_trainer::solver::FlowHyperparameters { joint_kernel: jk, task_kernel: tk, sigma, .. } = h.to_internal(&norm);
     let integ = Integrator { method: IntegratorMethod::Euler, steps: 1 };
     let cp = ControlPoints::new(nominal, &norm, noisy.joints.clone(), jk.clone(), tk, MomentumLaw::Hamiltonian, integ);
@@ -124,13 +124,7 @@ fn main() {
     });
     // CbD with its own evidence.
     let t0 = std::time::Instant::now();
-    let e = cbd_trainer::evidence::choose_cbd_hyperparameters(
-        &nominal,
-        &noisy,
-        &cbd_trainer::evidence::normalisation_of(&noisy),
-        &Default::default(),
-    )
-    .unwrap();
+    let e = cbd_trainer::evidence::choose_cbd_hyperparameters(&nominal, &noisy, &noisy.normalisation(), &Default::default()).unwrap();
     println!(
         "cbd evidence {:.2} on {} rows ({}), {:.1} s: {:?}",
         e.log_evidence,

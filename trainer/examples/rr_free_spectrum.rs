@@ -260,7 +260,7 @@ fn main() {
     let nominal = rr::nominal();
     let noise_seed: u64 = args.get(5).map_or(1u64.wrapping_add(0x5eed), |s| s.parse().unwrap());
     let (clean, noisy, test) = rr_prior::benchmark(per_axis, noise_seed);
-    let norm = cbd_trainer::evidence::normalisation_of(&noisy);
+    let norm = noisy.normalisation();
     let peer = fit_kernel_ridge_peer(&nominal, &noisy, &Default::default()).unwrap();
     let krr_test = mean_error(&peer.regression.predict(&nominal, &test.joints), &test.positions);
     let kh = &peer.hyperparameters;

@@ -83,7 +83,7 @@ fn main() {
         let pn = peer.regression.predict(&nominal, &test.joints);
         println!("krr: test mean {:.4e} (lml {:.2})", mean_error(&pn, &test.positions), peer.hyperparameters.log_marginal_likelihood);
     }
-    let norm = cbd_trainer::evidence::normalisation_of(&noisy);
+    let norm = noisy.normalisation();
     let (e, jk, tk, integ) = rr_prior::plain_cbd(&nominal, &noisy, &norm);
     let h = &e.hyperparameters;
     let link_angles = args.get(3).is_some_and(|s| s == "u" || s == "uu");

@@ -6,7 +6,7 @@
 //! nominal's: dh+cbd's evidence is not below cbd's on the same rows.
 
 use cbd_trainer::data::Measurements;
-use cbd_trainer::evidence::{choose_cbd_hyperparameters, normalisation_of, EvidenceOptions};
+use cbd_trainer::evidence::{choose_cbd_hyperparameters, EvidenceOptions};
 use cbd_trainer::parametric::{calibrate_dh, DhCalibrationOptions};
 use cbd_trainer::simulate::{add_noise, configurations, rr, Sampling};
 
@@ -18,7 +18,7 @@ fn dh_first_evidence_is_not_below_the_nominal_one_on_a_large_noisy_grid() {
     let options = EvidenceOptions::default();
 
     let nominal = rr::nominal();
-    let cbd = choose_cbd_hyperparameters(&nominal, &data, &normalisation_of(&data), &options).expect("cbd evidence");
+    let cbd = choose_cbd_hyperparameters(&nominal, &data, &data.normalisation(), &options).expect("cbd evidence");
 
     // dh+cbd as `cbd compare` runs it on a planar arm: the DH fit, read as a planar chain in its frame.
     let dh =
@@ -29,7 +29,7 @@ fn dh_first_evidence_is_not_below_the_nominal_one_on_a_large_noisy_grid() {
     for i in 0..moved.len() {
         frame.move_row(&mut moved.joints[i * n..(i + 1) * n], &mut moved.positions[i * m..(i + 1) * m]);
     }
-    let dh_cbd = choose_cbd_hyperparameters(&chain, &moved, &normalisation_of(&moved), &options).expect("dh+cbd evidence");
+    let dh_cbd = choose_cbd_hyperparameters(&chain, &moved, &moved.normalisation(), &options).expect("dh+cbd evidence");
 
     eprintln!(
         "log evidence: cbd {:.2} ({}), dh+cbd {:.2} ({}); σ {:.4e}, {:.4e} (true 1e-4)",

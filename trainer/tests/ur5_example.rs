@@ -104,7 +104,7 @@ fn cbd_hook_on_the_simulated_six_joint_arm() {
     let test = robot.measure(&random_configurations(200, 24), 25);
     let hook = |nominal: &cbd_protocol::NominalModel, data: &Measurements| -> cbd_trainer::Result<FittedCorrection> {
         let mut opts = CbdOptions::paper_rr();
-        opts.normalisation = cbd_trainer::evidence::normalisation_of(data);
+        opts.normalisation = data.normalisation();
         opts.joint_kernel = cbd_trainer::evidence::default_joint_kernel(nominal);
         opts.task_kernel.width = 1.0;
         opts.sigma = opts.normalisation.length_to_internal(robot.noise_std);

@@ -81,7 +81,7 @@ mod tests {
         use crate::simulate::{configurations, rr, Sampling};
         use cbd_protocol::{ConfigurationKernel, JointKernelAxis, MomentumLaw};
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 30, seed: 3 }, 2));
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let nominal = rr::nominal();
         let h = crate::calibrate::paper_rr_hyperparameters();
         let mut opts = CbdOptions::new(h.to_internal(&norm), Integrator { method: IntegratorMethod::Euler, steps: 1 }, norm.clone());

@@ -1,6 +1,6 @@
 //! Drift: is the residual correlated in the order the rows were measured, beyond what the
 //! configuration explains? (docs/DESIGN.md "Drift in measurement order", issue 49.)
-//! Here, in the calibrate layer, because the fit runs it as a stage ([`super::drift`]); `cbd diagnose`
+//! Here, in the calibrate layer, because the fit runs it as a stage ([`super::calibrate_rows`]); `cbd diagnose`
 //! and `cbd check` read it from above.
 //!
 //! On a contiguous window of the poses in file order, the residual r (one pose per row, the mean of

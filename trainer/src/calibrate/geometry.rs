@@ -121,7 +121,7 @@ fn calibrated_hypothesis(fitted: DhCalibration, data: &StageRows, norm: &Normali
 /// The hypothesis `settings.geometry` asks for, or for `Auto` the better of the two; and the
 /// DH-calibrated chain when it was fitted on the way, or, where none was and `with_chain`, the chain
 /// fitted here (`nominal` as it stands where the DH fit cannot calibrate it): the drift test's chain
-/// (`super::drift`), so that the chain is fitted once, in this stage.
+/// ([`super::drift_test::drift_of_chain`]), so that the chain is fitted once, in this stage.
 pub fn choose_geometry(
     nominal: &NominalModel,
     data: &StageRows,

@@ -5,7 +5,6 @@
 
 use super::{HyperparameterSource, Settings};
 use crate::data::stage_rows::StageRows;
-use crate::data::Measurements;
 use crate::evidence::{choose_on_rows, CbdHyperparameters, Evidence, GeometricBasis};
 use crate::solver::{CbdOptions, SolverSettings};
 use cbd_protocol::{Integrator, NominalModel, Normalisation};
@@ -69,12 +68,8 @@ fn placeholder_hyperparameters(base: &NominalModel) -> CbdHyperparameters {
     h
 }
 
-/// The task-space normalisation for `settings`: the data's (RMS radius) or none (the paper's units).
-pub fn normalisation(data: &Measurements, settings: &Settings) -> Normalisation {
-    normalisation_for(&data.normalisation(), settings)
-}
-
-/// The same for rows whose own normalisation is `rows` ([`StageRows::normalisation`]).
+/// The task-space normalisation for `settings`: the rows' own (`rows`: [`StageRows::normalisation`],
+/// RMS radius) or none (the paper's units).
 pub fn normalisation_for(rows: &Normalisation, settings: &Settings) -> Normalisation {
     match settings.source {
         HyperparameterSource::PaperRr => Normalisation::IDENTITY,

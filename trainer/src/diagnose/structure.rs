@@ -90,14 +90,15 @@ pub fn structure_tests(model: &NominalModel, data: &Measurements, r: &[f64], opt
     // Task position, normalised: (k − mean) / rms.
     let predicted: Vec<f64> =
         (0..rows).flat_map(|i| kinematics::position(model, data.joints(i), m, kinematics::point_of_row(model, i))).collect();
-    let norm = crate::evidence::normalisation_of(&Measurements {
+    let norm = Measurements {
         n_joints: n,
         task_dim: m,
         points_per_pose: data.points_per_pose,
         joints: data.joints.clone(),
         positions: predicted.clone(),
         order: data.order,
-    });
+    }
+    .normalisation();
     let x = |i: usize, d: usize| norm.position_to_internal(d, predicted[m * i + d]);
     let mut monomials: Vec<Box<dyn Fn(usize) -> f64>> = Vec::new();
     for d in 0..m {

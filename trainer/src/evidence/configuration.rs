@@ -391,7 +391,7 @@ mod tests {
     #[test]
     fn the_terms_evidence_is_the_dense_formula_and_its_gradient_is_exact() {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 20, seed: 3 }, 2));
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let nominal = rr::nominal();
         let table = PairTable::new(&nominal, &data, &norm);
         for flat in [false, true] {
@@ -479,7 +479,7 @@ mod choice_tests {
         let options = EvidenceOptions::default();
         for (planted, expect) in [(0.5, true), (0.0, false)] {
             let data = measure(planted, &mut gauss);
-            let norm = crate::evidence::normalisation_of(&data);
+            let norm = data.normalisation();
             let plain = crate::evidence::choose_cbd_hyperparameters(&robot.nominal, &data, &norm, &options).unwrap();
             let rows = EvidenceRows::new(&data, options.max_unknowns, options.coarse_unknowns);
             let found = search_configuration_term(&robot.nominal, &data, &rows, &norm, &options, &plain.hyperparameters).unwrap();

@@ -1,14 +1,7 @@
-//! The defaults every model selection starts from: the task-space normalisation of the data
-//! (docs/DESIGN.md §1) and one unit kernel axis per joint.
+//! The default every model selection starts from: one unit kernel axis per joint (the task-space
+//! normalisation, the other default, is the data's own: [`crate::data::Measurements::normalisation`]).
 
-use crate::data::Measurements;
-use cbd_protocol::{JointKernel, NominalModel, Normalisation};
-
-/// Task-space normalisation from data: offset = mean position, scale = RMS distance to it
-/// ([`Measurements::normalisation`]).
-pub fn normalisation_of(data: &Measurements) -> Normalisation {
-    data.normalisation()
-}
+use cbd_protocol::{JointKernel, NominalModel};
 
 /// One axis per joint: periodic (b = 1) for revolute joints, Gaussian (width 1) for prismatic ones.
 pub fn default_joint_kernel(nominal: &NominalModel) -> JointKernel {

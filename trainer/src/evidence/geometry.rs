@@ -89,7 +89,7 @@ mod tests {
         let robot = SixJointRobot::ur5_like(3);
         let nominal = robot.nominal.clone();
         let data = robot.measure(&random_configurations(40, 5), 9);
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let fit = calibrate_dh(&nominal, &data, &DhCalibrationOptions::default()).unwrap();
         let group = linearised_group(&nominal, &fit.stats, &data).unwrap();
         let basis = GeometricBasis::new(&group, &data, &norm);

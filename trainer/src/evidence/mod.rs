@@ -31,7 +31,7 @@ pub(crate) use blob_prior::blob_covariance;
 #[cfg(test)]
 pub(crate) use blob_prior::model_for_tests;
 pub use configuration::{search_configuration_term, ConfigurationEvidence};
-pub use defaults::{default_joint_kernel, normalisation_of};
+pub use defaults::default_joint_kernel;
 pub use geometry::{is_length, GeometricBasis, GEOMETRY_PRIOR_STD};
 pub use hyperparameters::{CbdHyperparameters, ConfigurationHyperparameters};
 pub(crate) use table::PairTable;
@@ -105,12 +105,6 @@ impl Default for EvidenceOptions {
             max_weight_space_weights: 1200,
         }
     }
-}
-
-/// The rows used: all, or evenly spaced whole poses when N m exceeds `max_unknowns`
-/// ([`crate::data::stage_rows::evidence_rows`]).
-pub fn evidence_rows(data: &Measurements, max_unknowns: usize) -> Vec<usize> {
-    crate::data::stage_rows::evidence_rows(data, max_unknowns)
 }
 
 /// Chooses CbD's hyperparameters for `nominal` on `data` (training rows only), with the task space
@@ -244,7 +238,7 @@ mod tests {
     #[test]
     fn gradient_matches_finite_differences() {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 25, seed: 3 }, 2));
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let table = PairTable::new(&rr::nominal(), &data, &norm);
         let theta = Theta {
             log_widths: vec![0.3f64.ln(), 1.7f64.ln()],
@@ -266,7 +260,7 @@ mod tests {
         use crate::axis_forms::{tests::HalfTurn, AxisForm};
         use joint_pair_table::JointPairTable;
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 25, seed: 3 }, 2));
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let mut table = PairTable::new(&rr::nominal(), &data, &norm);
         let forms: Vec<&'static dyn AxisForm> = vec![&HalfTurn, table.joint.forms[1]];
         table.joint = JointPairTable::new(forms, &data);
@@ -304,7 +298,7 @@ mod tests {
     #[test]
     fn starts_on_the_workers_are_a_serial_loops_search() {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 40, seed: 5 }, 2));
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let table = PairTable::new(&rr::nominal(), &data, &norm);
         let scales = DataScales::of(&table);
         let (lower, upper) = scales.bounds(&table);

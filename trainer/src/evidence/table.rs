@@ -307,7 +307,7 @@ mod tests {
     #[test]
     fn the_evidences_k_lin_is_the_fits_to_a_stated_bound() {
         let data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count: 30, seed: 3 }, 2));
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let nominal = rr::nominal();
         let table = PairTable::new(&nominal, &data, &norm);
         for log_widths in [vec![0.3f64.ln(), 1.7f64.ln()], vec![8f64.ln(), 0.02f64.ln()]] {

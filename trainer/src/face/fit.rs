@@ -109,7 +109,7 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     // The model's length unit (the data are read into it): the floor's line names it.
     let unit = arm.length_unit();
     let mut noise_floor = describe_noise_floor(&calibration, unit);
-    // Drift in measurement order (`calibrate::drift`): beside the floor, and recorded in the blob when found.
+    // Drift in measurement order (`calibrate::drift_test`): beside the floor, and recorded in the blob when found.
     let drift = &calibration.drift;
     let found = drift.as_ref().filter(|d| d.detected);
     let blob = with_record(&calibration.fit.blob, found, crate::data::import_frame::import_frame(&arm.spec))?;

@@ -29,7 +29,7 @@ use faer::{linalg::solvers::Solve, Mat, Side};
 #[derive(Debug, Clone, PartialEq)]
 pub struct SearchOptions {
     /// Positions are divided by this before the GP sees them; `None`: the scale of
-    /// [`crate::evidence::normalisation_of`] (RMS distance of the measured positions from their mean),
+    /// [`crate::data::Measurements::normalisation`] (RMS distance of the measured positions from their mean),
     /// the same normalisation the CbD model uses.
     pub task_scale: Option<f64>,
     /// After the shared-width search, refine each joint's width separately.
@@ -160,7 +160,7 @@ pub fn choose_kernel_ridge_hyperparameters(
     let n = data.n_joints;
     let rows = crate::data::evenly_spaced_rows(count, options.max_points);
     let used = data.subset(&rows);
-    let task_scale = options.task_scale.unwrap_or_else(|| crate::evidence::normalisation_of(data).task_scale);
+    let task_scale = options.task_scale.unwrap_or_else(|| data.normalisation().task_scale);
     let residual = normalised_residual(nominal, &used, task_scale);
     let table = JointPairTable::new(forms_of(nominal), &used);
     let init = data_start(&table, options);

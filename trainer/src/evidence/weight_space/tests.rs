@@ -22,7 +22,7 @@ fn rr_rows(count: usize) -> crate::data::Measurements {
 #[test]
 fn weight_space_evidence_equals_the_kernel_form() {
     let data = rr_rows(60);
-    let norm = crate::evidence::normalisation_of(&data);
+    let norm = data.normalisation();
     let p = theta().pack();
     let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, None, &p, 4000).unwrap();
     let kernel = PairTable::new(&rr::nominal(), &data, &norm);
@@ -43,7 +43,7 @@ fn weight_space_evidence_equals_the_kernel_form() {
 #[test]
 fn weight_space_gradient_matches_finite_differences() {
     let data = rr_rows(40);
-    let norm = crate::evidence::normalisation_of(&data);
+    let norm = data.normalisation();
     let p = theta().pack();
     let ws = WeightSpaceTable::new(&rr::nominal(), &data, &norm, None, &p, 4000).unwrap();
     super::super::search::assert_gradient_matches_central_differences(&ws, &p, 1e-5);
@@ -52,7 +52,7 @@ fn weight_space_gradient_matches_finite_differences() {
 #[test]
 fn prismatic_joints_and_long_bases_are_declined() {
     let data = rr_rows(20);
-    let norm = crate::evidence::normalisation_of(&data);
+    let norm = data.normalisation();
     // Narrow joint kernels need many functions: more than a small limit allows.
     let mut narrow = theta();
     narrow.log_widths = vec![20f64.ln(), 20f64.ln()];
@@ -68,13 +68,13 @@ fn refine_from(per_axis: usize, factors: &[f64]) -> (f64, Vec<(f64, Theta, usize
     let mut data = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis }, 2));
     crate::simulate::add_noise(&mut data.positions, 1e-4, 1u64.wrapping_add(0x5eed));
     let nominal = rr::nominal();
-    let norm = crate::evidence::normalisation_of(&data);
+    let norm = data.normalisation();
     let e = crate::evidence::choose_cbd_hyperparameters(&nominal, &data, &norm, &Default::default()).unwrap();
     assert_eq!(e.form, "weight space");
     let (h, s) = (&e.hyperparameters, norm.task_scale);
     let chosen = -e.log_evidence - (data.len() * 2) as f64 * s.ln();
     let b: Vec<f64> = h.joint_axes.iter().map(|a| if let cbd_protocol::JointKernelAxis::Periodic { b } = a { *b } else { 0.0 }).collect();
-    let rows = crate::evidence::evidence_rows(&data, 1200);
+    let rows = crate::data::stage_rows::evidence_rows(&data, 1200);
     let table = PairTable::new(&nominal, &data.subset(&rows), &norm);
     let (lower, upper) = DataScales::of(&table).bounds(&table);
     let found = factors
@@ -137,14 +137,14 @@ fn rr_geometry(data: &crate::data::Measurements) -> (cbd_protocol::NominalModel,
     let options = DhCalibrationOptions { planar_as_dh: true, ..Default::default() };
     let fit = calibrate_dh(&rr::nominal(), data, &options).unwrap();
     let group = linearised_group(&rr::nominal(), &fit.stats, data).unwrap();
-    let basis = crate::evidence::GeometricBasis::new(&group, data, &crate::evidence::normalisation_of(data));
+    let basis = crate::evidence::GeometricBasis::new(&group, data, &data.normalisation());
     (fit.model, basis)
 }
 
 #[test]
 fn explicit_columns_in_weight_space_equal_the_kernel_form() {
     let data = rr_rows(60);
-    let norm = crate::evidence::normalisation_of(&data);
+    let norm = data.normalisation();
     let (model, basis) = rr_geometry(&data);
     assert!(basis.p >= 4, "{:?}", basis.names);
     let p = theta().pack();
@@ -167,7 +167,7 @@ fn explicit_columns_in_weight_space_equal_the_kernel_form() {
 #[test]
 fn explicit_columns_gradient_matches_finite_differences() {
     let data = rr_rows(40);
-    let norm = crate::evidence::normalisation_of(&data);
+    let norm = data.normalisation();
     let (model, basis) = rr_geometry(&data);
     let p = theta().pack();
     let ws = WeightSpaceTable::new(&model, &data, &norm, Some(&basis), &p, 4000).unwrap();

@@ -208,7 +208,7 @@ mod tests {
     fn the_runtime_reproduces_the_trainers_predictions_with_the_term() {
         let robot = SixJointRobot::ur5_like(3);
         let data = robot.measure(&random_configurations(40, 4), 5);
-        let norm = crate::evidence::normalisation_of(&data);
+        let norm = data.normalisation();
         let opts = six_joint_options(&norm);
         let momenta = solve_with_configuration(&robot.nominal, &data, &opts).unwrap();
         let predicted = predict_with_configuration(&robot.nominal, &opts, &data.joints, &momenta, &data.joints).unwrap();

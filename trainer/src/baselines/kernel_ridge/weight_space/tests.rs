@@ -9,7 +9,7 @@ use cbd_protocol::{JointKernel, JointKernelAxis};
 fn rr_rows(count: usize) -> (crate::data::Measurements, faer::Mat<f64>) {
     let mut data = rr::RealRr::default().measure(&configurations(Sampling::Uniform { count, seed: 11 }, 2));
     add_noise(&mut data.positions, 1e-4, 3);
-    let scale = crate::evidence::normalisation_of(&data).task_scale;
+    let scale = data.normalisation().task_scale;
     let residual = normalised_residual(&rr::nominal(), &data, scale);
     (data, residual)
 }
