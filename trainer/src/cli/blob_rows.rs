@@ -1,13 +1,10 @@
 //! A blob read for a command: decoded here against the command's model flag (what `cbd eval`,
-//! `cbd check`, `cbd compensate` and `cbd plan --check` share), evaluated on measured rows by the
-//! face's `blob_rows`, which the commands reach here.
+//! `cbd check`, `cbd compensate` and `cbd plan --check` share); the face evaluates it.
 
 use crate::cli::args::blob_misfit;
 use crate::cli::ModelArgs;
 use crate::error::{Context, Result};
 use std::path::Path;
-
-pub(crate) use crate::face::blob_rows::{evaluate_rows, finite_statistics, recorded_sigma};
 
 /// `blob` (read from `path`) decoded and checked to fit `nominal`, the model file's chain (joints
 /// and their kinds, task coordinates, tool points, length unit), and its import `spec` (the frame

@@ -13,6 +13,7 @@ pub use crate::error::{Error, Result};
 
 mod arm;
 pub(crate) mod blob_rows;
+mod check;
 mod compare;
 mod compensate;
 mod diagnose;
@@ -27,6 +28,7 @@ mod simulate;
 
 pub(crate) use arm::register_base_if_unknown;
 pub use arm::ArmModel;
+pub use check::{check, CheckSettings, Checked};
 pub use compare::{compare, CompareSettings, Comparison};
 pub use compensate::{compensate, CompensatedCommand, MAX_ITERATIONS};
 pub use diagnose::{diagnose, DiagnoseSettings, Diagnosis};
