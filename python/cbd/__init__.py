@@ -19,7 +19,7 @@ Progress and warnings go to the ``logging`` logger ``"cbd"``; failures raise :cl
 
 import logging as _logging
 
-from ._cbd import CbdError, Model, ModelFile, __version__, compare, diagnose, fit, simulate
+from ._cbd import CbdError, Model, ModelFile, __version__, check, compare, diagnose, fit, simulate
 
 _logging.getLogger("cbd").addHandler(_logging.NullHandler())
 
@@ -30,4 +30,4 @@ class CbdMemoryError(CbdError, MemoryError):
     ``MemoryError``; the message names the argument and its shape."""
 
 
-__all__ = ["CbdError", "CbdMemoryError", "Model", "ModelFile", "__version__", "compare", "diagnose", "fit", "simulate"]
+__all__ = ["CbdError", "CbdMemoryError", "Model", "ModelFile", "__version__", "check", "compare", "diagnose", "fit", "simulate"]

@@ -118,5 +118,8 @@ def diagnose(
 ) -> dict[str, Any]:
     """Traces the residual to physical effects (the face's ``diagnose``, the one ``cbd diagnose`` calls, in memory); its JSON value as a dict."""
 
+def check(model: Optional[ModelFile], blob: Union[Model, PathLike], data: Data, alpha: float = 0.01, register: bool = False) -> dict[str, Any]:
+    """Does a calibration still hold (the face's ``check``, the one ``cbd check`` calls, in memory): fresh poses against the blob's own predictive distribution; its JSON value as a dict (``verdict``, ``p_value``, …)."""
+
 def simulate(poses: Optional[PathLike] = None, **options: Option) -> Tuple[Array, Array]:
     """Simulated measurements (``cbd simulate``'s flags by name; ``poses`` a CSV of poses to measure at): ``(q, y)``, the rows the command's CSV holds."""

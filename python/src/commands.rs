@@ -1,10 +1,11 @@
-//! `cbd.compare`, `cbd.diagnose`, `cbd.simulate`: the library face's operations the commands call
+//! `cbd.compare`, `cbd.diagnose`, `cbd.check`, `cbd.simulate`: the library face's operations the commands call
 //! after reading their files (`cbd_trainer::face`), in this process, on their settings (keyword
 //! arguments by the flags' names); data given as arrays become measurements directly, and results
 //! come back as values — no file or text between them.
 
 use crate::arrays::{out2, Rows};
 use crate::errors::{cbd_error, guarded, one_at_a_time, Failure};
+use crate::model::Model;
 use crate::model_file::{arrays_of, measurements, ModelFile};
 use cbd_trainer::face::{ColumnSpec, Dataset};
 use pyo3::prelude::*;
@@ -256,6 +257,56 @@ pub fn diagnose<'py>(
             }
         }
         Ok(d.to_json())
+    })?;
+    json_dict(py, &json)
+}
+
+/// Does a calibration still hold, as `cbd check`: `blob` a Model (from `fit` or `Model.load`) or a
+/// blob file's path, `data` fresh poses (a CSV path or `(q, y)` arrays in the model file's columns,
+/// in measurement order), `alpha` the test's level, `register` to fit the fresh rows' rigid frame
+/// first (also when the model file's base is `register = true`). Returns the command's JSON
+/// (`--json`) as a dict: `verdict` ("holds" or "changed"), `p_value`, `statistic`, `dof`, the error
+/// against the floor, and when it changed the named change. (`--update` and `--log`, which write
+/// files, are the command's.)
+#[pyfunction]
+#[pyo3(signature = (model, blob, data, alpha=0.01, register=false))]
+pub fn check<'py>(
+    py: Python<'py>,
+    model: Option<PyRef<'py, ModelFile>>,
+    blob: &Bound<'py, PyAny>,
+    data: &Bound<'py, PyAny>,
+    alpha: f64,
+    register: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
+    let arm = match &model {
+        Some(m) => cbd_trainer::face::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string()))?,
+        None => cbd_trainer::face::ArmModel::builtin_rr(),
+    };
+    // A Model's bytes, or a path read inside (as the command reads --blob).
+    let (bytes, source) = match blob.extract::<PyRef<'py, Model>>() {
+        Ok(m) => (Some(m.blob.clone()), PathBuf::from("(the Model given)")),
+        Err(_) => {
+            let path = if blob.hasattr("__fspath__")? { py.import("os")?.call_method1("fspath", (blob,))? } else { blob.clone() };
+            let path: PathBuf = path.extract().map_err(|_| cbd_error("blob: give a cbd.Model or a blob file's path"))?;
+            (None, path)
+        }
+    };
+    let data = Data::of(&arm.spec, data, "data", "data (q, y)")?;
+    let json = run(py, &sources([&data]), || {
+        let from_file = bytes.is_none().then_some(source.as_path());
+        let inputs = [("--model", arm.path.as_deref()), ("--blob", from_file), ("--data", data.file())];
+        cbd_trainer::face::check_paths(&inputs, &[])?;
+        let bytes = match bytes {
+            Some(b) => b,
+            None => cbd_trainer::face::read_blob(&source)?,
+        };
+        let decoded = cbd_trainer::face::decode_blob(&bytes, &source, arm.path.as_deref(), &arm.nominal, &arm.spec)?;
+        let fresh = data.read(&arm.spec)?;
+        let settings = cbd_trainer::face::CheckSettings { alpha, register, update: false };
+        let blob = cbd_trainer::face::DecodedBlob { model: decoded, source: &source };
+        let checked = cbd_trainer::face::check(&arm, blob, &bytes, &fresh, &settings)?;
+        Ok(checked.to_json(None))
     })?;
     json_dict(py, &json)
 }

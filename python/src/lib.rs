@@ -1,5 +1,5 @@
 //! The `cbd` Python package's native module (`cbd._cbd`): numpy in, numpy out, every pipeline the
-//! `cbd` command's own (a fit through the library's face, `face::fit`, compare/diagnose/simulate as the
+//! `cbd` command's own (a fit through the library's face, `face::fit`, compare/diagnose/check/simulate as the
 //! commands themselves), evaluation and compensation the runtime's. Messages go to Python's
 //! `logging` (logger "cbd"), never to stdout; errors raise `cbd.CbdError` with the command's message.
 
@@ -17,7 +17,7 @@ use pyo3::prelude::*;
 #[pymodule]
 mod _cbd {
     #[pymodule_export]
-    use super::commands::{compare, diagnose, simulate};
+    use super::commands::{check, compare, diagnose, simulate};
     #[pymodule_export]
     use super::errors::CbdError;
     #[pymodule_export]

@@ -1,7 +1,8 @@
-"""compare, diagnose and simulate are the commands: the same JSON keys, the same data."""
+"""compare, diagnose, check and simulate are the commands: the same JSON keys, the same data."""
 
 import json
 import logging
+import subprocess
 import threading
 import time
 
@@ -33,6 +34,31 @@ def test_compare_and_diagnose_give_the_commands_json(rr_dir, cbd_bin, tmp_path):
     run(cbd_bin, "diagnose", "--no-cbd", "--model", rr_dir / "rr.toml", "--data", rr_dir / "train.csv", "--test", rr_dir / "test.csv", "--json", tmp_path / "d.json")
     want = json.loads((tmp_path / "d.json").read_text())
     assert got.keys() == want.keys()
+
+
+def test_check_gives_the_commands_json(rr_dir, cbd_bin, tmp_path):
+    """cbd.check on a fitted Model and arrays is `cbd check` on the blob file and the CSV: the same
+    JSON, value for value; a blob that does not fit the model file is a CbdError naming both."""
+    rr = cbd.ModelFile.load(rr_dir / "rr.toml")
+    train, test = read_csv(rr_dir / "train.csv"), read_csv(rr_dir / "test.csv")
+    model = cbd.fit(rr, train[:, :2], train[:, 2:])
+    got = cbd.check(rr, model, (test[:, :2], test[:, 2:]), alpha=0.05)
+    blob = tmp_path / "rr.blob"
+    blob.write_bytes(model.to_bytes())
+    assert cbd.check(rr, blob, rr_dir / "test.csv", alpha=0.05) == got
+    done = subprocess.run(
+        [str(a) for a in (cbd_bin, "check", "--model", rr_dir / "rr.toml", "--blob", blob, "--data", rr_dir / "test.csv", "--alpha", "0.05", "--json", tmp_path / "c.json")],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == (0 if got["verdict"] == "holds" else 3), done.stderr
+    assert got == json.loads((tmp_path / "c.json").read_text())
+    assert got["rows"] == len(test) and 0.0 <= got["p_value"] <= 1.0 and got["alpha"] == 0.05
+    six = cbd.ModelFile.load(UR5 / "ur5.toml")
+    with pytest.raises(cbd.CbdError, match="does not fit"):
+        cbd.check(six, model, rr_dir / "test.csv")
+    with pytest.raises(cbd.CbdError, match="--alpha"):
+        cbd.check(rr, model, rr_dir / "test.csv", alpha=1.5)
 
 
 def test_poses_and_written_model_files_are_the_commands(rr_dir, cbd_bin, tmp_path):

@@ -1,9 +1,9 @@
 //! What several commands share: their argument groups (the model file; the pipeline's options are
 //! the face's, `crate::face::PipelineOptions`) and the helpers behind them (the model file read from
-//! its flag, a blob that does not fit its model). Commands import from here, from `blob_rows` (a
+//! its flag). Commands import from here, from `blob_rows` (a
 //! blob read and evaluated on rows) and from `cli` itself, never from each other.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// The nominal model: a model file, or the built-in planar RR arm.
 #[derive(Debug, Clone, clap::Args)]
@@ -23,11 +23,4 @@ impl crate::face::ArmModel {
             None => Ok(Self::builtin_rr()),
         }
     }
-}
-
-/// A blob that does not fit the model file (or the built-in arm) it is used with: one message
-/// naming both, for `eval` and `compensate`.
-pub fn blob_misfit(blob: &std::path::Path, model: &ModelArgs, why: String) -> Error {
-    let file = model.model.as_ref().map_or("the built-in RR arm (no --model given)".to_string(), |p| p.display().to_string());
-    Error::InvalidInput(format!("{}: does not fit {file}: {why}", blob.display()))
 }

@@ -65,6 +65,26 @@ pub fn read_blob(path: &std::path::Path) -> Result<Vec<u8>> {
     crate::data::read_capped(path, crate::data::MAX_BLOB_BYTES, "blob")
 }
 
+/// `bytes` (the blob `source` names in messages) decoded and checked to fit `nominal`, the model
+/// file's chain (joints and their kinds, task coordinates, tool points, length unit), and its import
+/// `spec` (the frame rows are read into, where the blob records it); a misfit names the blob and
+/// `model_file` (`None`: the built-in RR arm).
+pub fn decode_blob<'b>(
+    bytes: &'b [u8],
+    source: &std::path::Path,
+    model_file: Option<&std::path::Path>,
+    nominal: &cbd_protocol::NominalModel,
+    spec: &ColumnSpec,
+) -> Result<cbd_protocol::Model<'b>> {
+    use crate::error::Context;
+    let decoded = cbd_protocol::decode(bytes).context(source.display())?;
+    check_blob_fits_model_file(&decoded, nominal, spec).map_err(|why| {
+        let file = model_file.map_or("the built-in RR arm (no --model given)".to_string(), |p| p.display().to_string());
+        Error::InvalidInput(format!("{}: does not fit {file}: {why}", source.display()))
+    })?;
+    Ok(decoded)
+}
+
 /// Measurements as a front read them, with what messages call them.
 pub struct Dataset {
     /// The rows' source in messages: the CSV file's path, or the arrays' label (`(q, y)`).
