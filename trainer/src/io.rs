@@ -308,10 +308,19 @@ fn link_unnamed(_: &std::fs::File, _: &Path) -> std::io::Result<()> {
 }
 
 /// A file the run reads: device and inode (the same file under another name or a hard link is
-/// still that file) and how the command line named it.
+/// still that file), the path it was read at, and how the command line named it.
 struct Input {
     id: (u64, u64),
+    path: PathBuf,
     name: String,
+}
+
+impl Input {
+    /// Whether `id` is this input's file: the same device and inode, and the input still there
+    /// (a deleted input's inode may come back as another file, which is then no input).
+    fn is(&self, id: (u64, u64)) -> bool {
+        self.id == id && file_id(&self.path) == Some(id)
+    }
 }
 
 /// Every input noted so far ([`note_input`]).
@@ -334,8 +343,8 @@ fn file_id(path: &Path) -> Option<(u64, u64)> {
 pub fn note_input(name: &str, path: &Path) {
     let Some(id) = file_id(path) else { return };
     let mut inputs = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
-    if !inputs.iter().any(|i| i.id == id) {
-        inputs.push(Input { id, name: name.to_string() });
+    if !inputs.iter().any(|i| i.is(id)) {
+        inputs.push(Input { id, path: path.to_path_buf(), name: name.to_string() });
     }
 }
 
@@ -349,7 +358,7 @@ pub fn forget_inputs() {
 fn refuse_input(path: &Path) -> Result<()> {
     let Some(id) = file_id(path) else { return Ok(()) };
     let inputs = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
-    match inputs.iter().find(|i| i.id == id) {
+    match inputs.iter().find(|i| i.is(id)) {
         Some(input) => Err(Error::Path {
             path: path.to_path_buf(),
             reason: format!("is also an input ({}); writing there would replace it: give the output another path", input.name),
@@ -564,6 +573,25 @@ mod tests {
         let dash = Path::new(STDOUT);
         assert!(check_paths(&[], &[("--out", Some(dash)), ("--json", Some(dash))]).is_err());
         assert!(check_paths(&[("--data", Some(&data))], &[("--out", Some(&new)), ("--json", None)]).is_ok());
+        forget_inputs();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// An input that is gone from its path is no input any more: its inode, which the file system
+    /// may give to a new file (here: the same file renamed away), does not refuse that file's write.
+    /// (Tests running beside this module's, which read model files from scratch folders they then
+    /// delete, once made `atomic_write_leaves_only_the_output` refuse its own output.)
+    #[test]
+    fn an_input_gone_from_its_path_refuses_nothing() {
+        let _turn = FILES.lock().unwrap_or_else(|e| e.into_inner());
+        let dir = scratch("gone");
+        let (read, moved) = (dir.join("model.toml"), dir.join("moved.txt"));
+        std::fs::write(&read, b"name = \"x\"\n").unwrap();
+        note_input("the model file", &read);
+        assert!(write_atomically(&read, b"x").unwrap_err().to_string().contains("is also an input (the model file)"));
+        std::fs::rename(&read, &moved).unwrap();
+        write_atomically(&moved, b"an output").unwrap();
+        assert_eq!(std::fs::read(&moved).unwrap(), b"an output");
         forget_inputs();
         std::fs::remove_dir_all(&dir).unwrap();
     }
