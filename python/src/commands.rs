@@ -156,6 +156,15 @@ fn json_dict<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<
     py.import("json")?.call_method1("loads", (text,))
 }
 
+/// The arm as the command would read it, from the file `model` parsed (not parsed again), or the
+/// built-in RR arm.
+fn arm_of(model: Option<&ModelFile>) -> PyResult<cbd_trainer::face::ArmModel> {
+    match model {
+        Some(m) => cbd_trainer::face::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string())),
+        None => Ok(cbd_trainer::face::ArmModel::builtin_rr()),
+    }
+}
+
 /// Every method side by side on the same data, as `cbd compare`: `train` and `test` are CSV paths
 /// or `(q, y)` arrays in the model file's columns; `plots` a folder for its figure; `options` are
 /// `cbd compare`'s other flags by name. Returns the command's JSON (`--json`) as a dict, keys as
@@ -170,8 +179,7 @@ pub fn compare<'py>(
     plots: Option<PathBuf>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    // The arm as the command reads it, from the file this ModelFile parsed (not parsed again).
-    let arm = cbd_trainer::face::ArmModel::from_file(&model.path, model.file.clone()).map_err(|e| cbd_error(e.to_string()))?;
+    let arm = arm_of(Some(&model))?;
     let train = Data::of(&arm.spec, train, "train", "train (q, y)")?;
     let test = Data::of(&arm.spec, test, "test", "test (q, y)")?;
     let settings: cbd_trainer::face::CompareSettings = typed_args(py, "compare", options, &["json"])?;
@@ -218,11 +226,7 @@ pub fn diagnose<'py>(
     write_model: Option<PathBuf>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
-    let arm = match &model {
-        Some(m) => cbd_trainer::face::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string()))?,
-        None => cbd_trainer::face::ArmModel::builtin_rr(),
-    };
+    let arm = arm_of(model.as_deref())?;
     let data = Data::of(&arm.spec, data, "data", "data (q, y)")?;
     let test = test.map(|t| Data::of(&arm.spec, t, "test", "test (q, y)")).transpose()?;
     let settings: cbd_trainer::face::DiagnoseSettings = typed_args(py, "diagnose", options, &["json"])?;
@@ -278,11 +282,9 @@ pub fn check<'py>(
     alpha: f64,
     register: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    // The arm as the command would read it, from the file this ModelFile parsed (not parsed again).
-    let arm = match &model {
-        Some(m) => cbd_trainer::face::ArmModel::from_file(&m.path, m.file.clone()).map_err(|e| cbd_error(e.to_string()))?,
-        None => cbd_trainer::face::ArmModel::builtin_rr(),
-    };
+    let arm = arm_of(model.as_deref())?;
+    let settings = cbd_trainer::face::CheckSettings { alpha, register, update: false };
+    settings.validate().map_err(|e| cbd_error(e.to_string()))?;
     // A Model's bytes, or a path read inside (as the command reads --blob).
     let (bytes, source) = match blob.extract::<PyRef<'py, Model>>() {
         Ok(m) => (Some(m.blob.clone()), PathBuf::from("(the Model given)")),
@@ -303,7 +305,6 @@ pub fn check<'py>(
         };
         let decoded = cbd_trainer::face::decode_blob(&bytes, &source, arm.path.as_deref(), &arm.nominal, &arm.spec)?;
         let fresh = data.read(&arm.spec)?;
-        let settings = cbd_trainer::face::CheckSettings { alpha, register, update: false };
         let blob = cbd_trainer::face::DecodedBlob { model: decoded, source: &source };
         let checked = cbd_trainer::face::check(&arm, blob, &bytes, &fresh, &settings)?;
         Ok(checked.to_json(None))

@@ -45,6 +45,8 @@ pub struct CheckArgs {
 }
 
 pub fn run(args: CheckArgs) -> Result<()> {
+    let settings = CheckSettings { alpha: args.alpha, register: args.register, update: args.update };
+    settings.validate()?;
     crate::io::check_paths(
         &[("--model", args.model.model.as_deref()), ("--blob", Some(&args.blob)), ("--data", Some(&args.data))],
         &[("--json", args.json.as_deref()), ("--log", args.log.as_deref()), ("--out", args.out.as_deref())],
@@ -53,7 +55,6 @@ pub fn run(args: CheckArgs) -> Result<()> {
     let data = crate::face::Dataset::read(&args.data, &arm.spec)?;
     let bytes = crate::face::read_blob(&args.blob)?;
     let model = decode_fitting(&bytes, &args.blob, &args.model, &arm.nominal, &arm.spec)?;
-    let settings = CheckSettings { alpha: args.alpha, register: args.register, update: args.update };
     let checked = crate::face::check(&arm, DecodedBlob { model, source: &args.blob }, &bytes, &data, &settings)?;
     print_checked(&checked, &args.data);
     let updated = match (&args.out, &checked.updated) {
@@ -72,9 +73,10 @@ pub fn run(args: CheckArgs) -> Result<()> {
     };
     if checked.extrapolating > 0 {
         errln!(
-            "warning: {} of {} configurations are far from every measured configuration (kernel support < 0.05): extrapolation",
+            "warning: {} of {} configurations are far from every measured configuration (kernel support < {}): extrapolation",
             checked.extrapolating,
-            checked.rows
+            checked.rows,
+            crate::face::EXTRAPOLATION_THRESHOLD
         );
     }
     if let Some(path) = &args.json {

@@ -13,7 +13,7 @@ use crate::report::stats::ErrorStats;
 use std::path::Path;
 
 /// Kernel support below which a fresh pose counts as extrapolating.
-const EXTRAPOLATION_THRESHOLD: f64 = 0.05;
+pub const EXTRAPOLATION_THRESHOLD: f64 = 0.05;
 
 /// What the check is asked.
 #[derive(Debug, Clone, Copy)]
@@ -51,14 +51,23 @@ pub struct Checked {
     pub extrapolating: usize,
 }
 
+impl CheckSettings {
+    /// Rejects out-of-range values before any work, naming the flag (a front calls it before
+    /// reading its files; [`check`] again).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(Error::InvalidInput(format!(
+                "--alpha must be a number between 0 and 1 (exclusive), got {}",
+                crate::error::number(self.alpha)
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Checks `blob` (decoded from `bytes`) on the fresh rows `data` of `arm`.
 pub fn check(arm: &ArmModel, blob: DecodedBlob<'_>, bytes: &[u8], data: &Dataset, settings: &CheckSettings) -> Result<Checked> {
-    if !(settings.alpha > 0.0 && settings.alpha < 1.0) {
-        return Err(Error::InvalidInput(format!(
-            "--alpha must be a number between 0 and 1 (exclusive), got {}",
-            crate::error::number(settings.alpha)
-        )));
-    }
+    settings.validate()?;
     let (model, blob_path, data_path) = (blob.model, blob.source, data.source.as_path());
     let (rows, lines) = (&data.imported.measurements, &data.imported.lines);
     if model.n_joints() != rows.n_joints || model.task_dim() != rows.task_dim {

@@ -28,7 +28,7 @@ mod simulate;
 
 pub(crate) use arm::register_base_if_unknown;
 pub use arm::ArmModel;
-pub use check::{check, CheckSettings, Checked};
+pub use check::{check, CheckSettings, Checked, EXTRAPOLATION_THRESHOLD};
 pub use compare::{compare, CompareSettings, Comparison};
 pub use compensate::{compensate, CompensatedCommand, MAX_ITERATIONS};
 pub use diagnose::{diagnose, DiagnoseSettings, Diagnosis};
