@@ -13,6 +13,7 @@ use cbd_tests::{lcg, model_blob};
 use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
 use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
 use cbd_trainer::simulate::{configurations, rr, Sampling};
+use std::f64::consts::FRAC_PI_2;
 
 /// `model` with `list` as its effects.
 fn with_effects(model: &NominalModel, list: &[Effect]) -> NominalModel {
@@ -51,11 +52,11 @@ fn modified_chain() -> NominalModel {
     NominalModel::DhChain(DhChain {
         convention: DhConvention::Modified,
         joints: heapless::Vec::from_slice(&[
-            j(JointKind::Revolute, 0.0, 1.5707963267948966, 89.0),
+            j(JointKind::Revolute, 0.0, FRAC_PI_2, 89.0),
             j(JointKind::Revolute, -425.0, 0.0, 0.0),
             j(JointKind::Prismatic, -392.0, 0.2, 50.0),
-            j(JointKind::Revolute, 0.0, 1.5707963267948966, 109.0),
-            j(JointKind::Revolute, 30.0, -1.5707963267948966, 94.0),
+            j(JointKind::Revolute, 0.0, FRAC_PI_2, 109.0),
+            j(JointKind::Revolute, 30.0, -FRAC_PI_2, 94.0),
             j(JointKind::Revolute, 0.0, 0.0, 82.0),
         ])
         .unwrap(),

@@ -205,6 +205,27 @@ fn bad_input_is_one_line_naming_the_file() {
     fails_with(&out, &["old.blob", "no noise σ"]);
 }
 
+/// The paper's noise-free RR grid: the blob's σ (2.6e-8) is below what double precision resolves in
+/// the predictive covariance. Refused naming the blob and what to do (--sigma); with the
+/// instrument's noise given, the same check runs and holds.
+#[test]
+fn a_noise_free_blob_is_refused_saying_what_to_do() {
+    let dir = scratch("noise-free");
+    for args in [
+        &["simulate", "--grid", "16", "--out", "grid.csv"][..],
+        &["simulate", "--sampling", "uniform", "--count", "50", "--seed", "2", "--out", "fresh.csv"],
+        &["fit", "--data", "grid.csv", "--out", "exact.blob", "--quiet"],
+    ] {
+        let out = cbd(&dir, args);
+        assert!(out.status.success(), "{args:?}: {}", text(&out.stderr));
+    }
+    fails_with(&cbd(&dir, &["check", "--blob", "exact.blob", "--data", "fresh.csv"]), &["exact.blob", "not positive definite", "--sigma"]);
+    let out = cbd(&dir, &["fit", "--data", "grid.csv", "--out", "given.blob", "--quiet", "--sigma", "1e-4"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = cbd(&dir, &["check", "--blob", "given.blob", "--data", "fresh.csv"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
 /// Naming the change (issue 50 item 3): one planted change of a detectable size per set of 20
 /// fresh poses (`cbd simulate --effect`, the same arm); the check says "changed", the first named
 /// change is the planted one by its `--effect` spelling, its size within 4 standard errors of the

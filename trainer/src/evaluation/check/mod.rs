@@ -68,7 +68,13 @@ impl std::fmt::Display for CheckError {
             }
             CheckError::DegenerateFrame => write!(f, "the fresh rows' points lie on a line: their frame cannot be registered"),
             CheckError::PlanarFrame => write!(f, "registering the fresh rows' frame needs 3-D positions"),
-            CheckError::NotPositiveDefinite => write!(f, "the blob's predictive covariance at the fresh rows is not positive definite"),
+            CheckError::NotPositiveDefinite => write!(
+                f,
+                "the blob's predictive covariance at the fresh rows is not positive definite: usually its σ lies so far below its \
+                 kernels' scale (rows measured without noise, such as simulated ones) that double precision cannot resolve the \
+                 fresh rows' posterior; the check needs the measurements' real noise: fit again with --sigma (the instrument's \
+                 noise per coordinate)"
+            ),
         }
     }
 }
