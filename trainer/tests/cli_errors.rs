@@ -796,3 +796,20 @@ fn a_blob_is_used_only_through_the_import_frame_it_was_fitted_in() {
     fails_with(&out, &["mapped.blob", "joint import"]);
     assert!(!dir.join("x.urdf").exists());
 }
+
+/// `--configuration-field on` where the field's kernel form cancels beyond what the runtime
+/// reproduces (the RR 6 × 6 grid with noise 1e-4: relative difference 9e-11 against 1e-12): one
+/// error line naming the file, the flag and why, instead of "the runtime does not reproduce the
+/// fit"; `auto` on the same rows fits the plain model and its warning offers `on` only as a try.
+#[test]
+fn a_configuration_field_no_blob_can_carry_is_refused_saying_why() {
+    let dir = scratch("field-cancels");
+    let out = cbd(&dir, &["simulate", "--grid", "6", "--noise", "1e-4", "--out", "g6.csv"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = cbd(&dir, &["fit", "--data", "g6.csv", "--out", "on.blob", "--configuration-field", "on"]);
+    fails_with(&out, &["g6.csv", "--configuration-field on", "cancels", "--configuration-field auto"]);
+    assert!(!dir.join("on.blob").exists());
+    let out = cbd(&dir, &["fit", "--data", "g6.csv", "--out", "auto.blob"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--configuration-field on tries it in the kernel form (refused where"), "{}", stderr(&out));
+}

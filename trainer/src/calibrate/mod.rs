@@ -104,23 +104,28 @@ pub fn calibrate_rows(nominal: &NominalModel, data: &StageRows, settings: &Setti
             // the runtime reproduces (1e-12), `auto` keeps the plain model and says why.
             let plain = plain_fit(&base, data, &hyperparameters, &norm, settings)?;
             let h = settings.overrides.apply(&base, c.with_term.clone());
+            // Why not, and whether `on` may still fit it (not where it was tried and cancelled).
             let with = if configuration::needs_expansion(&plain.3) {
-                Err("the plain model's fields need the kernels' own basis, which the field lacks".to_string())
+                Err(("the plain model's fields need the kernels' own basis, which the field lacks".to_string(), true))
             } else {
                 match configuration::fit(&base, &data.rows, &h, &norm, settings) {
                     Ok(fitted) => Ok(fitted),
-                    Err(e) if matches!(e.stage_error(), Some(crate::solver::FitError::RuntimeMismatch(_))) => {
-                        Err(format!("its kernel form cancels beyond what the runtime reproduces ({e})"))
+                    Err(e) if is_runtime_mismatch(&e) => {
+                        Err((format!("its kernel form cancels beyond what the runtime reproduces ({e})"), false))
                     }
                     Err(e) => return Err(e),
                 }
             };
             match with {
                 Ok((scheme, options, fit)) => (h, scheme, options, fit),
-                Err(why) => {
+                Err((why, on_may_fit)) => {
+                    let advice = if on_may_fit {
+                        "; --configuration-field on tries it in the kernel form (refused where that form cancels beyond what the runtime reproduces)"
+                    } else {
+                        ""
+                    };
                     early_warnings.push(format!(
-                        "the configuration field was chosen by evidence (+{:.1} nats) but is not used: {why}; \
-                         --configuration-field on fits it in the kernel form",
+                        "the configuration field was chosen by evidence (+{:.1} nats) but is not used: {why}{advice}",
                         c.with_term_log_evidence - c.plain_log_evidence
                     ));
                     if let Some(c) = configuration.as_mut() {
@@ -132,7 +137,15 @@ pub fn calibrate_rows(nominal: &NominalModel, data: &StageRows, settings: &Setti
         }
         Some(c) => {
             let h = settings.overrides.apply(&base, c.with_term.clone());
-            let (scheme, options, fit) = configuration::fit(&base, &data.rows, &h, &norm, settings)?;
+            let (scheme, options, fit) =
+                configuration::fit(&base, &data.rows, &h, &norm, settings).map_err(|e| match is_runtime_mismatch(&e) {
+                    // Not the runtime's fault: the field's kernel form cancels on these rows (σ far below the kernels).
+                    true => crate::Error::InvalidInput(format!(
+                    "--configuration-field on: the field's kernel form cancels on these rows beyond what the runtime reproduces ({e}), \
+                     so no blob can carry it; --configuration-field auto keeps the plain model here"
+                )),
+                    false => e,
+                })?;
             (h, scheme, options, fit)
         }
         None => plain_fit(&base, data, &hyperparameters, &norm, settings)?,
@@ -305,6 +318,11 @@ pub fn describe(h: &CbdHyperparameters) -> String {
         readable(h.task_gamma),
         readable(h.sigma)
     )
+}
+
+/// The fit's blob evaluated by the runtime differs from the fit beyond 1e-12 (the kernel form cancels).
+fn is_runtime_mismatch(e: &crate::Error) -> bool {
+    matches!(e.stage_error(), Some(crate::solver::FitError::RuntimeMismatch(_)))
 }
 
 #[cfg(test)]
