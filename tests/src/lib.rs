@@ -152,3 +152,29 @@ pub fn expansion_blob(
     let mut s = 11u64;
     encode_with_synthetic_expansion(&model, &codes, &exponents, scale, || lcg(&mut s)).expect("the expansion model encodes")
 }
+
+/// A six-joint DH chain in mm with a prismatic third joint, every joint's zero offset 0.1 rad, a
+/// rotated and shifted base and an offset tool: the chain the runtime's Jacobian and expansion tests
+/// share, in either convention.
+pub fn six_joint_chain(convention: DhConvention) -> NominalModel {
+    use std::f64::consts::FRAC_PI_2;
+    let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
+    let mut tool = Transform::IDENTITY;
+    tool.translation = [10.0, 20.0, 31.0];
+    NominalModel::DhChain(DhChain {
+        convention,
+        joints: heapless::Vec::from_slice(&[
+            j(JointKind::Revolute, 0.0, FRAC_PI_2, 89.0),
+            j(JointKind::Revolute, -425.0, 0.0, 0.0),
+            j(JointKind::Prismatic, -392.0, 0.2, 0.0),
+            j(JointKind::Revolute, 0.0, FRAC_PI_2, 109.0),
+            j(JointKind::Revolute, 0.0, -FRAC_PI_2, 94.0),
+            j(JointKind::Revolute, 0.0, 0.0, 82.0),
+        ])
+        .unwrap(),
+        base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
+        tool,
+        effects: Effects::NONE,
+        tool_points: heapless::Vec::new(),
+    })
+}

@@ -4,29 +4,7 @@
 use cbd_protocol::*;
 use cbd_runtime::internals::flow::query_derivatives::nominal_hessian;
 use cbd_runtime::Calibrator;
-use cbd_tests::{lcg, model_blob};
-
-fn six_joint(convention: DhConvention) -> NominalModel {
-    let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
-    let mut tool = Transform::IDENTITY;
-    tool.translation = [10.0, 20.0, 31.0];
-    NominalModel::DhChain(DhChain {
-        convention,
-        joints: heapless::Vec::from_slice(&[
-            j(JointKind::Revolute, 0.0, 1.5707963267948966, 89.0),
-            j(JointKind::Revolute, -425.0, 0.0, 0.0),
-            j(JointKind::Prismatic, -392.0, 0.2, 0.0),
-            j(JointKind::Revolute, 0.0, 1.5707963267948966, 109.0),
-            j(JointKind::Revolute, 0.0, -1.5707963267948966, 94.0),
-            j(JointKind::Revolute, 0.0, 0.0, 82.0),
-        ])
-        .unwrap(),
-        base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
-        tool,
-        effects: cbd_protocol::Effects::NONE,
-        tool_points: heapless::Vec::new(),
-    })
-}
+use cbd_tests::{lcg, model_blob, six_joint_chain as six_joint};
 
 fn check(blob: &[u8], queries: &[Vec<f64>]) -> (f64, f64) {
     let mut storage = vec![0.0; 200_000];

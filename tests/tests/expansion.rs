@@ -8,29 +8,7 @@ use cbd_runtime::internals::expansion::{for_each_task_basis, joint_row_len, writ
 use cbd_runtime::internals::flow::control_points::initial_state;
 use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::{storage_len_for, Calibrator, Error};
-use cbd_tests::{expansion_blob, joint_codes, lcg, task_exponents};
-
-fn six_joint(convention: DhConvention) -> NominalModel {
-    let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
-    let mut tool = Transform::IDENTITY;
-    tool.translation = [10.0, 20.0, 31.0];
-    NominalModel::DhChain(DhChain {
-        convention,
-        joints: heapless::Vec::from_slice(&[
-            j(JointKind::Revolute, 0.0, 1.5707963267948966, 89.0),
-            j(JointKind::Revolute, -425.0, 0.0, 0.0),
-            j(JointKind::Prismatic, -392.0, 0.2, 0.0),
-            j(JointKind::Revolute, 0.0, 1.5707963267948966, 109.0),
-            j(JointKind::Revolute, 0.0, -1.5707963267948966, 94.0),
-            j(JointKind::Revolute, 0.0, 0.0, 82.0),
-        ])
-        .unwrap(),
-        base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
-        tool,
-        effects: Effects::NONE,
-        tool_points: heapless::Vec::new(),
-    })
-}
+use cbd_tests::{expansion_blob, joint_codes, lcg, six_joint_chain as six_joint, task_exponents};
 
 fn storage_for(blob: &[u8]) -> Vec<f64> {
     vec![0.0; storage_len_for(&decode(blob).unwrap())]

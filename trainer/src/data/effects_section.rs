@@ -262,6 +262,8 @@ mod tests {
     /// A written direction of unit length to rounding reads back bit for bit (a `[planar]` file
     /// written by `diagnose --write-model` once read back 1 ulp off and wrote different text); any
     /// other length is normalised.
+    // The literals are the directions as written in files, 1 ulp apart on purpose.
+    #[allow(clippy::approx_constant)]
     #[test]
     fn a_unit_gravity_direction_reads_back_as_written() {
         let planar = NominalModel::planar(&[1.0, 0.5]).unwrap();

@@ -193,6 +193,8 @@ mod tests {
         }
     }
 
+    // The literals are values as a file writes them.
+    #[allow(clippy::approx_constant)]
     #[test]
     fn decimals_read_back_exactly_without_exponents() {
         for v in [0.089159, -1.941303950897609e-11, 1.5707963267948966, 1e21, -0.0, 3.0] {
