@@ -13,7 +13,6 @@ use cbd_tests::{lcg, model_blob};
 use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
 use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
 use cbd_trainer::simulate::{configurations, rr, Sampling};
-use std::f64::consts::FRAC_PI_2;
 
 /// `model` with `list` as its effects.
 fn with_effects(model: &NominalModel, list: &[Effect]) -> NominalModel {
@@ -44,27 +43,15 @@ fn every_effect(n: usize, reach: f64, torque: f64) -> Vec<Effect> {
     list
 }
 
-/// The 6-joint chain of `exact_jacobian.rs` (mm, a prismatic third joint) in the modified convention.
+/// The 6-joint chain of `exact_jacobian.rs` (mm, a prismatic third joint) in the modified convention,
+/// with a joint offset on the prismatic joint and a link length on the fifth.
 fn modified_chain() -> NominalModel {
-    let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
-    let mut tool = Transform::IDENTITY;
-    tool.translation = [10.0, 20.0, 31.0];
-    NominalModel::DhChain(DhChain {
-        convention: DhConvention::Modified,
-        joints: heapless::Vec::from_slice(&[
-            j(JointKind::Revolute, 0.0, FRAC_PI_2, 89.0),
-            j(JointKind::Revolute, -425.0, 0.0, 0.0),
-            j(JointKind::Prismatic, -392.0, 0.2, 50.0),
-            j(JointKind::Revolute, 0.0, FRAC_PI_2, 109.0),
-            j(JointKind::Revolute, 30.0, -FRAC_PI_2, 94.0),
-            j(JointKind::Revolute, 0.0, 0.0, 82.0),
-        ])
-        .unwrap(),
-        base: Transform { rotation: [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], translation: [100.0, 0.0, 200.0] },
-        tool,
-        effects: Effects::NONE,
-        tool_points: heapless::Vec::new(),
-    })
+    let mut chain = cbd_tests::six_joint_chain(DhConvention::Modified);
+    if let NominalModel::DhChain(c) = &mut chain {
+        c.joints[2].d = 50.0;
+        c.joints[4].a = 30.0;
+    }
+    chain
 }
 
 /// A tilted gravity direction and uneven link masses (one per joint).
