@@ -149,8 +149,19 @@ for name in rr rr256 six six-effects rr-ws six-ws chain10 six-points six-c; do
         summary+=("FAIL  $name blob: the host printed no values")
         failures=$((failures + 1))
     fi
+    # The variants build side by side: each has its own target directory, and a fat-LTO build with
+    # one codegen unit keeps one core busy, so a 2-core machine builds two at once (the builds are
+    # most of this check's time). A failed build stops the check, as it did one at a time.
+    pids=()
     for variant in $variants; do
-        elf="$(fw_build "$name" "$variant")"
+        fw_build "$name" "$variant" >"$OUT/elf-path-$name-$variant.txt" &
+        pids+=("$!")
+    done
+    for pid in "${pids[@]}"; do
+        wait "$pid" || { log "building the firmware for blob $name failed"; exit 1; }
+    done
+    for variant in $variants; do
+        elf="$(cat "$OUT/elf-path-$name-$variant.txt")"
         cpus="m4 m7"
         [ "$variant" = dp ] && cpus="m7"
         case "$name" in six-effects | chain10 | six-points) [ "$variant" = sp ] && cpus="m4" ;; esac
@@ -178,17 +189,34 @@ done
 # Panic-free at link level, for every build (sp, dp, f32): the variants compile different code
 # (software f64, the M7's FPU, the f32 feature), so one panic-free build proves nothing of the others.
 rr_storage="$("$HOST" info "$OUT/blobs/rr.blob" | awk '{print $4}')"
-for variant in sp dp f32; do
-    log "building the panic-never firmware (rr blob, $variant)"
-    pn_dir="$FW_DIR/target/panic-never-$variant"
+# pn_settings VARIANT: sets flags, features, cpu and host for the panic-never build of VARIANT.
+pn_settings() {
     flags="-C link-arg=-Tlink.x" features="panic-never" cpu=m4 host="$OUT/host-rr.txt"
-    case "$variant" in
+    case "$1" in
         dp) flags="$flags -C target-cpu=cortex-m7"; cpu=m7 ;;
         f32) features="panic-never,f32"; host="$OUT/host-rr-f32.txt" ;;
     esac
+}
+# The three builds side by side (their own target directories, as above); each one's exit status
+# is kept for the checks below.
+for variant in sp dp f32; do
+    log "building the panic-never firmware (rr blob, $variant)"
+    pn_settings "$variant"
+    (
+        cd "$FW_DIR"
+        status=0
+        CARGO_TARGET_DIR="$FW_DIR/target/panic-never-$variant" RUSTFLAGS="$flags" CBD_BLOB="$OUT/blobs/rr.blob" \
+            CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features "$features" \
+            >"$OUT/panic-never-$variant.log" 2>&1 || status=$?
+        echo "$status" >"$OUT/panic-never-$variant.status"
+    ) &
+done
+wait
+for variant in sp dp f32; do
+    pn_dir="$FW_DIR/target/panic-never-$variant"
+    pn_settings "$variant"
     pn_log="$OUT/panic-never-$variant.log"
-    if (cd "$FW_DIR" && CARGO_TARGET_DIR="$pn_dir" RUSTFLAGS="$flags" CBD_BLOB="$OUT/blobs/rr.blob" \
-        CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features "$features") >"$pn_log" 2>&1; then
+    if [ "$(cat "$OUT/panic-never-$variant.status")" = 0 ]; then
         cp "$pn_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/rr-panic-never-$variant.elf"
         run="$OUT/fw-rr-panic-never-$variant-$cpu.txt"
         if fw_run "$OUT/elf/rr-panic-never-$variant.elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >/dev/null; then
