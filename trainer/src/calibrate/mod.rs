@@ -137,15 +137,16 @@ pub fn calibrate_rows(nominal: &NominalModel, data: &StageRows, settings: &Setti
         }
         Some(c) => {
             let h = settings.overrides.apply(&base, c.with_term.clone());
-            let (scheme, options, fit) =
-                configuration::fit(&base, &data.rows, &h, &norm, settings).map_err(|e| match is_runtime_mismatch(&e) {
-                    // Not the runtime's fault: the field's kernel form cancels on these rows (σ far below the kernels).
-                    true => crate::Error::InvalidInput(format!(
-                    "--configuration-field on: the field's kernel form cancels on these rows beyond what the runtime reproduces ({e}), \
-                     so no blob can carry it; --configuration-field auto keeps the plain model here"
-                )),
-                    false => e,
-                })?;
+            let (scheme, options, fit) = match configuration::fit(&base, &data.rows, &h, &norm, settings) {
+                // Not the runtime's fault: the field's kernel form cancels on these rows (σ far below the kernels).
+                Err(e) if is_runtime_mismatch(&e) => {
+                    return Err(crate::Error::InvalidInput(format!(
+                        "--configuration-field on: the field's kernel form cancels on these rows beyond what the runtime \
+                         reproduces ({e}), so no blob can carry it; --configuration-field auto keeps the plain model here"
+                    )))
+                }
+                fitted => fitted?,
+            };
             (h, scheme, options, fit)
         }
         None => plain_fit(&base, data, &hyperparameters, &norm, settings)?,
