@@ -75,11 +75,12 @@ fw_build() {
         f32) flags="-C link-arg=-Tlink.x"; features="--features f32" ;;
         *) log "unknown variant $variant"; return 1 ;;
     esac
-    # Chains beyond 7 joints need the runtime's `long-chains` build (16 joints, larger stack arrays),
-    # in a target directory of its own so the two builds do not rebuild each other.
+    # Chains beyond 7 joints need the runtime's `long-chains` build (16 joints, larger stack arrays).
+    # It shares the variant's target directory: cargo keeps each feature set's artifacts apart (their
+    # own metadata hash), so the dependencies compile once per variant and the builds do not undo
+    # each other.
     if [ "$("$HOST" info "$blob" | awk '{print $2}')" -gt 7 ]; then
         features="$features --features long-chains"
-        target_dir="$target_dir-long-chains"
     fi
     log "building firmware: blob $name, variant $variant, storage $storage values"
     # shellcheck disable=SC2086
@@ -130,61 +131,51 @@ log "runtime builds for thumbv7em-none-eabihf (no_std, no heap)"
 fw_host_and_blobs
 fw_host_f32
 
-failures=0
-summary=()
 # six-effects (the 6-joint blob with all four physical effect types) runs sp on the M4 and dp on
 # the M7 only, to keep the check short. rr-ws and six-ws hold the fields in the kernels' own basis
 # (format 5, docs/DESIGN.md §11): the runtime evaluates the expansion instead of the kernel form.
 # chain10 (10 joints, the longest chain the firmware check holds) and six-points (three tool points,
 # format 6: every query also prints the tool frame and its Jacobian, `qp` lines) run like six-effects.
 # six-c holds the configuration-dependent task field (format 8, docs/DESIGN.md §16, Euler × 1).
-for name in rr rr256 six six-effects rr-ws six-ws chain10 six-points six-c; do
-    variants="sp dp f32"
-    case "$name" in six-effects | chain10 | six-points) variants="sp dp" ;; esac
+BLOBS="rr rr256 six six-effects rr-ws six-ws chain10 six-points six-c"
+variants_of() { case "$1" in six-effects | chain10 | six-points) echo "sp dp" ;; *) echo "sp dp f32" ;; esac; }
+# cpus_of BLOB VARIANT
+cpus_of() {
+    if [ "$2" = dp ]; then echo m7; return; fi
+    case "$1" in six-effects | chain10 | six-points) [ "$2" = sp ] && { echo m4; return; } ;; esac
+    echo "m4 m7"
+}
+
+for name in $BLOBS; do
     "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
     "$HOST_F32" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name-f32.txt"
+done
+rm -f "$OUT"/summary-*.txt "$OUT"/stack-*.txt "$OUT/stack.txt" "$OUT"/fw-*.txt
+
+# run_on_cpu NAME VARIANT CPU ELF: runs one firmware on one CPU and compares its bits and stack,
+# writing PASS/FAIL lines to $OUT/summary-NAME-VARIANT-CPU.txt.
+run_on_cpu() {
+    local name="$1" variant="$2" cpu="$3" elf="$4" run host values errors stack summary="$OUT/summary-$1-$2-$3.txt"
+    run="$OUT/fw-$name-$variant-$cpu.txt"
+    host="$OUT/host-$name.txt"
+    [ "$variant" = f32 ] && host="$OUT/host-$name-f32.txt"
     values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
     errors=$(grep -c ' error$' "$OUT/host-$name.txt" || true)
-    if [ "$values" -eq 0 ]; then
-        summary+=("FAIL  $name blob: the host printed no values")
-        failures=$((failures + 1))
-    fi
-    # The variants build side by side: each has its own target directory, and a fat-LTO build with
-    # one codegen unit keeps one core busy, so a 2-core machine builds two at once (the builds are
-    # most of this check's time). A failed build stops the check, as it did one at a time.
-    pids=()
-    for variant in $variants; do
-        fw_build "$name" "$variant" >"$OUT/elf-path-$name-$variant.txt" &
-        pids+=("$!")
-    done
-    for pid in "${pids[@]}"; do
-        wait "$pid" || { log "building the firmware for blob $name failed"; exit 1; }
-    done
-    for variant in $variants; do
-        elf="$(cat "$OUT/elf-path-$name-$variant.txt")"
-        cpus="m4 m7"
-        [ "$variant" = dp ] && cpus="m7"
-        case "$name" in six-effects | chain10 | six-points) [ "$variant" = sp ] && cpus="m4" ;; esac
-        host="$OUT/host-$name.txt"
-        [ "$variant" = f32 ] && host="$OUT/host-$name-f32.txt"
-        for cpu in $cpus; do
-            run="$OUT/fw-$name-$variant-$cpu.txt"
-            if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >"$OUT/diff-$name-$variant-$cpu.txt"; then
-                summary+=("PASS  $name blob  ${variant} build on $cpu: $values values bit-identical to the host's ($errors evaluation errors)")
-                if stack="$(fw_stack "$elf" "$run")"; then
-                    summary+=("PASS  $name blob  ${variant} build on $cpu: a query's stack ${stack% *} bytes, ${stack#* } bytes free for it")
-                    echo "$name $variant $cpu $stack" >>"$OUT/stack.txt"
-                else
-                    summary+=("FAIL  $name blob  ${variant} build on $cpu: the query's stack does not fit the RAM left (${stack:-no figure})")
-                    failures=$((failures + 1))
-                fi
+    {
+        [ "$values" -eq 0 ] && echo "FAIL  $name blob: the host printed no values"
+        if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >"$OUT/diff-$name-$variant-$cpu.txt"; then
+            echo "PASS  $name blob  ${variant} build on $cpu: $values values bit-identical to the host's ($errors evaluation errors)"
+            if stack="$(fw_stack "$elf" "$run")"; then
+                echo "PASS  $name blob  ${variant} build on $cpu: a query's stack ${stack% *} bytes, ${stack#* } bytes free for it"
+                echo "$name $variant $cpu $stack" >"$OUT/stack-$name-$variant-$cpu.txt"
             else
-                summary+=("FAIL  $name blob  ${variant} build on $cpu: see $OUT/diff-$name-$variant-$cpu.txt")
-                failures=$((failures + 1))
+                echo "FAIL  $name blob  ${variant} build on $cpu: the query's stack does not fit the RAM left (${stack:-no figure})"
             fi
-        done
-    done
-done
+        else
+            echo "FAIL  $name blob  ${variant} build on $cpu: see $OUT/diff-$name-$variant-$cpu.txt"
+        fi
+    } >"$summary"
+}
 
 # Panic-free at link level, for every build (sp, dp, f32): the variants compile different code
 # (software f64, the M7's FPU, the f32 feature), so one panic-free build proves nothing of the others.
@@ -197,33 +188,24 @@ pn_settings() {
         f32) features="panic-never,f32"; host="$OUT/host-rr-f32.txt" ;;
     esac
 }
-# The three builds side by side (their own target directories, as above); each one's exit status
-# is kept for the checks below.
-for variant in sp dp f32; do
+# panic_never VARIANT: builds the rr blob's firmware with the panic handler that does not link, in
+# the variant's target directory (the dependencies are the ones its other builds compiled), runs it,
+# and writes its line to $OUT/summary-panic-never-VARIANT.txt.
+panic_never() {
+    local variant="$1" flags features cpu host status=0 run summary="$OUT/summary-panic-never-$1.txt"
+    local dir="$FW_DIR/target/$variant" pn_log="$OUT/panic-never-$1.log"
     log "building the panic-never firmware (rr blob, $variant)"
     pn_settings "$variant"
-    (
-        cd "$FW_DIR"
-        status=0
-        CARGO_TARGET_DIR="$FW_DIR/target/panic-never-$variant" RUSTFLAGS="$flags" CBD_BLOB="$OUT/blobs/rr.blob" \
-            CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features "$features" \
-            >"$OUT/panic-never-$variant.log" 2>&1 || status=$?
-        echo "$status" >"$OUT/panic-never-$variant.status"
-    ) &
-done
-wait
-for variant in sp dp f32; do
-    pn_dir="$FW_DIR/target/panic-never-$variant"
-    pn_settings "$variant"
-    pn_log="$OUT/panic-never-$variant.log"
-    if [ "$(cat "$OUT/panic-never-$variant.status")" = 0 ]; then
-        cp "$pn_dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/rr-panic-never-$variant.elf"
+    (cd "$FW_DIR" && CARGO_TARGET_DIR="$dir" RUSTFLAGS="$flags" CBD_BLOB="$OUT/blobs/rr.blob" \
+        CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features "$features") \
+        >"$pn_log" 2>&1 || status=$?
+    if [ "$status" = 0 ]; then
+        cp "$dir/thumbv7em-none-eabihf/release/cbd-firmware" "$OUT/elf/rr-panic-never-$variant.elf"
         run="$OUT/fw-rr-panic-never-$variant-$cpu.txt"
         if fw_run "$OUT/elf/rr-panic-never-$variant.elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >/dev/null; then
-            summary+=("PASS  panic-never $variant build links (no reachable panic in runtime, decoder or printing) and is bit-identical on $cpu")
+            echo "PASS  panic-never $variant build links (no reachable panic in runtime, decoder or printing) and is bit-identical on $cpu" >"$summary"
         else
-            summary+=("FAIL  panic-never $variant build linked but its output differs (see $run)")
-            failures=$((failures + 1))
+            echo "FAIL  panic-never $variant build linked but its output differs (see $run)" >"$summary"
         fi
     elif grep -q 'undefined symbol: cbd_firmware_panic_is_reachable' "$pn_log"; then
         # Where are the panics? (same code and flags, with the ordinary panic handler)
@@ -232,16 +214,58 @@ for variant in sp dp f32; do
             log "panic sites: $OUT/panic-sites-$variant.txt"
         fi
         if [ "${CBD_FW_REQUIRE_PANIC_NEVER:-1}" = 1 ]; then
-            summary+=("FAIL  panic-never $variant build: a panic is reachable (see $pn_log)")
-            failures=$((failures + 1))
+            echo "FAIL  panic-never $variant build: a panic is reachable (see $pn_log)" >"$summary"
         else
-            summary+=("INFO  panic-never $variant build: a panic is reachable (see $OUT/panic-sites-$variant.txt)")
+            echo "INFO  panic-never $variant build: a panic is reachable (see $OUT/panic-sites-$variant.txt)" >"$summary"
         fi
     else
-        summary+=("FAIL  panic-never $variant build failed to compile (see $pn_log)")
-        failures=$((failures + 1))
+        echo "FAIL  panic-never $variant build failed to compile (see $pn_log)" >"$summary"
     fi
+}
+
+# One pipeline per variant, the three side by side: each builds its blobs in order in its own target
+# directory, then its panic-never build; each blob's QEMU runs start as soon as its firmware is built.
+# A fat-LTO build with one codegen unit and a QEMU run each keep one core busy, so a 2-core machine
+# stays busy throughout (builds and runs are all of this check's time). A failed build stops the
+# check, as it did one at a time.
+variant_pipeline() {
+    local variant="$1" name elf cpu runs=()
+    for name in $BLOBS; do
+        case " $(variants_of "$name") " in *" $variant "*) ;; *) continue ;; esac
+        elf="$(fw_build "$name" "$variant")" || { log "building the firmware for blob $name ($variant) failed"; return 1; }
+        # The runs go on while the next blob builds (each ELF is a copy of its own).
+        for cpu in $(cpus_of "$name" "$variant"); do
+            run_on_cpu "$name" "$variant" "$cpu" "$elf" &
+            runs+=("$!")
+        done
+    done
+    panic_never "$variant"
+    wait "${runs[@]}"
+}
+mkdir -p "$OUT/elf"
+pids=()
+for variant in sp dp f32; do
+    variant_pipeline "$variant" &
+    pids+=("$!")
 done
+for pid in "${pids[@]}"; do
+    wait "$pid" || { log "a firmware build failed"; exit 1; }
+done
+
+# The summary in a fixed order: blob by blob, variant by variant, then the panic-never builds.
+summary=()
+for name in $BLOBS; do
+    for variant in $(variants_of "$name"); do
+        for cpu in $(cpus_of "$name" "$variant"); do
+            mapfile -t -O "${#summary[@]}" summary <"$OUT/summary-$name-$variant-$cpu.txt"
+            if [ -f "$OUT/stack-$name-$variant-$cpu.txt" ]; then cat "$OUT/stack-$name-$variant-$cpu.txt" >>"$OUT/stack.txt"; fi
+        done
+    done
+done
+for variant in sp dp f32; do
+    mapfile -t -O "${#summary[@]}" summary <"$OUT/summary-panic-never-$variant.txt"
+done
+failures=$(printf '%s\n' "${summary[@]}" | grep -c '^FAIL' || true)
 
 echo "== firmware check (host vs QEMU, bits; f32 builds against the host's f32 build) =="
 printf '%s\n' "${summary[@]}"
