@@ -56,10 +56,10 @@ pub const NOMINAL_ITERATIONS: usize = 8;
 impl CompensateOptions {
     /// The inverse-flow start and four fold-aware Gauss–Newton steps (`fold_steps`), no guard,
     /// no chord steps. Four since issue 25: on RR models trained from noisy and noise-free data
-    /// (tests/tests/expansion_fit.rs) three steps left 2.4 % of 1000 reachable targets in the folded-arm
+    /// (tests/tests/cross_crate/expansion_fit.rs) three steps left 2.4 % of 1000 reachable targets in the folded-arm
     /// band (q2 near ±π, where the nominal inverse misses by ~0.4 rad) 1.5–14 × 1e-9 short; the
     /// fourth brings every one of them to ~1e-15 (quadratic convergence). Measured with three, over 2000 reachable targets per model
-    /// (`steps_saved_by_the_inverse_flow_start` in tests/tests/compensate.rs): 100 % within 1e-9
+    /// (`steps_saved_by_the_inverse_flow_start` in tests/tests/cross_crate/compensate.rs): 100 % within 1e-9
     /// of the reach on the reference RR model (fold band included: the fold-aware step removes the
     /// halving per step there) and on the three six-joint test models; eight plain steps from the
     /// seed, the former default, also reach 100 % but cost twice as much. M7 (dp) cost at N = 256:

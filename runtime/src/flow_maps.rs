@@ -5,7 +5,7 @@
 //! integrates the joint field v forward along the same trajectory, both with the model's
 //! fixed-step scheme. The runtime's k1 integrates eq. (20) at the query with eq. (19)'s transported
 //! J, which omits D²k·v, so k1 is this composition only to first order in the deformation: the
-//! start misses the target by a second-order term (measured in tests/tests/inverse_flow.rs) plus
+//! start misses the target by a second-order term (measured in tests/tests/cross_crate/inverse_flow.rs) plus
 //! the scheme's discretisation error; Newton steps on k1 ([`crate::compensate`]) remove the rest.
 //! Fixed cost, no heap, no panic. With an expansion (format 5) the stages' fields come from its
 //! stage weights instead of the trajectory: w from the task basis at y, v from the joint basis at

@@ -1,5 +1,5 @@
 //! Offline trainer for Calibration by Diffeomorphisms, laid out by pipeline stage, bottom to top
-//! (docs/DESIGN.md §1 states the layers; `cargo test -p cbd-tests --test house` checks them):
+//! (docs/DESIGN.md §1 states the layers; `cargo test -p cbd-tests --test cross_crate house::` checks them):
 //! errors, files and the bound on imported values → worker threads and numerical building blocks
 //! (least squares, the Levenberg–Marquardt driver) → nominal models and memory → data import →
 //! simulation, flow (primal + tangent), reports → the kernels' expansions, the solver, parametric (DH)

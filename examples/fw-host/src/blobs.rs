@@ -9,7 +9,7 @@ use crate::shared::Lcg;
 
 const RR_REFERENCE: &str = include_str!("../../../tests/data/rr_flow_reference.json");
 
-/// The paper's RR arm settings, exactly as `tests/tests/reference_flow.rs` builds them.
+/// The paper's RR arm settings, exactly as `tests/tests/cross_crate/reference_flow.rs` builds them.
 fn rr_model<'a>(points: &'a [u8], momenta: &'a [u8], n_points: u32, integrator: Integrator) -> Model<'a> {
     Model {
         nominal: NominalModel::planar(&cbd_protocol::paper_rr::LENGTHS).expect("2 joints"),

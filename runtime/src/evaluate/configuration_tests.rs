@@ -31,7 +31,7 @@ fn le_bytes(values: &[f64]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
-/// A six-joint DH chain with a prismatic third joint (as tests/tests/exact_jacobian.rs).
+/// A six-joint DH chain with a prismatic third joint (as tests/tests/cross_crate/exact_jacobian.rs).
 fn six_joint() -> NominalModel {
     let j = |kind, a: f64, alpha: f64, d: f64| DhJoint { kind, a, alpha, d, theta_offset: 0.1 };
     let mut tool = Transform::IDENTITY;

@@ -260,7 +260,7 @@ pub fn load_model_file(path: impl AsRef<Path>) -> Result<ModelFile, ImportError>
 }
 
 /// Model files parsed by this process so far: a command parses its own once (issue 52;
-/// `trainer/tests/model_parsed_once.rs` counts them).
+/// `trainer/tests/end_to_end/model_parsed_once.rs` counts them).
 pub fn parses() -> usize {
     PARSES.load(std::sync::atomic::Ordering::Relaxed)
 }

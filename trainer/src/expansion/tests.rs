@@ -85,6 +85,6 @@ fn the_posterior_mean_is_the_kernel_forms_without_the_cancellation() {
         .fold(0.0f64, f64::max);
     // Noise 1e-4: the two posterior means agree to a few % of it. The gap is the kernel form's own
     // rounding, ~1e-16 × its 1e11 cancellation × the scale (measured: 2.2e-6); which of the two is
-    // right shows out of sample (tests/tests/expansion_fit.rs).
+    // right shows out of sample (tests/tests/cross_crate/expansion_fit.rs).
     assert!(diff < 0.05 * 1e-4, "expansion vs kernel form at the training points: {diff:e}");
 }

@@ -176,7 +176,7 @@ mod never_panics {
 
 /// Host wall time of compensate against one evaluate at N = 256 (printed, not asserted: the
 /// machine's load decides wall time; the firmware's instruction count is the fixed figure).
-/// `cargo test --release -p cbd-tests --test compensate -- --ignored --nocapture cost`
+/// `cargo test --release -p cbd-tests --test cross_crate compensate::cost -- --ignored --nocapture`
 #[test]
 #[ignore]
 fn cost_relative_to_evaluate() {
@@ -217,7 +217,7 @@ fn cost_relative_to_evaluate() {
 /// Residual distribution against the number of steps, with and without the inverse-flow start
 /// (k1⁻¹ ≈ φ ∘ k0⁻¹ ∘ ψ⁻¹), over `count` reachable targets (the targets and seeds of
 /// [`round_trip`]). Printed for BENCHMARKS.md:
-/// `cargo test --release -p cbd-tests --test compensate -- --ignored --nocapture steps_saved`
+/// `cargo test --release -p cbd-tests --test cross_crate compensate::steps_saved -- --ignored --nocapture`
 #[test]
 #[ignore]
 fn steps_saved_by_the_inverse_flow_start() {

@@ -2,7 +2,7 @@
 //! `cbd diagnose --write-model` works on a planar arm whose base and offsets it corrects, and the
 //! written file's nominal (`cbd eval`) is the diagnosed "nominal + effects" row.
 
-mod cli_support;
+use crate::cli_support;
 
 use cbd_protocol::Effect;
 use cbd_trainer::simulate::effects::EffectArm;

@@ -6,7 +6,7 @@
 //! - no output path destroys an input or a non-regular file, for every flag that writes, each
 //!   figure under `--plots` included.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 use std::os::unix::fs::{FileTypeExt, MetadataExt};

@@ -1,7 +1,7 @@
 //! `cbd plan` and `cbd simulate --poses` through the real binary: the loop plan → measure → plan
 //! again from the data → fit, and bad inputs (exit code 1, the file and line named, no panic).
 
-mod cli_support;
+use crate::cli_support;
 use cli_support::*;
 
 #[test]

@@ -1,7 +1,7 @@
 //! Issue 27 ("no input crashes `cbd`, no output destroys a file, no damaged model is used"): one
 //! test per item, through the real binary.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 

@@ -2,7 +2,7 @@
 //! output path it was given as it found it — each pre-existing output byte-identical, no new file
 //! or directory left behind — whichever output flag and however late the failure.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 use std::collections::BTreeMap;

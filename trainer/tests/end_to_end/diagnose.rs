@@ -4,7 +4,7 @@
 //! unexplained structure and absorbed by CbD. The data are simulated by `simulate::effects`,
 //! which implements the effects independently of the runtime.
 
-mod common;
+use crate::common;
 
 use cbd_protocol::Effect;
 use cbd_protocol::NominalModel;

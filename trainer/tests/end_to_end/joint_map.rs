@@ -1,7 +1,7 @@
 //! Issue 26 item 3: a joint mapping in the model file (`[measurements.joint_map]`) against the
 //! same data converted by hand — the FANUC convention, q3 = −(J3 + J2) and J4–J6 reversed.
 
-mod cli_support;
+use crate::cli_support;
 
 use cbd_trainer::data::csv_import::read_measurements;
 use cbd_trainer::data::model_file::{load_model_file, parse_model_file, write_model_file};

@@ -15,13 +15,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-// The firmware check's blob builders, compiled here exactly as `cbd-fw-host` compiles them.
-#[path = "../../examples/fw-host/src/blobs.rs"]
-#[allow(dead_code)]
-mod blobs;
-#[path = "../../examples/firmware/src/shared.rs"]
-#[allow(dead_code)]
-mod shared;
+// The firmware check's blob builders (declared at the crate root, beside `shared`, which they use).
+use crate::blobs;
 
 const CBD: &str = env!("CARGO_BIN_EXE_cbd");
 

@@ -12,7 +12,7 @@
 //! - the same poses given as position + quaternion columns give the same model to 1e-9 mm (the
 //!   simulator writes the point columns as the points of the pose it writes: the same data).
 
-mod cli_support;
+use crate::cli_support;
 use cli_support::{examples, json, run, scratch};
 
 const TOOL_POINTS: &str = "0,0,0;100,0,0;50,86.60254037844386,0";

@@ -3,9 +3,9 @@
 //! kinematics to 1e-9 of the reach on 1000 random poses; a URDF model's own file keeps every byte
 //! but the calibrated origins; a blob without calibrated geometry is refused.
 
-mod cli_support;
+use crate::cli_support;
 #[allow(dead_code)] // the diagnose files use the rest
-mod common;
+use crate::common;
 
 use cbd_protocol::{DhChain, DhConvention, JointKind, NominalModel};
 use cbd_runtime::internals::kinematics::rigid::dh_walk;

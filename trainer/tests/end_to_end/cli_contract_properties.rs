@@ -8,7 +8,7 @@
 //! - a blob and a model file that do not fit each other are refused by `eval` and `compensate`;
 //! - a blob's base or tool that is not a rotation within 1e-9 is refused by the runtime's loader.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 use proptest::prelude::*;

@@ -6,7 +6,7 @@
 //! sag of the waist pitch (1 mrad · cos q2) and a second transmission harmonic on the shoulder
 //! (0.4 mrad · sin 2 q4) — which is CbD's part. Measurements carry 0.01 mm noise per coordinate.
 
-mod cli_support;
+use crate::cli_support;
 
 use cbd_protocol::NominalModel;
 use cbd_runtime::internals::kinematics::forward_kinematics;

@@ -64,7 +64,7 @@ fn ur5_dh_calibration_reaches_the_reference_accuracy() {
     assert!(stats.mean < 0.13, "mean test error {} mm", stats.mean);
 }
 
-/// Every peer on the UR5 data (about half a minute): `cargo test -p cbd-trainer --test ur5_example -- --ignored --nocapture`.
+/// Every peer on the UR5 data (about half a minute): `cargo test -p cbd-trainer --test end_to_end ur5_example:: -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn ur5_compare_peers() {
@@ -88,7 +88,7 @@ fn ur5_compare_peers() {
 }
 
 /// The CbD hook of `compare_peers`, wired with `fit_cbd` and data-scaled default options (not
-/// tuned): `cargo test -p cbd-trainer --test ur5_example -- --ignored --nocapture cbd_hook`.
+/// tuned): `cargo test -p cbd-trainer --test end_to_end ur5_example::cbd_hook -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn cbd_hook_on_the_simulated_six_joint_arm() {

@@ -1,7 +1,7 @@
 //! Issue 38: `cbd fit` decides by CbD's own evidence whether the chain's geometry is calibrated
 //! first, says so with both scores, and every error table states the noise floor.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 use std::path::Path;

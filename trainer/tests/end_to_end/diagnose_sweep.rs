@@ -4,7 +4,7 @@
 //! translation and rotation, joint offsets and link-length errors; a six-joint arm with DH, base
 //! and tool errors. Five seeds (arm, configurations, noise draw) × two noise levels per case.
 
-mod common;
+use crate::common;
 
 use cbd_protocol::{Effect, NominalModel};
 use cbd_trainer::data::Measurements;

@@ -3,7 +3,7 @@
 //! `cbd diagnose --json` reports it (`"drift": {"detected", "sd", "length"}`), and not when the rows
 //! are shuffled or none was planted; the real UR5 campaign has it. Bad specs are refused.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 use std::path::Path;

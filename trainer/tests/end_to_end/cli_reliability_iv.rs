@@ -2,7 +2,7 @@
 //! binary. A wrong input exits 1 with one `error:` line naming the field; where the input is valid
 //! the bad rows are flagged and counted in the summary, and no row flagged `ok` is wrong.
 
-mod cli_support;
+use crate::cli_support;
 
 use cli_support::*;
 use std::path::Path;

@@ -109,7 +109,7 @@ fn ur5_blob_is_identical_across_thread_counts() {
     assert!(two == two_again, "2 threads, run to run: {}", first_difference(&two, &two_again));
 }
 
-// `cbd fit` run twice on the same CSV (through the binary) is in trainer/tests/cli_errors.rs:
+// `cbd fit` run twice on the same CSV (through the binary) is in trainer/tests/end_to_end/cli_errors.rs:
 // `cli_fit_twice_gives_identical_files`.
 
 // ---------------------------------------------------------------- atomic writes

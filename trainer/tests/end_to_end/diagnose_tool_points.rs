@@ -8,7 +8,7 @@
 //! `--write-model` keeps the tool points: `cbd eval`'s nominal error of the written model equals the
 //! diagnosed "+ effects" row.
 
-mod cli_support;
+use crate::cli_support;
 use cli_support::{examples, json, run, scratch};
 
 const TOOL_POINTS: &str = "0,0,0;100,0,0;50,86.60254037844386,0";

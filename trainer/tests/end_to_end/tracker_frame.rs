@@ -159,7 +159,7 @@ fn data_in_a_hidden_frame_give_the_declared_base_figures_and_the_registered_base
     }
 }
 
-mod cli_support;
+use crate::cli_support;
 
 /// The CLI: a nominal far from the data is a warning naming the figure (declared base); with
 /// the base declared unknown, `fit` registers it, says where, and the warning is gone. A base
