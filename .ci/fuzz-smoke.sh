@@ -39,27 +39,52 @@ cargo +nightly fuzz build -O --sanitizer "$sanitizer"
 
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
-for t in $targets; do
+# fuzz_one TARGET: runs one target for $seconds and writes its verdict to $scratch/TARGET.verdict.
+fuzz_one() {
+    local t="$1" log="$scratch/$1.log" status=0 runs
     mkdir -p "$scratch/$t" "artifacts/$t"
-    echo "== fuzz smoke: $t for ${seconds} s"
     # -timeout: one input taking longer than 10 s is a hang; -rss_limit_mb: 2 GB is a leak/blow-up.
-    log="$scratch/$t.log"
-    status=0
     cargo +nightly fuzz run -O --sanitizer "$sanitizer" "$t" "$scratch/$t" "$PWD/corpus/$t" -- \
         -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 >"$log" 2>&1 || status=$?
-    grep -E '(INITED|DONE) |stat::number_of_executed_units|stat::peak_rss_mb' "$log" || true
     if [ "$status" -ne 0 ]; then
-        tail -n 60 "$log"
-        echo "fuzz-smoke: $t FAILED (exit $status); reproducer in fuzz/artifacts/$t/"
-        exit 1
+        echo "FAILED (exit $status); reproducer in fuzz/artifacts/$t/" >"$scratch/$t.verdict"
+        return
     fi
     # A target that ran no inputs did not test anything: fail rather than pass silently.
     runs="$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -n 1)"
     if [ -z "$runs" ] || [ "$runs" -eq 0 ]; then
-        tail -n 30 "$log"
-        echo "fuzz-smoke: $t executed no inputs"
-        exit 1
+        echo "executed no inputs" >"$scratch/$t.verdict"
+        return
     fi
-    echo "fuzz-smoke: $t executed $runs inputs in ${seconds} s"
+    echo "ok $runs" >"$scratch/$t.verdict"
+}
+# libFuzzer runs one process per target: as many targets at once as there are cores, so each still
+# has a core of its own for its $seconds (a 2-core machine runs three targets in two rounds, not three).
+cores="$(nproc 2>/dev/null || echo 1)"
+running=0
+for t in $targets; do
+    if [ "$running" -ge "$cores" ]; then
+        wait -n || true
+        running=$((running - 1))
+    fi
+    echo "== fuzz smoke: $t for ${seconds} s"
+    fuzz_one "$t" &
+    running=$((running + 1))
 done
+wait
+failed=0
+for t in $targets; do
+    log="$scratch/$t.log"
+    grep -E '(INITED|DONE) |stat::number_of_executed_units|stat::peak_rss_mb' "$log" || true
+    verdict="$(cat "$scratch/$t.verdict" 2>/dev/null || echo "did not run")"
+    case "$verdict" in
+        ok\ *) echo "fuzz-smoke: $t executed ${verdict#ok } inputs in ${seconds} s" ;;
+        *)
+            tail -n 60 "$log" 2>/dev/null || true
+            echo "fuzz-smoke: $t $verdict"
+            failed=1
+            ;;
+    esac
+done
+[ "$failed" -eq 0 ] || exit 1
 echo "fuzz-smoke: all targets ran ${seconds} s without a crash"
