@@ -14,6 +14,8 @@ use cbd_trainer::simulate::effects::{EffectArm, InjectedEffect};
 use cbd_trainer::simulate::six_joint::{random_configurations, ur5_nominal};
 use cbd_trainer::simulate::{configurations, rr, Sampling};
 
+use crate::finite_differences::worst_jacobian_errors;
+
 /// `model` with `list` as its effects.
 fn with_effects(model: &NominalModel, list: &[Effect]) -> NominalModel {
     let mut m = model.clone();
@@ -227,27 +229,6 @@ fn augmented_jacobian_and_hessian_match_finite_differences_on_the_test_arms() {
     }
 }
 
-/// Largest |exact Jacobian − central differences of the positions| / max |Dk1| over `queries`.
-fn exact_jacobian_error(cal: &mut Calibrator<'_>, queries: &[Vec<f64>], step: f64) -> f64 {
-    let mut worst: f64 = 0.0;
-    for q in queries {
-        let e = cal.evaluate(q).unwrap();
-        let scale = e.jacobian().iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        for d in 0..q.len() {
-            let (mut qa, mut qb) = (q.clone(), q.clone());
-            qa[d] += step;
-            qb[d] -= step;
-            let ya: Vec<f64> = cal.evaluate(&qa).unwrap().position().iter().copied().collect();
-            let yb: Vec<f64> = cal.evaluate(&qb).unwrap().position().iter().copied().collect();
-            for r in 0..ya.len() {
-                let fd = (ya[r] - yb[r]) / (2.0 * step);
-                worst = worst.max((fd - e.jacobian()[(r, d)]).abs() / scale);
-            }
-        }
-    }
-    worst
-}
-
 #[test]
 fn trainer_blob_with_effects_round_trips_and_its_exact_jacobian_matches_finite_differences() {
     // The "real" RR arm: longer links plus every effect; the nominal model declares the effects
@@ -280,7 +261,7 @@ fn trainer_blob_with_effects_round_trips_and_its_exact_jacobian_matches_finite_d
     assert!(worst <= 1e-12, "runtime vs trainer at the training points: {worst:e}");
     let mut s = 5u64;
     let queries: Vec<Vec<f64>> = (0..10).map(|_| (0..2).map(|_| 3.0 * lcg(&mut s)).collect()).collect();
-    let exact = exact_jacobian_error(&mut cal, &queries, 1e-6);
+    let exact = worst_jacobian_errors(&mut cal, &queries, 1e-6).0;
     // The calibrated model sees the effects: its training error is far below the rigid model's.
     let rigid_error = (0..train.len())
         .map(|i| {
@@ -311,7 +292,7 @@ fn six_joint_blobs_with_effects_have_exact_jacobians() {
             let mut cal = Calibrator::load(&blob, &mut storage).unwrap();
             assert_eq!(cal.model().nominal.effects().list.len(), 5 * n);
             let queries: Vec<Vec<f64>> = case.configurations.chunks_exact(n).take(5).map(|q| q.to_vec()).collect();
-            let exact = exact_jacobian_error(&mut cal, &queries, 1e-6);
+            let exact = worst_jacobian_errors(&mut cal, &queries, 1e-6).0;
             eprintln!("{} {integrator:?}: exact Jacobian vs finite differences {exact:.1e}", case.name);
             assert!(exact < 1e-7, "{}: exact Jacobian off by {exact:e}", case.name);
         }

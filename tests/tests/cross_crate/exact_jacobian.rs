@@ -6,34 +6,12 @@ use cbd_runtime::internals::flow::query_derivatives::nominal_hessian;
 use cbd_runtime::Calibrator;
 use cbd_tests::{lcg, model_blob, six_joint_chain as six_joint};
 
+use crate::finite_differences::worst_jacobian_errors;
+
 fn check(blob: &[u8], queries: &[Vec<f64>]) -> (f64, f64) {
     let mut storage = vec![0.0; 200_000];
     let mut cal = Calibrator::load(blob, &mut storage).unwrap();
-    let (mut worst_exact, mut worst_transported): (f64, f64) = (0.0, 0.0);
-    for q in queries {
-        let plain = cal.evaluate_transported(q).unwrap();
-        let e = cal.evaluate(q).unwrap();
-        // The position is the same computation, bit for bit.
-        assert_eq!(
-            plain.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-            e.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>()
-        );
-        let h = 1e-6;
-        let scale = e.jacobian().iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        for d in 0..q.len() {
-            let (mut qa, mut qb) = (q.clone(), q.clone());
-            qa[d] += h;
-            qb[d] -= h;
-            let ya: Vec<f64> = cal.evaluate(&qa).unwrap().position().iter().copied().collect();
-            let yb: Vec<f64> = cal.evaluate(&qb).unwrap().position().iter().copied().collect();
-            for r in 0..ya.len() {
-                let fd = (ya[r] - yb[r]) / (2.0 * h);
-                worst_exact = worst_exact.max((fd - e.jacobian()[(r, d)]).abs() / scale);
-                worst_transported = worst_transported.max((fd - e.transported_jacobian()[(r, d)]).abs() / scale);
-            }
-        }
-    }
-    (worst_exact, worst_transported)
+    worst_jacobian_errors(&mut cal, queries, 1e-6)
 }
 
 #[test]

@@ -10,6 +10,8 @@ use cbd_runtime::internals::inverse_kinematics::nominal_position;
 use cbd_runtime::{storage_len_for, Calibrator, Error};
 use cbd_tests::{expansion_blob, joint_codes, lcg, six_joint_chain as six_joint, task_exponents};
 
+use crate::finite_differences::worst_jacobian_errors;
+
 fn storage_for(blob: &[u8]) -> Vec<f64> {
     vec![0.0; storage_len_for(&decode(blob).unwrap())]
 }
@@ -18,29 +20,7 @@ fn storage_for(blob: &[u8]) -> Vec<f64> {
 fn exact_jacobian_error(blob: &[u8], queries: &[Vec<f64>]) -> f64 {
     let mut storage = storage_for(blob);
     let mut cal = Calibrator::load(blob, &mut storage).unwrap();
-    let mut worst: f64 = 0.0;
-    for q in queries {
-        let plain = cal.evaluate_transported(q).unwrap();
-        let e = cal.evaluate(q).unwrap();
-        assert_eq!(
-            plain.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-            e.position().iter().map(|v| v.to_bits()).collect::<Vec<_>>()
-        );
-        let h = 1e-6;
-        let scale = e.jacobian().iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        for d in 0..q.len() {
-            let (mut qa, mut qb) = (q.clone(), q.clone());
-            qa[d] += h;
-            qb[d] -= h;
-            let ya: Vec<f64> = cal.evaluate(&qa).unwrap().position().iter().copied().collect();
-            let yb: Vec<f64> = cal.evaluate(&qb).unwrap().position().iter().copied().collect();
-            for r in 0..ya.len() {
-                let fd = (ya[r] - yb[r]) / (2.0 * h);
-                worst = worst.max((fd - e.jacobian()[(r, d)]).abs() / scale);
-            }
-        }
-    }
-    worst
+    worst_jacobian_errors(&mut cal, queries, 1e-6).0
 }
 
 #[test]

@@ -10,6 +10,7 @@ mod effects;
 mod exact_jacobian;
 mod expansion;
 mod expansion_fit;
+mod finite_differences;
 mod house;
 mod inverse_flow;
 mod reference_flow;

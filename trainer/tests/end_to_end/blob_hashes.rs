@@ -12,11 +12,13 @@
 //! every machine); the trained blobs also depend on the floating-point kernels faer picks for the
 //! CPU, so a different SIMD level may legitimately change them: re-pin there, never here.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
 // The firmware check's blob builders (declared at the crate root, beside `shared`, which they use).
 use crate::blobs;
+
+use crate::cli_support;
 
 const CBD: &str = env!("CARGO_BIN_EXE_cbd");
 
@@ -64,10 +66,7 @@ fn same_float_kernels_as_the_pins() -> bool {
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cbd-blob-hashes-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    cli_support::scratch(&format!("blob-hashes-{name}"))
 }
 
 /// Runs `cbd ARGS --out DIR/out.blob` and returns the blob it wrote.

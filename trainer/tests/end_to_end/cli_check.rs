@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
+use crate::cli_support;
+
 const CBD: &str = env!("CARGO_BIN_EXE_cbd");
 
 fn model() -> PathBuf {
@@ -14,10 +16,7 @@ fn model() -> PathBuf {
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cbd-check-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    cli_support::scratch(&format!("check-{name}"))
 }
 
 fn cbd(dir: &Path, args: &[&str]) -> Output {

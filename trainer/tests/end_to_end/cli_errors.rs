@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
+use crate::cli_support;
+
 const CBD: &str = env!("CARGO_BIN_EXE_cbd");
 
 fn ur5_dir() -> PathBuf {
@@ -17,10 +19,7 @@ fn ur5_dir() -> PathBuf {
 
 /// A fresh scratch directory per test.
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cbd-cli-errors-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    cli_support::scratch(&format!("cli-errors-{name}"))
 }
 
 fn cbd(dir: &Path, args: &[&str]) -> Output {

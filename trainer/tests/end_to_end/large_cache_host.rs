@@ -9,13 +9,12 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use crate::cli_support;
+
 const CBD: &str = env!("CARGO_BIN_EXE_cbd");
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cbd-large-cache-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    cli_support::scratch(&format!("large-cache-{name}"))
 }
 
 /// A sysfs CPU folder for two CPUs with a 48 KiB L1, a 2 MiB L2 each and a shared 480 MiB L3.
