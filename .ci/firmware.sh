@@ -146,11 +146,17 @@ cpus_of() {
     echo "m4 m7"
 }
 
+rm -f "$OUT"/summary-*.txt "$OUT"/stack-*.txt "$OUT/stack.txt" "$OUT"/fw-*.txt
+# The host's lines for every blob, and what they hold: $OUT/host-NAME.count is "VALUES ERRORS".
+host_summary=()
 for name in $BLOBS; do
     "$HOST" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name.txt"
     "$HOST_F32" eval "$OUT/blobs/$name.blob" >"$OUT/host-$name-f32.txt"
+    values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
+    errors=$(grep -c ' error$' "$OUT/host-$name.txt" || true)
+    echo "$values $errors" >"$OUT/host-$name.count"
+    [ "$values" -ne 0 ] || host_summary+=("FAIL  $name blob: the host printed no values")
 done
-rm -f "$OUT"/summary-*.txt "$OUT"/stack-*.txt "$OUT/stack.txt" "$OUT"/fw-*.txt
 
 # run_on_cpu NAME VARIANT CPU ELF: runs one firmware on one CPU and compares its bits and stack,
 # writing PASS/FAIL lines to $OUT/summary-NAME-VARIANT-CPU.txt.
@@ -159,10 +165,8 @@ run_on_cpu() {
     run="$OUT/fw-$name-$variant-$cpu.txt"
     host="$OUT/host-$name.txt"
     [ "$variant" = f32 ] && host="$OUT/host-$name-f32.txt"
-    values=$(awk '$1 ~ /^q/ && $2 != "error" {n += NF - 2} END {print n + 0}' "$OUT/host-$name.txt")
-    errors=$(grep -c ' error$' "$OUT/host-$name.txt" || true)
+    read -r values errors <"$OUT/host-$name.count"
     {
-        [ "$values" -eq 0 ] && echo "FAIL  $name blob: the host printed no values"
         if fw_run "$elf" "$cpu" "$run" && diff <(grep '^q' "$run") "$host" >"$OUT/diff-$name-$variant-$cpu.txt"; then
             echo "PASS  $name blob  ${variant} build on $cpu: $values values bit-identical to the host's ($errors evaluation errors)"
             if stack="$(fw_stack "$elf" "$run")"; then
@@ -180,22 +184,18 @@ run_on_cpu() {
 # Panic-free at link level, for every build (sp, dp, f32): the variants compile different code
 # (software f64, the M7's FPU, the f32 feature), so one panic-free build proves nothing of the others.
 rr_storage="$("$HOST" info "$OUT/blobs/rr.blob" | awk '{print $4}')"
-# pn_settings VARIANT: sets flags, features, cpu and host for the panic-never build of VARIANT.
-pn_settings() {
-    flags="-C link-arg=-Tlink.x" features="panic-never" cpu=m4 host="$OUT/host-rr.txt"
-    case "$1" in
-        dp) flags="$flags -C target-cpu=cortex-m7"; cpu=m7 ;;
-        f32) features="panic-never,f32"; host="$OUT/host-rr-f32.txt" ;;
-    esac
-}
 # panic_never VARIANT: builds the rr blob's firmware with the panic handler that does not link, in
 # the variant's target directory (the dependencies are the ones its other builds compiled), runs it,
 # and writes its line to $OUT/summary-panic-never-VARIANT.txt.
 panic_never() {
-    local variant="$1" flags features cpu host status=0 run summary="$OUT/summary-panic-never-$1.txt"
+    local variant="$1" status=0 run summary="$OUT/summary-panic-never-$1.txt"
     local dir="$FW_DIR/target/$variant" pn_log="$OUT/panic-never-$1.log"
+    local flags="-C link-arg=-Tlink.x" features="panic-never" cpu=m4 host="$OUT/host-rr.txt"
+    case "$variant" in
+        dp) flags="$flags -C target-cpu=cortex-m7"; cpu=m7 ;;
+        f32) features="panic-never,f32"; host="$OUT/host-rr-f32.txt" ;;
+    esac
     log "building the panic-never firmware (rr blob, $variant)"
-    pn_settings "$variant"
     (cd "$FW_DIR" && CARGO_TARGET_DIR="$dir" RUSTFLAGS="$flags" CBD_BLOB="$OUT/blobs/rr.blob" \
         CBD_STORAGE_LEN="$rr_storage" cargo build -q --release --no-default-features --features "$features") \
         >"$pn_log" 2>&1 || status=$?
@@ -252,8 +252,9 @@ for pid in "${pids[@]}"; do
     wait "$pid" || { log "a firmware build failed"; exit 1; }
 done
 
-# The summary in a fixed order: blob by blob, variant by variant, then the panic-never builds.
-summary=()
+# The summary in a fixed order: the host's, then blob by blob, variant by variant, then the
+# panic-never builds.
+summary=("${host_summary[@]}")
 for name in $BLOBS; do
     for variant in $(variants_of "$name"); do
         for cpu in $(cpus_of "$name" "$variant"); do
