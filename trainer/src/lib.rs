@@ -50,7 +50,7 @@ pub mod flow;
 pub mod io;
 /// The bound every imported value obeys.
 pub mod limits;
-/// What a fit needs in memory, checked before it allocates.
+/// What a fit needs in memory, checked before it allocates, and the worker threads it runs on.
 pub mod memory;
 /// Nominal models: DH chains, planar arms, URDF, rigid fits, batched k0.
 pub mod nominal;
@@ -68,7 +68,5 @@ pub mod report;
 pub mod simulate;
 /// Energy (16) minimised over the momenta: closed form and Levenberg–Marquardt (`numeric`'s driver).
 pub mod solver;
-/// The worker thread pool every command runs on.
-pub mod workers;
 
 pub use error::{Error, Result};

@@ -1,4 +1,5 @@
-//! Memory a command will need, estimated before it allocates, against what the process may use:
+//! Memory a command will need, estimated before it allocates, against what the process may use, and
+//! the worker threads it computes on (the threads that estimate counts):
 //! a fit or simulation too large for the machine is refused up front with the figure and the flag
 //! that lowers it (exit 1), instead of an allocation failure deep inside faer (exit 101) or an abort
 //! (exit 134). The estimate counts every large allocation: the (N·m)² matrices, and per worker
@@ -44,7 +45,7 @@ impl Host {
 
     /// This machine's caches and workers, with `available` bytes.
     pub fn with_available(available: Option<f64>) -> Host {
-        Host { caches: CacheSizes::of_this_host(), workers: crate::workers::worker_threads(), available }
+        Host { caches: CacheSizes::of_this_host(), workers: worker_threads(), available }
     }
 }
 
@@ -233,7 +234,7 @@ pub fn fixed_fit_bytes(caches: &CacheSizes, threads: usize, dim: usize) -> f64 {
 /// several, one on a single worker.
 pub fn worker_bytes(caches: &CacheSizes, threads: usize, dim: usize) -> f64 {
     let buffers = if threads > 1 { 2.0 } else { 1.0 };
-    buffers * gemm_workspace_bytes_for(caches, dim) + crate::workers::WORKER_STACK_BYTES as f64
+    buffers * gemm_workspace_bytes_for(caches, dim) + WORKER_STACK_BYTES as f64
 }
 
 /// The linear model's least-squares problem in the expansion (`expansion::fit_linear`): the design
@@ -256,7 +257,7 @@ pub fn flow_expansion_bytes(rows: usize, params: usize) -> f64 {
 /// may use now, less the multiply buffers the workers it runs on may allocate meanwhile (two each,
 /// [`worker_bytes`]) and a margin for small blocks. The error gives both figures.
 pub fn room_for(bytes: f64, dim: usize) -> Result<(), MemoryError> {
-    let host = Host { workers: crate::workers::current_workers(), ..Host::this_process() };
+    let host = Host { workers: current_workers(), ..Host::this_process() };
     room_for_on(&host, bytes, dim)
 }
 
@@ -408,7 +409,7 @@ pub fn gigabytes(bytes: f64) -> String {
 }
 
 /// The worker threads a fit of `rows` × `task_dim` runs on within `available` bytes: the command's
-/// ([`crate::workers::worker_threads`]) when they fit, else one (the results are the same). A fit
+/// ([`worker_threads`]) when they fit, else one (the results are the same). A fit
 /// that does not fit even on one is refused, naming the need and its parts, what is available, how
 /// many rows would fit and `remedy` (the caller's flag that lowers it), or, when one worker alone
 /// does not fit, the memory limit to raise.
@@ -434,7 +435,7 @@ pub fn needed_so_far() -> f64 {
 /// where the up-front check already covered them (the kernel form within its budget): the need
 /// [`needed_so_far`] reports, counted as [`room_for`] counts it.
 pub fn note_need(bytes: f64, dim: usize) {
-    let host = Host { workers: crate::workers::current_workers(), ..Host::with_available(None) };
+    let host = Host { workers: current_workers(), ..Host::with_available(None) };
     record_need(mapped_bytes() + bytes + pending_buffers(&host, dim));
 }
 
@@ -531,23 +532,23 @@ fn workers_text(caches: &CacheSizes, threads: usize, dim: usize) -> String {
         "{threads} worker thread(s) of {} each (faer's matrix-multiply buffers {} and an {} MiB stack)",
         gigabytes(worker_bytes(caches, threads, dim)),
         gigabytes(gemm_workspace_bytes_for(caches, dim)),
-        crate::workers::WORKER_STACK_BYTES >> 20
+        WORKER_STACK_BYTES >> 20
     )
 }
 
 /// [`check_fit`] for `rows` rows of `task_dim` coordinates, read from `file`, against what this
 /// process may use; the error names the file. Returns the worker threads to fit on
-/// (`crate::workers::on_workers`). Sizes only: the memory's estimates need no rows.
+/// (`on_workers`). Sizes only: the memory's estimates need no rows.
 pub fn check_fit_of(file: &std::path::Path, rows: usize, task_dim: usize, remedy: &str) -> crate::Result<usize> {
     check_fit(rows, task_dim, available_bytes(), remedy).context(file.display())
 }
 
-/// The number of workers for a command: [`crate::workers::MAX_WORKERS`] on a machine with the
+/// The number of workers for a command: [`MAX_WORKERS`] on a machine with the
 /// cores, one when the memory this process may use does not hold a second worker's buffers and
 /// stack with room to spare (half of it for the computation). Sized for small problems (the
 /// command's own checks then size its fits).
 pub fn workers_for_memory(available: Option<f64>) -> usize {
-    workers_for_memory_on(&Host::with_available(available), crate::workers::default_workers())
+    workers_for_memory_on(&Host::with_available(available), default_workers())
 }
 
 /// [`workers_for_memory`] on a given machine, for `most` workers at most.
@@ -561,6 +562,91 @@ pub fn workers_for_memory_on(host: &Host, most: usize) -> usize {
 
 /// Matrix dimension the command-wide worker count is sized for: a 256-row fit of 3 coordinates.
 const SMALL_DIM: usize = 768;
+
+// The worker threads a `cbd` command computes on: one rayon pool, built before the command runs
+// and sized here, so that every parallel piece of faer and of the flow runs on threads the memory
+// check counts. Without it faer's `Par::Rayon` reached rayon's global pool, which has a thread per
+// core (each holding faer's matrix-multiply buffers, [`gemm_workspace_bytes`])
+// and panics ("the global thread pool has not been initialized") when its threads cannot start.
+
+/// Most worker threads: faer's factorisations are split into a fixed two pieces
+/// (`numeric::FIXED_SPLIT`), so a third thread would add a workspace and no speed.
+pub const MAX_WORKERS: usize = 2;
+
+/// Stack of each worker: the main thread's 8 MiB, since the command runs on a worker.
+pub const WORKER_STACK_BYTES: usize = 8 << 20;
+
+/// The pool's size once [`run_in_pool`] has built it.
+static WORKERS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+
+/// Threads this process computes on: the pool's size, or before there is one the number it would
+/// have, min(cores, [`MAX_WORKERS`]).
+pub fn worker_threads() -> usize {
+    WORKERS.get().copied().unwrap_or_else(default_workers)
+}
+
+/// The workers of the pool this runs on (a fit's), else [`worker_threads`].
+pub fn current_workers() -> usize {
+    match rayon::current_thread_index() {
+        Some(_) => rayon::current_num_threads(),
+        None => worker_threads(),
+    }
+}
+
+/// The workers a command starts on this machine ([`workers_for_cores`] of its cores).
+pub fn default_workers() -> usize {
+    workers_for_cores(std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+/// The workers a command starts on a machine with `cores` cores: one per core, at most [`MAX_WORKERS`].
+pub fn workers_for_cores(cores: usize) -> usize {
+    cores.clamp(1, MAX_WORKERS)
+}
+
+/// Runs `f` on a new pool of `threads` workers (the results do not depend on the count: the work is
+/// split into fixed pieces). A pool whose threads cannot start (a memory limit too low for their
+/// stacks) is an error, never a panic.
+pub fn run_in_pool<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> Result<R, PoolError> {
+    let threads = threads.clamp(1, MAX_WORKERS);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .stack_size(WORKER_STACK_BYTES)
+        .thread_name(|k| format!("cbd-worker-{k}"))
+        .build()
+        .map_err(|source| PoolError { threads, source })?;
+    let _ = WORKERS.set(threads);
+    Ok(pool.install(f))
+}
+
+/// The worker pool's threads could not start ([`run_in_pool`]).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot start {threads} worker thread(s) of {} MiB stack: {source} (is the memory limit too low?)", WORKER_STACK_BYTES >> 20)]
+pub struct PoolError {
+    pub threads: usize,
+    #[source]
+    pub source: rayon::ThreadPoolBuildError,
+}
+
+impl From<PoolError> for crate::Error {
+    fn from(e: PoolError) -> crate::Error {
+        crate::Error::stage("workers", e)
+    }
+}
+
+/// Runs `f` on `threads` workers: on the pool it is called from when that has no more (a fit inside
+/// `cbd fit` runs on the command's pool: a pool per fit would start threads, each with its own
+/// workspace, that the memory check does not count), else on a new pool of `threads` (one worker
+/// when the memory check found room for one only; the command's idle workers hold no workspace).
+pub fn on_workers<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    let threads = threads.max(1);
+    if rayon::current_thread_index().is_some() && rayon::current_num_threads() <= threads {
+        return f();
+    }
+    match rayon::ThreadPoolBuilder::new().num_threads(threads).stack_size(WORKER_STACK_BYTES).build() {
+        Ok(pool) => pool.install(f),
+        Err(_) => f(),
+    }
+}
 
 #[cfg(test)]
 mod tests {
@@ -688,7 +774,6 @@ mod tests {
     /// not fit twice over.
     #[test]
     fn workers_follow_cores_and_memory() {
-        use crate::workers::{workers_for_cores, MAX_WORKERS};
         assert_eq!((workers_for_cores(1), workers_for_cores(64)), (1, MAX_WORKERS));
         for caches in [LAPTOP, SERVER] {
             for cores in [1, 64] {
@@ -790,5 +875,15 @@ mod tests {
         assert_eq!(cache_size("32768K"), Some(32 << 20));
         assert_eq!((cache_size("2M"), cache_size("1G"), cache_size("512")), (Some(2 << 20), Some(1 << 30), Some(512)));
         assert_eq!((cpu_count("0-3,8"), cpu_count("5"), cpu_count("x")), (Some(5), Some(1), None));
+    }
+
+    #[test]
+    fn commands_run_on_one_bounded_pool() {
+        let (inside, nested, fewer) = run_in_pool(2, || {
+            (rayon::current_num_threads(), on_workers(7, rayon::current_num_threads), on_workers(1, rayon::current_num_threads))
+        })
+        .unwrap();
+        assert_eq!((inside, nested, fewer), (2, 2, 1), "a fit inside a command runs on its pool, or on fewer workers");
+        assert_eq!(run_in_pool(9, rayon::current_num_threads).unwrap(), MAX_WORKERS);
     }
 }

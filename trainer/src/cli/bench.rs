@@ -226,7 +226,7 @@ fn fit_one(n: usize, blob_out: &std::path::Path) -> Result<FitBench> {
         crate::calibrate::Settings { source: crate::calibrate::HyperparameterSource::PaperRr, steps: Some(2), ..Default::default() };
     let threads = check_size(n, "--sizes")?;
     let settings = crate::calibrate::Settings { solver: crate::solver::SolverSettings { threads, ..settings.solver }, ..settings };
-    let fit = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))?.fit;
+    let fit = crate::memory::on_workers(threads, || crate::calibrate::calibrate(&rr::nominal(), &train, &settings))?.fit;
     crate::io::write_atomically(blob_out, &fit.blob)?;
     let predicted = crate::predict::evaluate_blob(&fit.blob, &test.joints)?;
     Ok(FitBench::of("rr", n, &fit.report, 0.0, crate::report::stats::ErrorStats::of_positions(&predicted, &test.positions, 2).mean))
@@ -250,7 +250,7 @@ fn fit_ur5(dir: &std::path::Path) -> Result<FitBench> {
 /// marginal likelihood) on the noisy RR benchmark: σ = 1e-4 per coordinate on a √N × √N grid (the
 /// noise of `cbd simulate --noise 1e-4`), 3000 noise-free random test configurations.
 fn evidence_rr(n: usize, threads: usize, memory_budget: Option<f64>) -> Result<EvidenceBench> {
-    crate::workers::on_workers(threads, || evidence_rr_on_workers(n, memory_budget))
+    crate::memory::on_workers(threads, || evidence_rr_on_workers(n, memory_budget))
 }
 
 fn evidence_rr_on_workers(n: usize, memory_budget: Option<f64>) -> Result<EvidenceBench> {

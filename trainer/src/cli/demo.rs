@@ -155,7 +155,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     };
     let test = real.measure(&configurations(Sampling::Uniform { count: args.test_points, seed: 2026 }, 2));
     settings.solver.threads = threads;
-    let calibration = crate::workers::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings))?;
+    let calibration = crate::memory::on_workers(threads, || crate::calibrate::calibrate(&nominal, &train, &settings))?;
     crate::face::print_calibration(&calibration, args.solver.quiet);
     let (opts, fit) = (&calibration.options, &calibration.fit);
     crate::cli::write_atomically(&args.out, &fit.blob)?;

@@ -219,7 +219,6 @@ pub mod import_frame;
 pub mod joint_columns;
 pub mod joint_map;
 pub mod model_file;
-pub mod nominal_check;
 pub mod preparation;
 pub mod stage_rows;
 pub mod units;

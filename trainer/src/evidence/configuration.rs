@@ -5,8 +5,7 @@
 //! the term's γ_C → 0, so the richer family never scores lower at its optimum).
 
 use super::search::{counted, from_each, minimise, Criterion, Partial};
-use super::starts::DataScales;
-use super::table::{ConfigTheta, PairTable, Theta};
+use super::table::{ConfigTheta, DataScales, PairTable, Theta};
 use super::{CbdHyperparameters, EvidenceError, EvidenceOptions};
 use crate::data::stage_rows::EvidenceRows;
 use crate::data::Measurements;

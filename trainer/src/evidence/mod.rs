@@ -23,7 +23,6 @@ mod hyperparameters;
 pub(crate) mod joint_pair_table;
 mod likelihood;
 pub(crate) mod search;
-mod starts;
 mod table;
 pub(crate) mod weight_space;
 
@@ -42,9 +41,8 @@ use crate::data::Measurements;
 use crate::numeric::likelihood_search::{LikelihoodSearch::CbdEvidence, MIN_SEARCH_ROWS};
 use cbd_protocol::{NominalModel, Normalisation};
 use search::minimise;
-use starts::DataScales;
 use std::cell::RefCell;
-use table::Theta;
+use table::{DataScales, Theta};
 
 /// What the evidence search found.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -334,7 +332,7 @@ mod tests {
         let serial_count = RefCell::new(0usize);
         let serial: Vec<_> = starts.iter().map(|p| minimise(&table, &lower, &upper, p, 30, &serial_count)).collect();
         for threads in [1, 2] {
-            let (found, count) = crate::workers::run_in_pool(threads, || {
+            let (found, count) = crate::memory::run_in_pool(threads, || {
                 search::counted(|c| search::from_each(&starts, c, |p, counted| minimise(&table, &lower, &upper, p, 30, counted)))
             })
             .unwrap();

@@ -107,7 +107,7 @@ pub fn compare(arm: &ArmModel, train: &Dataset, test: &Dataset, settings: &Compa
     }
     let mut warnings = inputs.warnings;
     for (path, imported) in [(&train.source, &inputs.train), (&test.source, &inputs.test)] {
-        warnings.extend(crate::data::nominal_check::nominal_warnings(
+        warnings.extend(crate::data::preparation::nominal_warnings(
             &inputs.nominal,
             &imported.measurements,
             &imported.lines,
@@ -131,14 +131,14 @@ pub fn compare(arm: &ArmModel, train: &Dataset, test: &Dataset, settings: &Compa
     )?;
     pipeline.solver.threads = threads;
     let context = PeerContext { settings: pipeline.clone(), search: Default::default() };
-    let mut methods = crate::workers::on_workers(threads, || {
+    let mut methods = crate::memory::on_workers(threads, || {
         let fitters = fitters(PEERS, &context);
         let peers: Vec<Peer> = fitters.iter().map(|f| f.peer()).collect();
         compare_peers(&inputs.nominal, rows, &inputs.test.measurements, &peers)
     });
     // The row `cbd fit` writes by default, and the noise floor from the σ that row's fit assumed
     // (what `cbd fit` records in the blob), else its hypothesis' evidence.
-    let choice = crate::workers::on_workers(threads, || crate::calibrate::geometry::geometry_choice(&inputs.nominal, rows, &pipeline))?;
+    let choice = crate::memory::on_workers(threads, || crate::calibrate::geometry::geometry_choice(&inputs.nominal, rows, &pipeline))?;
     methods.default_fit = Some(choice);
     let written = methods.written_by_fit().and_then(|name| methods.rows.iter().find(|r| r.name == name));
     methods.noise_floor = written.and_then(|r| noise_floor(r.noise_sigma, &r.name, &pipeline, rows.task_dim));
@@ -146,7 +146,7 @@ pub fn compare(arm: &ArmModel, train: &Dataset, test: &Dataset, settings: &Compa
         errln!("warning: {w}");
     }
     let commanded = match &settings.commanded {
-        Some(robot) => Some(crate::workers::on_workers(threads, || commanded_peers(robot, &inputs.nominal, rows, &context))?),
+        Some(robot) => Some(crate::memory::on_workers(threads, || commanded_peers(robot, &inputs.nominal, rows, &context))?),
         None => None,
     };
     Ok(Comparison { methods, commanded, registration: inputs.registration, unit })

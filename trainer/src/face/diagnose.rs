@@ -100,8 +100,7 @@ pub fn diagnose(arm: &ArmModel, data: &Dataset, test: Option<&Dataset>, settings
             true => super::register_base_if_unknown(arm, nominal, &imported.measurements, path)?,
             false => None,
         };
-        for w in crate::data::nominal_check::nominal_warnings(nominal, &imported.measurements, &imported.lines, path, arm.register_base())?
-        {
+        for w in crate::data::preparation::nominal_warnings(nominal, &imported.measurements, &imported.lines, path, arm.register_base())? {
             errln!("warning: {w}");
         }
         Ok::<_, Error>(registration)
@@ -111,7 +110,7 @@ pub fn diagnose(arm: &ArmModel, data: &Dataset, test: Option<&Dataset>, settings
     // The CbD rows fit all training rows: refuse up front what cannot fit in memory.
     let threads = match settings.no_cbd {
         false => crate::memory::check_fit_of(&source, data.len(), data.task_dim, "--no-cbd skips the CbD rows")?,
-        true => crate::workers::worker_threads(),
+        true => crate::memory::worker_threads(),
     };
     let test = match test {
         Some(test) => {
@@ -128,7 +127,7 @@ pub fn diagnose(arm: &ArmModel, data: &Dataset, test: Option<&Dataset>, settings
     let mut pipeline = settings.solver.settings()?;
     pipeline.solver.verbose = false;
     pipeline.solver.threads = threads;
-    let diagnosis = crate::workers::on_workers(threads, || {
+    let diagnosis = crate::memory::on_workers(threads, || {
         let fitter = super::peers::cbd_correction(&pipeline);
         let cbd: Option<crate::evaluation::correction::CorrectionFitter> = if settings.no_cbd { None } else { Some(&fitter) };
         crate::diagnose::diagnose(&nominal, &data, test, cbd, &options)

@@ -90,7 +90,7 @@ pub fn fit(arm: &ArmModel, data: &Dataset, settings: &FitSettings) -> Result<Cal
     pipeline.solver.memory_budget = crate::memory::kernel_form_budget(threads, unknowns);
     pipeline.solver.threads = threads;
     let calibration =
-        crate::workers::on_workers(threads, || crate::calibrate::calibrate_rows(&nominal, &data, &pipeline)).context(source.display())?;
+        crate::memory::on_workers(threads, || crate::calibrate::calibrate_rows(&nominal, &data, &pipeline)).context(source.display())?;
     print_calibration(&calibration, settings.pipeline.quiet);
     let mut report = calibration.to_json();
     if let Some(r) = &registration {

@@ -57,7 +57,7 @@ pub use crate::predict::check_calibrator;
 pub fn run<T: Send>(work: impl FnOnce() -> Result<T> + Send) -> Result<T> {
     crate::io::forget_inputs();
     let threads = crate::memory::workers_for_memory(crate::memory::available_bytes());
-    crate::workers::run_in_pool(threads, || crate::io::with_staged_outputs(work))?
+    crate::memory::run_in_pool(threads, || crate::io::with_staged_outputs(work))?
 }
 
 /// The bytes of the blob file at `path` (refused beyond the largest blob the format allows).

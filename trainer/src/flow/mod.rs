@@ -7,8 +7,8 @@ pub mod tangent;
 pub use primal::{ControlPoints, PrimalFlow};
 
 /// Runs `f` on a pool of `threads` threads, or on the command's pool when called there
-/// ([`crate::workers::on_workers`]). The arithmetic never depends on the count: work is split into
+/// ([`crate::memory::on_workers`]). The arithmetic never depends on the count: work is split into
 /// a fixed number of pieces (see `numeric::FIXED_SPLIT` and the tangent's column chunks).
 pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
-    crate::workers::on_workers(threads, f)
+    crate::memory::on_workers(threads, f)
 }

@@ -38,9 +38,9 @@ impl Criterion for WeightSpaceTable {
         self.count * self.m
     }
 
-    /// Absolute, not per unknown ([`super::boxes::absolute_tolerances`]).
+    /// Absolute, not per unknown ([`super::absolute_tolerances`]).
     fn tolerances(&self) -> (f64, f64) {
-        super::boxes::absolute_tolerances(self.observations())
+        super::absolute_tolerances(self.observations())
     }
 
     fn nlml_and_gradient(&self, packed: &[f64]) -> Option<(f64, Vec<f64>)> {

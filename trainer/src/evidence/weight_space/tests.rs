@@ -64,7 +64,7 @@ fn prismatic_joints_and_long_bases_are_declined() {
 /// from the evidence's own choice with the joint widths scaled by each of `factors`: (nlml, θ) per
 /// start, and the choice's nlml.
 fn refine_from(per_axis: usize, factors: &[f64]) -> (f64, Vec<(f64, Theta, usize)>) {
-    use super::super::starts::DataScales;
+    use super::super::table::DataScales;
     let mut data = rr::RealRr::default().measure(&configurations(Sampling::Grid { per_axis }, 2));
     crate::simulate::add_noise(&mut data.positions, 1e-4, 1u64.wrapping_add(0x5eed));
     let nominal = rr::nominal();

@@ -13,7 +13,7 @@
 
 use super::ResidualWeightSpace;
 use crate::evidence::search::Criterion;
-use crate::evidence::weight_space::boxes::absolute_tolerances;
+use crate::evidence::weight_space::absolute_tolerances;
 use crate::evidence::weight_space::prior::PeriodicShares;
 use crate::numeric::FIXED_SPLIT;
 use faer::dyn_stack::{MemBuffer, MemStack};

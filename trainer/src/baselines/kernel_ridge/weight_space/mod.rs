@@ -6,14 +6,13 @@
 //!
 //! The basis is fixed for a box around the subset's choice (b_d up to 3 ×, ν down to 1/9, i.e. σ
 //! down to 1/3 at fixed γ; the dropped prior share 100 × below ν there) and moves when the optimum
-//! reaches one of its faces (`crate::evidence::weight_space::boxes`).
+//! reaches one of its faces (`crate::evidence::weight_space::minimise_in_boxes`).
 
 mod likelihood;
 
 use crate::data::Measurements;
-use crate::evidence::weight_space::boxes::{minimise_in_boxes, BoxedCriterion, BOX};
 use crate::evidence::weight_space::design::periodic_design;
-use crate::evidence::weight_space::Declined;
+use crate::evidence::weight_space::{minimise_in_boxes, BoxedCriterion, Declined, BOX};
 use crate::expansion::basis::{truncate, AxisSeries};
 use crate::expansion::tolerance_for;
 use crate::numeric::FIXED_SPLIT;
