@@ -323,7 +323,8 @@ fn design_layers(heading: &str) -> BTreeMap<String, usize> {
     layers
 }
 
-/// The imports of `dir`'s modules that point up a layer of the table under `heading`. With
+/// The imports of `dir`'s modules that point up a layer of the table under `heading` (which must
+/// place every module, and name no other). With
 /// `face_on_top` the crate's root (lib.rs: its face, which re-exports) stands above every layer, so
 /// a module that names a path through it (`crate::Error`) imports upward; without, such paths are
 /// not counted.
@@ -339,6 +340,9 @@ fn upward_imports(dir: &str, heading: &str, face_on_top: bool) -> Vec<String> {
     let modules: BTreeSet<String> = krate.files.keys().filter_map(|p| p.first().cloned()).collect();
     let unplaced: Vec<&String> = modules.iter().filter(|m| !layers.contains_key(*m)).collect();
     assert!(unplaced.is_empty(), "{dir} modules missing from the layer table {heading:?} in docs/DESIGN.md §1: {unplaced:?}");
+    // And no row for a module that is gone (a merged file's row stood on after it, unchecked).
+    let stale: Vec<&String> = layers.keys().filter(|m| !modules.contains(*m)).collect();
+    assert!(stale.is_empty(), "the layer table {heading:?} in docs/DESIGN.md §1 names modules {dir} no longer has: {stale:?}");
     let mut upward = Vec::new();
     for (from, targets) in &krate.arrows {
         let Some(from_module) = top(from) else { continue };
