@@ -122,9 +122,6 @@ const REFINED_ON_THE_OPTIMUM: usize = 2;
 /// Screened starts on the plain θ given and the balanced start that go on.
 const REFINED: usize = 3;
 
-/// Of the plain search's starts run to the end on the medium rows, the best continued on every row.
-const PLAIN_CONTINUED: usize = 1;
-
 /// Of the term's screened starts run to the end on the medium rows, the best continued on every row.
 const TERM_CONTINUED: usize = 2;
 
@@ -167,29 +164,27 @@ pub fn search_configuration_term(
     let plain_packed: Vec<f64> = plain_theta.pack();
     let (plain_lower, plain_upper) = scales.bounds(&table);
     let plain_at = table.nlml_and_gradient(&plain_packed).map(|(v, _)| (v, plain_packed.clone()));
-    // The plain member searched again on these rows, with the tight rule and to the end: from its
-    // chosen θ here, and from every start of the plain search on the medium rows, the best of those
-    // (scored here) continued here (the plain search screens its starts on coarse rows and stops at
-    // 1e-4 nats per unknown; on the UR5's interleaved fold 0 it ended 114 nats below the optimum
-    // one of its own starts reaches). The term is nested in the plain member, so its gain is
-    // measured against the best plain optimum found, and its starts are put on top of that optimum
-    // too.
+    // The plain member refined on these rows from its chosen θ, with the tight rule and restarts (the
+    // plain search stops at 1e-4 nats per unknown). The term is nested in the plain member, so its
+    // gain is measured against this optimum, and its starts are put on top of it too. The plain
+    // search's other starts are not searched again here: it screened them itself, and running each
+    // to the end on the medium rows and the best on these (the search until stop 62, added when the
+    // plain search ended 114 nats short on the UR5's interleaved fold 0) cost a fifth of dh+cbd's fit
+    // on the UR5 and moved none of its ten folds by more than 1e-3 mm (docs/DESIGN.md §16, stop 63).
     let long = options.max_iterations.max(REFINE_ITERATIONS);
     let plain_tight = Tight(&table);
-    let plain_starts: Vec<Vec<f64>> = std::iter::once(plain_packed.clone())
-        .chain(scales.starts(&table).iter().map(|t| Theta { config: None, ..t.clone() }.pack()))
-        .collect();
+    let from_given = minimise_restarted(&plain_tight, &plain_lower, &plain_upper, &plain_packed, long, &evaluations);
     // Runs each start to the end on the medium rows, scores the optima on the evidence's rows (one
     // evaluation each) and continues the best `keep` there to the end; without medium rows, every
     // start on the evidence's rows. A start far from its optimum spends most of its evaluations
-    // climbing (UR5: 100–250 on every row for a plain start, 80–390 for a term's), which the medium
-    // rows do at an eighth of the cost; the evidence's rows then only finish it (30–70).
+    // climbing (UR5: 80–390 on every row for a term's start), which the medium rows do at an eighth
+    // of the cost; the evidence's rows then only finish it (30–70).
     // Each start's searches run on the command's workers (`from_each`), the results in the starts'
     // order, as a serial loop's.
-    let staged = |from: &[Vec<f64>], keep: usize, lower: &[f64], upper: &[f64], evaluations: &RefCell<usize>| -> Vec<(f64, Vec<f64>)> {
+    let staged = |from: &[Vec<f64>], keep: usize, evaluations: &RefCell<usize>| -> Vec<(f64, Vec<f64>)> {
         let full = Tight(&table);
         let to_the_end = |from: &[Vec<f64>]| -> Vec<(f64, Vec<f64>)> {
-            from_each(from, evaluations, |p, counted| minimise_restarted(&full, lower, upper, p, long, counted))
+            from_each(from, evaluations, |p, counted| minimise_restarted(&full, &lower, &upper, p, long, counted))
                 .into_iter()
                 .flatten()
                 .collect()
@@ -199,7 +194,7 @@ pub fn search_configuration_term(
         };
         let medium = Tight(medium);
         let mut scored: Vec<(f64, Vec<f64>)> = from_each(from, evaluations, |p, counted| {
-            let (_, p) = minimise_restarted(&medium, lower, upper, p, long, counted)?;
+            let (_, p) = minimise_restarted(&medium, &lower, &upper, p, long, counted)?;
             *counted.borrow_mut() += 1;
             table.nlml_and_gradient(&p).map(|(v, _)| (v, p))
         })
@@ -210,14 +205,7 @@ pub fn search_configuration_term(
         let kept: Vec<Vec<f64>> = scored.into_iter().take(keep).map(|(_, p)| p).collect();
         to_the_end(&kept)
     };
-    let scale_starts: Vec<Vec<f64>> = plain_starts[1..].to_vec();
-    // The plain θ given refined beside the scale starts' stages.
-    let ((from_given, given_count), (from_scales, scales_count)) = rayon::join(
-        || counted(|c| minimise_restarted(&plain_tight, &plain_lower, &plain_upper, &plain_starts[0], long, c)),
-        || counted(|c| staged(&scale_starts, PLAIN_CONTINUED, &plain_lower, &plain_upper, c)),
-    );
-    *evaluations.borrow_mut() += given_count + scales_count;
-    let mut plain_found: Vec<(f64, Vec<f64>)> = from_given.into_iter().chain(from_scales).chain(plain_at).collect();
+    let mut plain_found: Vec<(f64, Vec<f64>)> = from_given.into_iter().chain(plain_at).collect();
     plain_found.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (plain_nlml, best_plain) = plain_found.into_iter().next().ok_or(EvidenceError::NoValidSetting(LikelihoodSearch::CbdEvidence))?;
     let best_plain_theta = Theta::unpack(&best_plain, n);
@@ -306,10 +294,8 @@ pub fn search_configuration_term(
     let nested_on_full: Vec<Vec<f64>> = if coarse.is_some() { vec![nested] } else { Vec::new() };
     let refined_all: Vec<(f64, Vec<f64>)> = {
         // The nested model's refinement beside the screened starts' stages.
-        let ((mut found, staged_count), (nested, nested_count)) = rayon::join(
-            || counted(|c| staged(&screened, TERM_CONTINUED, &lower, &upper, c)),
-            || counted(|c| run(&table, &nested_on_full, long, true, c)),
-        );
+        let ((mut found, staged_count), (nested, nested_count)) =
+            rayon::join(|| counted(|c| staged(&screened, TERM_CONTINUED, c)), || counted(|c| run(&table, &nested_on_full, long, true, c)));
         *evaluations.borrow_mut() += staged_count + nested_count;
         found.extend(nested);
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
