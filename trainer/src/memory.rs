@@ -566,7 +566,7 @@ const SMALL_DIM: usize = 768;
 // The worker threads a `cbd` command computes on: one rayon pool, built before the command runs
 // and sized here, so that every parallel piece of faer and of the flow runs on threads the memory
 // check counts. Without it faer's `Par::Rayon` reached rayon's global pool, which has a thread per
-// core (each holding faer's matrix-multiply buffers, [`gemm_workspace_bytes`])
+// core (each holding faer's matrix-multiply buffers, `gemm_workspace_bytes`)
 // and panics ("the global thread pool has not been initialized") when its threads cannot start.
 
 /// Most worker threads: faer's factorisations are split into a fixed two pieces

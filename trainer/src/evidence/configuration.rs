@@ -216,7 +216,7 @@ pub fn search_configuration_term(
     // the nested model's optimum is reachable).
     let var_r = table.fields_variance;
     let half = scales.log_half();
-    let widths = |shift: f64| -> Vec<f64> { table.joint.forms.iter().zip(half).map(|(f, l)| l + shift / f.log_weight_slope()).collect() };
+    let widths = |shift: f64| scales.widths(&table, shift);
     let fixed = |b: f64| -> Vec<f64> { table.joint.forms.iter().zip(half).map(|(f, l)| if f.periodic() { b.ln() } else { *l }).collect() };
     let balanced = Theta { log_sigma: plain_theta.log_sigma, ..scales.starts(&table)[0].clone() };
     // [b = 5, b = 0.5, narrower task factor, negligible term] on `base`.

@@ -327,7 +327,7 @@ impl DataScales {
     }
 
     /// Joint widths shifted by `shift` in log weight (log b; ℓ moves by half as much the other way).
-    fn widths(&self, table: &PairTable, shift: f64) -> Vec<f64> {
+    pub fn widths(&self, table: &PairTable, shift: f64) -> Vec<f64> {
         table.joint.forms.iter().zip(&self.log_half).map(|(f, l)| l + shift / f.log_weight_slope()).collect()
     }
 
@@ -404,7 +404,6 @@ impl DataScales {
 /// The median over rows of the distance from a row's nominal position to the nearest other row's
 /// (normalised units; 1e-2 for fewer than two rows or rows all at one point).
 fn median_spacing(table: &PairTable) -> f64 {
-    use crate::evidence::joint_pair_table::JointPairTable;
     let count = table.count;
     let mut nearest: Vec<f64> = (0..count)
         .map(|i| {
